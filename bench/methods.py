@@ -1,0 +1,55 @@
+"""Methods: ours (Lloyd under the shape metric on a backend) and the baselines.
+
+A method is a callable ``run(problem, backend, iterations, progress) -> Distribution``;
+bench/ treats them all alike.  Baselines register themselves in ``METHODS`` under the
+name used by ``cvtbench run --method``.
+"""
+
+from __future__ import annotations
+
+import time
+
+from cvt.distribution import Distribution
+from cvt.lloyd import lloyd
+from cvt.problem import Problem
+
+
+def run_ours(problem: Problem, backend, iterations: int = 20, progress=None) -> Distribution:
+    """The paper's method: Lloyd relaxation under the metric whose unit ball is the
+    element's shape, on any backend."""
+    t0 = time.perf_counter()
+    res = lloyd(problem, backend, iterations, progress=progress)
+    total = time.perf_counter() - t0
+    return Distribution(
+        method="ours", sites=res.sites, angles=res.angles, scales=res.scales,
+        energy=res.energy, seconds=res.seconds, total_seconds=total,
+        empty=res.empty, empty_sites=res.empty_sites,
+    )
+
+
+METHODS = {"ours": run_ours}
+
+
+def method_names() -> list[str]:
+    _load_baselines()
+    return list(METHODS)
+
+
+def get_method(name: str):
+    from cvt.errors import InputError
+
+    _load_baselines()
+    if name not in METHODS:
+        raise InputError(f"unknown method {name!r}; choose one of {', '.join(METHODS)}")
+    return METHODS[name]
+
+
+def _load_baselines() -> None:
+    """Import baselines/ so that each registers itself (a no-op when none exist yet)."""
+    import importlib
+    import pkgutil
+
+    import baselines
+
+    for mod in pkgutil.iter_modules(baselines.__path__):
+        importlib.import_module(f"baselines.{mod.name}")

@@ -1,0 +1,125 @@
+"""Size from a density image (paper §3.3.1) and direction from a field (§3.3.2).
+
+Both are sampled at a site's current position (the pixel that contains it) and re-read
+at every Lloyd iteration.
+
+Density: a non-negative (H, W) array, larger = denser = smaller cells.  The size factor
+of a site is ``s = sqrt(mean_density / max(density(p), floor))``, with ``floor`` 1 % of
+the largest density so that empty areas do not get unbounded cells; a cell's area then
+scales like 1/density.  ``s`` multiplies the cone's footprint (a smaller slope α in the
+paper's words), so ``d_i(x) = gauge(...) / s_i``.
+
+Direction: an angle in radians per position, in the raster frame (x right, y down; a
+positive angle turns clockwise on screen).  Named analytic fields:
+``constant:DEG``, ``radial`` (pointing away from the raster centre),
+``circular`` (tangent to circles around the centre), ``wave:PERIOD`` (angle oscillating
+±30° with x, period in pixels).  An image field maps grey levels linearly from 0 (0°)
+to 255 (180°); a 16-bit image maps 0..65535 the same way.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import numpy as np
+
+from .errors import InputError
+
+DENSITY_FLOOR = 0.01
+
+
+def _sample(img: np.ndarray, sites: np.ndarray) -> np.ndarray:
+    h, w = img.shape
+    j = np.clip(np.floor(sites[:, 0]).astype(np.int64), 0, w - 1)
+    i = np.clip(np.floor(sites[:, 1]).astype(np.int64), 0, h - 1)
+    return img[i, j]
+
+
+@dataclass
+class DensityMap:
+    values: np.ndarray  # (H, W) float64, >= 0, not all zero
+
+    def __post_init__(self):
+        v = np.asarray(self.values, dtype=np.float64)
+        if v.ndim != 2:
+            raise InputError(f"density must be a 2-D image, got shape {v.shape}")
+        if not np.isfinite(v).all() or (v < 0).any():
+            raise InputError("density must be finite and non-negative everywhere")
+        if v.max() <= 0:
+            raise InputError("density image is all zero: nothing to distribute sites by")
+        self.values = v
+        floor = DENSITY_FLOOR * v.max()
+        self._clipped = np.maximum(v, floor)
+        self._mean = float(self._clipped.mean())
+
+    @property
+    def shape(self):
+        return self.values.shape
+
+    def scales_at(self, sites: np.ndarray) -> np.ndarray:
+        return np.sqrt(self._mean / _sample(self._clipped, sites))
+
+    def acceptance(self) -> np.ndarray:
+        """Per-pixel acceptance probability for rejection sampling (density / max)."""
+        return self.values / self.values.max()
+
+
+class DirectionField:
+    """Angle (radians) as a function of position; ``shape`` is None for analytic fields."""
+
+    def __init__(self, spec: str, angles: np.ndarray | None = None, width=None, height=None):
+        self.spec = spec
+        self._angles = angles
+        self.width, self.height = width, height
+
+    @property
+    def shape(self):
+        return None if self._angles is None else self._angles.shape
+
+    @classmethod
+    def from_angles(cls, angles: np.ndarray, spec: str = "array") -> DirectionField:
+        a = np.asarray(angles, dtype=np.float64)
+        if a.ndim != 2 or not np.isfinite(a).all():
+            raise InputError("direction field must be a finite 2-D array of angles")
+        return cls(spec, a, a.shape[1], a.shape[0])
+
+    @classmethod
+    def named(cls, spec: str, width: int, height: int) -> DirectionField:
+        name, _, arg = spec.partition(":")
+        if name == "constant":
+            try:
+                float(arg)
+            except ValueError:
+                raise InputError(f"field {spec!r}: constant needs an angle in degrees, e.g. constant:30") from None
+        elif name == "wave":
+            try:
+                if float(arg or 200) <= 0:
+                    raise ValueError
+            except ValueError:
+                raise InputError(f"field {spec!r}: wave needs a period > 0 in pixels, e.g. wave:200") from None
+        elif name not in ("radial", "circular"):
+            raise InputError(
+                f"unknown field {spec!r}; use constant:DEG, radial, circular, wave:PERIOD or an image file"
+            )
+        return cls(spec, None, width, height)
+
+    def angles_at(self, sites: np.ndarray) -> np.ndarray:
+        sites = np.asarray(sites, dtype=np.float64)
+        if self._angles is not None:
+            return _sample(self._angles, sites)
+        name, _, arg = self.spec.partition(":")
+        cx, cy = self.width / 2.0, self.height / 2.0
+        if name == "constant":
+            return np.full(len(sites), math.radians(float(arg)))
+        if name == "radial":
+            return np.arctan2(sites[:, 1] - cy, sites[:, 0] - cx)
+        if name == "circular":
+            return np.arctan2(sites[:, 1] - cy, sites[:, 0] - cx) + math.pi / 2
+        period = float(arg or 200)
+        return math.radians(30.0) * np.sin(2 * math.pi * sites[:, 0] / period)
+
+
+def angles_from_grey(grey: np.ndarray, full_scale: float) -> np.ndarray:
+    """Grey levels 0..full_scale -> angles 0..π (a line direction, modulo 180°)."""
+    return np.asarray(grey, dtype=np.float64) / full_scale * math.pi

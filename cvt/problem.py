@@ -1,0 +1,143 @@
+"""The problem: a raster, a region, N sites, a metric, optional density and field.
+
+Pixel (i, j) (row i, column j) is sampled at its centre (j + 0.5, i + 0.5); x grows
+right, y grows down; every coordinate is in pixel units.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from .errors import InputError
+from .fields import DirectionField, DensityMap
+from .metrics import Metric, make_metric
+
+MAX_SIDE = 32768
+
+
+def parse_size(text) -> tuple[int, int]:
+    """'W' or 'WxH' -> (W, H), each in 1..32768."""
+    raw = str(text).strip().lower()
+    parts = raw.split("x")
+    try:
+        if len(parts) == 1:
+            w = h = int(parts[0])
+        elif len(parts) == 2:
+            w, h = int(parts[0]), int(parts[1])
+        else:
+            raise ValueError
+    except ValueError:
+        raise InputError(f"size must be W or WxH with whole numbers, got {text!r}") from None
+    for side in (w, h):
+        if side < 1 or side > MAX_SIDE:
+            raise InputError(f"size {text!r}: each side must be between 1 and {MAX_SIDE} pixels")
+    return w, h
+
+
+@dataclass(frozen=True)
+class Grid:
+    """The raster the CVT lives on, and the region inside it (``mask`` True = inside)."""
+
+    width: int
+    height: int
+    mask: np.ndarray | None = None  # (H, W) bool, None means the whole raster
+
+    def __post_init__(self):
+        if self.mask is not None:
+            m = np.ascontiguousarray(self.mask, dtype=bool)
+            if m.shape != (self.height, self.width):
+                raise InputError(
+                    f"region mask is {m.shape[1]}x{m.shape[0]}, raster is {self.width}x{self.height}"
+                )
+            if not m.any():
+                raise InputError("region mask is empty: no pixel is inside the region")
+            object.__setattr__(self, "mask", m)
+
+    @property
+    def shape(self) -> tuple[int, int]:
+        return (self.height, self.width)
+
+    @property
+    def pixel_count(self) -> int:
+        return int(self.mask.sum()) if self.mask is not None else self.width * self.height
+
+    def inside(self) -> np.ndarray:
+        """The region as a (H, W) bool array (allocated when mask is None)."""
+        if self.mask is None:
+            return np.ones(self.shape, dtype=bool)
+        return self.mask
+
+
+@dataclass
+class Problem:
+    """Everything that defines one CVT run, independent of the backend."""
+
+    grid: Grid
+    n_sites: int
+    metric: Metric = field(default_factory=lambda: make_metric("l2"))
+    density: DensityMap | None = None
+    field: DirectionField | None = None
+    seed: int = 0
+    init_sites: np.ndarray | None = None  # (N, 2) pixel units; overrides seeding
+
+    def __post_init__(self):
+        if self.init_sites is not None:
+            pts = np.asarray(self.init_sites, dtype=np.float64)
+            if pts.ndim != 2 or pts.shape[1] != 2 or len(pts) == 0:
+                raise InputError("initial sites must be a non-empty list of (x, y) pairs")
+            if not np.isfinite(pts).all():
+                raise InputError("initial sites contain NaN or infinite coordinates")
+            w, h = self.grid.width, self.grid.height
+            bad = (pts[:, 0] < 0) | (pts[:, 0] > w) | (pts[:, 1] < 0) | (pts[:, 1] > h)
+            if bad.any():
+                k = int(np.argmax(bad))
+                raise InputError(
+                    f"initial site {k} at ({pts[k, 0]:g}, {pts[k, 1]:g}) is outside the "
+                    f"{w}x{h} raster"
+                )
+            self.init_sites = pts
+            self.n_sites = len(pts)
+        n = self.n_sites
+        if isinstance(n, bool) or not isinstance(n, (int, np.integer)) or n < 1:
+            raise InputError(f"number of sites must be a whole number >= 1, got {n!r}")
+        self.n_sites = int(n)
+        if self.n_sites > self.grid.pixel_count:
+            raise InputError(
+                f"{self.n_sites} sites do not fit in a region of {self.grid.pixel_count} pixels"
+            )
+        for name, img in (("density", self.density), ("field", self.field)):
+            if img is not None and img.shape is not None and img.shape != self.grid.shape:
+                raise InputError(f"{name} map is {img.shape[::-1]}, raster is {self.grid.shape[::-1]}")
+
+    def angles_at(self, sites: np.ndarray) -> np.ndarray:
+        if self.field is None:
+            return np.zeros(len(sites))
+        return self.field.angles_at(sites)
+
+    def scales_at(self, sites: np.ndarray) -> np.ndarray:
+        if self.density is None:
+            return np.ones(len(sites))
+        return self.density.scales_at(sites)
+
+
+def pixel_index(sites: np.ndarray, width: int, height: int) -> tuple[np.ndarray, np.ndarray]:
+    """Row and column of the pixel that contains each site (clamped to the raster)."""
+    j = np.clip(np.floor(sites[:, 0]).astype(np.int64), 0, width - 1)
+    i = np.clip(np.floor(sites[:, 1]).astype(np.int64), 0, height - 1)
+    return i, j
+
+
+def lattice_sites(width: int, height: int, k: int) -> np.ndarray:
+    """k x k sites at the centres of a regular lattice of cells (for tests and figures)."""
+    xs = (np.arange(k) + 0.5) * (width / k)
+    ys = (np.arange(k) + 0.5) * (height / k)
+    gx, gy = np.meshgrid(xs, ys)
+    return np.stack([gx.ravel(), gy.ravel()], axis=1)
+
+
+def default_site_count(width: int, height: int) -> int:
+    """A pleasant default: one site per ~16x16 pixels."""
+    return max(1, int(math.ceil(width * height / 256)))
