@@ -1,6 +1,7 @@
 """Methods: ours (Lloyd under the shape metric on a backend) and the baselines.
 
-A method is a callable ``run(problem, backend, iterations, progress) -> Distribution``;
+A method is a callable
+``run(problem, backend, iterations=20, progress=None, element=None, gap=0.0) -> Distribution``;
 bench/ treats them all alike.  Baselines register themselves in ``METHODS`` under the
 name used by ``cvtbench run --method``.
 """
@@ -14,9 +15,11 @@ from cvt.lloyd import lloyd
 from cvt.problem import Problem
 
 
-def run_ours(problem: Problem, backend, iterations: int = 20, progress=None) -> Distribution:
+def run_ours(problem: Problem, backend, iterations: int = 20, progress=None,
+             element: str | None = None, gap: float = 0.0) -> Distribution:
     """The paper's method: Lloyd relaxation under the metric whose unit ball is the
-    element's shape, on any backend."""
+    element's shape, on any backend.  ``element`` (default: the metric's own shape) and
+    ``gap`` (grout, px) are for placing the elements."""
     t0 = time.perf_counter()
     res = lloyd(problem, backend, iterations, progress=progress)
     total = time.perf_counter() - t0

@@ -116,6 +116,10 @@ def add_parser(sub):
                        description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     p.add_argument("--backend", default="numpy", help="numpy (reference), opencl or gl (default numpy)")
     p.add_argument("--method", default="ours", help="ours (default) or a baseline name")
+    p.add_argument("--device", default=None,
+                   help="OpenCL device as PLATFORM[:DEVICE] indices, like PYOPENCL_CTX (opencl backend)")
+    p.add_argument("--gl-mode", default="cone", choices=["cone", "exact"],
+                   help="gl backend: cone (paper's cones and pyramids) or exact (per-fragment metric)")
     add_problem_arguments(p)
     p.add_argument("--iterations", type=str, default="20", help="Lloyd iterations (default 20; 0 allowed)")
     p.add_argument("--out", default="out/run", help="output folder (default out/run)")
@@ -157,7 +161,7 @@ def run(args) -> int:
     iterations = _parse_iterations(args.iterations)
     problem = problem_from_args(args)
     method = get_method(args.method)
-    backend = create_backend(args.backend)
+    backend = create_backend(args.backend, **backend_options(args))
     try:
         dist = method(problem, backend, iterations, progress=_progress(args.quiet))
         labels = dist.labels
@@ -178,6 +182,15 @@ def run(args) -> int:
               f"({len(dist.sites)} sites, {dist.iterations} iterations, median {mean:.1f} ms/iteration)",
               file=sys.stderr)
     return 0
+
+
+def backend_options(args) -> dict:
+    """Constructor options of the chosen backend taken from the command line."""
+    if args.backend == "opencl" and args.device is not None:
+        return {"device": args.device}
+    if args.backend == "gl":
+        return {"mode": args.gl_mode}
+    return {}
 
 
 def build_result(args, problem: Problem, dist, backend_name: str, device: str) -> dict:
