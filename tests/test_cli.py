@@ -1,0 +1,165 @@
+"""`cvtbench run` end to end, and every bad input: one line, exit 2, no output."""
+
+import json
+import subprocess
+import sys
+
+import numpy as np
+import pytest
+from PIL import Image
+
+from bench.cli import main
+
+
+def run_cli(argv, capsys):
+    code = main(argv)
+    out, err = capsys.readouterr()
+    return code, out, err
+
+
+@pytest.fixture
+def images(tmp_path):
+    d = {}
+    grad = np.tile(np.linspace(10, 250, 64, dtype=np.uint8), (48, 1))
+    Image.fromarray(grad).save(tmp_path / "density.png")
+    d["density"] = tmp_path / "density.png"
+    Image.fromarray(np.zeros((48, 64), np.uint8)).save(tmp_path / "zero.png")
+    d["zero"] = tmp_path / "zero.png"
+    disc = np.zeros((80, 80), np.uint8)
+    yy, xx = np.mgrid[0:80, 0:80]
+    disc[(xx - 40) ** 2 + (yy - 40) ** 2 < 30 ** 2] = 255
+    Image.fromarray(disc).save(tmp_path / "disc.png")
+    d["disc"] = tmp_path / "disc.png"
+    d["text"] = tmp_path / "notes.png"
+    d["text"].write_text("this is not an image\n")
+    full = tmp_path / "full.png"
+    noise = np.random.default_rng(0).integers(0, 255, (64, 64), dtype=np.uint8)
+    Image.fromarray(noise).save(full)
+    d["trunc"] = tmp_path / "trunc.png"
+    d["trunc"].write_bytes(full.read_bytes()[: len(full.read_bytes()) // 2])
+    return d
+
+
+def test_run_writes_result_sites_and_cells(tmp_path, capsys):
+    out = tmp_path / "run"
+    code, _, err = run_cli(["run", "--sites", "60", "--size", "96x64", "--iterations", "3",
+                            "--metric", "linf-axial", "--aspect", "0.7", "--seed", "4",
+                            "--field", "constant:30", "--out", str(out)], capsys)
+    assert code == 0, err
+    r = json.loads((out / "result.json").read_text())
+    for key in ("backend", "device", "metric", "aspect", "size", "sites", "angles", "scales",
+                "iterations", "energy", "seconds", "versions", "command"):
+        assert key in r, key
+    assert r["backend"] == "numpy" and r["metric"] == "linf-axial" and r["aspect"] == 0.7
+    assert r["size"] == [96, 64] and r["iterations"] == 3
+    assert len(r["sites"]) == 60 and len(r["energy"]) == 3 and len(r["seconds"]) == 3
+    np.testing.assert_allclose(r["angles"], np.radians(30))
+    assert r["command"].startswith("cvtbench run --sites 60")
+    csv = (out / "sites.csv").read_text().splitlines()
+    assert csv[0].startswith("x,y") and len(csv) == 61
+    with Image.open(out / "cells.png") as im:
+        assert im.size == (96, 64)
+        assert len(np.unique(np.asarray(im).reshape(-1, 3), axis=0)) > 30
+
+
+def test_init_csv_round_trip_and_zero_iterations(tmp_path, capsys):
+    init = tmp_path / "init.csv"
+    init.write_text("x,y\n10.5,20.25\n40,30\n70.125,5\n")
+    code, _, err = run_cli(["run", "--init", str(init), "--size", "80x40", "--iterations", "0",
+                            "--out", str(tmp_path / "o")], capsys)
+    assert code == 0, err
+    r = json.loads((tmp_path / "o" / "result.json").read_text())
+    assert r["sites"] == [[10.5, 20.25], [40.0, 30.0], [70.125, 5.0]]
+    assert r["iterations"] == 0 and r["energy"] == []
+
+
+def test_density_region_and_image_field(tmp_path, images, capsys):
+    code, _, err = run_cli(["run", "--sites", "40", "--size", "80", "--iterations", "2",
+                            "--density", str(images["density"]), "--region", str(images["disc"]),
+                            "--field", str(images["density"]), "--out", str(tmp_path / "o")], capsys)
+    assert code == 0, err  # density of another size is resampled, as documented
+    r = json.loads((tmp_path / "o" / "result.json").read_text())
+    sites = np.array(r["sites"])
+    assert (np.hypot(sites[:, 0] - 40, sites[:, 1] - 40) < 31).all()
+    assert r["region_pixels"] < 80 * 80 and len(set(np.round(r["scales"], 6))) > 5
+
+
+BAD = [
+    (["--metric", "l3"], "unknown metric 'l3'"),
+    (["--backend", "vulkan"], "unknown backend 'vulkan'"),
+    (["--sites", "0"], "--sites must be >= 1"),
+    (["--sites", "many"], "--sites must be a whole number"),
+    (["--sites", "5000", "--size", "64"], "5000 sites do not fit"),
+    (["--size", "0"], "size '0'"),
+    (["--size", "40000"], "size '40000'"),
+    (["--size", "10x"], "size must be W or WxH"),
+    (["--iterations", "-1"], "--iterations must be >= 0"),
+    (["--aspect", "0", "--metric", "l2-axial"], "aspect must be a finite number > 0"),
+    (["--aspect", "-2", "--metric", "linf-axial"], "aspect must be a finite number > 0"),
+    (["--field", "spiral"], "unknown field 'spiral'"),
+    (["--field", "constant:abc"], "constant needs an angle"),
+    (["--method", "magic"], "unknown method 'magic'"),
+]
+
+
+@pytest.mark.parametrize("extra,message", BAD)
+def test_bad_arguments(extra, message, tmp_path, capsys):
+    out = tmp_path / "out"
+    argv = ["run", "--sites", "20", "--size", "64", "--iterations", "1", "--out", str(out)]
+    code, _, err = run_cli(argv + extra, capsys)
+    assert code == 2
+    lines = err.strip().splitlines()
+    assert len(lines) == 1 and message in lines[0] and "Traceback" not in err
+    assert not out.exists()
+
+
+@pytest.mark.parametrize("option,which,message", [
+    ("--density", "zero", "all zero"),
+    ("--density", "text", "not an image file"),
+    ("--density", "trunc", "cannot read image"),
+    ("--density", "missing", "image file not found"),
+    ("--region", "zero", "is empty"),
+    ("--region", "text", "not an image file"),
+])
+def test_bad_images(option, which, message, images, tmp_path, capsys):
+    path = images.get(which, tmp_path / "nope.png")
+    out = tmp_path / "out"
+    code, _, err = run_cli(["run", "--sites", "10", "--size", "48", option, str(path),
+                            "--out", str(out)], capsys)
+    assert code == 2 and message in err and len(err.strip().splitlines()) == 1
+    assert not out.exists()
+
+
+@pytest.mark.parametrize("content,message", [
+    ("a,b\n1,2\n", "needs columns x and y"),
+    ("x,y\n1,nan\n", "NaN or infinite"),
+    ("x,y\n1,oops\n", "must be numbers"),
+    ("x,y\n10,10\n100,5\n", "outside the 64x64 raster"),
+    ("x,y\n", "has no sites"),
+])
+def test_bad_init_csv(content, message, tmp_path, capsys):
+    init = tmp_path / "init.csv"
+    init.write_text(content)
+    out = tmp_path / "out"
+    code, _, err = run_cli(["run", "--init", str(init), "--size", "64", "--out", str(out)], capsys)
+    assert code == 2 and message in err, err
+    assert not out.exists()
+
+
+def test_info_lists_every_backend(capsys):
+    code, out, _ = run_cli(["info"], capsys)
+    assert code == 0
+    for name in ("numpy", "opencl", "gl"):
+        assert f"  {name} " in out
+    assert "numpy   available" in out
+
+
+def test_console_script_end_to_end(tmp_path):
+    """The installed entry point, as a user runs it (subprocess, real exit status)."""
+    exe = [sys.executable, "-m", "bench.cli"]
+    ok = subprocess.run(exe + ["run", "--sites", "30", "--size", "64", "--iterations", "2",
+                               "--out", str(tmp_path / "o")], capture_output=True, text=True)
+    assert ok.returncode == 0, ok.stderr
+    assert (tmp_path / "o" / "result.json").exists()
+    bad = subprocess.run(exe + ["run", "--metric", "nope"], capture_output=True, text=True)
+    assert bad.returncode == 2 and "Traceback" not in bad.stderr and "unknown metric" in bad.stderr
