@@ -33,9 +33,16 @@ from .base import Backend
 class NumpyBackend(Backend):
     name = "numpy"
 
-    def __init__(self, tile: int = 16, probe_neighbours: int = 8):
-        self.tile = int(tile)
+    def __init__(self, tile: int | None = None, probe_neighbours: int = 8):
+        self.tile = None if tile is None else int(tile)
         self.probe_neighbours = int(probe_neighbours)
+
+    @staticmethod
+    def auto_tile(grid: Grid, n_sites: int) -> int:
+        """About 3/4 of the mean site spacing (measured best on 1024² with 1k-16k sites):
+        smaller tiles prune more candidates but cost more per-tile bookkeeping."""
+        spacing = math.sqrt(grid.pixel_count / max(n_sites, 1))
+        return int(min(32, max(8, round(0.75 * spacing))))
 
     def device(self) -> str:
         return f"CPU, NumPy {np.__version__} float64 (reference)"
@@ -44,7 +51,7 @@ class NumpyBackend(Backend):
         sites = np.asarray(sites, dtype=np.float64)
         scales = np.ones(len(sites)) if scales is None else np.asarray(scales, dtype=np.float64)
         coeffs = compile_sites(metric, sites, angles, scales)
-        t = self.tile
+        t = self.tile or self.auto_tile(grid, len(sites))
         w, h = grid.width, grid.height
         ntx, nty = -(-w // t), -(-h // t)
         labels = np.full((nty * t, ntx * t), -1, dtype=np.int32)
