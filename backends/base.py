@@ -42,5 +42,5 @@ class Backend(ABC):
         labels = self.label(sites, scales, angles, metric, grid)
         return moments_from_labels(labels, len(sites))
 
-    def close(self) -> None:
+    def close(self) -> None:  # noqa: B027 - optional hook, nothing to release by default
         """Release device resources (contexts, buffers)."""

@@ -95,7 +95,7 @@ def write_json(path, data) -> None:
 
 def write_sites_csv(path, sites, angles, scales) -> None:
     lines = ["x,y,angle_deg,scale"]
-    for (x, y), a, s in zip(sites, angles, scales):
+    for (x, y), a, s in zip(sites, angles, scales, strict=True):
         lines.append(f"{x:.6f},{y:.6f},{np.degrees(a):.6f},{s:.6f}")
     Path(path).write_text("\n".join(lines) + "\n")
 

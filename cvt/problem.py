@@ -12,7 +12,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from .errors import InputError
-from .fields import DirectionField, DensityMap
+from .fields import DensityMap, DirectionField
 from .metrics import Metric, make_metric
 
 MAX_SIDE = 32768
