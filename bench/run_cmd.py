@@ -4,6 +4,12 @@ DIR/result.json  the run: backend, device, metric, aspect, size, sites, angles, 
                  iterations, energy and seconds per iteration, versions, command, ...
 DIR/sites.csv    x,y (pixel units), angle_deg, scale per site, in input order
 DIR/cells.png    the final cells in distinct colours
+DIR/elements.svg one closed path per placed element (viewBox in pixel units)
+DIR/elements.png the same elements as a picture
+
+result.json also holds the placement: ``element``, ``gap``, ``coverage``, ``overlap``
+(bench/evaluate.py), ``placed``, ``skipped``, ``empty_cell_count``, the smallest and
+largest element area, and ``elements`` (per site its outline as [[x, y], ...], or null).
 """
 
 from __future__ import annotations
@@ -19,7 +25,9 @@ import numpy as np
 from cvt.errors import InputError
 from cvt.fields import DensityMap, DirectionField, angles_from_grey
 from cvt.metrics import METRIC_NAMES, make_metric
+from cvt.placement import check_shape, element_for, parse_gap, place_elements
 from cvt.problem import Grid, Problem, default_site_count, parse_size
+from cvt.shapes import ELEMENT_SHAPES
 
 DEFAULT_SIZE = "512"
 DEFAULT_SITES = 1000
@@ -122,6 +130,11 @@ def add_parser(sub):
                    help="gl backend: cone (paper's cones and pyramids) or exact (per-fragment metric)")
     add_problem_arguments(p)
     p.add_argument("--iterations", type=str, default="20", help="Lloyd iterations (default 20; 0 allowed)")
+    p.add_argument("--element", metavar="SHAPE", default=None,
+                   help=f"element placed in each cell: {', '.join(ELEMENT_SHAPES)} "
+                   "(default: the metric's own shape)")
+    p.add_argument("--gap", metavar="G", default="0",
+                   help="grout: width in pixels of the joint between elements (default 0)")
     p.add_argument("--out", default="out/run", help="output folder (default out/run)")
     p.add_argument("--quiet", action="store_true", help="no progress output")
     p.set_defaults(func=run)
@@ -159,28 +172,49 @@ def run(args) -> int:
     from .outputs import cells_image, command_line, machine, staged_dir, versions, write_json, write_sites_csv
 
     iterations = _parse_iterations(args.iterations)
+    element = None if args.element is None else check_shape(args.element)
+    gap = parse_gap(args.gap)
     problem = problem_from_args(args)
     method = get_method(args.method)
     backend = create_backend(args.backend, **backend_options(args))
     try:
-        dist = method(problem, backend, iterations, progress=_progress(args.quiet))
+        dist = method(problem, backend, iterations, progress=_progress(args.quiet),
+                      element=element, gap=gap)
         labels = dist.labels
         if labels is None:
             labels = backend.label(dist.sites, dist.scales, dist.angles, problem.metric, problem.grid)
         device = backend.device()
     finally:
         backend.close()
+    shape = dist.extra.get("element") or element_for(problem.metric, element)[0]
+    elements = dist.elements
+    if elements is None:  # a method that leaves placement to us: the same rule as ours
+        shape, turn = element_for(problem.metric, element)
+        elements = place_elements(labels, dist.sites, dist.angles + turn, dist.scales, shape,
+                                  problem.metric.aspect, problem.grid, gap)
+    from .evaluate import evaluate, region_polygon
+    from .svg import element_coordinates, elements_png, elements_svg
+
+    region = region_polygon(problem.grid)
+    ev = evaluate(elements, problem.grid, region=region, labels=labels)
     result = build_result(args, problem, dist, backend.name, device)
+    result.update(element=shape, gap=gap, **ev.as_dict())
     result.update(versions=versions(), machine=machine(), command=command_line(args.argv))
+    result["elements"] = element_coordinates(elements)
+    g = problem.grid
+    svg_region = None if g.mask is None else region
     with staged_dir(args.out) as tmp:
         write_json(tmp / "result.json", result)
         write_sites_csv(tmp / "sites.csv", dist.sites, dist.angles, dist.scales)
         cells_image(labels, len(dist.sites), dist.sites).save(tmp / "cells.png")
+        (tmp / "elements.svg").write_text(elements_svg(elements, g.width, g.height, region=svg_region))
+        elements_png(elements, g.width, g.height, region_mask=g.mask).save(tmp / "elements.png")
     if not args.quiet:
         mean = np.median(dist.seconds) * 1000 if dist.seconds else float("nan")
-        print(f"wrote {args.out}/result.json, sites.csv, cells.png  "
-              f"({len(dist.sites)} sites, {dist.iterations} iterations, median {mean:.1f} ms/iteration)",
-              file=sys.stderr)
+        print(f"wrote {args.out}/result.json, sites.csv, cells.png, elements.svg, elements.png  "
+              f"({len(dist.sites)} sites, {dist.iterations} iterations, median {mean:.1f} ms/iteration; "
+              f"{shape}s: coverage {ev.coverage:.2%}, overlap {ev.overlap:.3%}, "
+              f"{ev.skipped} skipped)", file=sys.stderr)
     return 0
 
 

@@ -1,0 +1,253 @@
+"""`cvtbench figures`: regenerate the pictures of the paper's Figures 3, 14 and 15.
+
+fig03_metrics.png   the six metrics' CVTs side by side, cells coloured (paper Figure 3)
+fig14_elements.png  squares, rectangles, ellipses, triangles, elements of varying size
+                    (a radial density) and of varying direction (a circular field)
+                    (paper Figure 14 a-f), each panel captioned with its coverage
+fig15_regions.png   elements in regions that are not rectangles: a star and a ring
+                    (paper Figure 15)
+
+Every panel is a real run of the suite: Lloyd relaxation (ours, 20 iterations, ~400
+sites by default) on the chosen backend, the elements placed by cvt.placement and the
+coverage measured by bench/evaluate.py.  Seeds are fixed, so the pictures are
+reproducible.  Files are written atomically (temporary file, then a rename).
+"""
+
+from __future__ import annotations
+
+import argparse
+import io
+import math
+import os
+import sys
+import tempfile
+import time
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+
+from cvt.errors import InputError
+from cvt.fields import DensityMap, DirectionField
+from cvt.metrics import make_metric
+from cvt.problem import Grid, Problem
+
+DEFAULT_OUT = "reports/figures"
+
+
+@dataclass
+class Settings:
+    size: int  # panel raster side, px
+    sites: int
+    iterations: int
+    scale: float  # drawing scale of a panel
+
+
+FULL = Settings(size=256, sites=400, iterations=20, scale=1.5)
+QUICK = Settings(size=96, sites=60, iterations=4, scale=1.0)
+
+
+def add_parser(sub):
+    p = sub.add_parser("figures", help="regenerate the figures (paper Figures 3, 14, 15) as PNG",
+                       description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    p.add_argument("--out", default=DEFAULT_OUT, help=f"output folder (default {DEFAULT_OUT})")
+    p.add_argument("--quick", action="store_true",
+                   help="small rasters, few sites and iterations (a smoke test, seconds)")
+    p.add_argument("--backend", default="numpy", help="numpy (default), opencl or gl")
+    p.add_argument("--quiet", action="store_true", help="no progress output")
+    p.set_defaults(func=run)
+
+
+# ------------------------------------------------------------------ problems
+def radial_density(size: int) -> DensityMap:
+    """Dense (small elements) at the centre, sparse (large) at the rim."""
+    yy, xx = np.mgrid[0:size, 0:size] + 0.5
+    r = np.hypot(xx - size / 2, yy - size / 2) / (size / 2 * math.sqrt(2))
+    return DensityMap(0.08 + (1.0 - r) ** 3)
+
+
+def star_mask(size: int, points: int = 5, inner: float = 0.45) -> np.ndarray:
+    """A five-pointed star filling most of the raster (True inside)."""
+    import shapely
+
+    k = np.arange(2 * points)
+    radius = np.where(k % 2 == 0, 0.48, 0.48 * inner) * size
+    t = -math.pi / 2 + k * math.pi / points
+    star = shapely.Polygon(np.stack([size / 2 + radius * np.cos(t), size / 2 + radius * np.sin(t)], 1))
+    yy, xx = np.mgrid[0:size, 0:size] + 0.5
+    return shapely.contains_xy(star, xx, yy)
+
+
+def ring_mask(size: int) -> np.ndarray:
+    yy, xx = np.mgrid[0:size, 0:size] + 0.5
+    r = np.hypot(xx - size / 2, yy - size / 2)
+    return (r < 0.48 * size) & (r > 0.18 * size)
+
+
+def _problem(st: Settings, metric: str, *, density=None, field=None, mask=None, seed=1) -> Problem:
+    grid = Grid(st.size, st.size, mask)
+    n = st.sites if mask is None else max(1, round(st.sites * grid.pixel_count / st.size ** 2))
+    fld = None if field is None else DirectionField.named(field, st.size, st.size)
+    return Problem(grid, n, make_metric(metric), density, fld, seed)
+
+
+# ------------------------------------------------------------------ drawing
+def _font(size: int):
+    """DejaVu Sans (shipped with matplotlib: it has β and ∞), else PIL's default."""
+    from PIL import ImageFont
+
+    try:
+        from matplotlib import font_manager
+
+        return ImageFont.truetype(font_manager.findfont("DejaVu Sans"), size)
+    except (ImportError, OSError, ValueError):
+        try:
+            return ImageFont.load_default(size=size)
+        except TypeError:  # Pillow < 10.1: a fixed bitmap font
+            return ImageFont.load_default()
+
+
+def grid_image(panels, captions, columns: int, title: str):
+    """Panels (PIL images of one size) in a grid, a caption under each, a title on top."""
+    from PIL import Image, ImageDraw
+
+    pw, ph = panels[0].size
+    pad, cap_h, title_h = 10, 24, 30
+    rows = math.ceil(len(panels) / columns)
+    w = columns * pw + (columns + 1) * pad
+    h = title_h + rows * (ph + cap_h + pad) + pad
+    img = Image.new("RGB", (w, h), (255, 255, 255))
+    draw = ImageDraw.Draw(img)
+    draw.text((pad, 7), title, fill=(0, 0, 0), font=_font(16))
+    font = _font(13)
+    for k, (panel, cap) in enumerate(zip(panels, captions, strict=True)):
+        r, c = divmod(k, columns)
+        x = pad + c * (pw + pad)
+        y = title_h + r * (ph + cap_h + pad)
+        img.paste(panel, (x, y))
+        draw.text((x, y + ph + 4), cap, fill=(0, 0, 0), font=font)
+    return img
+
+
+def png_bytes(img, colours: int = 128) -> bytes:
+    """PNG with an adaptive palette: the pictures are flat colours, so a palette keeps
+    them small (well under 300 KB) with no visible loss."""
+    from PIL import Image
+
+    buf = io.BytesIO()
+    img.quantize(colors=colours, method=Image.Quantize.MEDIANCUT, dither=Image.Dither.NONE).save(
+        buf, format="PNG", optimize=True)
+    return buf.getvalue()
+
+
+def atomic_write_bytes(path: Path, data: bytes) -> None:
+    path.parent.mkdir(parents=True, exist_ok=True)
+    fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", dir=path.parent)
+    try:
+        with os.fdopen(fd, "wb") as fh:
+            fh.write(data)
+        umask = os.umask(0)
+        os.umask(umask)
+        os.chmod(tmp, 0o666 & ~umask)  # mkstemp makes 0600; a picture is for everyone
+        os.replace(tmp, path)
+    except BaseException:
+        Path(tmp).unlink(missing_ok=True)
+        raise
+
+
+# ------------------------------------------------------------------ figures
+def _elements_panel(problem: Problem, backend, st: Settings, element=None):
+    """Run ours, place the elements, return (picture, coverage, the distribution)."""
+    from .evaluate import evaluate, region_polygon
+    from .methods import run_ours
+    from .svg import elements_png
+
+    dist = run_ours(problem, backend, st.iterations, element=element)
+    g = problem.grid
+    ev = evaluate(dist.elements, g, region=region_polygon(g), labels=dist.labels)
+    img = elements_png(dist.elements, g.width, g.height, region_mask=g.mask, scale=st.scale,
+                       supersample=2)
+    return img, ev, dist
+
+
+def figure_metrics(backend, st: Settings):
+    from PIL import Image
+
+    from .methods import run_ours
+    from .outputs import cells_image
+
+    names = [("l2", "(a) L2"), ("l1", "(b) L1 (Manhattan)"), ("linf", "(c) L∞ (Chebyshev)"),
+             ("linf-axial", "(d) L∞, axial β=0.5"), ("l2-axial", "(e) L2, axial β=0.5"),
+             ("triangle", "(f) triangle (equidistant line)")]
+    panels, caps = [], []
+    for metric, cap in names:
+        problem = _problem(st, metric)
+        dist = run_ours(problem, backend, st.iterations)
+        side = round(st.size * st.scale)
+        panels.append(cells_image(dist.labels, len(dist.sites), dist.sites).resize((side, side), Image.NEAREST))
+        caps.append(cap)
+    title = (f"Figure 3: CVTs under the six metrics ({st.sites} sites, {st.iterations} "
+             "Lloyd iterations, cells coloured, sites dark)")
+    return grid_image(panels, caps, 3, title)
+
+
+def figure_elements(backend, st: Settings):
+    runs = [
+        ("(a) squares", _problem(st, "linf"), None),
+        ("(b) rectangles β=0.5", _problem(st, "linf-axial"), None),
+        ("(c) ellipses β=0.5", _problem(st, "l2-axial"), None),
+        ("(d) triangles", _problem(st, "triangle"), None),
+        ("(e) sizes: radial density", _problem(st, "linf", density=radial_density(st.size)), None),
+        ("(f) directions: circular field", _problem(st, "linf-axial", field="circular"), None),
+    ]
+    panels, caps = [], []
+    for cap, problem, element in runs:
+        img, ev, _ = _elements_panel(problem, backend, st, element)
+        panels.append(img)
+        caps.append(f"{cap}: coverage {ev.coverage:.1%}")
+    title = f"Figure 14: compact distributions of elements ({st.sites} sites, {st.iterations} iterations)"
+    return grid_image(panels, caps, 3, title)
+
+
+def figure_regions(backend, st: Settings):
+    runs = [
+        ("(a) squares in a star", _problem(st, "linf", mask=star_mask(st.size))),
+        ("(b) ellipses in a ring, circular field",
+         _problem(st, "l2-axial", mask=ring_mask(st.size), field="circular")),
+        ("(c) triangles in a star, radial field",
+         _problem(st, "triangle", mask=star_mask(st.size), field="radial")),
+    ]
+    panels, caps = [], []
+    for cap, problem in runs:
+        img, ev, _ = _elements_panel(problem, backend, st)
+        panels.append(img)
+        caps.append(f"{cap}: {ev.coverage:.1%}")
+    return grid_image(panels, caps, 3, "Figure 15: elements in regions that are not rectangles")
+
+
+FIGURES = {
+    "fig03_metrics.png": figure_metrics,
+    "fig14_elements.png": figure_elements,
+    "fig15_regions.png": figure_regions,
+}
+
+
+def run(args) -> int:
+    from backends import create_backend
+
+    st = QUICK if args.quick else FULL
+    out = Path(args.out)
+    if out.exists() and not out.is_dir():
+        raise InputError(f"--out {args.out} exists and is not a folder")
+    backend = create_backend(args.backend)
+    try:
+        for name, make in FIGURES.items():
+            t0 = time.perf_counter()
+            data = png_bytes(make(backend, st))
+            atomic_write_bytes(out / name, data)
+            if not args.quiet:
+                print(f"wrote {out / name} ({len(data) // 1024} KB, {time.perf_counter() - t0:.1f} s)",
+                      file=sys.stderr)
+    finally:
+        backend.close()
+    return 0

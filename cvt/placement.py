@@ -1,0 +1,193 @@
+"""Placing one element in each cell (paper §3.4): the step that turns a CVT into a
+compact distribution of discrete elements.
+
+The rule
+--------
+Each cell is the set of pixels that carry its label in the final label raster.  Its
+*contour* is the set of unit pixel edges between one of its pixels and a pixel that is
+not (another cell, outside the region, or outside the raster); the contour lies half-way
+between the cell's last pixel centres and the first foreign ones.  The element of site i
+is the chosen shape's outline (:func:`cvt.shapes.unit_outline`), rotated by the site's
+angle θ_i, centred at the site p_i, at the largest size t_i whose element contains no
+*contour sample* of its cell in its interior::
+
+    t_i = min over contour samples q of cell i of  ρ(R(-θ_i)(q - p_i))
+
+where ρ is the gauge of the element's own unit ball (``cvt.metrics``; the inscribed
+128-gon of a curved outline lies inside that ball, so the polygon obeys the rule too).
+The samples are the midpoint of every contour edge, one per pair of 4-neighbour pixels
+with different labels.  With them an element follows the raster cell exactly where the
+contour is straight (a square in a square cell touches all four sides: coverage 1 on a
+lattice whose cell side is a whole number of pixels), and it can cross the contour only
+between two samples one pixel apart: by at most half a pixel for a square's corner and
+√3/2 px for a triangle's 60° tip, never by a whole pixel (tests check both bounds).  Adding
+the edges' end points (pixel corners) as samples would halve the crossing but lose up to
+0.7 px of reach on slanted contours: measured on 256 relaxed cells of ~16 px, 0.5 % of
+the coverage for squares and rectangles, 3-4 % for ellipses and circles, 6 % for
+triangles.  We prefer the coverage.
+
+Grout: ``gap`` G (pixels) is the width of the joint between two neighbouring elements.
+Each element keeps G/2 clear of its contour, measured along the normal of its own edge
+that faces the sample: polygons use the mitred offset ``max_k (f_k·v − G/2·|f_k|)``
+(f_k = R(θ)n_k/h_k, the facets of :func:`cvt.metrics.compile_sites`), so a square or a
+rectangle loses exactly G/2 per side in a straight-walled cell; ellipses use the
+first-order distance ``ρ(v) − G/2·|∇ρ(v)|`` (exact for circles).  The element stays a
+scaled copy of the shape; a cell too small for the gap gets no element.
+
+Skipped sites (``None`` in the returned list): a site whose cell has no pixel, a site
+whose own pixel belongs to another cell or lies outside the region (its element would
+grow into a foreign cell), and a cell whose contour passes through the site (size 0).
+:func:`placement_sizes` returns the sizes, so callers can count them.
+
+Where this departs from the paper
+---------------------------------
+The paper "extract[s] the contour of every Voronoi region and adjust[s] the size and
+direction based on the contour information" (§3.4, Figure 13) without giving the fit.
+We keep the direction the field gave the site (so a direction field reads the same in the
+elements as in the cells) and the site as the element's centre (a CVT site is its cell's
+centroid), and take the largest inscribed scale.  Fitting the angle or moving the centre
+per cell might cover more (not measured here); it would also bend the direction field
+and loosen the link between a site and its element.  ``scales`` (the density's size factor)
+is accepted for symmetry with the backends but not used: the cell already reflects it.
+
+Cost: one pass over the raster (``np.nonzero`` on neighbour differences), one gauge per
+sample and ``np.minimum.at``; no Python loop over pixels or sites.  About 40 ms for
+4000 cells on 1024² here.
+
+Which element goes in which CVT: :func:`element_for` gives the metric's own ball
+(``NATURAL_ELEMENT``) by default.  The l1 ball is the square turned by 45°, so squares
+placed in an l1 CVT (by default or by choice) are turned by 45° to match its diamond
+cells; every other shape keeps the site's angle as it is.
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+
+from .errors import InputError
+from .metrics import Metric, compile_sites, make_metric
+from .problem import Grid
+from .shapes import _BALL, ELEMENT_SHAPES, element_polygons
+
+
+def parse_gap(value) -> float:
+    """The grout gap in pixels: a finite number >= 0 (InputError otherwise)."""
+    try:
+        gap = float(value)
+    except (TypeError, ValueError):
+        raise InputError(f"gap must be a number of pixels >= 0, got {value!r}") from None
+    if not math.isfinite(gap) or gap < 0:
+        raise InputError(f"gap must be a finite number of pixels >= 0, got {value!r}")
+    return gap
+
+
+def check_shape(shape) -> str:
+    if shape not in ELEMENT_SHAPES:
+        raise InputError(f"unknown element {shape!r}; choose one of {', '.join(ELEMENT_SHAPES)}")
+    return shape
+
+
+def element_for(metric: Metric, element: str | None = None) -> tuple[str, float]:
+    """The element shape for cells of ``metric`` and the turn (radians) to add to every
+    site's angle: the metric's own ball unless ``element`` names another shape; squares
+    in an l1 CVT are turned by 45° (the l1 ball is a diamond)."""
+    shape = metric.natural_element if element is None else check_shape(element)
+    turn = math.pi / 4 if (metric.name == "l1" and shape == "square") else 0.0
+    return shape, turn
+
+
+def contour_samples(labels: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Midpoints of the cell contours: ``(owner, x, y)`` with one entry per (cell, edge).
+
+    Every pair of 4-neighbour pixels with different labels shares a unit edge; its
+    midpoint is a sample of the contour of each of the two cells (outside labels, -1,
+    own nothing).  The raster is padded with -1 so that its border is contour too."""
+    h, w = labels.shape
+    pad = np.full((h + 2, w + 2), -1, dtype=np.int32)
+    pad[1:-1, 1:-1] = labels
+    # horizontal pairs: pixels (r-1, c-1) | (r-1, c), shared edge x = c, y in [r-1, r]
+    r, c = np.nonzero(pad[:, :-1] != pad[:, 1:])
+    left, right = pad[r, c], pad[r, c + 1]
+    hx, hy = c.astype(np.float64), r - 0.5
+    # vertical pairs: pixels (r-1, c-1) over (r, c-1), shared edge y = r, x in [c-1, c]
+    r2, c2 = np.nonzero(pad[:-1, :] != pad[1:, :])
+    top, bottom = pad[r2, c2], pad[r2 + 1, c2]
+    vx, vy = c2 - 0.5, r2.astype(np.float64)
+    owner = np.concatenate([left, right, top, bottom])
+    x = np.concatenate([hx, hx, vx, vx])
+    y = np.concatenate([hy, hy, vy, vy])
+    keep = owner >= 0
+    return owner[keep], x[keep], y[keep]
+
+
+def placement_sizes(labels, sites, angles, shape: str, aspect, gap: float = 0.0) -> np.ndarray:
+    """(N,) element size per site by the rule of this module; 0 where the site is skipped.
+
+    Size 1 is the element's unit ball (``cvt.shapes``: square side 2, circle radius 1,
+    ...)."""
+    check_shape(shape)
+    gap = parse_gap(gap)
+    labels = np.asarray(labels)
+    sites = np.asarray(sites, dtype=np.float64).reshape(-1, 2)
+    n = len(sites)
+    angles = np.zeros(n) if angles is None else np.broadcast_to(np.asarray(angles, np.float64), (n,))
+    h, w = labels.shape
+    if n == 0:
+        return np.zeros(0)
+    ball = make_metric(_BALL[shape], aspect)
+    coef = compile_sites(ball, sites, angles, None)
+
+    owner, qx, qy = contour_samples(labels)
+    vx = qx - sites[owner, 0]
+    vy = qy - sites[owner, 1]
+    half = 0.5 * gap
+    if coef.kind == "polygon":
+        f = coef.facets  # (N, K, 2): f_k = R(θ) n_k / h_k, |f_k| = 1 / h_k
+        fo = f[owner]
+        slack = half * np.hypot(f[0, :, 0], f[0, :, 1])  # same |f_k| for every site
+        reach = np.max(fo[..., 0] * vx[:, None] + fo[..., 1] * vy[:, None] - slack, axis=1)
+    else:
+        q = coef.quad[owner]
+        gx = q[:, 0] * vx + q[:, 1] * vy  # Q v = ρ ∇ρ
+        gy = q[:, 1] * vx + q[:, 2] * vy
+        rho = np.sqrt(np.maximum(vx * gx + vy * gy, 0.0))
+        reach = rho
+        if half > 0:
+            with np.errstate(divide="ignore", invalid="ignore"):
+                grad = np.where(rho > 0, np.hypot(gx, gy) / rho, 0.0)
+            reach = rho - half * grad
+    sizes = np.full(n, np.inf)
+    np.minimum.at(sizes, owner, reach)
+
+    # a site must sit in a pixel of its own cell, or its element would grow into another
+    inside = (sites[:, 0] >= 0) & (sites[:, 0] < w) & (sites[:, 1] >= 0) & (sites[:, 1] < h)
+    j = np.clip(np.floor(sites[:, 0]).astype(np.int64), 0, w - 1)
+    i = np.clip(np.floor(sites[:, 1]).astype(np.int64), 0, h - 1)
+    own = inside & (labels[i, j] == np.arange(n))
+    ok = own & np.isfinite(sizes) & (sizes > 0)
+    return np.where(ok, sizes, 0.0)
+
+
+def place_elements(labels, sites, angles, scales, shape: str, aspect, grid: Grid,
+                   gap: float = 0.0) -> list:
+    """One shapely Polygon per site (``None`` where the cell is empty or too small):
+    the ``shape`` element, rotated by the site's angle, centred at the site, at the
+    largest size that keeps it in its cell (see the module docstring for the rule).
+
+    ``labels`` is the final (H, W) int32 label raster of these sites (-1 outside the
+    region); ``aspect`` is β of rectangles and ellipses; ``gap`` the grout width in px."""
+    labels = np.asarray(labels)
+    if labels.shape != grid.shape:
+        raise InputError(f"label raster is {labels.shape[1]}x{labels.shape[0]}, "
+                         f"grid is {grid.width}x{grid.height}")
+    sites = np.asarray(sites, dtype=np.float64).reshape(-1, 2)
+    n = len(sites)
+    angles = np.zeros(n) if angles is None else np.broadcast_to(np.asarray(angles, np.float64), (n,))
+    sizes = placement_sizes(labels, sites, angles, shape, aspect, gap)
+    placed = np.flatnonzero(sizes > 0)
+    out = np.full(n, None, dtype=object)
+    if len(placed):
+        out[placed] = element_polygons(shape, aspect, sites[placed], angles[placed], sizes[placed])
+    return out.tolist()

@@ -1,0 +1,148 @@
+"""Coverage and overlap (bench/evaluate.py) against hand-computed areas and against the
+plain union_all formula; the SVG and PNG drawings (bench/svg.py)."""
+
+import xml.etree.ElementTree as ET
+
+import numpy as np
+import pytest
+import shapely
+
+from bench.evaluate import empty_cell_count, evaluate, region_polygon
+from bench.svg import element_coordinates, elements_png, elements_svg
+from cvt.problem import Grid
+
+SVG = "{http://www.w3.org/2000/svg}"
+
+
+def test_two_overlapping_squares_by_hand():
+    grid = Grid(10, 10)
+    a = shapely.box(0, 0, 4, 4)  # 16
+    b = shapely.box(2, 2, 6, 6)  # 16, shares 4 with a
+    ev = evaluate([a, None, b], grid)
+    assert ev.coverage == pytest.approx(28 / 100)
+    assert ev.overlap == pytest.approx(4 / 100)
+    assert (ev.elements, ev.skipped, ev.overlapping_pairs) == (2, 1, 1)
+    assert ev.min_area == ev.max_area == pytest.approx(16)
+
+
+def test_clipped_to_the_region_and_touching_is_no_overlap():
+    grid = Grid(10, 10)
+    els = [shapely.box(-2, -2, 2, 2), shapely.box(2, 0, 4, 2), shapely.box(8, 8, 14, 9)]
+    ev = evaluate(els, grid)
+    assert ev.coverage == pytest.approx((4 + 4 + 2) / 100)
+    assert ev.overlap == 0.0 and ev.overlapping_pairs == 0
+    assert ev.max_area == pytest.approx(16)  # sizes are of the elements, not the clipped parts
+
+
+def test_triple_overlap_counts_each_extra_layer():
+    grid = Grid(10, 10)
+    sq = shapely.box(1, 1, 3, 3)
+    ev = evaluate([sq, sq, sq], grid)
+    assert ev.coverage == pytest.approx(0.04)
+    assert ev.overlap == pytest.approx(0.08)  # Σ area − union = 12 − 4
+
+
+def test_masked_region_area_and_coverage():
+    mask = np.zeros((20, 30), dtype=bool)
+    yy, xx = np.mgrid[0:20, 0:30]
+    mask[(xx - 15) ** 2 + (yy - 10) ** 2 < 64] = True
+    grid = Grid(30, 20, mask)
+    region = region_polygon(grid)
+    assert region.area == mask.sum()
+    full = shapely.box(0, 0, 30, 20)
+    ev = evaluate([full], grid)
+    assert ev.coverage == pytest.approx(1.0) and ev.overlap == 0.0
+
+
+@pytest.mark.parametrize("seed", [0, 1, 2])
+def test_matches_the_plain_union_formula(seed):
+    """The STRtree shortcut gives the same numbers as union_all over everything."""
+    rng = np.random.default_rng(seed)
+    grid = Grid(200, 150)
+    n = 300
+    centres = rng.random((n, 2)) * [220, 170] - 10
+    r = rng.uniform(2, 9, n)
+    els = list(shapely.buffer(shapely.points(centres), r, quad_segs=8))
+    els[5] = None
+    ev = evaluate(els, grid)
+    region = region_polygon(grid)
+    geoms = np.array([e for e in els if e is not None])
+    clipped = shapely.intersection(geoms, region)
+    union = shapely.area(shapely.union_all(clipped))
+    total = shapely.area(clipped).sum()
+    assert ev.coverage == pytest.approx(union / region.area, rel=1e-9)
+    assert ev.overlap == pytest.approx((total - union) / region.area, rel=1e-7, abs=1e-12)
+    assert ev.overlap > 0.01 and ev.overlapping_pairs > 10
+
+
+def test_empty_cells_and_nothing_placed():
+    labels = np.array([[0, 0, 2], [-1, 2, 2]], dtype=np.int32)
+    assert empty_cell_count(labels, 4) == 2  # sites 1 and 3
+    ev = evaluate([None, None, None, None], Grid(3, 2), labels=labels)
+    assert (ev.coverage, ev.overlap, ev.elements, ev.skipped, ev.empty_cells) == (0.0, 0.0, 0, 4, 2)
+    d = ev.as_dict()
+    assert {"coverage", "overlap", "placed", "skipped", "empty_cell_count",
+            "min_element_area", "max_element_area"} <= set(d)
+
+
+# ------------------------------------------------------------------ drawing
+def sample_elements():
+    return [shapely.box(2, 2, 10, 8), None,
+            shapely.Polygon([(20, 5), (30, 5), (25, 15)]),
+            shapely.Point(40, 20).buffer(5)]
+
+
+def test_svg_is_valid_xml_with_one_closed_path_per_element():
+    text = elements_svg(sample_elements(), 50, 30)
+    root = ET.fromstring(text)
+    assert root.tag == f"{SVG}svg"
+    assert root.get("viewBox") == "0 0 50 30"
+    assert (root.get("width"), root.get("height")) == ("50", "30")
+    assert root.find(f"{SVG}rect") is not None  # background
+    paths = root.findall(f"{SVG}g/{SVG}path")
+    assert len(paths) == 3
+    for p in paths:
+        d = p.get("d")
+        assert d.startswith("M") and d.endswith("Z") and d.count("M") == 1
+    # coordinates are pixel units: the square's corner is there
+    assert "2,2" in paths[0].get("d") and "10,8" in paths[0].get("d")
+
+
+def test_svg_of_a_masked_region_draws_the_region():
+    mask = np.zeros((30, 50), dtype=bool)
+    mask[5:25, 5:45] = True
+    region = region_polygon(Grid(50, 30, mask))
+    root = ET.fromstring(elements_svg(sample_elements(), 50, 30, region=region,
+                                      fills=["#ff0000", "#00ff00", "#0000ff", (1, 2, 3)]))
+    top = root.findall(f"{SVG}path")
+    assert len(top) == 1 and "5,5" in top[0].get("d")
+    fills = [p.get("fill") for p in root.findall(f"{SVG}g/{SVG}path")]
+    assert fills == ["#ff0000", "#0000ff", "#010203"]
+
+
+def test_png_paints_elements_in_their_colours():
+    fills = np.array([[255, 0, 0], [0, 0, 0], [0, 255, 0], [0, 0, 255]], dtype=np.uint8)
+    img = np.asarray(elements_png(sample_elements(), 50, 30, fills=fills, scale=2.0))
+    assert img.shape == (60, 100, 3)
+    assert tuple(img[10, 12]) == (255, 0, 0)  # inside the square (x 6, y 5)
+    assert tuple(img[40, 80]) == (0, 0, 255)  # centre of the circle
+    assert tuple(img[55, 5]) == (0xF4, 0xF1, 0xEA)  # free region
+
+
+def test_coordinates_are_json_ready():
+    coords = element_coordinates(sample_elements())
+    assert coords[1] is None
+    assert sorted(map(tuple, coords[0])) == [(2.0, 2.0), (2.0, 8.0), (10.0, 2.0), (10.0, 8.0)]
+    assert len(coords[3]) >= 32 and all(len(p) == 2 for p in coords[3])
+
+
+def test_region_of_a_mask_is_one_valid_polygon():
+    yy, xx = np.mgrid[0:64, 0:64]
+    r2 = (xx - 32) ** 2 + (yy - 32) ** 2
+    mask = (r2 < 28 ** 2) & (r2 > 8 ** 2)  # a ring: one polygon with a hole
+    region = region_polygon(Grid(64, 64, mask))
+    assert shapely.is_valid(region) and region.geom_type == "Polygon"
+    assert len(region.interiors) == 1 and region.area == mask.sum()
+    # an element across many pixel rows inside the ring is inside, untouched by clipping
+    ev = evaluate([shapely.box(41, 20, 51, 44)], Grid(64, 64, mask), region=region)
+    assert ev.coverage == pytest.approx(240 / mask.sum())
