@@ -1,0 +1,335 @@
+"""Picture to mosaic (issue 8): fields from a picture, the API, the CLI, bad pictures.
+
+Pictures are small (128-192 px) and runs short (100-300 elements, a few iterations) so
+that the file stays well under a minute on the shared 2-core machine."""
+
+from __future__ import annotations
+
+import json
+import math
+import xml.etree.ElementTree as ET
+
+import numpy as np
+import pytest
+import shapely
+from PIL import Image
+
+from bench.cli import main
+from bench.evaluate import evaluate
+from cvt.errors import InputError
+from cvt.image_fields import picture_fields
+from cvt.mosaic import make_mosaic, picture_array, raster_size, resample
+
+SVG = "{http://www.w3.org/2000/svg}"
+
+
+def stripes(n=160, deg=30.0, period=24.0):
+    """Black/white stripes whose edges run at ``deg`` in the raster frame (x right,
+    y down, positive = clockwise on screen)."""
+    y, x = np.mgrid[0:n, 0:n] + 0.5
+    t = math.radians(deg)
+    u = -x * math.sin(t) + y * math.cos(t)  # coordinate across the stripes
+    return (np.sin(2 * math.pi * u / period) > 0).astype(np.float64)
+
+
+def angle_error_deg(angles, truth_deg, period_deg):
+    d = (np.degrees(angles) - truth_deg + period_deg / 2) % period_deg - period_deg / 2
+    return np.abs(d)
+
+
+# ----------------------------------------------------------------------- fields
+
+@pytest.mark.parametrize("deg", [30.0, -20.0])
+def test_field_runs_along_the_edges_in_the_raster_frame(deg):
+    f = picture_fields(stripes(deg=deg), spacing=10.0, element="rectangle")
+    angles = f.field.angles_at(np.array([[x, y] for x in (40.5, 80.5, 120.5) for y in (40.5, 80.5, 120.5)]))
+    assert angle_error_deg(angles, deg, 180.0).max() < 3.0
+    assert f.edges.any() and not f.edges.all()
+
+
+def test_flat_picture_gives_uniform_density_and_zero_field():
+    f = picture_fields(np.full((40, 50, 3), 0.4), spacing=5.0)
+    assert np.ptp(f.density.values) == 0
+    assert np.all(f.field.angles_at(np.array([[10.0, 10.0], [45.0, 30.0]])) == 0)
+
+
+# ----------------------------------------------------------------------- the API
+
+@pytest.mark.parametrize("deg,element,period", [(30.0, "square", 90.0), (-20.0, "rectangle", 180.0)])
+def test_elements_follow_the_edges(deg, element, period):
+    m = make_mosaic(stripes(deg=deg), n_elements=200, element=element, iterations=6, use_density=False)
+    err = angle_error_deg(m.angles, deg, period)
+    assert err.mean() < 10.0, err.mean()
+    # the placed polygons carry the angle: a rectangle's long side lies along the stripes
+    if element == "rectangle":
+        poly = next(p for p in m.polygons if p is not None)
+        xy = np.asarray(poly.exterior.coords)[:4]
+        sides = np.diff(np.vstack([xy, xy[:1]]), axis=0)
+        long_side = sides[np.argmax(np.hypot(sides[:, 0], sides[:, 1]))]
+        assert angle_error_deg(np.arctan2(long_side[1], long_side[0]), deg, 180.0) < 12.0
+
+
+def test_without_field_every_element_is_upright():
+    m = make_mosaic(stripes(deg=30.0), n_elements=120, iterations=2, use_field=False, use_density=False)
+    assert np.all(m.angles == 0)
+
+
+def test_smaller_elements_where_the_picture_has_detail():
+    rng = np.random.default_rng(3)
+    h, w = 128, 192
+    pic = np.full((h, w, 3), 0.6)
+    blocks = rng.random((h // 8, w // 16, 3)).repeat(8, axis=0).repeat(8, axis=1)
+    pic[:, : w // 2] = blocks  # busy left half, flat right half
+    m = make_mosaic(pic, n_elements=250, iterations=8, use_field=False)
+    areas = np.array([0.0 if p is None else p.area for p in m.polygons])
+    placed = areas > 0
+    left = placed & (m.sites[:, 0] < w / 2 - 10)
+    right = placed & (m.sites[:, 0] > w / 2 + 10)
+    assert left.sum() > right.sum()  # more elements where the detail is
+    assert areas[left].mean() < 0.7 * areas[right].mean()
+    # and without the density both halves are alike
+    u = make_mosaic(pic, n_elements=250, iterations=8, use_field=False, use_density=False)
+    ua = np.array([0.0 if p is None else p.area for p in u.polygons])
+    ul, ur = u.sites[:, 0] < w / 2 - 10, u.sites[:, 0] > w / 2 + 10
+    assert 0.8 < ua[ul].mean() / ua[ur].mean() < 1.25
+
+
+def test_colours_match_a_flat_colour_picture():
+    pic = np.zeros((160, 160, 3))
+    quads = np.array([[0.9, 0.1, 0.1], [0.1, 0.7, 0.2], [0.2, 0.3, 0.9], [0.95, 0.9, 0.2]])
+    pic[:80, :80], pic[:80, 80:], pic[80:, :80], pic[80:, 80:] = quads
+    m = make_mosaic(pic, n_elements=200, iterations=6, element="square")
+    assert m.colours.shape == (200, 3)
+    i = (m.sites[:, 1] >= 80).astype(int) * 2 + (m.sites[:, 0] >= 80).astype(int)
+    err = np.abs(m.colours - quads[i]).mean(axis=1)
+    assert err.mean() < 0.03, err.mean()
+    # an element wholly inside one quadrant has exactly that quadrant's colour
+    inner = [k for k, p in enumerate(m.polygons)
+             if p is not None and shapely.box(*(np.array([0, 0, 80, 80]) + 80 * np.array(
+                 [i[k] % 2, i[k] // 2, i[k] % 2, i[k] // 2]))).contains(p)]
+    assert len(inner) > 100
+    assert np.abs(m.colours[inner] - quads[i[inner]]).max() < 1e-9
+    # coverage is the suite's one definition
+    assert m.coverage == pytest.approx(evaluate(m.polygons, m.problem.grid).coverage)
+    assert 0.3 < m.coverage <= 1.0
+
+
+def test_same_seed_same_mosaic_and_numpy_input_equals_file(tmp_path):
+    pic = (stripes(n=128, deg=10.0) * 200 + 20).astype(np.uint8)
+    Image.fromarray(pic).save(tmp_path / "s.png")
+    a = make_mosaic(pic, n_elements=100, iterations=3, seed=5)
+    b = make_mosaic(tmp_path / "s.png", n_elements=100, iterations=3, seed=5)
+    np.testing.assert_array_equal(a.sites, b.sites)
+    np.testing.assert_allclose(a.colours, b.colours, atol=1e-12)
+
+
+def test_raster_size_and_resampling():
+    assert raster_size(3000, 1500) == (1024, 512)  # capped, aspect kept
+    assert raster_size(300, 200) == (300, 200)  # never enlarged by default
+    assert raster_size(300, 200, "600") == (600, 400)  # long side
+    assert raster_size(300, 200, "64x64") == (64, 64)
+    with pytest.raises(InputError, match="size"):
+        raster_size(300, 200, "big")
+    flat = np.full((900, 1800, 3), 0.25)
+    small = resample(flat, 256, 128)
+    assert small.shape == (128, 256, 3) and np.allclose(small, 0.25, atol=1e-6)
+
+
+@pytest.mark.parametrize("bad,match", [
+    (np.full((20, 20), 1.5), "0..1"),
+    (np.zeros((20, 20, 2)), "shape"),
+    (np.zeros((0, 5)), "shape|no pixels"),
+    (np.full((20, 20), np.nan), "NaN"),
+])
+def test_bad_arrays_raise_input_error(bad, match):
+    with pytest.raises(InputError, match=match):
+        picture_array(bad)
+
+
+@pytest.mark.parametrize("kwargs,match", [
+    (dict(n_elements=0), "elements"),
+    (dict(n_elements=5000), "do not fit"),
+    (dict(element="hexagon"), "hexagon"),
+    (dict(metric="l3"), "l3"),
+    (dict(gap=-1), "gap"),
+    (dict(grout="not-a-colour"), "colour"),
+    (dict(contrast=0.5), "contrast"),
+])
+def test_bad_options_raise_input_error(kwargs, match):
+    with pytest.raises(InputError, match=match):
+        make_mosaic(np.zeros((40, 40)), **{"n_elements": 20, "iterations": 1, **kwargs})
+
+
+# ----------------------------------------------------------------------- the CLI
+
+def _run(argv, capsys):
+    code = main(argv)
+    out, err = capsys.readouterr()
+    return code, err
+
+
+@pytest.fixture
+def picture_file(tmp_path):
+    rgb = np.zeros((120, 150, 3), np.uint8)
+    rgb[:, :75] = (200, 40, 40)
+    rgb[:, 75:] = (30, 90, 200)
+    rgb[40:80, 50:100] = (250, 220, 50)
+    path = tmp_path / "pic.png"
+    Image.fromarray(rgb).save(path)
+    return path
+
+
+@pytest.mark.parametrize("element,tag", [("square", "polygon"), ("ellipse", "ellipse")])
+def test_cli_writes_svg_png_and_result(picture_file, tmp_path, capsys, element, tag):
+    out = tmp_path / "out"
+    code, err = _run(["mosaic", str(picture_file), "--out", str(out), "--elements", "150",
+                      "--iterations", "3", "--element", element, "--grout", "#101010"], capsys)
+    assert code == 0, err
+    assert "iteration 3/3" in err  # progress on stderr
+    root = ET.parse(out / "mosaic.svg").getroot()
+    elements = root.findall(f".//{SVG}{tag}")
+    res = json.loads((out / "result.json").read_text())
+    assert len(elements) == res["elements"] == 150 - res["skipped"]
+    assert res["skipped"] <= 3
+    assert root.find(f"{SVG}rect").get("fill") == "#101010"
+    for key in ("backend", "device", "metric", "aspect", "size", "sites", "angles", "scales",
+                "iterations", "energy", "seconds", "coverage", "image", "colours"):
+        assert key in res, key
+    assert res["size"] == [150, 120] and res["iterations"] == 3 and len(res["sites"]) == 150
+    assert res["metric"] == ("linf" if element == "square" else "l2-axial")
+    assert 0.3 < res["coverage"] <= 1.0
+    # each element's fill is the colour recorded for its site
+    fills = {e.get("fill") for e in elements}
+    assert fills <= set(res["colours"]) and "#c82828" in fills
+    with Image.open(out / "mosaic.png") as png:
+        assert png.size == (150, 120)
+        # at each placed site the picture shows that element's colour
+        rgb = np.asarray(png.convert("RGB"), dtype=int)
+    sites = np.array(res["sites"])
+    centre = rgb[sites[:, 1].astype(int), sites[:, 0].astype(int)]
+    want = np.array([[int(c[k:k + 2], 16) for k in (1, 3, 5)] for c in res["colours"]])
+    assert np.median(np.abs(centre - want).max(axis=1)) <= 2
+
+
+@pytest.fixture
+def bad_pictures(tmp_path):
+    d = {}
+    noise = np.random.default_rng(0).integers(0, 255, (64, 64, 3), dtype=np.uint8)
+    Image.fromarray(noise).save(tmp_path / "full.png")
+    data = (tmp_path / "full.png").read_bytes()
+    d["truncated"] = tmp_path / "truncated.png"
+    d["truncated"].write_bytes(data[: len(data) // 2])
+    d["text"] = tmp_path / "notes.png"
+    d["text"].write_text("this is not an image\n")
+    d["missing"] = tmp_path / "nope.png"
+    d["one"] = tmp_path / "one.png"
+    Image.fromarray(np.array([[[10, 200, 30]]], np.uint8)).save(d["one"])
+    return d
+
+
+@pytest.mark.parametrize("name,match", [("truncated", "cannot read image|truncated"),
+                                        ("text", "not an image"), ("missing", "not found"),
+                                        ("one", "1x1")])
+def test_cli_bad_pictures_exit_2_with_one_line(bad_pictures, tmp_path, capsys, name, match):
+    out = tmp_path / "out"
+    code, err = _run(["mosaic", str(bad_pictures[name]), "--out", str(out), "--elements", "50"], capsys)
+    assert code == 2
+    lines = err.strip().splitlines()
+    assert lines[-1].startswith("cvtbench: error:") and "Traceback" not in err
+    import re
+
+    assert re.search(match, lines[-1]), lines[-1]
+    assert not out.exists()
+
+
+def test_cli_one_pixel_picture_works_when_enlarged(bad_pictures, tmp_path, capsys):
+    out = tmp_path / "out"
+    code, err = _run(["mosaic", str(bad_pictures["one"]), "--out", str(out), "--size", "32",
+                      "--elements", "12", "--iterations", "2", "--quiet"], capsys)
+    assert code == 0, err
+    res = json.loads((out / "result.json").read_text())
+    assert res["size"] == [32, 32] and set(res["colours"]) == {"#0ac81e"}
+
+
+def _save_16bit(path):
+    arr = np.full((64, 80), 30000, np.uint16)
+    arr[:, 40:] = 60000
+    Image.fromarray(arr).save(path)
+    return [30000 / 65535, 60000 / 65535]
+
+
+def _save_palette(path):
+    img = Image.new("P", (80, 64))
+    img.putpalette([255, 0, 0, 0, 0, 255] + [0] * 762)
+    px = np.zeros((64, 80), np.uint8)
+    px[:, 40:] = 1
+    img.putdata(px.ravel().tolist())
+    img.save(path)
+    return [(1.0, 0.0, 0.0), (0.0, 0.0, 1.0)]
+
+
+def _save_rgba(path):
+    rgba = np.zeros((64, 80, 4), np.uint8)
+    rgba[:, :40] = (0, 0, 0, 255)
+    rgba[:, 40:] = (0, 0, 0, 0)  # transparent: composited on white
+    Image.fromarray(rgba, "RGBA").save(path)
+    return [(0.0, 0.0, 0.0), (1.0, 1.0, 1.0)]
+
+
+def _save_grey_jpeg(path):
+    arr = np.full((64, 80), 40, np.uint8)
+    arr[:, 40:] = 220
+    Image.fromarray(arr).save(path, quality=95)
+    return [40 / 255, 220 / 255]
+
+
+@pytest.mark.parametrize("maker,suffix", [(_save_16bit, ".png"), (_save_palette, ".png"),
+                                          (_save_rgba, ".png"), (_save_grey_jpeg, ".jpg")])
+def test_cli_other_formats_give_correct_colours(tmp_path, capsys, maker, suffix):
+    path = tmp_path / f"pic{suffix}"
+    left, right = (np.broadcast_to(np.asarray(c, float), (3,)) for c in maker(path))
+    out = tmp_path / "out"
+    code, err = _run(["mosaic", str(path), "--out", str(out), "--elements", "60", "--iterations", "3",
+                      "--quiet"], capsys)
+    assert code == 0, err
+    res = json.loads((out / "result.json").read_text())
+    cols = np.array([[int(c[k:k + 2], 16) / 255 for k in (1, 3, 5)] for c in res["colours"]])
+    x = np.array(res["sites"])[:, 0]
+    far_left, far_right = x < 30, x > 50
+    assert far_left.any() and far_right.any()
+    tol = 0.04 if suffix == ".jpg" else 0.01
+    assert np.abs(cols[far_left] - left).max() < tol
+    assert np.abs(cols[far_right] - right).max() < tol
+
+
+@pytest.mark.parametrize("argv,match", [
+    (["--elements", "many"], "--elements"),
+    (["--gap", "-2"], "--gap"),
+    (["--iterations", "-1"], "--iterations"),
+    (["--metric", "l7"], "l7"),
+    (["--backend", "quantum"], "quantum"),
+    (["--size", "0"], "size"),
+])
+def test_cli_bad_options_exit_2(picture_file, tmp_path, capsys, argv, match):
+    out = tmp_path / "out"
+    code, err = _run(["mosaic", str(picture_file), "--out", str(out), *argv], capsys)
+    assert code == 2 and match in err and "Traceback" not in err
+    assert not out.exists()
+
+
+def test_cli_compare_writes_three_panels(picture_file, tmp_path, capsys):
+    out = tmp_path / "out"
+    code, err = _run(["mosaic", str(picture_file), "--out", str(out), "--elements", "80",
+                      "--iterations", "2", "--element", "triangle", "--compare", "density", "--quiet"], capsys)
+    assert code == 0, err
+    with Image.open(out / "compare_density.png") as img:
+        assert img.width > 3 * 150 and img.height > 120
+    assert json.loads((out / "result.json").read_text())["metric"] == "triangle"
+
+
+def test_rgba_uint16_array_is_composited_on_white():
+    rgba = np.zeros((48, 64, 4), np.uint16)
+    rgba[..., 0] = 65535  # red where opaque
+    rgba[:, :32, 3] = 65535
+    rgb, _ = picture_array(rgba)
+    assert np.allclose(rgb[:, :32], [1, 0, 0]) and np.allclose(rgb[:, 32:], [1, 1, 1])
