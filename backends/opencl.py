@@ -1,0 +1,377 @@
+"""The OpenCL backend: one work-item per pixel, nearest site by a ring search over a grid.
+
+Each call the host (NumPy) folds angles and scales into per-site coefficients with
+:func:`cvt.metrics.compile_sites` (the one definition of every metric: the kernel never
+re-types a shape), buckets the sites into a uniform grid of cells about one average
+spacing wide, and uploads them sorted by cell.  The kernel (``opencl_kernels.cl``)
+searches the cells around each pixel ring by ring and stops once the next ring cannot
+hold a nearer site; the bound ``|x - p_i| <= circumradius · s_max · d_i(x)`` holds for
+every angle, scale and aspect, so the result is exact (up to float32) and the cost per
+pixel does not grow with N.
+
+:meth:`OpenCLBackend.moments` also sums the moments on the device (runs of equal labels
+per row segment, added with atomics), so a Lloyd iteration reads back 5·N integers, not
+the raster; :meth:`OpenCLBackend.label` reads the raster.
+
+Two label kernels, the same search: ``label_blocks`` (one work-item per 8x8 block of
+pixels; the default on CPUs, where PoCL vectorises its inner loop over the block's pixels,
+4-5x faster than a work-item per pixel here) and ``label_pixels`` (one work-item per
+pixel; the default on GPUs).
+
+Device choice, first that applies: the ``device`` option ("PLATFORM[:DEVICE]", indices
+or name fragments, as ``cvtbench run --device``), the ``PYOPENCL_CTX`` environment
+variable (same syntax), else the first GPU, else the first CPU device, else any device.
+Nothing is ever asked interactively.
+"""
+
+from __future__ import annotations
+
+import math
+import os
+import warnings
+from pathlib import Path
+
+import numpy as np
+
+from cvt.errors import BackendUnavailable, InputError
+from cvt.metrics import Metric, compile_sites
+from cvt.moments import Moments
+from cvt.problem import Grid
+
+from .base import Backend
+
+KERNEL_FILE = Path(__file__).with_name("opencl_kernels.cl")
+SEGMENT = 64  # pixels of a row per work-item of the moments kernel
+REACH_MARGIN = 1e-4  # relative slack on the search bound against float32 rounding
+
+
+def _import_pyopencl():
+    try:
+        import pyopencl as cl
+    except ImportError as exc:  # pyopencl missing, or its native library fails to load
+        raise BackendUnavailable(
+            f"opencl: pyopencl is not importable ({exc}); install the 'opencl' extra "
+            "(pip install 'compact-distributions[opencl]')"
+        ) from None
+    return cl
+
+
+def _platforms(cl) -> list:
+    try:
+        platforms = cl.get_platforms()
+    except cl.Error as exc:  # no ICD loader / no platform: PLATFORM_NOT_FOUND_KHR
+        raise BackendUnavailable(f"opencl: no OpenCL platform found ({exc})") from None
+    if not platforms:
+        raise BackendUnavailable("opencl: no OpenCL platform found")
+    return platforms
+
+
+def _devices(cl, platform) -> list:
+    try:
+        return platform.get_devices()
+    except cl.Error:  # DEVICE_NOT_FOUND on a platform without devices
+        return []
+
+
+def describe_device(cl, dev) -> str:
+    """'platform / device name (type)', the text recorded in result.json."""
+    kind = cl.device_type.to_string(dev.type).replace("ALL | ", "")
+    return f"{dev.platform.name.strip()} / {dev.name.strip()} ({kind})"
+
+
+def _pick(items, token: str, what: str, source: str, names):
+    """One of ``items`` by index or (case-insensitive) name fragment."""
+    token = token.strip()
+    if token.isdigit():
+        k = int(token)
+        if k < len(items):
+            return items[k]
+    else:
+        hits = [it for it, nm in zip(items, names, strict=True) if token.lower() in nm.lower()]
+        if hits:
+            return hits[0]
+    have = "; ".join(f"{k}: {nm.strip()}" for k, nm in enumerate(names)) or "none"
+    raise InputError(f"{source}={token!r}: no OpenCL {what} {token!r} (have {have})")
+
+
+def _preferred(cl, devices: list):
+    """A GPU if there is one, else a CPU, else the first device."""
+    for kind in (cl.device_type.GPU, cl.device_type.CPU):
+        for dev in devices:
+            if dev.type & kind:
+                return dev
+    return devices[0]
+
+
+def choose_device(cl, spec: str | None = None):
+    """The device named by ``spec``, else by PYOPENCL_CTX, else the preferred one."""
+    source = "device"
+    if spec is None or str(spec).strip() == "":
+        spec, source = os.environ.get("PYOPENCL_CTX", ""), "PYOPENCL_CTX"
+    platforms = _platforms(cl)
+    if not str(spec).strip():
+        devices = [d for p in platforms for d in _devices(cl, p)]
+        if not devices:
+            raise BackendUnavailable("opencl: OpenCL platforms exist but none has a device")
+        return _preferred(cl, devices)
+    parts = str(spec).split(":")
+    if len(parts) > 2:
+        raise InputError(f"{source}={spec!r}: expected PLATFORM[:DEVICE], e.g. 0:0")
+    platform = _pick(platforms, parts[0], "platform", source, [p.name for p in platforms])
+    devices = _devices(cl, platform)
+    if not devices:
+        raise BackendUnavailable(f"opencl: platform {platform.name.strip()!r} has no device")
+    if len(parts) == 1 or not parts[1].strip():
+        return _preferred(cl, devices)
+    return _pick(devices, parts[1], "device", source, [d.name for d in devices])
+
+
+class OpenCLBackend(Backend):
+    """Labels and moments by an OpenCL kernel; see the module docstring.
+
+    ``device``: "PLATFORM[:DEVICE]" (indices or name fragments); ``split_atomics``: keep
+    the moment sums as 32-bit split counters even where 64-bit atomics exist (tests use
+    it to check the portable path); ``cell_factor``: grid cell width in average site
+    spacings; ``local_size``: the label kernel's work-group shape (None: the driver's)."""
+
+    name = "opencl"
+
+    def __init__(self, device: str | None = None, split_atomics: bool = False,
+                 cell_factor: float = 1.0, local_size: tuple[int, int] | None = None,
+                 block: int | None = None):
+        cl = self._cl = _import_pyopencl()
+        self._device = choose_device(cl, device)
+        try:
+            self._context = cl.Context([self._device])
+            self._queue = cl.CommandQueue(self._context)
+        except cl.Error as exc:
+            raise BackendUnavailable(
+                f"opencl: cannot open {describe_device(cl, self._device)}: {exc}") from None
+        has64 = "cl_khr_int64_base_atomics" in self._device.extensions
+        self.int64_atomics = has64 and not split_atomics
+        self.cell_factor = float(cell_factor)
+        self.local_size = None if local_size is None else tuple(int(v) for v in local_size)
+        if block is None:  # CPUs vectorise over a block's pixels; GPUs want a pixel each
+            block = 0 if self._device.type & cl.device_type.GPU else 8
+        self.block = int(block)
+        self._programs: dict[tuple, tuple] = {}  # (kind, K, int64) -> (label, moments kernels)
+        self._buffers: dict[str, object] = {}
+        self._mask_source = None  # the mask array last uploaded (grids are immutable)
+        self._mask_pixels = 0
+
+    # ------------------------------------------------------------------ device
+    @classmethod
+    def probe(cls) -> str:
+        cl = _import_pyopencl()
+        try:
+            return describe_device(cl, choose_device(cl, None))
+        except InputError as exc:  # a bad PYOPENCL_CTX: `info` shows why
+            raise BackendUnavailable(f"opencl: {exc}") from None
+
+    def device(self) -> str:
+        return describe_device(self._cl, self._device)
+
+    def close(self) -> None:
+        for buf in self._buffers.values():
+            buf.release()
+        self._buffers.clear()
+        self._programs.clear()
+        self._mask_source = None
+        self._queue = self._context = None
+
+    # ---------------------------------------------------------------- programs
+    def _kernels(self, metric: Metric, k: int):
+        """The built (label, moments) kernels for this metric kind; built once."""
+        key = (metric.kind, k, self.int64_atomics, self.block)
+        if key not in self._programs:
+            cl = self._cl
+            stride = 8 if metric.kind == "ellipse" else 4 + 2 * k
+            opts = [f"-DSTRIDE={stride}", f"-DK={k}", f"-DBW={max(self.block, 1)}", f"-DBH={max(self.block, 1)}"]
+            if metric.kind == "ellipse":
+                opts.append("-DMETRIC_ELLIPSE")
+            if self.int64_atomics:
+                opts.append("-DUSE_INT64_ATOMICS")
+            try:
+                source = KERNEL_FILE.read_text()
+            except OSError as exc:
+                raise BackendUnavailable(f"opencl: kernel source missing: {exc}") from None
+            try:
+                with warnings.catch_warnings():
+                    warnings.simplefilter("ignore")  # compiler chatter is not an error
+                    prg = cl.Program(self._context, source).build(options=opts)
+            except cl.Error as exc:
+                log = " ".join(str(exc).split())[:400]
+                raise BackendUnavailable(
+                    f"opencl: kernel failed to build on {self.device()} ({' '.join(opts)}): {log}"
+                ) from None
+            label_name = "label_blocks" if self.block > 0 else "label_pixels"
+            self._programs[key] = (cl.Kernel(prg, label_name), cl.Kernel(prg, "row_moments"))
+        return self._programs[key]
+
+    def _buffer(self, name: str, nbytes: int):
+        """A device buffer of at least ``nbytes``, reused across calls."""
+        nbytes = max(int(nbytes), 4)
+        buf = self._buffers.get(name)
+        if buf is None or buf.size < nbytes:
+            cl = self._cl
+            limit = self._device.max_mem_alloc_size
+            if nbytes > limit:
+                raise BackendUnavailable(
+                    f"opencl: {name} needs {nbytes / 2**20:.0f} MiB, more than the "
+                    f"{limit / 2**20:.0f} MiB one buffer may have on {self.device()}")
+            if buf is not None:
+                buf.release()
+            try:
+                buf = cl.Buffer(self._context, cl.mem_flags.READ_WRITE, nbytes)
+            except cl.Error as exc:
+                raise BackendUnavailable(
+                    f"opencl: out of device memory for {name} ({nbytes / 2**20:.0f} MiB) "
+                    f"on {self.device()}: {exc}") from None
+            self._buffers[name] = buf
+        return buf
+
+    def _upload(self, name: str, array: np.ndarray):
+        array = np.ascontiguousarray(array)
+        buf = self._buffer(name, array.nbytes)
+        if array.nbytes:
+            self._cl.enqueue_copy(self._queue, buf, array, is_blocking=True)
+        return buf
+
+    # ------------------------------------------------------------------ labels
+    def _site_records(self, sites, scales, angles, metric: Metric):
+        """Per-site float32 records (see the kernel file) and the search reach."""
+        n = len(sites)
+        uniform = (angles is None or np.ptp(angles) == 0) and np.ptp(scales) == 0
+        if uniform:  # one shape for all: compile it once and repeat it (N-fold less work)
+            one = compile_sites(metric, sites[:1], None if angles is None else angles[:1], scales[:1])
+            coeffs = one if n == 1 else type(one)(
+                one.kind, sites,
+                facets=None if one.facets is None else np.broadcast_to(one.facets, (n,) + one.facets.shape[1:]),
+                quad=None if one.quad is None else np.broadcast_to(one.quad, (n, 3)))
+        else:
+            coeffs = compile_sites(metric, sites, angles, scales)
+        hi = sites.astype(np.float32)
+        lo = (sites - hi.astype(np.float64)).astype(np.float32)
+        if metric.kind == "ellipse":
+            qxx, qxy, qyy = coeffs.quad.T
+            l11 = np.sqrt(qxx)
+            l21 = qxy / l11
+            l22 = np.sqrt(np.maximum(qyy - l21 * l21, 0.0))
+            coef = np.stack([l11, l21, l22, np.zeros_like(l11)], axis=1)
+            k = 0
+        else:
+            k = coeffs.facets.shape[1]
+            coef = coeffs.facets.reshape(len(sites), 2 * k)
+        records = np.concatenate([hi, lo, coef.astype(np.float32)], axis=1)
+        reach = metric.circumradius * float(scales.max()) * (1 + REACH_MARGIN)
+        return records, k, reach
+
+    def _run_labels(self, sites, scales, angles, metric: Metric, grid: Grid):
+        """Enqueue the label kernel; the labels stay in the device buffer 'labels'."""
+        sites = np.asarray(sites, dtype=np.float64).reshape(-1, 2)
+        n = len(sites)
+        if n == 0:
+            raise InputError("no sites to label")
+        if not np.isfinite(sites).all():
+            raise InputError("sites contain NaN or infinite coordinates")
+        scales = np.ones(n) if scales is None else np.asarray(scales, dtype=np.float64)
+        if scales.shape != (n,) or not (np.isfinite(scales).all() and (scales > 0).all()):
+            raise InputError("scales must be N finite numbers > 0")
+        if angles is not None:
+            angles = np.asarray(angles, dtype=np.float64)
+            if angles.shape != (n,) or not np.isfinite(angles).all():
+                raise InputError("angles must be N finite numbers (radians)")
+        if self._queue is None:
+            raise RuntimeError("opencl: this backend was closed; create a new one")
+        w, h = grid.width, grid.height
+        records, k, reach = self._site_records(sites, scales, angles, metric)
+        label_kernel, _ = self._kernels(metric, k)
+
+        use_mask = grid.mask is not None
+        if use_mask and self._mask_source is not grid.mask:
+            self._upload("mask", grid.mask.view(np.uint8))
+            self._mask_source, self._mask_pixels = grid.mask, int(grid.mask.sum())
+        area = self._mask_pixels if use_mask else w * h
+
+        # the uniform grid: about one site per cell over the region
+        # float32-exact, so the host's buckets and the kernel's cell edges agree
+        cell = float(np.float32(max(1.0, self.cell_factor * math.sqrt(area / n))))
+        ncx, ncy = max(1, math.ceil(w / cell)), max(1, math.ceil(h / cell))
+        cx = np.clip(np.floor(sites[:, 0] / cell), 0, ncx - 1).astype(np.int64)
+        cy = np.clip(np.floor(sites[:, 1] / cell), 0, ncy - 1).astype(np.int64)
+        cid = cy * ncx + cx
+        # stable, so a cell's sites stay in index order; 16-bit keys get numpy's radix sort
+        key_type = np.uint16 if ncx * ncy <= 65535 else np.int32
+        order = np.argsort(cid.astype(key_type), kind="stable")
+        starts = np.zeros(ncx * ncy + 1, dtype=np.int32)
+        np.cumsum(np.bincount(cid, minlength=ncx * ncy), out=starts[1:])
+
+        cl = self._cl
+        # per cell: circumradius x the largest scale in it (the kernel's local bound)
+        cell_reach = np.zeros(ncx * ncy, dtype=np.float64)
+        full = starts[1:] > starts[:-1]
+        cell_reach[full] = np.maximum.reduceat(scales[order], starts[:-1][full])
+        cell_reach *= metric.circumradius * (1 + REACH_MARGIN)
+        starts_buf = self._upload("cell_start", starts)
+        reach_buf = self._upload("cell_reach", cell_reach.astype(np.float32))
+        records_buf = self._upload("records", records[order])
+        index_buf = self._upload("site_index", order.astype(np.int32))
+        mask_buf = self._buffer("mask", 4)
+        labels_buf = self._buffer("labels", 4 * w * h)
+        slack = 1e-3 + 4 * max(w, h) * 2.0**-24  # px: float32 rounding of far cell edges
+        label_kernel.set_args(
+            np.int32(w), np.int32(h), np.int32(ncx), np.int32(ncy), np.float32(cell),
+            np.float32(reach), np.float32(slack), starts_buf, reach_buf, records_buf, index_buf,
+            mask_buf, np.int32(use_mask), labels_buf)
+        local = self.local_size
+        if self.block > 0:
+            w, h = -(-w // self.block), -(-h // self.block)  # one work-item per block
+        if local is None:
+            global_size = (w, h)
+        else:
+            global_size = (-(-w // local[0]) * local[0], -(-h // local[1]) * local[1])
+        try:
+            cl.enqueue_nd_range_kernel(self._queue, label_kernel, global_size, local)
+        except cl.Error as exc:
+            raise BackendUnavailable(f"opencl: label kernel failed on {self.device()}: {exc}") from None
+        return labels_buf, n
+
+    def label(self, sites, scales, angles, metric: Metric, grid: Grid) -> np.ndarray:
+        labels_buf, _ = self._run_labels(sites, scales, angles, metric, grid)
+        out = np.empty((grid.height, grid.width), dtype=np.int32)
+        self._read(out, labels_buf)
+        return out
+
+    def _read(self, out: np.ndarray, buf) -> None:
+        try:
+            self._cl.enqueue_copy(self._queue, out, buf, is_blocking=True)
+        except self._cl.Error as exc:  # a kernel that failed surfaces here
+            raise BackendUnavailable(f"opencl: device error on {self.device()}: {exc}") from None
+
+    # ----------------------------------------------------------------- moments
+    def moments(self, sites, scales, angles, metric: Metric, grid: Grid) -> Moments:
+        """Labels and their integer moments on the device; reads back 5·N sums."""
+        cl = self._cl
+        labels_buf, n = self._run_labels(sites, scales, angles, metric, grid)
+        k = 0 if metric.kind == "ellipse" else np.asarray(metric.normals).shape[0]
+        _, moments_kernel = self._kernels(metric, k)
+        words = 5 * n if self.int64_atomics else 10 * n
+        acc_buf = self._buffer("moments", 4 * 2 * 5 * n)
+        cl.enqueue_fill_buffer(self._queue, acc_buf, np.uint32(0), 0, 4 * 2 * 5 * n)
+        w, h = grid.width, grid.height
+        moments_kernel.set_args(np.int32(w), np.int32(h), np.int32(SEGMENT), labels_buf,
+                                np.int32(n), acc_buf)
+        try:
+            cl.enqueue_nd_range_kernel(self._queue, moments_kernel, (-(-w // SEGMENT), h), None)
+        except cl.Error as exc:
+            raise BackendUnavailable(f"opencl: moments kernel failed on {self.device()}: {exc}") from None
+        if self.int64_atomics:
+            acc = np.empty(words, dtype=np.uint64)
+            self._read(acc, acc_buf)
+            sums = acc.view(np.int64).reshape(5, n)
+        else:
+            acc = np.empty(words, dtype=np.uint32)
+            self._read(acc, acc_buf)
+            lo, hi = acc[:5 * n].astype(np.int64), acc[5 * n:].astype(np.int64)
+            sums = ((hi << 32) | lo).reshape(5, n)
+        return Moments(*(np.ascontiguousarray(row) for row in sums))

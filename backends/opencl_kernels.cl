@@ -1,0 +1,360 @@
+/* Kernels of the OpenCL backend (backends/opencl.py builds them once per metric kind).
+
+   Compile-time defines, set by the host:
+     METRIC_ELLIPSE        the metric is elliptic (l2, l2-axial); else polygonal
+     K                     number of facets of a polygonal metric (3 or 4 here)
+     STRIDE                floats per site record (see below)
+     BW, BH                pixels per work-item of label_blocks (8 x 8)
+     USE_INT64_ATOMICS     the device has cl_khr_int64_base_atomics; else the moment sums
+                           are kept as split 32-bit counters (low word + carries)
+
+   A site record (STRIDE floats), sorted by grid cell on the host:
+     [0..1] p_hi = float32(p)            [2..3] p_lo = float32(p - p_hi)
+     polygon: [4 + 2k, 5 + 2k] facet k,  d = max_k f_k . v
+     ellipse: [4..6] = (l11, l21, l22),  the Cholesky factor of the site's quadratic
+              form Q = L L^T, so d^2 = (l11 vx + l21 vy)^2 + (l22 vy)^2: a sum of squares,
+              no cancellation in float32.
+   v = x - p is formed first as (x - p_hi) - p_lo: x - p_hi is exact in float32 when
+   both are close, so v carries float64-like accuracy into the dot products.
+
+   Plain ?: instead of fmin/fmax/fabs: PoCL stops vectorising the work-group loop on
+   those (MEASUREMENTS.md, about 4x slower). */
+
+#ifdef USE_INT64_ATOMICS
+#pragma OPENCL EXTENSION cl_khr_int64_base_atomics : enable
+#endif
+
+/* The distance of a site record from (px, py): d for polygons, d^2 for ellipses
+   (the comparison and the search bound take that into account). */
+inline float site_distance(__global const float *rec, const float px, const float py)
+{
+    const float vx = (px - rec[0]) - rec[2];
+    const float vy = (py - rec[1]) - rec[3];
+#ifdef METRIC_ELLIPSE
+    const float u = rec[4] * vx + rec[5] * vy;
+    const float w = rec[6] * vy;
+    return u * u + w * w;
+#else
+    float d = rec[4] * vx + rec[5] * vy;
+#pragma unroll
+    for (int k = 1; k < K; ++k) {
+        const float e = rec[4 + 2 * k] * vx + rec[5 + 2 * k] * vy;
+        d = e > d ? e : d;
+    }
+    return d;
+#endif
+}
+
+/* One work-item per pixel: the nearest site, searched over a uniform grid of cells ring
+   by ring (Chebyshev rings of cells around the pixel's cell).
+
+   Stopping bound: every site satisfies |x - p_i| <= reach * d_i(x) with
+   reach = circumradius * max_i s_i (gauge(v) >= |v| / circumradius, d_i = gauge / s_i),
+   which holds for any angle, scale and aspect.  Once the rings 0..r have been searched,
+   every unsearched site lies outside the block of cells and so at least `out` (the
+   pixel's distance to the block's edge, edges on the raster border excluded) away: it
+   cannot be nearer (or tie) once out > reach * best.  A cell in a ring is skipped the
+   same way with its own reach (circumradius times the largest s_i in that cell), which
+   keeps the search local where scales vary.  Both reaches carry a relative margin and
+   `slack` (pixels, from the host) an absolute one against float32 rounding (of d, and of
+   cell edges far from the origin), so near-ties are always evaluated and go to the lower
+   index. */
+__kernel void label_pixels(const int width, const int height,
+                           const int ncx, const int ncy, const float cell,
+                           const float reach, const float slack,
+                           __global const int *cell_start,
+                           __global const float *cell_reach,
+                           __global const float *records,
+                           __global const int *site_index,
+                           __global const uchar *mask, const int use_mask,
+                           __global int *labels)
+{
+    const int j = get_global_id(0);
+    const int i = get_global_id(1);
+    if (j >= width || i >= height)
+        return;
+    const int pix = i * width + j;
+    if (use_mask && !mask[pix]) {
+        labels[pix] = -1;
+        return;
+    }
+    const float px = (float)j + 0.5f;
+    const float py = (float)i + 0.5f;
+    int cx = (int)(px / cell);
+    int cy = (int)(py / cell);
+    cx = cx < ncx ? cx : ncx - 1;
+    cy = cy < ncy ? cy : ncy - 1;
+
+    float best = INFINITY;
+    int best_idx = 0x7fffffff;
+    float best_dist = INFINITY; /* d of the best site so far, after the last ring */
+
+    for (int r = 0;; ++r) {
+        const int y0 = cy - r > 0 ? cy - r : 0;
+        const int y1 = cy + r < ncy - 1 ? cy + r : ncy - 1;
+        for (int gy = y0; gy <= y1; ++gy) {
+            const int on_edge_row = (gy == cy - r) || (gy == cy + r);
+            const int step = on_edge_row ? 1 : 2 * r;
+            /* y gap between the pixel and this row of cells */
+            const float top = gy * cell, bottom = (gy + 1) * cell;
+            const float gapy = py < top ? top - py : (py > bottom ? py - bottom : 0.0f);
+            for (int gx = cx - r; gx <= cx + r; gx += step) {
+                if (gx < 0 || gx >= ncx)
+                    continue;
+                const float left = gx * cell, right = (gx + 1) * cell;
+                const float gapx = px < left ? left - px : (px > right ? px - right : 0.0f);
+                const int c = gy * ncx + gx;
+                const float cell_lim = cell_reach[c] * best_dist + slack;
+                if (gapx * gapx + gapy * gapy > cell_lim * cell_lim)
+                    continue;
+                const int s1 = cell_start[c + 1];
+                for (int s = cell_start[c]; s < s1; ++s) {
+                    const float d = site_distance(records + s * STRIDE, px, py);
+                    const int idx = site_index[s];
+                    if (d < best || (d == best && idx < best_idx)) {
+                        best = d;
+                        best_idx = idx;
+                    }
+                }
+            }
+        }
+#ifdef METRIC_ELLIPSE
+        best_dist = sqrt(best);
+#else
+        best_dist = best > 0.0f ? best : 0.0f;
+#endif
+        const float lim = reach * best_dist + slack;
+        /* distance from the pixel to the edge of the searched block of cells; an edge
+           on the raster border has nothing beyond it */
+        float out = INFINITY;
+        if (cx - r > 0) {
+            const float e = px - (cx - r) * cell;
+            out = e < out ? e : out;
+        }
+        if (cx + r < ncx - 1) {
+            const float e = (cx + r + 1) * cell - px;
+            out = e < out ? e : out;
+        }
+        if (cy - r > 0) {
+            const float e = py - (cy - r) * cell;
+            out = e < out ? e : out;
+        }
+        if (cy + r < ncy - 1) {
+            const float e = (cy + r + 1) * cell - py;
+            out = e < out ? e : out;
+        }
+        if (out == INFINITY || out > lim)
+            break;
+    }
+    labels[pix] = best_idx;
+}
+
+/* The same search for CPUs: one work-item per BW x BH block of pixels.  Every pixel of
+   the block visits the same cells (those under the block, then rings around them), so
+   the innermost loop runs over the block's pixels for one site with a fixed trip count
+   and no dependence between iterations: the compiler vectorises it (a per-pixel loop
+   over sites, as in label_pixels, is a serial argmin that CPUs run one lane wide).
+   The block stops after the first ring at which every pixel inside the region is done
+   by the bound above. */
+__kernel void label_blocks(const int width, const int height,
+                           const int ncx, const int ncy, const float cell,
+                           const float reach, const float slack,
+                           __global const int *cell_start,
+                           __global const float *cell_reach,
+                           __global const float *records,
+                           __global const int *site_index,
+                           __global const uchar *mask, const int use_mask,
+                           __global int *labels)
+{
+    const int x0 = get_global_id(0) * BW;
+    const int y0 = get_global_id(1) * BH;
+    if (x0 >= width || y0 >= height)
+        return;
+    const int xn = x0 + BW < width ? BW : width - x0; /* pixels of the block inside */
+    const int yn = y0 + BH < height ? BH : height - y0;
+
+    /* which pixels count: inside the raster and the region */
+    int live[BH][BW];
+    int any_live = 0;
+    for (int yy = 0; yy < BH; ++yy)
+        for (int xx = 0; xx < BW; ++xx) {
+            int in = xx < xn && yy < yn;
+            if (in && use_mask)
+                in = mask[(y0 + yy) * width + x0 + xx] != 0;
+            live[yy][xx] = in;
+            any_live |= in;
+        }
+    if (!any_live) {
+        for (int yy = 0; yy < yn; ++yy)
+            for (int xx = 0; xx < xn; ++xx)
+                labels[(y0 + yy) * width + x0 + xx] = -1;
+        return;
+    }
+
+    int cx0 = (int)(((float)x0 + 0.5f) / cell), cx1 = (int)(((float)(x0 + xn - 1) + 0.5f) / cell);
+    int cy0 = (int)(((float)y0 + 0.5f) / cell), cy1 = (int)(((float)(y0 + yn - 1) + 0.5f) / cell);
+    cx0 = cx0 < ncx ? cx0 : ncx - 1;
+    cx1 = cx1 < ncx ? cx1 : ncx - 1;
+    cy0 = cy0 < ncy ? cy0 : ncy - 1;
+    cy1 = cy1 < ncy ? cy1 : ncy - 1;
+
+    float best[BH][BW];
+    int best_idx[BH][BW];
+    for (int yy = 0; yy < BH; ++yy)
+        for (int xx = 0; xx < BW; ++xx) {
+            best[yy][xx] = INFINITY;
+            best_idx[yy][xx] = 0x7fffffff;
+        }
+
+    /* the box of the block's pixel centres, and the largest best d over its live pixels
+       after the last ring (a cell farther than its reach times that cannot win) */
+    const float box_x0 = (float)x0 + 0.5f, box_x1 = (float)(x0 + xn - 1) + 0.5f;
+    const float box_y0 = (float)y0 + 0.5f, box_y1 = (float)(y0 + yn - 1) + 0.5f;
+    float worst_dist = INFINITY;
+
+    for (int r = 0;; ++r) {
+        const int bx0 = cx0 - r, bx1 = cx1 + r, by0 = cy0 - r, by1 = cy1 + r;
+        const int inner = bx1 - bx0; /* step from the left to the right column */
+        const int gy_end = by1 < ncy - 1 ? by1 : ncy - 1;
+        for (int gy = by0 > 0 ? by0 : 0; gy <= gy_end; ++gy) {
+            const int step = (r == 0 || gy == by0 || gy == by1) ? 1 : inner;
+            const float top = gy * cell, bottom = (gy + 1) * cell;
+            const float gapy = box_y1 < top ? top - box_y1 : (box_y0 > bottom ? box_y0 - bottom : 0.0f);
+            for (int gx = bx0; gx <= bx1; gx += step) {
+                if (gx < 0 || gx >= ncx)
+                    continue;
+                const int c = gy * ncx + gx;
+                const float left = gx * cell, right = (gx + 1) * cell;
+                const float gapx = box_x1 < left ? left - box_x1 : (box_x0 > right ? box_x0 - right : 0.0f);
+                const float cell_lim = cell_reach[c] * worst_dist + slack;
+                if (gapx * gapx + gapy * gapy > cell_lim * cell_lim)
+                    continue;
+                const int s1 = cell_start[c + 1];
+                for (int s = cell_start[c]; s < s1; ++s) {
+                    __global const float *rec = records + s * STRIDE;
+                    const int idx = site_index[s];
+                    for (int yy = 0; yy < BH; ++yy) {
+                        const float py = (float)(y0 + yy) + 0.5f;
+                        for (int xx = 0; xx < BW; ++xx) {
+                            const float px = (float)(x0 + xx) + 0.5f;
+                            const float d = site_distance(rec, px, py);
+                            const float b = best[yy][xx];
+                            const int better = d < b || (d == b && idx < best_idx[yy][xx]);
+                            best[yy][xx] = better ? d : b;
+                            best_idx[yy][xx] = better ? idx : best_idx[yy][xx];
+                        }
+                    }
+                }
+            }
+        }
+        /* done when, for every live pixel, the pixel's distance to the edge of the
+           searched block (edges on the raster border excluded) exceeds its reach */
+        const float left = bx0 > 0 ? bx0 * cell : -INFINITY;
+        const float right = bx1 < ncx - 1 ? (bx1 + 1) * cell : INFINITY;
+        const float top = by0 > 0 ? by0 * cell : -INFINITY;
+        const float bottom = by1 < ncy - 1 ? (by1 + 1) * cell : INFINITY;
+        if (left == -INFINITY && right == INFINITY && top == -INFINITY && bottom == INFINITY)
+            break; /* the whole grid has been searched */
+        int pending = 0;
+        worst_dist = 0.0f;
+        for (int yy = 0; yy < BH; ++yy) {
+            const float py = (float)(y0 + yy) + 0.5f;
+            for (int xx = 0; xx < BW; ++xx) {
+                const float px = (float)(x0 + xx) + 0.5f;
+                const float b = best[yy][xx];
+#ifdef METRIC_ELLIPSE
+                const float dist = sqrt(b);
+#else
+                const float dist = b > 0.0f ? b : 0.0f;
+#endif
+                const float lim = reach * dist + slack;
+                const int done = px - left > lim && right - px > lim
+                                 && py - top > lim && bottom - py > lim;
+                pending |= live[yy][xx] && !done;
+                worst_dist = live[yy][xx] && dist > worst_dist ? dist : worst_dist;
+            }
+        }
+        if (!pending)
+            break;
+    }
+    for (int yy = 0; yy < yn; ++yy)
+        for (int xx = 0; xx < xn; ++xx)
+            labels[(y0 + yy) * width + x0 + xx] = live[yy][xx] ? best_idx[yy][xx] : -1;
+}
+
+/* ------------------------------------------------------------------------ moments */
+
+#ifdef USE_INT64_ATOMICS
+typedef ulong acc_t;
+inline void add_sum(volatile __global ulong *acc, const int q, const int n, const int site,
+                    const ulong v)
+{
+    atom_add(acc + q * n + site, v);
+}
+#else
+typedef uint acc_t;
+/* A 64-bit sum as two 32-bit counters: low words at [q*n + site], high words at
+   [5n + q*n + site].  Each addition that wraps the low word adds one carry, so
+   total = high * 2^32 + low whatever the order of the atomics. */
+inline void add_sum(volatile __global uint *acc, const int q, const int n, const int site,
+                    const ulong v)
+{
+    const uint vlo = (uint)v;
+    const uint old = atomic_add(acc + q * n + site, vlo);
+    const uint carry = old > 0xffffffffu - vlo ? 1u : 0u;
+    const uint vhi = (uint)(v >> 32) + carry;
+    if (vhi)
+        atomic_add(acc + 5 * n + q * n + site, vhi);
+}
+#endif
+
+/* Σ_{j=0..m} j^2 (0 for m < 0) */
+inline ulong sum_squares(const long m)
+{
+    if (m < 0)
+        return 0;
+    const ulong u = (ulong)m;
+    return u * (u + 1) * (2 * u + 1) / 6;
+}
+
+inline void flush_run(volatile __global acc_t *acc, const int n, const int site,
+                      const int a, const int b, const int row)
+{
+    const ulong len = (ulong)(b - a + 1);
+    const ulong r = (ulong)row;
+    add_sum(acc, 0, n, site, len);
+    add_sum(acc, 1, n, site, (ulong)(a + b) * len / 2);
+    add_sum(acc, 2, n, site, r * len);
+    add_sum(acc, 3, n, site, sum_squares(b) - sum_squares((long)a - 1));
+    add_sum(acc, 4, n, site, r * r * len);
+}
+
+/* Per-site integer sums (count, Σj, Σi, Σj², Σi²) of the label raster.  One work-item
+   per segment of `seg` pixels of a row: it walks the segment, and adds each run of equal
+   labels in closed form with one atomic per sum, so the atomics are per run (a few per
+   cell and row), not per pixel. */
+__kernel void row_moments(const int width, const int height, const int seg,
+                          __global const int *labels, const int n,
+                          volatile __global acc_t *acc)
+{
+    const int s = get_global_id(0);
+    const int i = get_global_id(1);
+    const int j0 = s * seg;
+    if (i >= height || j0 >= width)
+        return;
+    const int j1 = j0 + seg < width ? j0 + seg : width;
+    __global const int *row = labels + (size_t)i * width;
+    int cur = row[j0];
+    int start = j0;
+    for (int j = j0 + 1; j < j1; ++j) {
+        const int l = row[j];
+        if (l != cur) {
+            if (cur >= 0)
+                flush_run(acc, n, cur, start, j - 1, i);
+            cur = l;
+            start = j;
+        }
+    }
+    if (cur >= 0)
+        flush_run(acc, n, cur, start, j1 - 1, i);
+}

@@ -1,0 +1,339 @@
+"""The OpenCL backend against the float64 NumPy reference, on the device probe() picks
+(PoCL's CPU device in CI).
+
+float32 against float64 may flip genuine ties (L1 and L∞ have whole tie segments), so
+labels must agree on >= 99.9 % of pixels and every disagreement must be a near-tie; a
+Lloyd step must land every site within 0.5 px (mean 0.01 px); after 20 iterations the
+energies must agree within 1 %.  Both label kernels (per block for CPUs, per pixel for
+GPUs) and both moment paths (64-bit atomics, split 32-bit counters) are checked.
+"""
+
+import json
+import math
+
+import numpy as np
+import pytest
+
+from backends.numpy_backend import NumpyBackend
+from cvt.errors import BackendUnavailable, InputError
+from cvt.fields import DensityMap, DirectionField
+from cvt.lloyd import lloyd
+from cvt.metrics import METRIC_NAMES, compile_sites, make_metric
+from cvt.moments import moments_from_labels
+from cvt.problem import Grid, Problem
+
+try:
+    from backends.opencl import OpenCLBackend, choose_device
+
+    DEVICE = OpenCLBackend.probe()
+except BackendUnavailable as exc:
+    pytest.skip(f"OpenCL backend unavailable: {exc}", allow_module_level=True)
+
+TIE_TOLERANCE = 1e-5  # relative
+KERNELS = {"blocks": 8, "pixels": 0}
+
+
+@pytest.fixture(scope="module")
+def backends():
+    made = {name: OpenCLBackend(block=block) for name, block in KERNELS.items()}
+    yield made
+    for b in made.values():
+        b.close()
+
+
+@pytest.fixture(scope="module")
+def reference():
+    return NumpyBackend()
+
+
+def notched_ellipse(w, h):
+    """A non-rectangular region: an ellipse with a rectangular bite out of one side."""
+    ys, xs = np.mgrid[0:h, 0:w] + 0.5
+    inside = ((xs - w / 2) / (0.48 * w)) ** 2 + ((ys - h / 2) / (0.48 * h)) ** 2 < 1
+    inside &= ~((xs > 0.6 * w) & (np.abs(ys - h / 2) < 0.12 * h))
+    return inside
+
+
+def sites_in(mask, n, rng):
+    ys, xs = np.nonzero(mask)
+    pick = rng.choice(len(xs), n, replace=False)
+    return np.stack([xs[pick], ys[pick]], axis=1) + rng.random((n, 2))
+
+
+def random_case(name, varied, seed, w=256, h=192, n=300):
+    rng = np.random.default_rng(seed)
+    mask = notched_ellipse(w, h)
+    sites = sites_in(mask, n, rng)
+    angles = rng.random(n) * 2 * np.pi if varied else None
+    scales = 0.4 + 1.6 * rng.random(n) if varied else None
+    return sites, angles, scales, make_metric(name, 0.5), Grid(w, h, mask)
+
+
+def assert_labels_match(got, want, sites, angles, scales, metric):
+    """>= 99.9 % equal, the same region, and every difference a near-tie."""
+    assert got.dtype == np.int32 and got.shape == want.shape
+    np.testing.assert_array_equal(got < 0, want < 0)
+    diff = got != want
+    assert diff.mean() <= 1e-3, f"{diff.sum()} of {diff.size} pixels differ"
+    if diff.any():
+        coeffs = compile_sites(metric, sites, angles, scales)
+        i, j = np.nonzero(diff)
+        d_got = coeffs.distance(got[diff], j + 0.5, i + 0.5)
+        d_want = coeffs.distance(want[diff], j + 0.5, i + 0.5)
+        gap = np.abs(d_got - d_want) / np.maximum(np.maximum(d_got, d_want), 1e-12)
+        assert gap.max() <= TIE_TOLERANCE, f"a disagreement is not a tie: relative gap {gap.max():.2e}"
+
+
+def test_probe_names_platform_and_device():
+    assert " / " in DEVICE and DEVICE.endswith(")")
+
+
+@pytest.mark.parametrize("kernel", KERNELS)
+@pytest.mark.parametrize("varied", [False, True], ids=["plain", "angles+scales"])
+@pytest.mark.parametrize("name", METRIC_NAMES)
+def test_labels_agree_with_reference(backends, reference, name, varied, kernel):
+    sites, angles, scales, metric, grid = random_case(name, varied, seed=METRIC_NAMES.index(name))
+    got = backends[kernel].label(sites, scales, angles, metric, grid)
+    want = reference.label(sites, scales, angles, metric, grid)
+    assert_labels_match(got, want, sites, angles, scales, metric)
+
+
+@pytest.mark.parametrize("kernel", KERNELS)
+@pytest.mark.parametrize("name", ["l2-axial", "linf-axial", "triangle"])
+def test_search_bound_holds_for_clusters_and_extreme_shapes(backends, reference, name, kernel):
+    """Most sites in one corner, a few far away, scales over a 20x range and a thin
+    ball (aspect 0.25): the ring search must go far and still stop correctly."""
+    rng = np.random.default_rng(11)
+    w, h = 200, 150
+    sites = np.concatenate([rng.random((150, 2)) * [40, 30], rng.random((6, 2)) * [w, h]])
+    angles = rng.random(len(sites)) * 2 * np.pi
+    scales = np.exp(rng.uniform(np.log(0.15), np.log(3.0), len(sites)))
+    metric = make_metric(name, 0.25)
+    grid = Grid(w, h)
+    got = backends[kernel].label(sites, scales, angles, metric, grid)
+    want = reference.label(sites, scales, angles, metric, grid)
+    assert_labels_match(got, want, sites, angles, scales, metric)
+
+
+@pytest.mark.parametrize("kernel", KERNELS)
+@pytest.mark.parametrize("name", ["l2", "linf", "triangle"])
+def test_far_from_the_origin(backends, reference, name, kernel):
+    """A 16384-px-wide strip: float32 keeps only ~0.001 px there, so L∞'s tie segments
+    flip on hundreds of pixels unless v = x - p keeps the site's low bits (hi/lo split)."""
+    rng = np.random.default_rng(4)
+    w, h = 16384, 48
+    sites = rng.random((1500, 2)) * [w, h]
+    angles, scales = None, None
+    metric, grid = make_metric(name), Grid(w, h)
+    got = backends[kernel].label(sites, scales, angles, metric, grid)
+    want = reference.label(sites, scales, angles, metric, grid)
+    assert_labels_match(got, want, sites, angles, scales, metric)
+
+
+@pytest.mark.parametrize("kernel", KERNELS)
+def test_ties_go_to_the_lower_index(backends, kernel):
+    # sites 1 and 2 coincide: they tie everywhere, 1 must win; the grid puts them in one
+    # cell after site 3, whose index order must not matter
+    sites = np.array([[30.0, 30.0], [10.0, 10.0], [10.0, 10.0], [10.2, 10.1]])
+    lab = backends[kernel].label(sites, None, None, make_metric("l1"), Grid(40, 40))
+    assert 2 not in lab and (lab == 1).any()
+
+
+@pytest.mark.parametrize("kernel", KERNELS)
+@pytest.mark.parametrize("name", ["l2", "l1", "linf"])
+def test_exact_ties_across_cells_go_to_the_lower_index(backends, name, kernel):
+    """Site 1 (left cell) and site 0 (right cell) are exactly equidistant from column
+    x = 30.5: pixels there search their own cell, meet site 1 first, and must still
+    end with site 0."""
+    sites = np.array([[50.5, 10.5], [10.5, 10.5]])
+    lab = backends[kernel].label(sites, None, None, make_metric(name), Grid(64, 64))
+    assert (lab[:, 30] == 0).all() and (lab[:20, 29] == 1).all() and (lab[:, 31] == 0).all()
+
+
+@pytest.mark.parametrize("split", [False, True], ids=["native", "split32"])
+@pytest.mark.parametrize("name", ["l2", "linf", "triangle"])
+def test_device_moments_equal_host_sums_of_device_labels(name, split):
+    sites, angles, scales, metric, grid = random_case(name, True, seed=5)
+    ocl = OpenCLBackend(split_atomics=split)
+    try:
+        labels = ocl.label(sites, scales, angles, metric, grid)
+        got = ocl.moments(sites, scales, angles, metric, grid)
+    finally:
+        ocl.close()
+    want = moments_from_labels(labels, len(sites))
+    for field in ("count", "sx", "sy", "sxx", "syy"):
+        np.testing.assert_array_equal(getattr(got, field), getattr(want, field), err_msg=field)
+
+
+@pytest.mark.parametrize("split", [False, True], ids=["native", "split32"])
+def test_moment_sums_past_32_bits(split):
+    """One site owning a 4096 x 300 raster: Σj² = 300·Σ_{j<4096} j² ≈ 6.9e12, and the
+    split counters wrap their low word many times."""
+    ocl = OpenCLBackend(split_atomics=split)
+    try:
+        mom = ocl.moments(np.array([[5.0, 5.0]]), None, None, make_metric("l2"), Grid(4096, 300))
+    finally:
+        ocl.close()
+    j, i = np.arange(4096, dtype=np.int64), np.arange(300, dtype=np.int64)
+    assert mom.count[0] == 4096 * 300
+    assert mom.sx[0] == 300 * j.sum() and mom.sy[0] == 4096 * i.sum()
+    assert mom.sxx[0] == 300 * (j * j).sum() > 2**32
+    assert mom.syy[0] == 4096 * (i * i).sum()
+
+
+@pytest.mark.parametrize("varied", [False, True], ids=["plain", "angles+scales"])
+@pytest.mark.parametrize("name", METRIC_NAMES)
+def test_one_lloyd_step_lands_where_the_reference_does(backends, reference, name, varied):
+    sites, angles, scales, metric, grid = random_case(name, varied, seed=20 + METRIC_NAMES.index(name))
+    got = backends["blocks"].moments(sites, scales, angles, metric, grid).centroids(sites)
+    ref_labels = reference.label(sites, scales, angles, metric, grid)
+    want = moments_from_labels(ref_labels, len(sites)).centroids(sites)
+    moved = np.hypot(*(got - want).T)
+    assert moved.max() <= 0.5 and moved.mean() <= 0.01, (moved.max(), moved.mean())
+
+
+@pytest.mark.parametrize("name", METRIC_NAMES)
+def test_energy_after_20_iterations_matches_reference(backends, reference, name):
+    w, h = 160, 128
+    yy, xx = np.mgrid[0:h, 0:w]
+    density = DensityMap(1.0 + 3.0 * xx / w)
+    field = DirectionField.named("wave:90", w, h) if name != "l2" else None
+    problem = Problem(Grid(w, h, notched_ellipse(w, h)), 120, make_metric(name), density, field, seed=3)
+    ours = lloyd(problem, backends["blocks"], iterations=20)
+    ref = lloyd(problem, reference, iterations=20)
+    assert ours.energy[0] == pytest.approx(ref.energy[0], rel=1e-3)  # same start: ties at most
+    assert ours.energy[-1] == pytest.approx(ref.energy[-1], rel=0.01)
+    assert ours.energy[-1] < ours.energy[0]
+
+
+def test_same_input_same_labels(backends):
+    sites, angles, scales, metric, grid = random_case("linf", True, seed=9)
+    first = backends["blocks"].label(sites, scales, angles, metric, grid)
+    again = backends["blocks"].label(sites, scales, angles, metric, grid)
+    fresh = OpenCLBackend()
+    try:
+        other = fresh.label(sites, scales, angles, metric, grid)
+    finally:
+        fresh.close()
+    np.testing.assert_array_equal(first, again)
+    np.testing.assert_array_equal(first, other)
+
+
+def test_programs_are_built_once_per_metric_kind():
+    ocl = OpenCLBackend()
+    try:
+        sites = np.random.default_rng(0).random((50, 2)) * 64
+        for name in ("l1", "linf", "l1", "l2", "l2-axial", "triangle"):
+            ocl.label(sites, None, None, make_metric(name), Grid(64, 64))
+        kinds = sorted((kind, k) for kind, k, *_ in ocl._programs)
+        assert kinds == [("ellipse", 0), ("polygon", 3), ("polygon", 4)]
+    finally:
+        ocl.close()
+
+
+# ---------------------------------------------------------------- device choice, errors
+def test_device_option_and_pyopencl_ctx_pick_the_same_device(monkeypatch):
+    import pyopencl as cl
+
+    monkeypatch.delenv("PYOPENCL_CTX", raising=False)
+    by_option = choose_device(cl, "0:0")
+    monkeypatch.setenv("PYOPENCL_CTX", "0:0")
+    by_env = choose_device(cl, None)
+    assert by_option == by_env == cl.get_platforms()[0].get_devices()[0]
+    ocl = OpenCLBackend(device="0")
+    try:
+        assert ocl.device().startswith(cl.get_platforms()[0].name.strip() + " / ")
+    finally:
+        ocl.close()
+
+
+@pytest.mark.parametrize("bad", [dict(scales=np.zeros(3)), dict(angles=np.array([0.0, np.nan, 0.0])),
+                                 dict(sites=np.array([[1.0, np.inf], [2, 2], [3, 3]]))])
+def test_bad_site_data_is_an_input_error(backends, bad):
+    args = dict(sites=np.array([[1.0, 1.0], [2, 2], [3, 3]]), scales=None, angles=None)
+    args.update(bad)
+    with pytest.raises(InputError):
+        backends["blocks"].label(args["sites"], args["scales"], args["angles"], make_metric("l2"), Grid(8, 8))
+
+
+@pytest.mark.parametrize("spec", ["99", "0:99", "no-such-platform", "0:0:0"])
+def test_bad_device_is_an_input_error(spec, monkeypatch):
+    monkeypatch.delenv("PYOPENCL_CTX", raising=False)
+    with pytest.raises(InputError, match="device") as err:
+        OpenCLBackend(device=spec)
+    assert "\n" not in str(err.value)
+
+
+def test_bad_pyopencl_ctx_makes_probe_say_why(monkeypatch):
+    monkeypatch.setenv("PYOPENCL_CTX", "42")
+    with pytest.raises(BackendUnavailable, match="PYOPENCL_CTX"):
+        OpenCLBackend.probe()
+
+
+def test_kernel_that_fails_to_build_is_one_clear_error(tmp_path, monkeypatch):
+    import backends.opencl as module
+
+    broken = tmp_path / "broken.cl"
+    broken.write_text("__kernel void label_blocks(__global int *x) { x[0] = undefined_name; }\n")
+    monkeypatch.setattr(module, "KERNEL_FILE", broken)
+    ocl = OpenCLBackend()
+    try:
+        with pytest.raises(BackendUnavailable, match="failed to build") as err:
+            ocl.label(np.array([[1.0, 1.0]]), None, None, make_metric("l2"), Grid(8, 8))
+        assert "\n" not in str(err.value)
+    finally:
+        ocl.close()
+
+
+def test_raster_too_large_for_the_device_is_one_clear_error():
+    ocl = OpenCLBackend()
+    try:
+        limit = ocl._device.max_mem_alloc_size
+        side = math.isqrt(limit // 4) + 1  # the label raster alone exceeds one allocation
+        if side > 32768:
+            pytest.skip(f"device allows {limit} bytes per buffer: no raster is too large")
+        with pytest.raises(BackendUnavailable, match="MiB"):
+            ocl.label(np.array([[1.0, 1.0]]), None, None, make_metric("l2"), Grid(side, side))
+    finally:
+        ocl.close()
+
+
+def test_cli_run_and_info(tmp_path, capsys):
+    from bench.cli import main
+
+    out = tmp_path / "run"
+    code = main(["run", "--backend", "opencl", "--device", "0:0", "--sites", "150", "--size", "96",
+                 "--iterations", "3", "--out", str(out), "--quiet"])
+    assert code == 0
+    result = json.loads((out / "result.json").read_text())
+    assert result["backend"] == "opencl" and " / " in result["device"]
+    assert main(["info"]) == 0
+    info = capsys.readouterr().out
+    line = next(ln for ln in info.splitlines() if ln.strip().startswith("opencl"))
+    assert "available" in line and " / " in line
+
+
+def test_missing_pyopencl_is_backend_unavailable(monkeypatch):
+    import sys
+
+    monkeypatch.setitem(sys.modules, "pyopencl", None)  # import now fails
+    with pytest.raises(BackendUnavailable, match="pyopencl is not importable"):
+        OpenCLBackend.probe()
+
+
+def test_no_platform_is_backend_unavailable(monkeypatch):
+    import types
+
+    class FakeError(Exception):
+        pass
+
+    monkeypatch.delenv("PYOPENCL_CTX", raising=False)
+    empty = types.SimpleNamespace(Error=FakeError, get_platforms=lambda: [])
+    with pytest.raises(BackendUnavailable, match="no OpenCL platform"):
+        choose_device(empty)
+
+    def no_icd():
+        raise FakeError("PLATFORM_NOT_FOUND_KHR")
+
+    with pytest.raises(BackendUnavailable, match="no OpenCL platform"):
+        choose_device(types.SimpleNamespace(Error=FakeError, get_platforms=no_icd))
