@@ -1,0 +1,250 @@
+"""The GL backend (cones and pyramids in a z-buffer, or exact per-fragment distances)
+against the NumPy float64 reference, on llvmpipe in CI.
+
+Skipped, with the reason, where moderngl, EGL or an OpenGL 4.3 driver is missing."""
+
+import numpy as np
+import pytest
+
+from backends import create_backend
+from backends.numpy_backend import NumpyBackend
+from cvt.errors import BackendUnavailable, InputError
+from cvt.fields import DensityMap, DirectionField
+from cvt.lloyd import final_labels, lloyd
+from cvt.metrics import METRIC_NAMES, make_metric
+from cvt.moments import moments_from_labels
+from cvt.problem import Grid, Problem
+
+gl = pytest.importorskip("backends.gl")
+
+
+def _backend(mode):
+    try:
+        return gl.GLBackend(mode=mode)
+    except BackendUnavailable as exc:
+        pytest.skip(str(exc))
+
+
+@pytest.fixture(scope="module")
+def cone():
+    b = _backend("cone")
+    yield b
+    b.close()
+
+
+@pytest.fixture(scope="module")
+def exact():
+    b = _backend("exact")
+    yield b
+    b.close()
+
+
+@pytest.fixture(scope="module")
+def reference():
+    return NumpyBackend()
+
+
+def disc_mask(w, h):
+    ys, xs = np.mgrid[0:h, 0:w] + 0.5
+    return (xs - w / 2) ** 2 + (ys - h / 2) ** 2 < (0.47 * min(w, h)) ** 2
+
+
+def random_case(seed, w=384, h=256, n=300, masked=False):
+    rng = np.random.default_rng(seed)
+    sites = rng.random((n, 2)) * [w, h]
+    angles = rng.random(n) * 2 * np.pi
+    scales = 0.6 + 0.8 * rng.random(n)
+    grid = Grid(w, h, disc_mask(w, h) if masked else None)
+    return sites, scales, angles, grid
+
+
+def check_region(labels, grid):
+    """-1 exactly outside the region: a region pixel that no cone reached is a bug."""
+    inside = grid.inside()
+    assert labels.dtype == np.int32 and labels.shape == grid.shape
+    assert (labels[inside] >= 0).all()
+    assert (labels[~inside] == -1).all()
+
+
+@pytest.mark.parametrize("name", METRIC_NAMES)
+@pytest.mark.parametrize("mode, floor", [("exact", 0.999), ("cone", 0.99)])
+def test_labels_agree_with_reference(name, mode, floor, cone, exact, reference):
+    backend = exact if mode == "exact" else cone
+    sites, scales, angles, grid = random_case(METRIC_NAMES.index(name), masked=name in ("l1", "l2-axial"))
+    metric = make_metric(name, 0.6)
+    got = backend.label(sites, scales, angles, metric, grid)
+    want = reference.label(sites, scales, angles, metric, grid)
+    check_region(got, grid)
+    agree = (got == want)[grid.inside()].mean()
+    assert agree >= floor, f"{mode} {name}: {agree:.5f} of region pixels agree"
+    # moments on the device equal the host sums of the device's own labels, exactly
+    mom = backend.moments(sites, scales, angles, metric, grid)
+    host = moments_from_labels(got, len(sites))
+    for field in ("count", "sx", "sy", "sxx", "syy"):
+        np.testing.assert_array_equal(getattr(mom, field), getattr(host, field), err_msg=field)
+
+
+@pytest.mark.parametrize("name", METRIC_NAMES)
+def test_exact_one_lloyd_step_lands_with_reference(name, exact, reference):
+    sites, scales, angles, grid = random_case(100 + METRIC_NAMES.index(name), w=256, h=256, n=250)
+    metric = make_metric(name, 0.5)
+    ours = exact.moments(sites, scales, angles, metric, grid).centroids(sites)
+    theirs = reference.moments(sites, scales, angles, metric, grid).centroids(sites)
+    gap = np.hypot(*(ours - theirs).T)
+    assert gap.max() <= 0.5 and gap.mean() <= 0.01, (gap.max(), gap.mean())
+
+
+def field_problem(name, n=220, w=256, h=256, seed=3):
+    """A problem with a density map (scales 0.7..1.4) and a wave field (angles)."""
+    xs = np.linspace(0.0, 1.0, w)[None, :].repeat(h, axis=0)
+    density = DensityMap(0.5 + 1.5 * xs)
+    field = DirectionField.named("wave:150", w, h)
+    return Problem(Grid(w, h), n, make_metric(name), density, field, seed=seed)
+
+
+@pytest.mark.parametrize("name", METRIC_NAMES)
+def test_cone_twenty_iterations_energy_and_coverage(name, cone, reference):
+    from bench.evaluate import evaluate
+    from cvt.placement import element_for, place_elements
+
+    problem = field_problem(name)
+    runs = {}
+    for label, backend in (("gl", cone), ("ref", reference)):
+        res = lloyd(problem, backend, iterations=20)
+        labels = final_labels(problem, backend, res)
+        check_region(labels, problem.grid)
+        shape, turn = element_for(problem.metric)
+        elements = place_elements(labels, res.sites, res.angles + turn, res.scales, shape,
+                                  problem.metric.aspect, problem.grid)
+        runs[label] = (res.energy[-1], evaluate(elements, problem.grid).coverage)
+    (e_gl, c_gl), (e_ref, c_ref) = runs["gl"], runs["ref"]
+    assert abs(e_gl - e_ref) <= 0.01 * e_ref, (e_gl, e_ref)
+    assert abs(c_gl - c_ref) <= 0.005, (c_gl, c_ref)
+
+
+@pytest.mark.parametrize("mode", ["cone", "exact"])
+def test_ties_go_to_the_lower_index(mode, cone, exact):
+    backend = exact if mode == "exact" else cone
+    # sites 1 and 2 coincide with equal angle and scale: they tie on every pixel
+    sites = np.array([[10.0, 12.0], [30.5, 20.25], [30.5, 20.25], [50.0, 40.0]])
+    for name in ("l1", "l2", "triangle"):
+        lab = backend.label(sites, np.ones(4), np.full(4, 0.3), make_metric(name), Grid(64, 48))
+        assert (lab == 1).any() and not (lab == 2).any(), name
+        assert backend.moments(sites, np.ones(4), np.full(4, 0.3), make_metric(name), Grid(64, 48)).count[2] == 0
+
+
+@pytest.mark.parametrize("mode", ["cone", "exact"])
+def test_every_region_pixel_is_reached_by_clustered_sites(mode, cone, exact, reference):
+    """Cone heights come from the actual sites: a tight cluster and one far site must
+    still cover the whole raster (a fixed 1/sqrt(N) radius would not)."""
+    backend = exact if mode == "exact" else cone
+    rng = np.random.default_rng(5)
+    sites = np.vstack([rng.random((200, 2)) * 20 + 5, [[250.0, 190.0]]])
+    scales = 0.5 + rng.random(201)
+    angles = rng.random(201) * 6.3
+    grid = Grid(256, 200)
+    for name in ("linf-axial", "l2"):
+        metric = make_metric(name, 0.5)
+        got = backend.label(sites, scales, angles, metric, grid)
+        check_region(got, grid)
+        want = reference.label(sites, scales, angles, metric, grid)
+        assert (got == want).mean() >= 0.99
+        assert backend.moments(sites, scales, angles, metric, grid).count.sum() == grid.pixel_count
+
+
+def test_cone_heights_bound_every_cell(cone, reference):
+    """r_i >= the largest d_i over the pixels of cell i (the reference's cells)."""
+    from cvt.metrics import compile_sites
+
+    sites, scales, angles, grid = random_case(9, masked=True)
+    for name in ("l2-axial", "triangle"):
+        metric = make_metric(name, 0.5)
+        coeffs = compile_sites(metric, sites, angles, scales)
+        heights = gl.cone_heights(coeffs, scales, metric, gl._Blocks(grid, 8))
+        labels = reference.label(sites, scales, angles, metric, grid)
+        ys, xs = np.nonzero(labels >= 0)
+        d = coeffs.distance(labels[ys, xs], xs + 0.5, ys + 0.5)
+        largest = np.zeros(len(sites))
+        np.maximum.at(largest, labels[ys, xs], d)
+        assert (heights >= largest).all()
+
+
+def test_curved_cone_error_bound():
+    # relative height error tan²(π/2M), and the chosen M meets the requested bound
+    assert gl.ellipse_height_error(32) == pytest.approx(np.tan(np.pi / 64) ** 2)
+    for radius in (5.0, 20.0, 80.0):
+        m = gl.ellipse_segments(radius, 0.1)
+        assert gl.ellipse_height_error(m) * radius <= 0.1
+    # the drawn cone: heights within ±δ of the exact gauge along each face
+    metric = make_metric("l2-axial", 0.5)
+    verts, reach = gl.cone_vertices(metric, 16)
+    tri = verts.reshape(-1, 3, 3).astype(np.float64)
+    w = np.random.default_rng(0).dirichlet([1, 1, 1], size=200)
+    pts = np.einsum("sk,tkc->tsc", w, tri)  # points on every face
+    exact_h = metric.gauge(pts[..., :2])
+    delta = gl.ellipse_height_error(16)
+    assert np.all(np.abs(pts[..., 2] - exact_h) <= delta * exact_h + 1e-6)
+    # and the footprint contains the ball
+    assert np.all(metric.gauge(tri[:, 1, :2]) >= 1.0 - 1e-9)
+    assert reach == pytest.approx(1 / np.cos(np.pi / 16))
+
+
+@pytest.mark.parametrize("mode", ["cone", "exact"])
+def test_deterministic(mode, cone, exact):
+    backend = exact if mode == "exact" else cone
+    sites, scales, angles, grid = random_case(11, w=256, h=256, n=200)
+    metric = make_metric("l2", 1.0)
+    a = backend.label(sites, scales, angles, metric, grid)
+    m1 = backend.moments(sites, scales, angles, metric, grid)
+    backend.label(sites[:50], scales[:50], angles[:50], make_metric("triangle"), Grid(100, 70))
+    b = backend.label(sites, scales, angles, metric, grid)
+    m2 = backend.moments(sites, scales, angles, metric, grid)
+    np.testing.assert_array_equal(a, b)
+    np.testing.assert_array_equal(m1.sxx, m2.sxx)
+
+
+def test_moment_sums_beyond_32_bits(exact):
+    """Σj² of one cell over a 2048-pixel-wide raster exceeds 2**32: the shader carries."""
+    grid = Grid(2048, 40)
+    sites = np.array([[1000.0, 20.0]])
+    mom = exact.moments(sites, None, None, make_metric("linf"), grid)
+    j = np.arange(2048, dtype=np.int64)
+    i = np.arange(40, dtype=np.int64)
+    assert mom.sxx[0] == 40 * (j * j).sum() > 2**32
+    assert mom.sx[0] == 40 * j.sum() and mom.sy[0] == 2048 * i.sum()
+    assert mom.syy[0] == 2048 * (i * i).sum() and mom.count[0] == 2048 * 40
+
+
+def test_registry_device_and_options():
+    try:
+        backend = create_backend("gl", mode="exact")
+    except BackendUnavailable as exc:
+        pytest.skip(str(exc))
+    text = backend.device()
+    assert backend.ctx.info["GL_RENDERER"] in text and "exact" in text
+    assert gl.GLBackend.probe()
+    backend.close()
+    with pytest.raises(InputError, match="mode"):
+        gl.GLBackend(mode="pyramid")
+    with pytest.raises(InputError, match="max_error_px"):
+        gl.GLBackend(max_error_px=0)
+
+
+def test_bad_inputs(exact):
+    grid = Grid(32, 32)
+    with pytest.raises(InputError, match="sites"):
+        exact.label(np.zeros((0, 2)), None, None, make_metric("l2"), grid)
+    with pytest.raises(InputError, match="scales"):
+        exact.label(np.ones((2, 2)), np.array([1.0, -1.0]), None, make_metric("l2"), grid)
+
+
+def test_missing_moderngl_is_one_clear_error(monkeypatch):
+    import sys
+
+    monkeypatch.setattr(gl, "_CONTEXT", None)
+    monkeypatch.setattr(gl, "_CONTEXT_ERROR", None)
+    monkeypatch.setitem(sys.modules, "moderngl", None)  # import fails as if not installed
+    with pytest.raises(BackendUnavailable, match="moderngl is not installed"):
+        gl.GLBackend()
+    with pytest.raises(BackendUnavailable, match="moderngl"):  # the failure is remembered
+        gl.GLBackend.probe()
