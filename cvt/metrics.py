@@ -31,6 +31,7 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass, field
+from functools import cached_property
 
 import numpy as np
 
@@ -183,9 +184,21 @@ class SiteCoefficients:
     sites: np.ndarray
     facets: np.ndarray | None = None
     quad: np.ndarray | None = None
-    # Facets of a polygon that contains the scaled, rotated ball: max_k bounds·v <= d.
-    # The polygon's own facets; for ellipses the circumscribed octagon.  Used to prune.
-    bounds: np.ndarray | None = None
+    # For ellipses, what the pruning octagon needs (semi-axes, cos θ, sin θ, s); computed
+    # only when a backend asks for ``bounds`` (it costs ms at 16 000 sites).
+    _octagon: tuple | None = field(default=None, repr=False)
+
+    @cached_property
+    def bounds(self) -> np.ndarray:
+        """(N, F, 2) facets of a polygon that contains each scaled, rotated ball:
+        ``max_k bounds·v <= d``.  A polygon's own facets; for an ellipse the circumscribed
+        octagon (support of the ellipse in direction n is |diag(a, b) n|).  For pruning."""
+        if self.kind == "polygon":
+            return self.facets
+        (a, b), c, si, s = self._octagon
+        nrm = _regular_normals(np.arange(8) * 45.0)
+        nk = nrm / np.hypot(a * nrm[:, 0], b * nrm[:, 1])[:, None]
+        return _rotate_scale(nk, c, si, s)
 
     def distance(self, idx: np.ndarray, x: np.ndarray, y: np.ndarray) -> np.ndarray:
         """d_idx(x, y), broadcasting idx, x and y (float64)."""
@@ -215,14 +228,10 @@ def compile_sites(metric: Metric, sites, angles=None, scales=None) -> SiteCoeffi
         qxx = (c * c * ia + si * si * ib) / (s * s)
         qxy = (c * si * (ia - ib)) / (s * s)
         qyy = (si * si * ia + c * c * ib) / (s * s)
-        # circumscribed octagon: support of the ellipse in direction n is |diag(a,b) n|
-        nrm = _regular_normals(np.arange(8) * 45.0)
-        nk = nrm / np.hypot(a * nrm[:, 0], b * nrm[:, 1])[:, None]
-        bounds = _rotate_scale(nk, c, si, s)
         quad = np.stack([qxx, qxy, qyy], axis=1)
-        return SiteCoefficients("ellipse", sites, quad=quad, bounds=bounds)
+        return SiteCoefficients("ellipse", sites, quad=quad, _octagon=((a, b), c, si, s))
     facets = _rotate_scale(metric.normals / metric.offsets[:, None], c, si, s)
-    return SiteCoefficients("polygon", sites, facets=facets, bounds=facets)
+    return SiteCoefficients("polygon", sites, facets=facets)
 
 
 def _rotate_scale(nk: np.ndarray, c: np.ndarray, si: np.ndarray, s: np.ndarray) -> np.ndarray:
