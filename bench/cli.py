@@ -13,7 +13,7 @@ import sys
 from cvt.errors import BackendUnavailable, InputError
 
 # subcommand modules, in the order `cvtbench --help` lists them
-SUBCOMMANDS = ["bench.run_cmd", "bench.info_cmd", "bench.figures_cmd", "bench.mosaic_cmd"]
+SUBCOMMANDS = ["bench.run_cmd", "bench.info_cmd", "bench.figures_cmd", "bench.table2", "bench.mosaic_cmd", "bench.backends_cmd", "bench.regress_cmd", "bench.reproduce_cmd"]
 
 
 def build_parser() -> argparse.ArgumentParser:

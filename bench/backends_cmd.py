@@ -1,0 +1,366 @@
+"""`cvtbench backends`: milliseconds per Lloyd iteration for every backend, side by side.
+
+What is timed: one whole Lloyd iteration as :func:`cvt.lloyd.lloyd` runs it (angles and
+scales at the sites, the backend's labels and integer moments, the centroids), on
+uniform random sites of seed 0 that then move as Lloyd moves them.  Each configuration
+runs ``warmup`` iterations first (kernel builds, buffer allocation), then ``repeats``
+timed ones; the report gives their median.  The NumPy reference backend is the unit
+(``x numpy`` = NumPy's time / this backend's time, higher is faster); the cKDTree +
+np.bincount step (:mod:`bench.ckdtree_step`, the common CPU tool; l2, l1 and linf only)
+is an extra reference row.
+
+Full sweep: every available backend variant (numpy, opencl, gl-cone, gl-exact) x N in
+{1000, 4000, 16000} x raster {512, 1024, 2048} x the six metrics, 1 warm-up + 5 timed
+iterations.  Quick: N in {1000, 4000} x raster {256, 512, 1024} x l2, linf and
+triangle, 1 + 3.
+
+Writes ``OUT/backends.md``, ``.csv``, ``.png`` (log-log: time against N and against
+pixels) and one raw json per configuration under ``OUT/raw/backends*/`` (resumable: a
+configuration whose json exists is read back unless --force).  ``--from-benchmark-json``
+builds the same report from a pytest-benchmark ``--benchmark-json`` file instead.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import sys
+import time
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+
+from cvt.metrics import METRIC_NAMES
+
+CKDTREE = "ckdtree"  # the cKDTree + bincount reference row
+CKDTREE_METRICS = ("l2", "l1", "linf")
+
+FULL = {"sites": [1000, 4000, 16000], "sizes": [512, 1024, 2048], "metrics": list(METRIC_NAMES),
+        "warmup": 1, "repeats": 5}
+QUICK = {"sites": [1000, 4000], "sizes": [256, 512, 1024], "metrics": ["l2", "linf", "triangle"], "warmup": 1,
+         "repeats": 3}
+
+COLUMNS = ["backend", "metric", "n_sites", "size", "pixels", "ms_median", "ms_min", "ms_max", "repeats",
+           "warmup", "x_numpy", "status", "reason", "device"]
+
+
+@dataclass(frozen=True)
+class TimingSpec:
+    suite: str
+    backend: str  # a variant, or "ckdtree"
+    metric: str
+    n_sites: int
+    size: int
+    warmup: int
+    repeats: int
+
+    @property
+    def key(self) -> str:
+        return f"{self.backend}__{self.metric}__{self.size}__n{self.n_sites}__w{self.warmup}r{self.repeats}"
+
+
+def time_lloyd(backend, metric_name: str, n_sites: int, size: int, warmup: int, repeats: int,
+               seed: int = 0) -> list[float]:
+    """Seconds of each timed Lloyd iteration (after ``warmup`` untimed ones)."""
+    from cvt.lloyd import lloyd
+
+    problem = _problem(metric_name, n_sites, size, seed)
+    res = lloyd(problem, backend, warmup + repeats)
+    return [float(s) for s in res.seconds[warmup:]]
+
+
+def time_ckdtree(metric_name: str, n_sites: int, size: int, warmup: int, repeats: int,
+                 seed: int = 0) -> list[float]:
+    """The same loop with :func:`bench.ckdtree_step.ckdtree_step` as the backend."""
+    from cvt.seeding import initial_sites
+
+    from .ckdtree_step import ckdtree_step
+
+    problem = _problem(metric_name, n_sites, size, seed)
+    sites = initial_sites(problem)
+    out = []
+    for _ in range(warmup + repeats):
+        t0 = time.perf_counter()
+        sites = ckdtree_step(sites, size, size, metric_name).centroids(sites)
+        out.append(time.perf_counter() - t0)
+    return out[warmup:]
+
+
+def _problem(metric_name: str, n_sites: int, size: int, seed: int):
+    from cvt.metrics import make_metric
+    from cvt.problem import Grid, Problem
+
+    return Problem(Grid(size, size), n_sites, make_metric(metric_name), seed=seed)
+
+
+def sweep_specs(cfg: dict, variants: list[str], suite: str) -> list[TimingSpec]:
+    specs = []
+    for b in variants + [CKDTREE]:
+        for metric in cfg["metrics"]:
+            if b == CKDTREE and metric not in CKDTREE_METRICS:
+                continue
+            for size in cfg["sizes"]:
+                for n in cfg["sites"]:
+                    specs.append(TimingSpec(suite, b, metric, n, size, cfg["warmup"], cfg["repeats"]))
+    return specs
+
+
+def run_timings(specs: list[TimingSpec], out: Path | None, force: bool = False, quiet: bool = False,
+                unavailable: dict | None = None) -> list[dict]:
+    """Time every spec (one backend instance per variant, one alive at a time); raw json
+    per spec under ``out/raw/<suite>/`` when ``out`` is given (read back unless force)."""
+    from tqdm import tqdm
+
+    from cvt.errors import BackendUnavailable
+
+    from .outputs import atomic_write_text, dumps, machine, versions
+    from .runner import BackendCache
+
+    unavailable = dict(unavailable or {})
+    cache = BackendCache()
+    rows = []
+    bar = tqdm(specs, desc="timings", unit="cfg", disable=quiet, file=sys.stderr, dynamic_ncols=True,
+               mininterval=0.5)
+    base = {"ms_median": np.nan, "ms_min": np.nan, "ms_max": np.nan, "device": ""}
+    try:
+        for spec in bar:
+            bar.set_postfix_str(f"{spec.backend} {spec.metric} N={spec.n_sites} {spec.size}²")
+            row = {"key": spec.key, "backend": spec.backend, "metric": spec.metric, "n_sites": spec.n_sites,
+                   "size": spec.size, "pixels": spec.size * spec.size, "warmup": spec.warmup,
+                   "repeats": spec.repeats, "status": "ok", "reason": ""}
+            path = Path(out) / "raw" / spec.suite / f"{spec.key}.json" if out is not None else None
+            if spec.backend in unavailable:
+                rows.append({**row, **base, "status": "skipped", "reason": unavailable[spec.backend]})
+                continue
+            if path is not None and path.exists() and not force:
+                try:
+                    rows.append({**json.loads(path.read_text())["row"], "cached": True})
+                    continue
+                except (ValueError, KeyError):
+                    pass
+            try:
+                if spec.backend == CKDTREE:
+                    secs = time_ckdtree(spec.metric, spec.n_sites, spec.size, spec.warmup, spec.repeats)
+                    device = "CPU, scipy cKDTree (2 workers) + np.bincount"
+                else:
+                    backend = cache.get(spec.backend)
+                    secs = time_lloyd(backend, spec.metric, spec.n_sites, spec.size, spec.warmup, spec.repeats)
+                    device = backend.device()
+            except BackendUnavailable as exc:
+                unavailable[spec.backend] = str(exc)
+                rows.append({**row, **base, "status": "skipped", "reason": str(exc)})
+                continue
+            except (KeyboardInterrupt, MemoryError):
+                raise
+            except Exception as exc:
+                rows.append({**row, **base, "status": "failed", "reason": f"{type(exc).__name__}: {exc}"})
+                cache.close()
+                continue
+            ms = np.asarray(secs) * 1000
+            row.update(ms_median=float(np.median(ms)), ms_min=float(ms.min()), ms_max=float(ms.max()),
+                       device=device)
+            rows.append(row)
+            if path is not None:
+                atomic_write_text(path, dumps({"row": row, "seconds": secs, "spec": spec.__dict__,
+                                               "machine": machine(), "versions": versions()}))
+    except KeyboardInterrupt:
+        print(f"\ninterrupted: finished configurations are stored under {Path(out or '.') / 'raw'}; "
+              "run the same command again to resume", file=sys.stderr)
+        raise
+    finally:
+        bar.close()
+        cache.close()
+    return rows
+
+
+def with_ratios(rows: list[dict]):
+    """DataFrame of the rows with ``x_numpy`` = NumPy's median / this median, per
+    (metric, N, size): measured in the same sweep, so never across machines."""
+    import pandas as pd
+
+    from .runner import REFERENCE_BACKEND
+
+    df = pd.DataFrame(rows)
+    for c in COLUMNS:
+        if c not in df:
+            df[c] = np.nan
+    ref = df[(df["backend"] == REFERENCE_BACKEND) & (df["status"] == "ok")]
+    ref = ref.set_index(["metric", "n_sites", "size"])["ms_median"]
+    idx = list(zip(df["metric"], df["n_sites"], df["size"], strict=True))
+    df["x_numpy"] = [float(ref.get(k, np.nan)) / m if m and m == m else np.nan
+                     for k, m in zip(idx, df["ms_median"], strict=True)]
+    return df[COLUMNS]
+
+
+def render_markdown(df, prov: dict, command: str, quick: bool, cfg: dict, elapsed: float, cached: int) -> str:
+    from .report import header_markdown, markdown_table
+
+    notes = [
+        "what is timed: one Lloyd iteration (angles/scales at the sites, labels + integer moments on the "
+        "backend, centroids) on uniform random sites of seed 0, whole square raster; "
+        f"{cfg['warmup']} warm-up + {cfg['repeats']} timed iterations, median",
+        "x numpy = NumPy reference time / this time (higher is faster), measured in the same sweep; "
+        "ckdtree = scipy cKDTree query + np.bincount (l2, l1, linf only): the common CPU tool",
+        f"grid: N in {cfg['sites']}, raster {cfg['sizes']} px square, metrics {', '.join(cfg['metrics'])}",
+        f"this command took {elapsed:.0f} s ({cached} configurations read back from raw/)",
+    ]
+    if quick:
+        notes.insert(0, "**QUICK**: a small subset of the full sweep")
+    text = header_markdown("Backends: ms per Lloyd iteration" + (" (QUICK)" if quick else ""), prov, command, notes)
+    ok = df[df["status"] == "ok"]
+    order = [b for b in dict.fromkeys(df["backend"]) if b in set(ok["backend"])]
+    cols = ["metric", "N", "raster"] + [f"{b} ms" if b == "numpy" else f"{b} ms (x numpy)" for b in order]
+    body = []
+    for (metric, n, size), g in ok.groupby(["metric", "n_sites", "size"], sort=False):
+        cells = []
+        by = {r["backend"]: r for _, r in g.iterrows()}
+        for b in order:
+            r = by.get(b)
+            if r is None:
+                cells.append("")
+            elif b == "numpy":
+                cells.append(f"{r['ms_median']:.3g}")
+            else:
+                cells.append(f"{r['ms_median']:.3g} ({r['x_numpy']:.2g}x)" if r["x_numpy"] == r["x_numpy"]
+                             else f"{r['ms_median']:.3g}")
+        body.append([metric, n, f"{size}²"] + cells)
+    text += "\n" + markdown_table(cols, body)
+    gm = ok[ok["backend"] != "numpy"].groupby("backend", sort=False)["x_numpy"].apply(
+        lambda s: float(np.exp(np.log(s.dropna()).mean())) if s.notna().any() else np.nan)
+    if len(gm):
+        text += "\nGeometric mean speed-up over NumPy: " + ", ".join(f"{b} {v:.2g}x" for b, v in gm.items()) + "\n"
+    bad = df[df["status"] != "ok"].drop_duplicates(subset=["backend", "status", "reason"])
+    if len(bad):
+        text += "\n## Not measured\n\n" + markdown_table(
+            ["backend", "status", "reason"], [[r["backend"], r["status"], r["reason"]] for _, r in bad.iterrows()])
+    text += "\nPlot: `backends.png`; raw json per configuration under `raw/`.\n"
+    return text
+
+
+def render_plot(df, path: Path) -> bool:
+    """log-log: ms against N (middle raster) and against pixels (middle N); l2 solid,
+    the other metrics' median dashed."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    from .report import save_figure
+
+    ok = df[df["status"] == "ok"]
+    if ok.empty:
+        return False
+    sizes, ns = sorted(ok["size"].unique()), sorted(ok["n_sites"].unique())
+    size_mid, n_mid = sizes[len(sizes) // 2], ns[len(ns) // 2]
+    fig, axes = plt.subplots(1, 2, figsize=(13, 4.3), dpi=110, layout="constrained")
+    colours = plt.rcParams["axes.prop_cycle"].by_key()["color"]
+    for k, (b, g) in enumerate(ok.groupby("backend", sort=False)):
+        c = colours[k % len(colours)]
+        for ax, fixed, var, fixed_val in ((axes[0], "size", "n_sites", size_mid), (axes[1], "n_sites", "pixels", n_mid)):
+            sub = g[g[fixed] == fixed_val]
+            l2 = sub[sub["metric"] == "l2"].sort_values(var)
+            if len(l2):
+                ax.plot(l2[var], l2["ms_median"], "o-", color=c, label=f"{b} (l2)")
+            other = sub[sub["metric"] != "l2"].groupby(var)["ms_median"].median()
+            if len(other):
+                ax.plot(other.index, other.values, "s--", color=c, alpha=0.7, label=f"{b} (other metrics, median)")
+    axes[0].set(xscale="log", yscale="log", xlabel="N (sites)", ylabel="ms per Lloyd iteration",
+                title=f"time vs N at {size_mid}² px")
+    axes[1].set(xscale="log", yscale="log", xlabel="pixels", ylabel="ms per Lloyd iteration",
+                title=f"time vs pixels at N = {n_mid}")
+    from matplotlib.ticker import NullFormatter
+
+    for ax in axes:
+        ax.grid(True, which="both", alpha=0.3)
+        ax.xaxis.set_minor_formatter(NullFormatter())
+    axes[1].legend(fontsize=7, loc="upper left", bbox_to_anchor=(1.02, 1.0), borderaxespad=0)
+    save_figure(fig, path)
+    plt.close(fig)
+    return True
+
+
+def rows_from_benchmark_json(path) -> list[dict]:
+    """Rows from a pytest-benchmark json of tests/benchmarks (the Lloyd-step cases)."""
+    from cvt.errors import InputError
+
+    try:
+        data = json.loads(Path(path).read_text())
+    except (OSError, ValueError) as exc:
+        raise InputError(f"cannot read benchmark json {path}: {exc}") from None
+    rows = []
+    for b in data.get("benchmarks", []):
+        info = b.get("extra_info", {})
+        if info.get("kind") != "lloyd-step":
+            continue
+        st = b["stats"]
+        rows.append({"backend": info["backend"], "metric": info["metric"], "n_sites": info["n_sites"],
+                     "size": info["size"], "pixels": info["size"] ** 2, "ms_median": st["median"] * 1000,
+                     "ms_min": st["min"] * 1000, "ms_max": st["max"] * 1000, "repeats": st["rounds"],
+                     "warmup": 0, "status": "ok", "reason": "", "device": info.get("device", "")})
+    if not rows:
+        raise InputError(f"{path} holds no lloyd-step benchmarks (run pytest tests/benchmarks "
+                         "--benchmark-enable --benchmark-json FILE)")
+    return rows
+
+
+def add_parser(sub):
+    p = sub.add_parser("backends", help="ms per Lloyd iteration per backend, N, raster and metric",
+                       description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    p.add_argument("--quick", action="store_true", help="small subset (N 1000/4000, 256²-1024², l2, linf, triangle)")
+    p.add_argument("--force", action="store_true", help="re-time configurations whose raw json exists")
+    p.add_argument("--out", default=None, help="report folder (default reports, or reports/quick with --quick)")
+    p.add_argument("--backends", default=None, help="comma list of backend variants (default: all available)")
+    p.add_argument("--metrics", default=None, help="comma list of metrics")
+    p.add_argument("--sites", default=None, help="comma list of N")
+    p.add_argument("--sizes", default=None, help="comma list of square raster sides")
+    p.add_argument("--repeats", default=None, help="timed iterations per configuration")
+    p.add_argument("--no-ckdtree", action="store_true", help="leave out the cKDTree reference row")
+    p.add_argument("--from-benchmark-json", metavar="FILE", default=None,
+                   help="build the report from a pytest-benchmark json instead of timing here")
+    p.add_argument("--quiet", action="store_true", help="no progress bar")
+    p.set_defaults(func=run)
+
+
+def _int_list(text, what):
+    from .runner import parse_list, parse_positive_int
+
+    items = parse_list(text, None, what)
+    return None if items is None else [parse_positive_int(t, what) for t in items]
+
+
+def run(args) -> int:
+    from .outputs import command_line
+    from .report import provenance, write_csv, write_markdown
+    from .runner import VARIANTS, backend_variants, parse_list, parse_positive_int
+
+    t0 = time.perf_counter()
+    out = Path(args.out) if args.out else (Path("reports/quick") if args.quick else Path("reports"))
+    cfg = dict(QUICK if args.quick else FULL)
+    cfg["metrics"] = parse_list(args.metrics, METRIC_NAMES, "metric") or cfg["metrics"]
+    cfg["sites"] = _int_list(args.sites, "--sites") or cfg["sites"]
+    cfg["sizes"] = _int_list(args.sizes, "--sizes") or cfg["sizes"]
+    if args.repeats is not None:
+        cfg["repeats"] = parse_positive_int(args.repeats, "--repeats")
+    variants = backend_variants()
+    known = list(dict.fromkeys(list(VARIANTS) + list(variants)))
+    chosen = parse_list(args.backends, known, "backend") or known
+    unavailable = {v: text for v, (ok, text) in variants.items() if not ok}
+    if args.from_benchmark_json:
+        rows = rows_from_benchmark_json(args.from_benchmark_json)
+    else:
+        specs = sweep_specs(cfg, chosen, "backends-quick" if args.quick else "backends")
+        if args.no_ckdtree:
+            specs = [s for s in specs if s.backend != CKDTREE]
+        rows = run_timings(specs, out, force=args.force, quiet=args.quiet, unavailable=unavailable)
+    df = with_ratios(rows)
+    elapsed = time.perf_counter() - t0
+    cached = sum(1 for r in rows if r.get("cached"))
+    cmd = command_line(getattr(args, "argv", None) or ["backends"] + (["--quick"] if args.quick else []))
+    md = render_markdown(df, provenance(), cmd, args.quick, cfg, elapsed, cached)
+    out.mkdir(parents=True, exist_ok=True)
+    render_plot(df, out / "backends.png")
+    write_csv(out / "backends.csv", df)
+    write_markdown(out / "backends.md", md)
+    print(f"wrote {out}/backends.md, backends.csv, backends.png ({elapsed:.0f} s)", file=sys.stderr)
+    return 0

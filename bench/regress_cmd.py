@@ -1,0 +1,366 @@
+"""`cvtbench regress`: guard coverage and speed from one commit to the next (CI runs
+``cvtbench regress --quick`` on every commit).
+
+Coverage: the mean coverage over fixed seeds of each (method, backend, element) is
+compared with the committed baseline file (``bench/regress_baseline.json``); a drop of
+more than 0.5 percentage points fails.  Coverage is deterministic by seed, so the
+threshold only has to absorb float32 ties between devices.
+
+Speed: never absolute times (CI machines differ).  Each backend variant is timed against
+the NumPy reference *in the same run* (ms / NumPy's ms, same metric, N and raster), and
+NumPy itself against the cKDTree + bincount step; a ratio more than 2x the baseline's
+ratio fails.  The two are timed interleaved (one iteration each, in turn) and each
+keeps its fastest iteration, so background load cancels out.  A check that fails is
+measured once more and fails only if it fails again:
+one noisy sample on a shared machine is not a regression.
+
+What is in the baseline but cannot run here (a backend with no runtime) is reported as
+not checked, with the reason; what runs here but is not in the baseline is reported as
+new.  ``--update`` writes the current figures into the baseline file (entries not
+measured now are kept).  Exit status: 0 pass, 1 regression, 2 bad input or no baseline.
+
+Quick set (~30 s here): coverage of ours on every available backend for square, circle
+and triangle at 256² px, N = 250, seeds 0 and 1, plus every baseline on squares, seed 0,
+all 20 iterations; speed at 512² px, N = 2000, l2 and linf, 1 warm-up + 7 timed
+iterations each.  Full set: 512² px, N = 1000, seeds 0-2, every element; speed at 1024²,
+N = 4000, all six metrics.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import sys
+import time
+from pathlib import Path
+
+import numpy as np
+
+from cvt.errors import InputError
+
+BASELINE_FILE = Path(__file__).with_name("regress_baseline.json")
+COVERAGE_DROP_PP = 0.5  # percentage points
+SLOWDOWN = 2.0  # ratio against the reference measured in the same run
+
+SETS = {
+    "quick": {"size": 256, "n_sites": 250, "iterations": 20, "seeds": [0, 1],
+              "elements": ["square", "circle", "triangle"], "baseline_seeds": [0],
+              "speed": {"size": 512, "n_sites": 2000, "metrics": ["l2", "linf"], "warmup": 1, "repeats": 7}},
+    "full": {"size": 512, "n_sites": 1000, "iterations": 20, "seeds": [0, 1, 2],
+             "elements": ["square", "rectangle", "ellipse", "triangle", "circle"], "baseline_seeds": [0, 1, 2],
+             "speed": {"size": 1024, "n_sites": 4000,
+                       "metrics": ["l2", "l1", "linf", "linf-axial", "l2-axial", "triangle"],
+                       "warmup": 1, "repeats": 7}},
+}
+
+
+# ---------------------------------------------------------------------------------------
+# the logic (pure: tested with fabricated figures in tests/test_bench.py)
+
+
+def compare(baseline: dict, current: dict, coverage_drop_pp: float = COVERAGE_DROP_PP,
+            slowdown: float = SLOWDOWN) -> tuple[list[str], list[str]]:
+    """(failures, notes) of ``current`` against ``baseline``; both are sections
+    ``{"coverage": {key: {"mean": float, ...}}, "speed": {key: {"ratio": float, ...}}}``
+    with optional ``"unavailable": {key: reason}`` in ``current``."""
+    failures, notes = [], []
+    unavailable = current.get("unavailable", {})
+    base_cov, cur_cov = baseline.get("coverage", {}), current.get("coverage", {})
+    for key, b in base_cov.items():
+        c = cur_cov.get(key)
+        if c is None:
+            notes.append(f"not checked: coverage {key} ({unavailable.get(key, 'not run here')})")
+            continue
+        drop_pp = 100 * (b["mean"] - c["mean"])
+        if drop_pp > coverage_drop_pp:
+            failures.append(f"coverage of {key} fell from {100 * b['mean']:.2f} % to {100 * c['mean']:.2f} % "
+                            f"(-{drop_pp:.2f} pp; more than {coverage_drop_pp} pp)")
+        elif drop_pp < -coverage_drop_pp:
+            notes.append(f"coverage of {key} rose from {100 * b['mean']:.2f} % to {100 * c['mean']:.2f} % "
+                         "(run --update to raise the bar)")
+    for key in cur_cov.keys() - base_cov.keys():
+        notes.append(f"new: coverage {key} = {100 * cur_cov[key]['mean']:.2f} % is not in the baseline "
+                     "(run --update)")
+    base_sp, cur_sp = baseline.get("speed", {}), current.get("speed", {})
+    for key, b in base_sp.items():
+        c = cur_sp.get(key)
+        if c is None:
+            notes.append(f"not checked: speed {key} ({unavailable.get(key, 'not run here')})")
+            continue
+        factor = c["ratio"] / b["ratio"]
+        if factor > slowdown:
+            failures.append(f"speed of {key}: {c['ratio']:.3g}x the reference's time, baseline "
+                            f"{b['ratio']:.3g}x ({factor:.2f} times slower; limit {slowdown}x)")
+    for key in cur_sp.keys() - base_sp.keys():
+        notes.append(f"new: speed {key} = {cur_sp[key]['ratio']:.3g}x is not in the baseline (run --update)")
+    return failures, notes
+
+
+def merge(baseline: dict, current: dict) -> dict:
+    """The baseline updated with the current figures; entries not measured now stay."""
+    out = {"coverage": dict(baseline.get("coverage", {})), "speed": dict(baseline.get("speed", {}))}
+    out["coverage"].update(current.get("coverage", {}))
+    out["speed"].update(current.get("speed", {}))
+    return out
+
+
+# ---------------------------------------------------------------------------------------
+# measuring
+
+
+def coverage_specs(cfg: dict, methods: list[str], backends: list[str]):
+    from .runner import REFERENCE_BACKEND, RunSpec
+
+    specs = []
+    for element in cfg["elements"]:
+        for method in methods:
+            if method == "ours":
+                for b in backends:
+                    specs += [RunSpec("regress", method, b, element, cfg["size"], cfg["size"], cfg["n_sites"],
+                                      cfg["iterations"], s) for s in cfg["seeds"]]
+            elif element == "square" and REFERENCE_BACKEND in backends:
+                specs += [RunSpec("regress", method, REFERENCE_BACKEND, element, cfg["size"], cfg["size"],
+                                  cfg["n_sites"], cfg["iterations"], s) for s in cfg["baseline_seeds"]]
+    return specs
+
+
+def coverage_key(method: str, backend: str, element: str) -> str:
+    return f"{method}/{backend}/{element}"
+
+
+def speed_key(backend: str, reference: str, metric: str, n: int, size: int) -> str:
+    return f"{backend} vs {reference}, {metric}, N={n}, {size}²"
+
+
+def measure_coverage(cfg, methods, backends, unavailable, quiet) -> tuple[dict, dict, list[str]]:
+    from .runner import run_sweep
+
+    specs = coverage_specs(cfg, methods, backends)
+    rows = run_sweep(specs, out=".", store=False, quiet=quiet, unavailable=dict(unavailable))
+    groups: dict[str, list[dict]] = {}
+    for r in rows:
+        groups.setdefault(coverage_key(r["method"], r["backend"], r["element"]), []).append(r)
+    cov, skipped, failed = {}, {}, []
+    for key, rs in groups.items():
+        ok = [r for r in rs if r["status"] == "ok"]
+        bad = [r for r in rs if r["status"] == "failed"]
+        if bad:
+            failed.append(f"{key} failed to run: {bad[0]['reason']}")
+        if len(ok) == len(rs):
+            cov[key] = {"mean": float(np.mean([r["coverage"] for r in ok])),
+                        "values": [round(float(r["coverage"]), 6) for r in ok],
+                        "seeds": [r["seed"] for r in ok]}
+        elif not bad:
+            skipped[key] = rs[0]["reason"]
+    return cov, skipped, failed
+
+
+def lloyd_stepper(backend_or_ckdtree, metric: str, n: int, size: int, cache):
+    """A function that runs one Lloyd iteration (from its own evolving sites) and returns
+    its seconds; the cKDTree step when ``backend_or_ckdtree`` is "ckdtree"."""
+    from cvt.seeding import initial_sites
+
+    from .backends_cmd import CKDTREE, _problem
+    from .ckdtree_step import ckdtree_step
+
+    problem = _problem(metric, n, size, 0)
+    state = {"sites": initial_sites(problem)}
+    if backend_or_ckdtree == CKDTREE:
+        def step() -> float:
+            t0 = time.perf_counter()
+            state["sites"] = ckdtree_step(state["sites"], size, size, metric).centroids(state["sites"])
+            return time.perf_counter() - t0
+        return step
+    backend = cache.get(backend_or_ckdtree)
+
+    def step() -> float:
+        t0 = time.perf_counter()
+        sites = state["sites"]
+        mom = backend.moments(sites, problem.scales_at(sites), problem.angles_at(sites), problem.metric,
+                              problem.grid)
+        state["sites"] = mom.centroids(sites)
+        return time.perf_counter() - t0
+    return step
+
+
+def measure_speed_pair(backend: str, reference: str, metric: str, n: int, size: int, sp: dict,
+                       cache) -> dict:
+    """Ratio of ``backend``'s time to ``reference``'s on the same problem, their Lloyd
+    iterations interleaved (ref, backend, ref, backend, ...) so that a neighbour's load
+    hits both alike, each the fastest of its timed iterations (the least disturbed one)."""
+    from .backends_cmd import CKDTREE
+
+    # the reference's backend instance is made first and kept only while it is timed:
+    # BackendCache holds one backend at a time, so the pair gets two caches
+    from .runner import BackendCache
+
+    ref_cache = BackendCache() if reference != CKDTREE else None
+    try:
+        ref_step = lloyd_stepper(reference, metric, n, size, ref_cache)
+        b_step = lloyd_stepper(backend, metric, n, size, cache)
+        for _ in range(sp["warmup"]):
+            ref_step(), b_step()
+        ref_s, b_s = [], []
+        for _ in range(sp["repeats"]):
+            ref_s.append(ref_step())
+            b_s.append(b_step())
+    finally:
+        if ref_cache is not None:
+            ref_cache.close()
+    b_ms, ref_ms = 1000 * min(b_s), 1000 * min(ref_s)
+    return {"ratio": b_ms / ref_ms, "ms": round(b_ms, 3), "reference_ms": round(ref_ms, 3)}
+
+
+def speed_pairs(cfg: dict, backends: list[str]):
+    """(backend, reference, metric): each variant against NumPy, NumPy against cKDTree."""
+    from .backends_cmd import CKDTREE, CKDTREE_METRICS
+    from .runner import REFERENCE_BACKEND
+
+    sp = cfg["speed"]
+    pairs = []
+    for metric in sp["metrics"]:
+        if REFERENCE_BACKEND in backends and metric in CKDTREE_METRICS:
+            pairs.append((REFERENCE_BACKEND, CKDTREE, metric))
+        for b in backends:
+            if b != REFERENCE_BACKEND:
+                pairs.append((b, REFERENCE_BACKEND, metric))
+    return pairs
+
+
+def measure_speed(cfg, backends, unavailable, baseline_speed: dict, quiet) -> tuple[dict, dict, list[str]]:
+    """Current ratios; a pair whose ratio breaks the limit is measured once more and the
+    better of the two kept (a noisy neighbour must not fail CI)."""
+    from tqdm import tqdm
+
+    from .runner import BackendCache
+
+    sp = cfg["speed"]
+    n, size = sp["n_sites"], sp["size"]
+    out, skipped, failed = {}, {}, []
+    cache = BackendCache()
+    pairs = speed_pairs(cfg, backends)
+    try:
+        for backend, ref, metric in tqdm(pairs, desc="speed", unit="pair", disable=quiet, file=sys.stderr):
+            key = speed_key(backend, ref, metric, n, size)
+            if backend in unavailable or ref in unavailable:
+                skipped[key] = unavailable.get(backend) or unavailable.get(ref)
+                continue
+            try:
+                cur = measure_speed_pair(backend, ref, metric, n, size, sp, cache)
+                base = baseline_speed.get(key)
+                if base is not None and cur["ratio"] > SLOWDOWN * base["ratio"]:
+                    again = measure_speed_pair(backend, ref, metric, n, size, sp, cache)
+                    cur = min(cur, again, key=lambda d: d["ratio"])
+                    cur["remeasured"] = True
+            except (KeyboardInterrupt, MemoryError):
+                raise
+            except Exception as exc:
+                failed.append(f"speed {key} failed to run: {type(exc).__name__}: {exc}")
+                cache.close()
+                continue
+            out[key] = cur
+    finally:
+        cache.close()
+    return out, skipped, failed
+
+
+# ---------------------------------------------------------------------------------------
+# command
+
+
+def load_baseline(path: Path) -> dict:
+    if not path.exists():
+        raise InputError(f"no regression baseline at {path}; create it with `cvtbench regress --update`")
+    try:
+        return json.loads(path.read_text())
+    except ValueError as exc:
+        raise InputError(f"regression baseline {path} is not valid json: {exc}") from None
+
+
+def add_parser(sub):
+    p = sub.add_parser("regress", help="fail on a coverage drop (> 0.5 pp) or a 2x slowdown vs the baseline",
+                       description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    p.add_argument("--quick", action="store_true", help="the CI set (well under a minute)")
+    p.add_argument("--update", action="store_true", help="write the current figures into the baseline file")
+    p.add_argument("--baseline", default=None, help=f"baseline file (default {BASELINE_FILE})")
+    p.add_argument("--methods", default=None, help="comma list of methods (default all)")
+    p.add_argument("--backends", default=None, help="comma list of backend variants (default all available)")
+    p.add_argument("--no-speed", action="store_true", help="check coverage only")
+    p.add_argument("--no-coverage", action="store_true", help="check speed only")
+    p.add_argument("--quiet", action="store_true", help="no progress bars")
+    p.set_defaults(func=run)
+
+
+def run(args) -> int:
+    from bench.methods import method_names
+
+    from .outputs import atomic_write_text, dumps
+    from .report import provenance
+    from .runner import VARIANTS, backend_variants, parse_list
+
+    t0 = time.perf_counter()
+    mode = "quick" if args.quick else "full"
+    cfg = SETS[mode]
+    path = Path(args.baseline) if args.baseline else BASELINE_FILE
+    baseline_all = load_baseline(path) if (path.exists() or not args.update) else {}
+    baseline = baseline_all.get(mode)
+    if baseline is None and not args.update:
+        raise InputError(f"{path} has no {mode!r} section; create it with `cvtbench regress "
+                         f"{'--quick ' if args.quick else ''}--update`")
+    baseline = baseline or {}
+    all_methods = method_names()
+    methods = parse_list(args.methods, all_methods, "method") or all_methods
+    variants = backend_variants()
+    known = list(dict.fromkeys(list(VARIANTS) + list(variants)))
+    backends = parse_list(args.backends, known, "backend") or [v for v in known if v in variants]
+    unavailable = {v: text for v, (ok, text) in variants.items() if not ok}
+
+    current: dict = {"coverage": {}, "speed": {}, "unavailable": {}}
+    run_failures: list[str] = []
+    if not args.no_coverage:
+        cov, skipped, failed = measure_coverage(cfg, methods, backends, unavailable, args.quiet)
+        current["coverage"], run_failures = cov, run_failures + failed
+        current["unavailable"].update(skipped)
+    if not args.no_speed:
+        sp, skipped, failed = measure_speed(cfg, backends, unavailable, baseline.get("speed", {}), args.quiet)
+        current["speed"], run_failures = sp, run_failures + failed
+        current["unavailable"].update(skipped)
+    # compare only what was asked for: a --backends/--methods subset is not a regression
+    asked = {"coverage": {k: v for k, v in baseline.get("coverage", {}).items()
+                          if not args.no_coverage and k.split("/")[0] in methods and k.split("/")[1] in backends},
+             "speed": {k: v for k, v in baseline.get("speed", {}).items()
+                       if not args.no_speed and k.split(" vs ")[0] in backends}}
+    failures, notes = compare(asked, current)
+    failures = run_failures + failures
+    elapsed = time.perf_counter() - t0
+
+    for key, c in sorted(current["coverage"].items()):
+        b = asked["coverage"].get(key)
+        ref = f"  (baseline {100 * b['mean']:.2f} %)" if b else ""
+        print(f"coverage {key:<34} {100 * c['mean']:6.2f} %{ref}")
+    for key, c in current["speed"].items():
+        b = asked["speed"].get(key)
+        ref = f"  (baseline {b['ratio']:.3g}x)" if b else ""
+        print(f"speed    {key:<44} {c['ratio']:.3g}x  [{c['ms']:.1f} / {c['reference_ms']:.1f} ms]{ref}")
+    if not args.update:  # when updating, "new" and "rose" are what the update records
+        for note in sorted(notes):
+            print(f"note: {note}")
+    if args.update:
+        merged = merge(baseline, current)
+        merged["set"] = {k: v for k, v in cfg.items()}
+        merged["provenance"] = provenance()
+        baseline_all[mode] = merged
+        baseline_all["tolerances"] = {"coverage_drop_pp": COVERAGE_DROP_PP, "slowdown": SLOWDOWN}
+        atomic_write_text(path, dumps(baseline_all))
+        print(f"updated {path} ({mode}; {len(current['coverage'])} coverage and {len(current['speed'])} "
+              f"speed entries; {elapsed:.0f} s)")
+        return 1 if run_failures else 0
+    if failures:
+        for f in failures:
+            print(f"REGRESSION: {f}", file=sys.stderr)
+        print(f"cvtbench regress: {len(failures)} regression(s) against {path} ({mode}, {elapsed:.0f} s)",
+              file=sys.stderr)
+        return 1
+    print(f"regress ({mode}): no regression against {path}: {len(asked['coverage'])} coverage and "
+          f"{len(asked['speed'])} speed checks ({elapsed:.0f} s)")
+    return 0

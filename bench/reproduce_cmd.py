@@ -1,0 +1,103 @@
+"""`cvtbench reproduce`: every table and figure of the suite, in one command.
+
+Runs, in order, `cvtbench table2`, `cvtbench backends` and `cvtbench figures` (when
+bench/figures_cmd.py exists; otherwise a note says it was skipped), each into the same
+report folder, then writes ``OUT/reproduce.md``: what ran, how long each part took, and
+the machine, devices, versions and commit.  ``--quick`` runs the quick form of each
+(under 5 minutes on 2 cores) into ``reports/quick``; the full form writes ``reports``.
+Like its parts it resumes: runs whose raw json exists are read back unless --force.
+"""
+
+from __future__ import annotations
+
+import argparse
+import importlib
+import importlib.util
+import sys
+import time
+from pathlib import Path
+
+
+def add_parser(sub):
+    p = sub.add_parser("reproduce", help="table2 + backends + figures into reports/",
+                       description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    p.add_argument("--quick", action="store_true", help="the quick form of every part (< 5 min on 2 cores)")
+    p.add_argument("--force", action="store_true", help="re-run runs whose raw json exists")
+    p.add_argument("--out", default=None, help="report folder (default reports, or reports/quick with --quick)")
+    p.add_argument("--seeds", default=None, help="seeds for table2 (default 5; quick 2)")
+    p.add_argument("--quiet", action="store_true", help="no progress bars")
+    p.set_defaults(func=run)
+
+
+def _sub_args(module_name: str, argv: list[str]):
+    """Parse ``argv`` with the subcommand's own parser, so its defaults apply; options
+    the subcommand does not have are dropped (with their values)."""
+    mod = importlib.import_module(module_name)
+    parser = argparse.ArgumentParser(prog="cvtbench")
+    sub = parser.add_subparsers(dest="command")
+    mod.add_parser(sub)
+    p = sub.choices[next(iter(sub.choices))]
+    known = set(p._option_string_actions)
+    kept, i = [argv[0]], 1
+    while i < len(argv):
+        opt = argv[i]
+        action = p._option_string_actions.get(opt)
+        if action is not None:
+            takes_value = action.nargs != 0
+        else:
+            takes_value = i + 1 < len(argv) and not argv[i + 1].startswith("--")
+        if opt in known:
+            kept.append(opt)
+            if takes_value:
+                kept.append(argv[i + 1])
+        i += 2 if takes_value else 1
+    args = parser.parse_args(kept)
+    args.argv = kept
+    return args
+
+
+def run(args) -> int:
+    from .outputs import command_line
+    from .report import header_markdown, markdown_table, provenance, write_markdown
+
+    out = Path(args.out) if args.out else (Path("reports/quick") if args.quick else Path("reports"))
+    common = (["--quick"] if args.quick else []) + (["--force"] if args.force else []) + \
+        (["--quiet"] if args.quiet else [])
+    parts = [
+        ("table2", "bench.table2", ["table2", "--out", str(out)] + common
+         + (["--seeds", str(args.seeds)] if args.seeds else [])),
+        ("backends", "bench.backends_cmd", ["backends", "--out", str(out)] + common),
+        ("figures", "bench.figures_cmd", ["figures", "--out", str(out / "figures")] + common),
+    ]
+    results = []
+    t_all = time.perf_counter()
+    status = 0
+    for name, module, argv in parts:
+        if importlib.util.find_spec(module) is None:
+            results.append((name, "skipped", 0.0, f"{module.replace('.', '/')}.py does not exist yet"))
+            print(f"reproduce: {name} skipped ({module} does not exist)", file=sys.stderr)
+            continue
+        print(f"reproduce: {name} ...", file=sys.stderr)
+        sub_args = _sub_args(module, argv)
+        t0 = time.perf_counter()
+        try:
+            rc = int(sub_args.func(sub_args) or 0)
+            note = "" if rc == 0 else f"exit status {rc}"
+        except KeyboardInterrupt:
+            raise
+        except Exception as exc:  # one broken part must not hide the others' results
+            rc, note = 1, f"{type(exc).__name__}: {exc}"
+            print(f"reproduce: {name} failed: {note}", file=sys.stderr)
+        results.append((name, "ok" if rc == 0 else "failed", time.perf_counter() - t0,
+                        note or "`" + command_line(sub_args.argv) + "`"))
+        status = status or rc
+    total = time.perf_counter() - t_all
+    cmd = command_line(getattr(args, "argv", None) or ["reproduce"] + (["--quick"] if args.quick else []))
+    text = header_markdown("Reproduce" + (" (QUICK)" if args.quick else ""), provenance(), cmd,
+                           [f"total: {total:.0f} s on this machine (runs read back from raw/ take ~0 s; "
+                            "--force for a cold run)"])
+    text += "\n" + markdown_table(["part", "status", "seconds", "command / note"],
+                                  [[n, s, f"{t:.0f}", note] for n, s, t, note in results])
+    write_markdown(out / "reproduce.md", text)
+    print(f"reproduce: done in {total:.0f} s; summary in {out}/reproduce.md", file=sys.stderr)
+    return status

@@ -1,0 +1,293 @@
+"""`cvtbench table2`: the paper's Table 2 (coverage and time per method), regenerated.
+
+The problem set (also written into the report):
+
+* region: the whole square raster, no density, no direction field;
+* full: 1024x1024 px, N = 4000 sites (cells of ~16 px), 20 Lloyd iterations, seeds
+  0..K-1 (K = --seeds, default 5);
+* quick: 256x256 px, N = 250 (the same cell size), 20 iterations, seeds 0..1;
+* squares for every method (the paper's comparison): ours on every available backend,
+  each baseline on the NumPy reference backend (their own loops decide how they use it);
+* one row group per other element shape (rectangle β = 0.5, ellipse β = 0.5, triangle,
+  circle) for our method on every available backend, each under the metric whose unit
+  ball is that shape; variants of ours (``ours-fit``: the same cells, each element moved
+  inside its cell to grow it) on every shape on the reference backend.
+
+Coverage and overlap are those of :func:`bench.evaluate.evaluate`; time is the method's
+own wall time (``Distribution.total_seconds``: the 20 iterations, setup and element
+placement excluded, as the paper's "average time" of its synthesis).  The paper's
+figures stand beside ours on the square rows; the paper gives neither N nor its raster.
+
+Writes ``OUT/table2.md``, ``OUT/table2.csv``, ``OUT/table2.png`` (one effect picture
+per method: seed 0, the top-left corner of the region with about 250 elements) and ``OUT/raw/table2*/``.
+"""
+
+from __future__ import annotations
+
+import argparse
+import sys
+import time
+from pathlib import Path
+
+import numpy as np
+
+from .runner import ELEMENT_METRIC, REFERENCE_BACKEND, RunSpec
+
+# the paper's Table 2 (coverage, time), by our method names
+PAPER = {
+    "fritzsche2005": (0.648, "1 min"),
+    "smith2005": (0.681, "1 min"),
+    "hu2016": (0.843, "10 min"),
+    "ours": (0.856, "19 s"),
+    "ours-fit": (0.856, "19 s"),  # ours with the element moved inside its cell (paper §3.4)
+}
+PAPER_NAMES = {"fritzsche2005": "Fritzsche L. P.", "smith2005": "K. Smith", "hu2016": "Hu W.",
+               "ours": "Author (Chen et al.)"}
+ELEMENTS = ["square", "rectangle", "ellipse", "triangle", "circle"]
+
+FULL = {"size": 1024, "n_sites": 4000, "iterations": 20, "seeds": 5}
+QUICK = {"size": 256, "n_sites": 250, "iterations": 20, "seeds": 2}
+
+COLUMNS = ["method", "backend", "element", "metric", "width", "height", "n_sites", "iterations",
+           "seeds", "runs", "coverage_mean", "coverage_sd", "overlap_mean", "overlap_sd",
+           "time_mean_s", "time_sd_s", "ms_per_iteration", "placed_mean", "empty_cells_mean",
+           "paper_coverage", "paper_time", "status", "reason", "device"]
+
+
+def problem_set(quick: bool, seeds: int | None, methods: list[str], backends: list[str],
+                elements: list[str] | None = None) -> list[RunSpec]:
+    """The runs of Table 2 (see the module docstring); ``backends`` are the variants
+    to run ours on (available or not: unavailable ones become skipped rows)."""
+    cfg = QUICK if quick else FULL
+    k = cfg["seeds"] if seeds is None else seeds
+    suite = "table2-quick" if quick else "table2"
+    elements = elements or ELEMENTS
+    specs = []
+
+    def add(method, backend, element, picture_first):
+        for s in range(k):
+            specs.append(RunSpec(suite, method, backend, element, cfg["size"], cfg["size"],
+                                 cfg["n_sites"], cfg["iterations"], s,
+                                 picture=picture_first and s == 0))
+
+    for element in elements:
+        for method in methods:
+            if method == "ours":
+                for b in backends:
+                    add(method, b, element, picture_first=(b == backends[0]))
+            elif method.startswith("ours") or element == "square":
+                # variants of ours (e.g. ours-fit: another placement of the same cells) get
+                # every element, on the reference backend; baselines get the squares
+                add(method, REFERENCE_BACKEND, element, picture_first=True)
+    return specs
+
+
+def _sd(frame, column: str) -> float:
+    """Sample standard deviation over seeds (NaN with a single seed)."""
+    return float(frame[column].std(ddof=1)) if len(frame) > 1 else np.nan
+
+
+def aggregate(rows: list[dict]):
+    """One line per (method, backend, element): mean ± sd over the seeds that ran."""
+    import pandas as pd
+
+    df = pd.DataFrame(rows)
+    out = []
+    for (method, backend, element), g in df.groupby(["method", "backend", "element"], sort=False):
+        ok = g[g["status"] == "ok"]
+        first = g.iloc[0]
+        paper = PAPER.get(method) if element == "square" else None
+        rec = {
+            "method": method, "backend": backend, "element": element, "metric": first["metric"],
+            "width": first["width"], "height": first["height"], "n_sites": first["n_sites"],
+            "iterations": first["iterations"], "seeds": len(g), "runs": len(ok),
+            "paper_coverage": paper[0] if paper else np.nan, "paper_time": paper[1] if paper else "",
+        }
+        if len(ok):
+            rec.update(
+                coverage_mean=float(ok["coverage"].mean()), coverage_sd=_sd(ok, "coverage"),
+                overlap_mean=float(ok["overlap"].mean()), overlap_sd=_sd(ok, "overlap"),
+                time_mean_s=float(ok["total_seconds"].mean()), time_sd_s=_sd(ok, "total_seconds"),
+                ms_per_iteration=float(ok["ms_per_iteration"].median()),
+                placed_mean=float(ok["placed"].mean()), empty_cells_mean=float(ok["empty_cells"].mean()),
+                status="ok" if len(ok) == len(g) else "partial",
+                reason="; ".join(sorted(set(g.loc[g["status"] != "ok", "reason"].astype(str)))),
+                device=str(ok.iloc[0]["device"]),
+            )
+        else:
+            rec.update(status=str(first["status"]), reason=str(first["reason"]), device="")
+        out.append(rec)
+    table = pd.DataFrame(out)
+    for c in COLUMNS:
+        if c not in table:
+            table[c] = np.nan
+    return table[COLUMNS]
+
+
+def render_markdown(table, prov: dict, command: str, quick: bool, cfg: dict, seeds: int,
+                    elapsed: float, cached: int, total: int) -> str:
+    from .report import fmt_pct, fmt_seconds, header_markdown, markdown_table
+
+    title = "Table 2, regenerated" + (" (QUICK: small raster, 2 seeds; not the paper's scale)" if quick else "")
+    notes = [
+        f"problem set: square region, whole {cfg['size']}x{cfg['size']} px raster, N = {cfg['n_sites']} "
+        f"sites, {cfg['iterations']} Lloyd iterations, seeds 0..{seeds - 1}, no density, no direction "
+        "field; squares for every method, every other element shape for ours and ours-fit; "
+        "rectangle and ellipse β = 0.5",
+        "ours runs on every available backend; ours-fit and the baselines run on the NumPy reference "
+        "backend",
+        "coverage and overlap: bench.evaluate (area of the union of the elements inside the region / "
+        "area of the region; overlap: summed element area minus union area, / region area)",
+        "time: the method's wall time for its iterations (setup and element placement excluded), "
+        "mean over seeds; ms/it: median per iteration",
+        "paper: Table 2 of Chen, Yang & Yang 2019 (C++/OpenGL on a GPU; N and raster not stated); "
+        "shown on the square rows",
+        f"this command took {fmt_seconds(elapsed)}; {cached} of {total} runs were read back from "
+        "raw/ (run with --force to redo them)",
+    ]
+    text = header_markdown("Table 2" if not quick else title, prov, command, notes)
+    if quick:
+        text += f"\n**{title}**\n"
+    cols = ["method", "backend", "element", "coverage", "overlap", "time", "ms/it", "runs",
+            "paper coverage", "paper time"]
+    body = []
+    for _, r in table.iterrows():
+        if r["status"] not in ("ok", "partial"):
+            continue
+        body.append([
+            r["method"], r["backend"], r["element"],
+            fmt_pct(r["coverage_mean"], r["coverage_sd"]), fmt_pct(r["overlap_mean"], r["overlap_sd"]),
+            fmt_seconds(r["time_mean_s"]), f"{r['ms_per_iteration']:.3g}", f"{r['runs']}/{r['seeds']}",
+            fmt_pct(r["paper_coverage"]) if r["paper_time"] else "", r["paper_time"] or "",
+        ])
+    text += "\n" + markdown_table(cols, body)
+    missing = table[~table["status"].isin(["ok"])]
+    if len(missing):
+        text += "\n## Not run, failed or partial\n\n"
+        text += markdown_table(["method", "backend", "element", "status", "reason"],
+                               [[r["method"], r["backend"], r["element"], r["status"], r["reason"]]
+                                for _, r in missing.iterrows()])
+    text += ("\nThe picture `table2.png` shows one effect picture per method (seed 0, the top-left "
+             "corner of the region, about 250 elements); the raw json of every run, with its sites and timings, is "
+             "under `raw/`.\n")
+    return text
+
+
+def render_picture(table, out: Path, suite_specs: list[RunSpec], path: Path) -> bool:
+    """table2.png: squares of every method on the first row, ours with every other
+    element on the second.  Returns False when no picture exists (nothing ran)."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+    from PIL import Image
+
+    from .report import save_figure
+    from .runner import picture_crop, picture_path
+
+    cov = {(r["method"], r["backend"], r["element"]): r["coverage_mean"] for _, r in table.iterrows()}
+    panels = []
+    for spec in suite_specs:
+        p = picture_path(out, spec)
+        if spec.picture and p.exists():
+            panels.append((spec, p))
+    if not panels:
+        return False
+    rows = [[x for x in panels if x[0].element == "square"], [x for x in panels if x[0].element != "square"]]
+    rows = [r for r in rows if r]
+    ncol = max(len(r) for r in rows)
+    fig, axes = plt.subplots(len(rows), ncol, figsize=(2.6 * ncol, 3.1 * len(rows)), dpi=110,
+                             squeeze=False, layout="constrained")
+    for ax in axes.ravel():
+        ax.axis("off")
+    for i, row in enumerate(rows):
+        for j, (spec, p) in enumerate(row):
+            ax = axes[i][j]
+            with Image.open(p) as im:
+                ax.imshow(np.asarray(im.convert("RGB")))
+            c = cov.get((spec.method, spec.backend, spec.element), np.nan)
+            name = spec.method if spec.method != "ours" else f"ours ({spec.backend})"
+            ax.set_title(f"{name}\n{spec.element}: {100 * c:.1f} %", fontsize=9)
+    spec0 = panels[0][0]
+    crop = picture_crop(spec0.n_sites)
+    part = "the whole region" if crop >= 1 else f"top-left {crop * spec0.width:.0f}² px of {spec0.width}² px"
+    fig.suptitle(f"Effect pictures (seed 0, {part}, N = {spec0.n_sites})", fontsize=10)
+    save_figure(fig, path)
+    plt.close(fig)
+    return True
+
+
+def add_arguments(p: argparse.ArgumentParser) -> None:
+    p.add_argument("--quick", action="store_true", help="small version (256² px, N=250, 2 seeds): < 2 min")
+    p.add_argument("--seeds", default=None, help="seeds 0..K-1 (default 5; quick 2)")
+    p.add_argument("--force", action="store_true", help="re-run runs whose raw json exists")
+    p.add_argument("--out", default=None, help="report folder (default reports, or reports/quick with --quick)")
+    p.add_argument("--methods", default=None, help="comma list of methods (default: all registered)")
+    p.add_argument("--backends", default=None, help="comma list of backend variants for ours "
+                   "(default: numpy, opencl, gl-cone, gl-exact and any other registered)")
+    p.add_argument("--elements", default=None, help=f"comma list of element shapes (default all: {', '.join(ELEMENTS)})")
+    p.add_argument("--quiet", action="store_true", help="no progress bar")
+
+
+def add_parser(sub):
+    p = sub.add_parser("table2", help="regenerate the paper's Table 2 into reports/",
+                       description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    add_arguments(p)
+    p.set_defaults(func=run)
+
+
+def default_out(args) -> Path:
+    return Path(args.out) if args.out else (Path("reports/quick") if args.quick else Path("reports"))
+
+
+def run(args) -> int:
+    from bench.methods import method_names
+
+    from .outputs import command_line
+    from .report import provenance, write_csv, write_markdown
+    from .runner import VARIANTS, backend_variants, parse_list, parse_positive_int, run_sweep
+
+    t0 = time.perf_counter()
+    out = default_out(args)
+    cfg = QUICK if args.quick else FULL
+    seeds = cfg["seeds"] if args.seeds is None else parse_positive_int(args.seeds, "--seeds")
+    all_methods = method_names()
+    methods = parse_list(args.methods, all_methods, "method") or all_methods
+    if "ours" in methods:  # ours first, then the baselines in the paper's order
+        methods = ["ours"] + [m for m in methods if m != "ours"]
+    variants = backend_variants()
+    known = list(dict.fromkeys(list(VARIANTS) + list(variants)))
+    backends = parse_list(args.backends, known, "backend") or [v for v in known if v in variants]
+    elements = parse_list(args.elements, ELEMENTS, "element")
+    unavailable = {v: text for v, (ok, text) in variants.items() if not ok}
+    specs = problem_set(args.quick, seeds, methods, backends, elements)
+    rows = run_sweep(specs, out, force=args.force, quiet=args.quiet, unavailable=unavailable)
+    table = aggregate(rows)
+    elapsed = time.perf_counter() - t0
+    cached = sum(1 for r in rows if r.get("cached"))
+    prov = provenance()
+    cmd = command_line(getattr(args, "argv", None) or ["table2"] + (["--quick"] if args.quick else []))
+    md = render_markdown(table, prov, cmd, args.quick, cfg, seeds, elapsed, cached, len(rows))
+    out.mkdir(parents=True, exist_ok=True)
+    render_picture(table, out, specs, out / "table2.png")
+    write_csv(out / "table2.csv", table)
+    write_markdown(out / "table2.md", md)
+    _print_summary(table, out)
+    return 0
+
+
+def _print_summary(table, out: Path) -> None:
+    from .report import fmt_pct, fmt_seconds
+
+    for _, r in table.iterrows():
+        if r["status"] in ("ok", "partial"):
+            print(f"{r['method']:<14} {r['backend']:<9} {r['element']:<9} "
+                  f"{fmt_pct(r['coverage_mean'], r['coverage_sd']):>16}  {fmt_seconds(r['time_mean_s'])}",
+                  file=sys.stderr)
+        else:
+            print(f"{r['method']:<14} {r['backend']:<9} {r['element']:<9} {r['status']}: {r['reason']}",
+                  file=sys.stderr)
+    print(f"wrote {out}/table2.md, table2.csv, table2.png", file=sys.stderr)
+
+
+__all__ = ["problem_set", "aggregate", "PAPER", "ELEMENT_METRIC", "run"]

@@ -1,0 +1,258 @@
+"""bench/: the sweep runner (resume, interrupt), the reports (header, committed files
+up to date with the code), and the regression guard (its logic on fabricated figures,
+and end to end with a fabricated baseline that must fail)."""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+import numpy as np
+import pandas as pd
+import pytest
+
+from bench import regress_cmd, runner
+from bench.cli import main
+from bench.report import git_commit
+from bench.runner import RunSpec, run_sweep
+
+ROOT = Path(__file__).resolve().parent.parent
+REPORTS = ROOT / "reports"
+
+
+def tiny(seed=0, suite="t", method="ours", element="square", picture=False):
+    return RunSpec(suite, method, "numpy", element, 64, 64, 20, 3, seed, picture=picture)
+
+
+# ---------------------------------------------------------------------------------------
+# runner
+
+
+def test_run_row_has_coverage_from_placement(tmp_path):
+    rows = run_sweep([tiny(picture=True)], tmp_path, quiet=True)
+    (row,) = rows
+    assert row["status"] == "ok", row
+    assert 0.3 < row["coverage"] <= 1.0 and row["placed"] + row["skipped"] == 20
+    raw = json.loads(runner.raw_path(tmp_path, tiny()).read_text())
+    assert raw["row"]["coverage"] == row["coverage"] and len(raw["sites"]) == 20
+    assert runner.picture_path(tmp_path, tiny()).exists()
+
+
+def test_sweep_resumes_and_force_reruns(tmp_path, monkeypatch):
+    specs = [tiny(0), tiny(1)]
+    first = run_sweep(specs, tmp_path, quiet=True)
+    calls = []
+    real = runner.execute
+    monkeypatch.setattr(runner, "execute", lambda *a, **k: calls.append(1) or real(*a, **k))
+    again = run_sweep(specs, tmp_path, quiet=True)
+    assert calls == [] and all(r.get("cached") for r in again)
+    assert [r["coverage"] for r in again] == [r["coverage"] for r in first]
+    run_sweep(specs, tmp_path, force=True, quiet=True)
+    assert len(calls) == 2
+
+
+def test_interrupt_keeps_finished_runs_only(tmp_path, monkeypatch):
+    real = runner.execute
+    done = []
+
+    def flaky(spec, *a, **k):
+        if done:
+            raise KeyboardInterrupt
+        done.append(spec.key)
+        return real(spec, *a, **k)
+
+    monkeypatch.setattr(runner, "execute", flaky)
+    with pytest.raises(KeyboardInterrupt):
+        run_sweep([tiny(0), tiny(1)], tmp_path, quiet=True)
+    files = sorted(p.name for p in (tmp_path / "raw" / "t").iterdir())
+    assert files == [f"{tiny(0).key}.json"]  # no temp file, no json of the interrupted run
+
+
+def test_unavailable_and_failing_runs_become_rows(tmp_path, monkeypatch):
+    rows = run_sweep([tiny(0)], tmp_path, quiet=True, unavailable={"numpy": "no reason at all"})
+    assert rows[0]["status"] == "skipped" and rows[0]["reason"] == "no reason at all"
+
+    def broken(*a, **k):
+        raise RuntimeError("kaputt")
+
+    monkeypatch.setattr(runner, "execute", broken)
+    rows = run_sweep([tiny(1)], tmp_path, quiet=True)
+    assert rows[0]["status"] == "failed" and "kaputt" in rows[0]["reason"]
+    assert not runner.raw_path(tmp_path, tiny(1)).exists()  # retried next time
+
+
+def test_git_commit_outside_a_repository(tmp_path):
+    assert git_commit(tmp_path) == "unknown"
+    here = git_commit()
+    assert here == "unknown" or len(here.split()[0]) == 40
+
+
+# ---------------------------------------------------------------------------------------
+# committed reports are the output of the committed code
+
+
+def _committed(name):
+    path = REPORTS / name
+    if not path.exists():
+        pytest.fail(f"{path} is not committed; run `cvtbench reproduce` (and --quick)")
+    return pd.read_csv(path)
+
+
+def test_table2_quick_rerun_matches_committed(tmp_path, capsys):
+    code = main(["table2", "--quick", "--methods", "ours", "--backends", "numpy", "--elements",
+                 "square,circle", "--out", str(tmp_path), "--quiet"])
+    assert code == 0
+    new = pd.read_csv(tmp_path / "table2.csv")
+    old = _committed("quick/table2.csv")
+    assert list(new.columns) == list(old.columns)
+    assert (tmp_path / "table2.md").read_text().count("QUICK") >= 1 and (tmp_path / "table2.png").exists()
+    for _, r in new.iterrows():  # the NumPy reference is deterministic: same figures
+        o = old[(old.method == r.method) & (old.backend == r.backend) & (old.element == r.element)]
+        assert len(o) == 1, f"{r.method}/{r.backend}/{r.element} missing from reports/quick/table2.csv"
+        assert o.iloc[0].coverage_mean == pytest.approx(r.coverage_mean, abs=1e-6)
+        assert o.iloc[0].overlap_mean == pytest.approx(r.overlap_mean, abs=1e-6)
+
+
+def test_committed_table2_covers_every_method_and_backend():
+    from bench.methods import method_names
+    from bench.table2 import problem_set
+
+    variants = list(dict.fromkeys(list(runner.VARIANTS) + list(runner.backend_variants())))
+    for name, quick in (("table2.csv", False), ("quick/table2.csv", True)):
+        table = _committed(name)
+        expected = {(s.method, s.backend, s.element) for s in problem_set(quick, 1, method_names(), variants)}
+        have = set(zip(table.method, table.backend, table.element, strict=True))
+        assert expected <= have, f"reports/{name} lacks {sorted(expected - have)}: regenerate it"
+        ok = table[table.status == "ok"]
+        assert ((ok.coverage_mean > 0) & (ok.coverage_mean <= 1)).all()
+        square = table[(table.element == "square") & (table.method == "ours")]
+        assert (square.paper_coverage == 0.856).all()
+
+
+def test_backends_quick_rerun_matches_committed_columns(tmp_path):
+    code = main(["backends", "--quick", "--backends", "numpy", "--metrics", "l2", "--sites", "300",
+                 "--sizes", "96", "--repeats", "1", "--out", str(tmp_path), "--quiet"])
+    assert code == 0
+    new = pd.read_csv(tmp_path / "backends.csv")
+    assert list(new.columns) == list(_committed("quick/backends.csv").columns)
+    assert set(new.backend) == {"numpy", "ckdtree"} and (new.ms_median > 0).all()
+    assert new.loc[new.backend == "numpy", "x_numpy"].iloc[0] == pytest.approx(1.0)
+    full = _committed("backends.csv")
+    assert {1000, 4000, 16000} <= set(full.n_sites) and {512, 1024, 2048} <= set(full["size"])
+    assert set(full.metric) == {"l2", "l1", "linf", "linf-axial", "l2-axial", "triangle"}
+
+
+# ---------------------------------------------------------------------------------------
+# regression: logic on fabricated figures
+
+
+BASE = {"coverage": {"ours/numpy/square": {"mean": 0.800}, "ours/gl/square": {"mean": 0.8}},
+        "speed": {"opencl vs numpy, l2": {"ratio": 0.10}}}
+
+
+def test_compare_fails_on_a_coverage_drop_over_half_a_point():
+    cur = {"coverage": {"ours/numpy/square": {"mean": 0.794}}, "speed": {}}  # -0.6 pp
+    failures, _ = regress_cmd.compare(BASE, cur)
+    assert len(failures) == 1 and "ours/numpy/square" in failures[0] and "0.60 pp" in failures[0]
+    cur = {"coverage": {"ours/numpy/square": {"mean": 0.796}}, "speed": {}}  # -0.4 pp
+    assert regress_cmd.compare(BASE, cur)[0] == []
+
+
+def test_compare_speed_uses_ratios_only():
+    # 10x slower machine, same ratio: no regression
+    cur = {"coverage": {}, "speed": {"opencl vs numpy, l2": {"ratio": 0.10, "ms": 500.0, "reference_ms": 5000}}}
+    assert regress_cmd.compare(BASE, cur)[0] == []
+    cur["speed"]["opencl vs numpy, l2"]["ratio"] = 0.21  # 2.1x slower relative to numpy
+    failures, _ = regress_cmd.compare(BASE, cur)
+    assert len(failures) == 1 and "2.10 times slower" in failures[0]
+
+
+def test_compare_reports_missing_and_new_entries_without_failing():
+    cur = {"coverage": {"ours/numpy/square": {"mean": 0.8}, "ours/new/square": {"mean": 0.5}},
+           "speed": {}, "unavailable": {"ours/gl/square": "no EGL"}}
+    failures, notes = regress_cmd.compare(BASE, cur)
+    assert failures == []
+    text = "\n".join(notes)
+    assert "ours/gl/square (no EGL)" in text and "new: coverage ours/new/square" in text
+    assert "speed opencl vs numpy, l2 (not run here)" in text
+
+
+def test_merge_keeps_entries_not_measured_now():
+    merged = regress_cmd.merge(BASE, {"coverage": {"ours/numpy/square": {"mean": 0.9}}, "speed": {}})
+    assert merged["coverage"]["ours/numpy/square"]["mean"] == 0.9
+    assert merged["coverage"]["ours/gl/square"]["mean"] == 0.8 and "opencl vs numpy, l2" in merged["speed"]
+
+
+# ---------------------------------------------------------------------------------------
+# regression end to end (numpy only, to stay fast)
+
+
+def _fabricated(tmp_path, coverage_shift=0.0, speed_ratio=None):
+    committed = json.loads(regress_cmd.BASELINE_FILE.read_text())
+    quick = committed["quick"]
+    cov = {k: dict(v, mean=v["mean"] + coverage_shift) for k, v in quick["coverage"].items()
+           if k.startswith("ours/numpy/")}
+    speed = {k: dict(v) for k, v in quick["speed"].items() if k.startswith("numpy vs ckdtree")}
+    if speed_ratio is not None:
+        speed = {k: dict(v, ratio=speed_ratio) for k, v in speed.items()}
+    path = tmp_path / "baseline.json"
+    path.write_text(json.dumps({"quick": {"coverage": cov, "speed": speed}}))
+    return path
+
+
+REGRESS_COVERAGE = ["regress", "--quick", "--methods", "ours", "--backends", "numpy", "--no-speed", "--quiet"]
+
+
+def test_regress_passes_against_committed_baseline_and_fails_on_fabricated_drop(tmp_path, capsys):
+    assert regress_cmd.BASELINE_FILE.exists(), "bench/regress_baseline.json must be committed"
+    assert main(REGRESS_COVERAGE + ["--baseline", str(_fabricated(tmp_path))]) == 0
+    out = capsys.readouterr().out
+    assert "no regression" in out and "3 coverage" in out
+    # the baseline says 1 point more than the code reaches: a drop of 1 pp must fail
+    assert main(REGRESS_COVERAGE + ["--baseline", str(_fabricated(tmp_path, coverage_shift=0.01))]) == 1
+    err = capsys.readouterr().err
+    assert "REGRESSION: coverage of ours/numpy/square fell" in err
+
+
+def test_regress_fails_on_fabricated_slowdown(tmp_path, capsys):
+    # a baseline where NumPy took 1 % of cKDTree's time: today's ratio is far over 2x that
+    argv = ["regress", "--quick", "--backends", "numpy", "--no-coverage", "--quiet",
+            "--baseline", str(_fabricated(tmp_path, speed_ratio=0.01))]
+    assert main(argv) == 1
+    assert "REGRESSION: speed of numpy vs ckdtree" in capsys.readouterr().err
+
+
+def test_regress_without_baseline_is_an_input_error(tmp_path, capsys):
+    assert main(["regress", "--quick", "--baseline", str(tmp_path / "none.json")]) == 2
+    assert "regress --update" in capsys.readouterr().err
+
+
+@pytest.mark.parametrize("argv, text", [
+    (["table2", "--seeds", "0"], "--seeds"),
+    (["table2", "--backends", "cuda"], "cuda"),
+    (["table2", "--elements", "hexagon"], "hexagon"),
+    (["backends", "--sizes", "big"], "--sizes"),
+    (["regress", "--quick", "--methods", "magic"], "magic"),
+])
+def test_bad_bench_options_are_one_line_errors(argv, text, capsys, tmp_path):
+    assert main(argv + ["--out", str(tmp_path)] if argv[0] != "regress" else argv) == 2
+    err = capsys.readouterr().err.strip()
+    assert err.count("\n") == 0 and text in err
+
+
+def test_reproduce_passes_only_options_a_part_knows():
+    from bench.reproduce_cmd import _sub_args
+
+    args = _sub_args("bench.backends_cmd", ["backends", "--out", "x", "--seeds", "3", "--quick"])
+    assert args.out == "x" and args.quick and args.argv == ["backends", "--out", "x", "--quick"]
+
+
+def test_effect_picture_draws_elements():
+    import shapely
+
+    from cvt.problem import Grid
+
+    img = runner.effect_picture([shapely.box(0, 0, 16, 16), None], Grid(32, 32), side=64, crop=1.0)
+    a = np.asarray(img)
+    assert a.shape == (64, 64, 3)
+    assert a[5, 5].sum() > a[50, 50].sum()  # the box is drawn, the rest is background
