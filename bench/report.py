@@ -26,7 +26,9 @@ def git_commit(cwd=None) -> str:
         if head.returncode != 0:
             return "unknown"
         commit = head.stdout.strip()
-        dirty = subprocess.run(["git", "status", "--porcelain", "--untracked-files=no"], cwd=cwd,
+        # reports/ itself is rewritten while a sweep runs: it does not make the code dirty
+        dirty = subprocess.run(["git", "status", "--porcelain", "--untracked-files=no", "--",
+                                ".", ":(exclude)reports"], cwd=cwd,
                                capture_output=True, text=True, timeout=10)
         if dirty.returncode == 0 and dirty.stdout.strip():
             commit += " (+ uncommitted changes)"
