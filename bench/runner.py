@@ -4,8 +4,8 @@ Every report of ``bench/`` (Table 2, regression) is a list of :class:`RunSpec`; 
 module turns one spec into one row (a flat dict, one line of the report's table) and
 keeps that row, with the run's sites and timings, as raw json under
 ``<out>/raw/<suite>/<key>.json``.  Why a file per run: a sweep of many minutes can be
-interrupted (Ctrl-C) and resumed, a run whose json exists is read back instead of run
-again (``force`` re-runs it), and the report is always made from what is on disk, so it
+interrupted (Ctrl-C) and resumed, a run whose json exists, made by the same code on the
+same host (:func:`made_by`), is read back instead of run again (``force`` re-runs it), and the report is always made from what is on disk, so it
 never mixes two half sweeps.  Each json is written atomically (temp file + rename): the
 file exists only when the run finished.
 
@@ -24,10 +24,12 @@ from __future__ import annotations
 
 import hashlib
 import json
+import platform
 import sys
 import time
 import traceback
 from dataclasses import asdict, dataclass
+from functools import lru_cache
 from pathlib import Path
 
 import numpy as np
@@ -303,11 +305,13 @@ def run_sweep(specs: list[RunSpec], out, force: bool = False, store: bool = True
                 continue
             if store and path.exists() and not force:
                 try:
-                    rows[i] = json.loads(path.read_text())["row"]
-                    rows[i]["cached"] = True
-                    continue
+                    stored = json.loads(path.read_text())
+                    if stored.get("made_by") == made_by():
+                        rows[i] = stored["row"]
+                        rows[i]["cached"] = True
+                        continue
                 except (ValueError, KeyError):
-                    pass  # unreadable: run it again
+                    pass  # unreadable, or made by other code or on another machine: run it
             try:
                 backend = cache.get(spec.backend)
                 pic = picture_path(out, spec) if (spec.picture and store) else None
@@ -328,6 +332,7 @@ def run_sweep(specs: list[RunSpec], out, force: bool = False, store: bool = True
                 continue
             rows[i] = record["row"]
             if store:
+                record["made_by"] = made_by()
                 atomic_write_text(path, dumps(record))
     except KeyboardInterrupt:
         done = sum(1 for r in rows.values() if r.get("status") == "ok")
@@ -338,6 +343,21 @@ def run_sweep(specs: list[RunSpec], out, force: bool = False, store: bool = True
         bar.close()
         cache.close()
     return [rows[i] for i in range(len(specs))]
+
+
+@lru_cache(maxsize=1)
+def made_by() -> dict:
+    """What a stored run must share with this process to be read back instead of re-run:
+    the same source code (a hash of every .py and .cl file of the four packages) on the
+    same host.  So a sweep resumes after Ctrl-C, but a fresh clone, a code change or
+    another machine computes its own figures instead of reusing committed ones."""
+    root = Path(__file__).resolve().parent.parent
+    digest = hashlib.sha1()
+    for pkg in ("cvt", "backends", "baselines", "bench"):
+        for f in sorted((root / pkg).rglob("*")):
+            if f.suffix in (".py", ".cl") and f.is_file():
+                digest.update(f.relative_to(root).as_posix().encode() + b"\0" + f.read_bytes())
+    return {"code": digest.hexdigest()[:16], "host": platform.node()}
 
 
 def fingerprint(specs: list[RunSpec]) -> str:

@@ -51,6 +51,22 @@ def test_sweep_resumes_and_force_reruns(tmp_path, monkeypatch):
     assert len(calls) == 2
 
 
+def test_runs_stored_by_other_code_or_host_are_recomputed(tmp_path, monkeypatch):
+    spec = tiny(0)
+    run_sweep([spec], tmp_path, quiet=True)
+    path = runner.raw_path(tmp_path, spec)
+    stored = json.loads(path.read_text())
+    assert stored["made_by"] == runner.made_by()
+    stored["made_by"] = {"code": "0123456789abcdef", "host": stored["made_by"]["host"]}
+    path.write_text(json.dumps(stored))
+    calls = []
+    real = runner.execute
+    monkeypatch.setattr(runner, "execute", lambda *a, **k: calls.append(1) or real(*a, **k))
+    (row,) = run_sweep([spec], tmp_path, quiet=True)
+    assert calls == [1] and not row.get("cached")
+    assert json.loads(path.read_text())["made_by"] == runner.made_by()
+
+
 def test_interrupt_keeps_finished_runs_only(tmp_path, monkeypatch):
     real = runner.execute
     done = []
