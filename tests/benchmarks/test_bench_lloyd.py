@@ -8,7 +8,7 @@ and kind, which is what `cvtbench backends --from-benchmark-json FILE` reads.
 Sizes: in normal CI (``--benchmark-disable`` from pyproject) each case runs once as a
 plain test on a small problem (l2 and linf, N = 500, 128²) and checks its result
 against the NumPy reference.  With ``--benchmark-enable`` the set grows to the six
-metrics, N in {1000, 4000} and 512²/1024²; with ``CVT_BENCH_FULL=1`` it is the whole
+metrics, N in {1000, 4000, 16000} and 512²/1024²; with ``CVT_BENCH_FULL=1`` it is the whole
 grid of the backends report (N up to 16000, rasters up to 2048²).  For example::
 
     pytest tests/benchmarks/test_bench_lloyd.py --benchmark-enable --benchmark-json bench.json
@@ -30,7 +30,7 @@ from cvt.metrics import METRIC_NAMES, make_metric
 from cvt.problem import Grid
 
 SMALL = {"metrics": ["l2", "linf"], "sites": [500], "sizes": [128]}
-ENABLED = {"metrics": list(METRIC_NAMES), "sites": [1000, 4000], "sizes": [512, 1024]}
+ENABLED = {"metrics": list(METRIC_NAMES), "sites": [1000, 4000, 16000], "sizes": [512, 1024]}
 FULL = {"metrics": list(METRIC_NAMES), "sites": [1000, 4000, 16000], "sizes": [512, 1024, 2048]}
 
 VARIANTS = backend_variants()  # variant -> (available, device or reason)
