@@ -334,3 +334,40 @@ def tile_lloyd(problem: Problem, shape: TileShape, base_size: float, iterations:
     tiles = rasterize_tiles(shape, centers, angles, sizes, grid)
     labels, _ = tile_voronoi(tiles, inside)
     return centers, angles, sizes, labels, energy, seconds, empty, empty_sites
+
+
+def run_fixed_tiles(method: str, problem: Problem, iterations: int, progress, element, gap,
+                    delta: float, make_turn, extra: dict):
+    """The frame shared by the fixed-size tile methods (Fritzsche, Smith): set up the tile
+    shape and budget size (timed apart), run :func:`tile_lloyd` with the method's turning
+    rule ``make_turn(problem, shape)``, and package the result as a Distribution."""
+    from cvt.distribution import Distribution
+
+    t_setup = time.perf_counter()
+    if iterations < 0:
+        raise ValueError(f"iterations must be >= 0, got {iterations}")
+    gap = gap_value(gap)
+    shape = tile_shape(problem, element)
+    base = budget_size(shape, problem.grid, problem.n_sites, delta)
+    setup = time.perf_counter() - t_setup
+
+    t0 = time.perf_counter()
+    centers, angles, sizes, labels, energy, seconds, empty, empty_sites = tile_lloyd(
+        problem, shape, base, iterations, make_turn(problem, shape), progress, gap)
+    elements, clipped = make_elements(shape, centers, angles, sizes, problem.grid)
+    total = time.perf_counter() - t0
+    return Distribution(
+        method=method, sites=centers, angles=angles, scales=sizes / base,
+        elements=elements, energy=energy, seconds=seconds, setup_seconds=setup,
+        total_seconds=total, empty=empty, empty_sites=empty_sites, labels=labels,
+        extra={
+            **extra,
+            "element": shape.name,
+            "delta": delta,
+            "tile_size": base,
+            "scales": "tile size / budget tile size",
+            "voronoi": "distance transform of the rasterised tiles (scipy.ndimage)",
+            "energy": "mean squared distance of region pixels to their nearest tile (px²)",
+            "clipped_area_fraction": clipped,
+        },
+    )

@@ -44,23 +44,13 @@ Where this departs from the paper, and why
 
 from __future__ import annotations
 
-import time
-
 import numpy as np
 
 from bench.methods import METHODS
 from cvt.distribution import Distribution
 from cvt.problem import Problem
 
-from .common import (
-    BUDGET_DELTA,
-    budget_size,
-    gap_value,
-    make_elements,
-    nearest_equivalent,
-    tile_lloyd,
-    tile_shape,
-)
+from .common import BUDGET_DELTA, nearest_equivalent, run_fixed_tiles
 
 
 def principal_axis_turn(problem: Problem, shape):
@@ -81,36 +71,12 @@ def run(problem: Problem, backend=None, iterations: int = 20, progress=None,
         element: str | None = None, gap: float = 0.0, delta: float = BUDGET_DELTA) -> Distribution:
     """Fritzsche et al. 2005 on ``problem``; ``backend`` is not used (the distance is to
     the tiles, which no point-metric backend computes)."""
-    t_setup = time.perf_counter()
-    if iterations < 0:
-        raise ValueError(f"iterations must be >= 0, got {iterations}")
-    gap = gap_value(gap)
-    shape = tile_shape(problem, element)
-    base = budget_size(shape, problem.grid, problem.n_sites, delta)
-    setup = time.perf_counter() - t_setup
-
-    t0 = time.perf_counter()
-    centers, angles, sizes, labels, energy, seconds, empty, empty_sites = tile_lloyd(
-        problem, shape, base, iterations, principal_axis_turn(problem, shape), progress, gap)
-    elements, clipped = make_elements(shape, centers, angles, sizes, problem.grid)
-    total = time.perf_counter() - t0
-    return Distribution(
-        method="fritzsche2005", sites=centers, angles=angles, scales=sizes / base,
-        elements=elements, energy=energy, seconds=seconds, setup_seconds=setup,
-        total_seconds=total, empty=empty, empty_sites=empty_sites, labels=labels,
-        extra={
-            "paper": "Fritzsche, Hellwig, Hiller, Deussen, Interactive design of authentic "
-                     "looking mosaics using Voronoi structures, ISVD 2005",
-            "element": shape.name,
-            "delta": delta,
-            "tile_size": base,
-            "scales": "tile size / budget tile size",
-            "turn": "field" if problem.field is not None else "principal axis of the region",
-            "voronoi": "distance transform of the rasterised tiles (scipy.ndimage)",
-            "energy": "mean squared distance of region pixels to their nearest tile (px²)",
-            "clipped_area_fraction": clipped,
-        },
-    )
+    turn = "field" if problem.field is not None else "principal axis of the region"
+    return run_fixed_tiles("fritzsche2005", problem, iterations, progress, element, gap, delta,
+                           principal_axis_turn, {
+                               "paper": "Fritzsche, Hellwig, Hiller, Deussen, Interactive design of "
+                                        "authentic looking mosaics using Voronoi structures, ISVD 2005",
+                               "turn": turn})
 
 
 METHODS["fritzsche2005"] = run

@@ -39,7 +39,6 @@ Where this departs from the paper, and why
 from __future__ import annotations
 
 import math
-import time
 
 import numpy as np
 
@@ -47,7 +46,7 @@ from bench.methods import METHODS
 from cvt.distribution import Distribution
 from cvt.problem import Problem
 
-from .common import BUDGET_DELTA, budget_size, gap_value, make_elements, tile_lloyd, tile_shape
+from .common import BUDGET_DELTA, run_fixed_tiles
 
 COARSE_STEP = math.radians(6.0)
 FINE_STEPS = (math.radians(3.0), math.radians(1.5))
@@ -105,35 +104,10 @@ def run(problem: Problem, backend=None, iterations: int = 20, progress=None,
         element: str | None = None, gap: float = 0.0, delta: float = BUDGET_DELTA) -> Distribution:
     """Smith et al. 2005 on ``problem``; ``backend`` is not used (the distance is to the
     tiles' areas, which no point-metric backend computes)."""
-    t_setup = time.perf_counter()
-    if iterations < 0:
-        raise ValueError(f"iterations must be >= 0, got {iterations}")
-    gap = gap_value(gap)
-    shape = tile_shape(problem, element)
-    base = budget_size(shape, problem.grid, problem.n_sites, delta)
-    setup = time.perf_counter() - t_setup
-
-    t0 = time.perf_counter()
-    centers, angles, sizes, labels, energy, seconds, empty, empty_sites = tile_lloyd(
-        problem, shape, base, iterations, best_fit_turn(shape), progress, gap)
-    elements, clipped = make_elements(shape, centers, angles, sizes, problem.grid)
-    total = time.perf_counter() - t0
-    return Distribution(
-        method="smith2005", sites=centers, angles=angles, scales=sizes / base,
-        elements=elements, energy=energy, seconds=seconds, setup_seconds=setup,
-        total_seconds=total, empty=empty, empty_sites=empty_sites, labels=labels,
-        extra={
-            "paper": "Smith, Liu, Klein, Animosaics, SCA 2005",
-            "element": shape.name,
-            "delta": delta,
-            "tile_size": base,
-            "scales": "tile size / budget tile size",
-            "turn": "best fit: angle covering most of the tile's own region",
-            "voronoi": "distance transform of the rasterised tiles (scipy.ndimage)",
-            "energy": "mean squared distance of region pixels to their nearest tile (px²)",
-            "clipped_area_fraction": clipped,
-        },
-    )
+    return run_fixed_tiles("smith2005", problem, iterations, progress, element, gap, delta,
+                           lambda _problem, shape: best_fit_turn(shape), {
+                               "paper": "Smith, Liu, Klein, Animosaics, SCA 2005",
+                               "turn": "best fit: angle covering most of the tile's own region"})
 
 
 METHODS["smith2005"] = run
