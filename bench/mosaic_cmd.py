@@ -20,6 +20,7 @@ The paper's Figures 18-19 from the sample pictures (into reports/figures/):
 from __future__ import annotations
 
 import argparse
+import os
 import sys
 import time
 from pathlib import Path
@@ -232,7 +233,9 @@ def write_paper_figures(out_dir, samples_dir=None, iterations: int = 20) -> list
         with_ = make_mosaic(picture, iterations=iterations, **dict(opts, **{key: True}))
         without = make_mosaic(picture, iterations=iterations, **dict(opts, **{key: False}))
         path = out_dir / name
-        comparison_figure(with_.picture, without, with_, what).save(path, optimize=True)
+        tmp = path.with_name(f".{path.name}.tmp")  # never a half-written figure
+        comparison_figure(with_.picture, without, with_, what).save(tmp, format="PNG", optimize=True)
+        os.replace(tmp, path)
         print(f"{path}: {opts['element']} x {opts['n_elements']}, coverage without "
               f"{without.coverage:.3f}, with {with_.coverage:.3f}", file=sys.stderr)
         written.append(path)

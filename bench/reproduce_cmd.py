@@ -1,7 +1,7 @@
 """`cvtbench reproduce`: every table and figure of the suite, in one command.
 
-Runs, in order, `cvtbench table2`, `cvtbench backends` and `cvtbench figures` (when
-bench/figures_cmd.py exists; otherwise a note says it was skipped), each into the same
+Runs, in order, `cvtbench table2`, `cvtbench backends`, `cvtbench figures` and the
+mosaic Figures 18-19 (`python -m bench.mosaic_cmd`), each into the same
 report folder, then writes ``OUT/reproduce.md``: what ran, how long each part took, and
 the machine, devices, versions and commit.  ``--quick`` runs the quick form of each
 (under 5 minutes on 2 cores) into ``reports/quick``; the full form writes ``reports``.
@@ -68,6 +68,7 @@ def run(args) -> int:
          + (["--seeds", str(args.seeds)] if args.seeds else [])),
         ("backends", "bench.backends_cmd", ["backends", "--out", str(out)] + common),
         ("figures", "bench.figures_cmd", ["figures", "--out", str(out / "figures")] + common),
+        ("mosaic figures", "bench.mosaic_cmd", None),
     ]
     results = []
     t_all = time.perf_counter()
@@ -78,18 +79,25 @@ def run(args) -> int:
             print(f"reproduce: {name} skipped ({module} does not exist)", file=sys.stderr)
             continue
         print(f"reproduce: {name} ...", file=sys.stderr)
-        sub_args = _sub_args(module, argv)
         t0 = time.perf_counter()
         try:
-            rc = int(sub_args.func(sub_args) or 0)
-            note = "" if rc == 0 else f"exit status {rc}"
+            if argv is None:  # paper Figures 18-19 from the sample pictures
+                from .mosaic_cmd import write_paper_figures
+
+                iterations = 5 if args.quick else 20
+                write_paper_figures(out / "figures", iterations=iterations)
+                rc, note = 0, f"`python -m bench.mosaic_cmd {out / 'figures'}` ({iterations} iterations)"
+            else:
+                sub_args = _sub_args(module, argv)
+                rc = int(sub_args.func(sub_args) or 0)
+                note = "" if rc == 0 else f"exit status {rc}"
+                note = note or "`" + command_line(sub_args.argv) + "`"
         except KeyboardInterrupt:
             raise
         except Exception as exc:  # one broken part must not hide the others' results
             rc, note = 1, f"{type(exc).__name__}: {exc}"
             print(f"reproduce: {name} failed: {note}", file=sys.stderr)
-        results.append((name, "ok" if rc == 0 else "failed", time.perf_counter() - t0,
-                        note or "`" + command_line(sub_args.argv) + "`"))
+        results.append((name, "ok" if rc == 0 else "failed", time.perf_counter() - t0, note))
         status = status or rc
     total = time.perf_counter() - t_all
     cmd = command_line(getattr(args, "argv", None) or ["reproduce"] + (["--quick"] if args.quick else []))
