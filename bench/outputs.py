@@ -15,7 +15,7 @@ from pathlib import Path
 import numpy as np
 
 PACKAGES = ("numpy", "scipy", "shapely", "pandas", "matplotlib", "pillow", "pyopencl",
-            "moderngl", "scikit-image")
+            "moderngl")
 
 
 def versions() -> dict:
