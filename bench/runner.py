@@ -68,6 +68,7 @@ class RunSpec:
     aspect: float = DEFAULT_ASPECT
     gap: float = 0.0
     picture: bool = False  # also save an effect picture beside the raw json
+    delta: float | None = None  # tile budget δ of a fixed-size baseline (None: its default)
 
     @property
     def metric(self) -> str:
@@ -76,8 +77,14 @@ class RunSpec:
     @property
     def key(self) -> str:
         gap = f"__gap{self.gap:g}" if self.gap else ""
+        delta = f"__d{self.delta:g}" if self.delta is not None else ""
         return (f"{self.method}__{self.backend}__{self.element}__{self.width}x{self.height}"
-                f"__n{self.n_sites}__it{self.iterations}__s{self.seed}{gap}")
+                f"__n{self.n_sites}__it{self.iterations}__s{self.seed}{gap}{delta}")
+
+    @property
+    def label(self) -> str:
+        """The method as reports name it: with its tile budget where one was set."""
+        return self.method if self.delta is None else f"{self.method} δ={self.delta:g}"
 
     def params(self) -> dict:
         d = asdict(self)
@@ -169,7 +176,8 @@ def execute(spec: RunSpec, backend=None, picture_path: Path | None = None,
         backend = create_variant(spec.backend)
     try:
         t0 = time.perf_counter()
-        dist = method(problem, backend, spec.iterations, element=spec.element, gap=spec.gap)
+        budget = {} if spec.delta is None else {"delta": spec.delta}
+        dist = method(problem, backend, spec.iterations, element=spec.element, gap=spec.gap, **budget)
         wall = time.perf_counter() - t0
         device = backend.device()
         t1 = time.perf_counter()
@@ -193,7 +201,7 @@ def execute(spec: RunSpec, backend=None, picture_path: Path | None = None,
         effect_picture(elements, problem.grid).save(picture_path)
     secs = list(map(float, dist.seconds))
     row = {
-        "key": spec.key, **spec.params(), "status": "ok", "reason": "",
+        "key": spec.key, **spec.params(), "label": spec.label, "status": "ok", "reason": "",
         "device": device,
         "coverage": ev.coverage, "overlap": ev.overlap, "placed": ev.elements, "skipped": ev.skipped,
         "empty_cells": int(dist.empty[-1]) if dist.empty else 0,
@@ -271,7 +279,7 @@ def picture_path(out: Path, spec: RunSpec) -> Path:
 
 
 def skipped_row(spec: RunSpec, reason: str, status: str = "skipped") -> dict:
-    return {"key": spec.key, **spec.params(), "status": status, "reason": reason}
+    return {"key": spec.key, **spec.params(), "label": spec.label, "status": status, "reason": reason}
 
 
 def run_sweep(specs: list[RunSpec], out, force: bool = False, store: bool = True,
