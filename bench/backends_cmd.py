@@ -114,8 +114,8 @@ def run_timings(specs: list[TimingSpec], out: Path | None, force: bool = False, 
 
     from cvt.errors import BackendUnavailable
 
-    from .outputs import atomic_write_text, dumps, machine, versions
-    from .runner import BackendCache
+    from .outputs import machine, versions
+    from .runner import BackendCache, read_stored, write_stored
 
     unavailable = dict(unavailable or {})
     cache = BackendCache()
@@ -133,12 +133,10 @@ def run_timings(specs: list[TimingSpec], out: Path | None, force: bool = False, 
             if spec.backend in unavailable:
                 rows.append({**row, **base, "status": "skipped", "reason": unavailable[spec.backend]})
                 continue
-            if path is not None and path.exists() and not force:
-                try:
-                    rows.append({**json.loads(path.read_text())["row"], "cached": True})
-                    continue
-                except (ValueError, KeyError):
-                    pass
+            stored = read_stored(path) if path is not None and not force else None
+            if stored is not None:
+                rows.append({**stored, "cached": True})
+                continue
             try:
                 if spec.backend == CKDTREE:
                     secs = time_ckdtree(spec.metric, spec.n_sites, spec.size, spec.warmup, spec.repeats)
@@ -162,8 +160,8 @@ def run_timings(specs: list[TimingSpec], out: Path | None, force: bool = False, 
                        device=device)
             rows.append(row)
             if path is not None:
-                atomic_write_text(path, dumps({"row": row, "seconds": secs, "spec": spec.__dict__,
-                                               "machine": machine(), "versions": versions()}))
+                write_stored(path, {"row": row, "seconds": secs, "spec": spec.__dict__,
+                                    "machine": machine(), "versions": versions()})
     except KeyboardInterrupt:
         print(f"\ninterrupted: finished configurations are stored under {Path(out or '.') / 'raw'}; "
               "run the same command again to resume", file=sys.stderr)

@@ -293,7 +293,6 @@ def run_sweep(specs: list[RunSpec], out, force: bool = False, store: bool = True
     nor writes raw json."""
     from tqdm import tqdm
 
-    from .outputs import atomic_write_text, dumps
 
     unavailable = unavailable or {}
     # group by backend so that each backend is created once and at most one is alive
@@ -311,15 +310,11 @@ def run_sweep(specs: list[RunSpec], out, force: bool = False, store: bool = True
             if spec.backend in unavailable:
                 rows[i] = skipped_row(spec, unavailable[spec.backend])
                 continue
-            if store and path.exists() and not force:
-                try:
-                    stored = json.loads(path.read_text())
-                    if stored.get("made_by") == made_by():
-                        rows[i] = stored["row"]
-                        rows[i]["cached"] = True
-                        continue
-                except (ValueError, KeyError):
-                    pass  # unreadable, or made by other code or on another machine: run it
+            if store and not force:
+                stored = read_stored(path)
+                if stored is not None:
+                    rows[i] = {**stored, "cached": True}
+                    continue
             try:
                 backend = cache.get(spec.backend)
                 pic = picture_path(out, spec) if (spec.picture and store) else None
@@ -340,8 +335,7 @@ def run_sweep(specs: list[RunSpec], out, force: bool = False, store: bool = True
                 continue
             rows[i] = record["row"]
             if store:
-                record["made_by"] = made_by()
-                atomic_write_text(path, dumps(record))
+                write_stored(path, record)
     except KeyboardInterrupt:
         done = sum(1 for r in rows.values() if r.get("status") == "ok")
         print(f"\ninterrupted: {done} of {len(specs)} runs are stored under {Path(out) / 'raw'}; "
@@ -366,6 +360,23 @@ def made_by() -> dict:
             if f.suffix in (".py", ".cl") and f.is_file():
                 digest.update(f.relative_to(root).as_posix().encode() + b"\0" + f.read_bytes())
     return {"code": digest.hexdigest()[:16], "host": platform.node()}
+
+
+def read_stored(path: Path) -> dict | None:
+    """The row of a stored run, or None when there is none, it is unreadable, or other
+    code or another host made it (then the caller runs it again)."""
+    try:
+        stored = json.loads(Path(path).read_text())
+        return stored["row"] if stored.get("made_by") == made_by() else None
+    except (OSError, ValueError, KeyError):
+        return None
+
+
+def write_stored(path: Path, record: dict) -> None:
+    """Store a run's record (with its :func:`made_by`) atomically."""
+    from .outputs import atomic_write_text, dumps
+
+    atomic_write_text(path, dumps({**record, "made_by": made_by()}))
 
 
 def fingerprint(specs: list[RunSpec]) -> str:

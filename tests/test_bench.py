@@ -272,3 +272,21 @@ def test_effect_picture_draws_elements():
     a = np.asarray(img)
     assert a.shape == (64, 64, 3)
     assert a[5, 5].sum() > a[50, 50].sum()  # the box is drawn, the rest is background
+
+
+def test_backend_timings_are_read_back_only_when_this_code_made_them(tmp_path, monkeypatch):
+    from bench import backends_cmd
+
+    spec = backends_cmd.TimingSpec("t", "numpy", "l2", 40, 64, 0, 1)
+    calls = []
+    real = backends_cmd.time_lloyd
+    monkeypatch.setattr(backends_cmd, "time_lloyd", lambda *a, **k: calls.append(1) or real(*a, **k))
+    backends_cmd.run_timings([spec], tmp_path, quiet=True)
+    (again,) = backends_cmd.run_timings([spec], tmp_path, quiet=True)
+    assert calls == [1] and again.get("cached")
+    path = tmp_path / "raw" / "t" / f"{spec.key}.json"
+    stored = json.loads(path.read_text())
+    stored["made_by"] = {"code": "0123456789abcdef", "host": "elsewhere"}
+    path.write_text(json.dumps(stored))
+    (fresh,) = backends_cmd.run_timings([spec], tmp_path, quiet=True)
+    assert calls == [1, 1] and not fresh.get("cached")
