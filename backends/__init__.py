@@ -8,15 +8,15 @@ from __future__ import annotations
 
 import importlib
 
-from cvt.errors import BackendUnavailable, InputError
+from compact_distributions.cvt.errors import BackendUnavailable, InputError
 
 from .base import Backend
 
 # name -> "module:Class"
 REGISTRY = {
-    "numpy": "backends.numpy_backend:NumpyBackend",
-    "opencl": "backends.opencl:OpenCLBackend",
-    "gl": "backends.gl:GLBackend",
+    "numpy": "compact_distributions.backends.numpy_backend:NumpyBackend",
+    "opencl": "compact_distributions.backends.opencl:OpenCLBackend",
+    "gl": "compact_distributions.backends.gl:GLBackend",
 }
 
 

@@ -13,9 +13,9 @@ from abc import ABC, abstractmethod
 
 import numpy as np
 
-from cvt.metrics import Metric
-from cvt.moments import Moments, moments_from_labels
-from cvt.problem import Grid
+from compact_distributions.cvt.metrics import Metric
+from compact_distributions.cvt.moments import Moments, moments_from_labels
+from compact_distributions.cvt.problem import Grid
 
 
 class Backend(ABC):

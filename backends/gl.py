@@ -54,10 +54,10 @@ import math
 import numpy as np
 from scipy.ndimage import distance_transform_edt, maximum_filter
 
-from cvt.errors import BackendUnavailable, InputError
-from cvt.metrics import Metric, compile_sites
-from cvt.moments import Moments
-from cvt.problem import Grid
+from compact_distributions.cvt.errors import BackendUnavailable, InputError
+from compact_distributions.cvt.metrics import Metric, compile_sites
+from compact_distributions.cvt.moments import Moments
+from compact_distributions.cvt.problem import Grid
 
 from .base import Backend
 

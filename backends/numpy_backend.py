@@ -24,8 +24,8 @@ import math
 import numpy as np
 from scipy.spatial import cKDTree
 
-from cvt.metrics import Metric, compile_sites
-from cvt.problem import Grid
+from compact_distributions.cvt.metrics import Metric, compile_sites
+from compact_distributions.cvt.problem import Grid
 
 from .base import Backend
 

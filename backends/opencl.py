@@ -33,10 +33,10 @@ from pathlib import Path
 
 import numpy as np
 
-from cvt.errors import BackendUnavailable, InputError
-from cvt.metrics import Metric, compile_sites
-from cvt.moments import Moments
-from cvt.problem import Grid
+from compact_distributions.cvt.errors import BackendUnavailable, InputError
+from compact_distributions.cvt.metrics import Metric, compile_sites
+from compact_distributions.cvt.moments import Moments
+from compact_distributions.cvt.problem import Grid
 
 from .base import Backend
 

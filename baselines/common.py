@@ -28,11 +28,11 @@ import numpy as np
 import shapely
 from scipy import ndimage
 
-from bench.evaluate import region_polygon
-from cvt.metrics import Metric, make_metric
-from cvt.placement import check_shape, contour_samples, parse_gap
-from cvt.problem import Grid, Problem
-from cvt.shapes import _BALL, element_polygons, unit_outline
+from compact_distributions.bench.evaluate import region_polygon
+from compact_distributions.cvt.metrics import Metric, make_metric
+from compact_distributions.cvt.placement import check_shape, contour_samples, parse_gap
+from compact_distributions.cvt.problem import Grid, Problem
+from compact_distributions.cvt.shapes import _BALL, element_polygons, unit_outline
 
 BUDGET_DELTA = 0.95
 # rotational symmetry of each element's outline: a rotation by this angle maps it onto itself
@@ -305,7 +305,7 @@ def tile_lloyd(problem: Problem, shape: TileShape, base_size: float, iterations:
 
     Returns (centers, angles, sizes, labels, energy, seconds, empty, empty_sites)
     where energy is the mean squared distance of the region's pixels to their tile."""
-    from cvt.seeding import initial_sites
+    from compact_distributions.cvt.seeding import initial_sites
 
     grid = problem.grid
     inside = grid.inside()
@@ -341,7 +341,7 @@ def run_fixed_tiles(method: str, problem: Problem, iterations: int, progress, el
     """The frame shared by the fixed-size tile methods (Fritzsche, Smith): set up the tile
     shape and budget size (timed apart), run :func:`tile_lloyd` with the method's turning
     rule ``make_turn(problem, shape)``, and package the result as a Distribution."""
-    from cvt.distribution import Distribution
+    from compact_distributions.cvt.distribution import Distribution
 
     t_setup = time.perf_counter()
     if iterations < 0:

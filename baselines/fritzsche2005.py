@@ -46,9 +46,9 @@ from __future__ import annotations
 
 import numpy as np
 
-from bench.methods import METHODS
-from cvt.distribution import Distribution
-from cvt.problem import Problem
+from compact_distributions.bench.methods import METHODS
+from compact_distributions.cvt.distribution import Distribution
+from compact_distributions.cvt.problem import Problem
 
 from .common import BUDGET_DELTA, nearest_equivalent, run_fixed_tiles
 

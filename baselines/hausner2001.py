@@ -51,11 +51,11 @@ import time
 import numpy as np
 from scipy import ndimage
 
-from bench.methods import METHODS
-from cvt.distribution import Distribution
-from cvt.metrics import make_metric
-from cvt.problem import Grid, Problem
-from cvt.seeding import initial_sites
+from compact_distributions.bench.methods import METHODS
+from compact_distributions.cvt.distribution import Distribution
+from compact_distributions.cvt.metrics import make_metric
+from compact_distributions.cvt.problem import Grid, Problem
+from compact_distributions.cvt.seeding import initial_sites
 
 from .common import BUDGET_DELTA, budget_size, gap_value, make_elements, tile_shape
 

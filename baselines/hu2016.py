@@ -56,11 +56,11 @@ import numpy as np
 import shapely
 from scipy import ndimage
 
-from bench.evaluate import region_polygon
-from bench.methods import METHODS
-from cvt.distribution import Distribution
-from cvt.problem import Grid, Problem
-from cvt.seeding import initial_sites
+from compact_distributions.bench.evaluate import region_polygon
+from compact_distributions.bench.methods import METHODS
+from compact_distributions.cvt.distribution import Distribution
+from compact_distributions.cvt.problem import Grid, Problem
+from compact_distributions.cvt.seeding import initial_sites
 
 from .common import (
     BUDGET_DELTA,
@@ -229,7 +229,7 @@ def combinatorial_step(shape, centers, angles, sizes, grid: Grid, moves: int | N
 
 
 def _outline(shape, center, angle, size) -> np.ndarray:
-    from cvt.shapes import transform, unit_outline
+    from compact_distributions.cvt.shapes import transform, unit_outline
 
     return transform(unit_outline(shape.name, shape.aspect), center, angle, size)[0]
 

@@ -42,9 +42,9 @@ import math
 
 import numpy as np
 
-from bench.methods import METHODS
-from cvt.distribution import Distribution
-from cvt.problem import Problem
+from compact_distributions.bench.methods import METHODS
+from compact_distributions.cvt.distribution import Distribution
+from compact_distributions.cvt.problem import Problem
 
 from .common import BUDGET_DELTA, run_fixed_tiles
 

@@ -31,7 +31,7 @@ from pathlib import Path
 
 import numpy as np
 
-from cvt.metrics import METRIC_NAMES
+from compact_distributions.cvt.metrics import METRIC_NAMES
 
 CKDTREE = "ckdtree"  # the cKDTree + bincount reference row
 CKDTREE_METRICS = ("l2", "l1", "linf")
@@ -63,7 +63,7 @@ class TimingSpec:
 def time_lloyd(backend, metric_name: str, n_sites: int, size: int, warmup: int, repeats: int,
                seed: int = 0) -> list[float]:
     """Seconds of each timed Lloyd iteration (after ``warmup`` untimed ones)."""
-    from cvt.lloyd import lloyd
+    from compact_distributions.cvt.lloyd import lloyd
 
     problem = _problem(metric_name, n_sites, size, seed)
     res = lloyd(problem, backend, warmup + repeats)
@@ -73,7 +73,7 @@ def time_lloyd(backend, metric_name: str, n_sites: int, size: int, warmup: int, 
 def time_ckdtree(metric_name: str, n_sites: int, size: int, warmup: int, repeats: int,
                  seed: int = 0) -> list[float]:
     """The same loop with :func:`bench.ckdtree_step.ckdtree_step` as the backend."""
-    from cvt.seeding import initial_sites
+    from compact_distributions.cvt.seeding import initial_sites
 
     from .ckdtree_step import ckdtree_step
 
@@ -88,8 +88,8 @@ def time_ckdtree(metric_name: str, n_sites: int, size: int, warmup: int, repeats
 
 
 def _problem(metric_name: str, n_sites: int, size: int, seed: int):
-    from cvt.metrics import make_metric
-    from cvt.problem import Grid, Problem
+    from compact_distributions.cvt.metrics import make_metric
+    from compact_distributions.cvt.problem import Grid, Problem
 
     return Problem(Grid(size, size), n_sites, make_metric(metric_name), seed=seed)
 
@@ -112,7 +112,7 @@ def run_timings(specs: list[TimingSpec], out: Path | None, force: bool = False, 
     per spec under ``out/raw/<suite>/`` when ``out`` is given (read back unless force)."""
     from tqdm import tqdm
 
-    from cvt.errors import BackendUnavailable
+    from compact_distributions.cvt.errors import BackendUnavailable
 
     from .outputs import machine, versions
     from .runner import BackendCache, read_stored, write_stored
@@ -280,7 +280,7 @@ def render_plot(df, path: Path) -> bool:
 
 def rows_from_benchmark_json(path) -> list[dict]:
     """Rows from a pytest-benchmark json of tests/benchmarks (the Lloyd-step cases)."""
-    from cvt.errors import InputError
+    from compact_distributions.cvt.errors import InputError
 
     try:
         data = json.loads(Path(path).read_text())

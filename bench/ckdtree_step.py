@@ -13,7 +13,7 @@ from functools import lru_cache
 import numpy as np
 from scipy.spatial import cKDTree
 
-from cvt.moments import Moments, moments_from_labels
+from compact_distributions.cvt.moments import Moments, moments_from_labels
 
 P_OF_METRIC = {"l2": 2, "l1": 1, "linf": np.inf}
 

@@ -10,10 +10,10 @@ import argparse
 import importlib
 import sys
 
-from cvt.errors import BackendUnavailable, InputError
+from compact_distributions.cvt.errors import BackendUnavailable, InputError
 
 # subcommand modules, in the order `cvtbench --help` lists them
-SUBCOMMANDS = ["bench.run_cmd", "bench.info_cmd", "bench.figures_cmd", "bench.table2", "bench.mosaic_cmd", "bench.backends_cmd", "bench.regress_cmd", "bench.reproduce_cmd"]
+SUBCOMMANDS = ["compact_distributions.bench.run_cmd", "compact_distributions.bench.info_cmd", "compact_distributions.bench.figures_cmd", "compact_distributions.bench.table2", "compact_distributions.bench.mosaic_cmd", "compact_distributions.bench.backends_cmd", "compact_distributions.bench.regress_cmd", "compact_distributions.bench.reproduce_cmd"]
 
 
 def build_parser() -> argparse.ArgumentParser:

@@ -21,7 +21,7 @@ from dataclasses import dataclass
 import numpy as np
 import shapely
 
-from cvt.problem import Grid
+from compact_distributions.cvt.problem import Grid
 
 
 @dataclass

@@ -27,10 +27,10 @@ from pathlib import Path
 
 import numpy as np
 
-from cvt.errors import InputError
-from cvt.fields import DensityMap, DirectionField
-from cvt.metrics import make_metric
-from cvt.problem import Grid, Problem
+from compact_distributions.cvt.errors import InputError
+from compact_distributions.cvt.fields import DensityMap, DirectionField
+from compact_distributions.cvt.metrics import make_metric
+from compact_distributions.cvt.problem import Grid, Problem
 
 DEFAULT_OUT = "reports/figures"
 
@@ -233,7 +233,7 @@ FIGURES = {
 
 
 def run(args) -> int:
-    from backends import create_backend
+    from compact_distributions.backends import create_backend
 
     st = QUICK if args.quick else FULL
     out = Path(args.out)

@@ -9,7 +9,7 @@ def add_parser(sub):
 
 
 def run(args) -> int:
-    from backends import probe_all
+    from compact_distributions.backends import probe_all
 
     from .outputs import versions
 

@@ -11,9 +11,9 @@ from __future__ import annotations
 import math
 import time
 
-from cvt.distribution import Distribution
-from cvt.lloyd import lloyd
-from cvt.problem import Problem
+from compact_distributions.cvt.distribution import Distribution
+from compact_distributions.cvt.lloyd import lloyd
+from compact_distributions.cvt.problem import Problem
 
 
 def run_ours(problem: Problem, backend, iterations: int = 20, progress=None,
@@ -27,8 +27,8 @@ def run_ours(problem: Problem, backend, iterations: int = 20, progress=None,
     method "ours-fit").  ``total_seconds`` covers the Lloyd iterations only (what the paper's
     timings measure); the final labelling and the placement are timed apart in
     ``extra`` (``final_label_seconds``, ``placement_seconds``)."""
-    from cvt.lloyd import final_labels
-    from cvt.placement import element_for, parse_gap, place_elements
+    from compact_distributions.cvt.lloyd import final_labels
+    from compact_distributions.cvt.placement import element_for, parse_gap, place_elements
 
     shape, turn = element_for(problem.metric, element)
     gap = parse_gap(gap)
@@ -66,7 +66,7 @@ def method_names() -> list[str]:
 
 
 def get_method(name: str):
-    from cvt.errors import InputError
+    from compact_distributions.cvt.errors import InputError
 
     _load_baselines()
     if name not in METHODS:
@@ -79,7 +79,7 @@ def _load_baselines() -> None:
     import importlib
     import pkgutil
 
-    import baselines
+    from compact_distributions import baselines
 
     for mod in pkgutil.iter_modules(baselines.__path__):
         importlib.import_module(f"baselines.{mod.name}")

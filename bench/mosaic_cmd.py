@@ -27,15 +27,15 @@ from pathlib import Path
 
 import numpy as np
 
-from cvt.errors import InputError
-from cvt.metrics import METRIC_NAMES
-from cvt.shapes import ELEMENT_SHAPES
+from compact_distributions.cvt.errors import InputError
+from compact_distributions.cvt.metrics import METRIC_NAMES
+from compact_distributions.cvt.shapes import ELEMENT_SHAPES
 
 DEFAULT_OUT = "out/mosaic"
 
 
 def add_parser(sub):
-    from cvt.mosaic import DEFAULT_ELEMENTS
+    from compact_distributions.cvt.mosaic import DEFAULT_ELEMENTS
 
     p = sub.add_parser("mosaic", help="turn a picture into a mosaic (density and direction from the picture)",
                        description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
@@ -91,7 +91,7 @@ def _say(quiet: bool, text: str) -> None:
 
 def mosaic_options(args) -> dict:
     """make_mosaic keyword arguments from the parsed command line (validated)."""
-    from cvt.image_fields import DEFAULT_CONTRAST
+    from compact_distributions.cvt.image_fields import DEFAULT_CONTRAST
 
     from .run_cmd import _progress, backend_options
 
@@ -106,7 +106,7 @@ def mosaic_options(args) -> dict:
         grout=args.grout,
     )
     if args.backend != "numpy":
-        from backends import create_backend
+        from compact_distributions.backends import create_backend
 
         opts["backend"] = create_backend(args.backend, **backend_options(args))
     opts["progress"] = _progress(args.quiet)
@@ -115,8 +115,8 @@ def mosaic_options(args) -> dict:
 
 def mosaic_result_json(args, m) -> dict:
     """result.json: `cvtbench run`'s fields (bench.run_cmd.build_result) plus the mosaic's."""
-    from bench.evaluate import evaluate
-    from cvt.mosaic import hex_colour
+    from compact_distributions.bench.evaluate import evaluate
+    from compact_distributions.cvt.mosaic import hex_colour
 
     from .outputs import command_line, machine, versions
     from .run_cmd import build_result
@@ -141,7 +141,7 @@ def mosaic_result_json(args, m) -> dict:
 
 
 def run(args) -> int:
-    from cvt.mosaic import make_mosaic, picture_array
+    from compact_distributions.cvt.mosaic import make_mosaic, picture_array
 
     from .outputs import staged_dir, write_json, write_sites_csv
 
@@ -221,7 +221,7 @@ PAPER_FIGURES = [
 
 def write_paper_figures(out_dir, samples_dir=None, iterations: int = 20) -> list[Path]:
     """Re-make Figures 18-19 (original | without | with) from the sample pictures."""
-    from cvt.mosaic import make_mosaic, picture_array
+    from compact_distributions.cvt.mosaic import make_mosaic, picture_array
 
     samples_dir = Path(samples_dir or Path(__file__).resolve().parent.parent / "samples")
     out_dir = Path(out_dir)

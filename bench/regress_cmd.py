@@ -36,7 +36,7 @@ from pathlib import Path
 
 import numpy as np
 
-from cvt.errors import InputError
+from compact_distributions.cvt.errors import InputError
 
 BASELINE_FILE = Path(__file__).with_name("regress_baseline.json")
 COVERAGE_DROP_PP = 0.5  # percentage points
@@ -158,7 +158,7 @@ def measure_coverage(cfg, methods, backends, unavailable, quiet) -> tuple[dict, 
 def lloyd_stepper(backend_or_ckdtree, metric: str, n: int, size: int, cache):
     """A function that runs one Lloyd iteration (from its own evolving sites) and returns
     its seconds; the cKDTree step when ``backend_or_ckdtree`` is "ckdtree"."""
-    from cvt.seeding import initial_sites
+    from compact_distributions.cvt.seeding import initial_sites
 
     from .backends_cmd import CKDTREE, _problem
     from .ckdtree_step import ckdtree_step
@@ -292,7 +292,7 @@ def add_parser(sub):
 
 
 def run(args) -> int:
-    from bench.methods import method_names
+    from compact_distributions.bench.methods import method_names
 
     from .outputs import atomic_write_text, dumps
     from .report import provenance

@@ -39,7 +39,7 @@ def git_commit(cwd=None) -> str:
 
 def provenance() -> dict:
     """Machine, devices, versions, commit and date, as a dict (also stored in json)."""
-    from backends import probe_all
+    from compact_distributions.backends import probe_all
 
     return {
         "machine": machine(),

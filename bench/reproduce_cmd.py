@@ -64,11 +64,11 @@ def run(args) -> int:
     common = (["--quick"] if args.quick else []) + (["--force"] if args.force else []) + \
         (["--quiet"] if args.quiet else [])
     parts = [
-        ("table2", "bench.table2", ["table2", "--out", str(out)] + common
+        ("table2", "compact_distributions.bench.table2", ["table2", "--out", str(out)] + common
          + (["--seeds", str(args.seeds)] if args.seeds else [])),
-        ("backends", "bench.backends_cmd", ["backends", "--out", str(out)] + common),
-        ("figures", "bench.figures_cmd", ["figures", "--out", str(out / "figures")] + common),
-        ("mosaic figures", "bench.mosaic_cmd", None),
+        ("backends", "compact_distributions.bench.backends_cmd", ["backends", "--out", str(out)] + common),
+        ("figures", "compact_distributions.bench.figures_cmd", ["figures", "--out", str(out / "figures")] + common),
+        ("mosaic figures", "compact_distributions.bench.mosaic_cmd", None),
     ]
     results = []
     t_all = time.perf_counter()

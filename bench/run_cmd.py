@@ -22,12 +22,12 @@ import time
 
 import numpy as np
 
-from cvt.errors import InputError
-from cvt.fields import DensityMap, DirectionField, angles_from_grey
-from cvt.metrics import METRIC_NAMES, make_metric
-from cvt.placement import check_shape, element_for, parse_gap, place_elements
-from cvt.problem import Grid, Problem, default_site_count, parse_size
-from cvt.shapes import ELEMENT_SHAPES
+from compact_distributions.cvt.errors import InputError
+from compact_distributions.cvt.fields import DensityMap, DirectionField, angles_from_grey
+from compact_distributions.cvt.metrics import METRIC_NAMES, make_metric
+from compact_distributions.cvt.placement import check_shape, element_for, parse_gap, place_elements
+from compact_distributions.cvt.problem import Grid, Problem, default_site_count, parse_size
+from compact_distributions.cvt.shapes import ELEMENT_SHAPES
 
 DEFAULT_SIZE = "512"
 DEFAULT_SITES = 1000
@@ -95,7 +95,7 @@ def _parse_sites(text, default: int) -> int:
 
 def problem_from_args(args, sites_default=DEFAULT_SITES) -> Problem:
     """Build and validate the Problem; raises InputError with a one-line message."""
-    from cvt.images import load_grey, load_mask
+    from compact_distributions.cvt.images import load_grey, load_mask
 
     w, h = parse_size(args.size)
     metric = make_metric(args.metric, args.aspect)
@@ -166,7 +166,7 @@ def _progress(quiet: bool):
 
 
 def run(args) -> int:
-    from backends import create_backend
+    from compact_distributions.backends import create_backend
 
     from .methods import get_method
     from .outputs import cells_image, command_line, machine, staged_dir, versions, write_json, write_sites_csv

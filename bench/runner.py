@@ -34,7 +34,7 @@ from pathlib import Path
 
 import numpy as np
 
-from cvt.errors import BackendUnavailable
+from compact_distributions.cvt.errors import BackendUnavailable
 
 # element shape -> the metric whose unit ball it is (cvt/shapes.py documents the pairing)
 ELEMENT_METRIC = {"square": "linf", "rectangle": "linf-axial", "ellipse": "l2-axial",
@@ -99,7 +99,7 @@ class RunSpec:
 
 def backend_variants() -> dict[str, tuple[bool, str]]:
     """variant -> (available, device text or the reason it is unavailable)."""
-    from backends import probe_all
+    from compact_distributions.backends import probe_all
 
     out: dict[str, tuple[bool, str]] = {}
     for name, ok, text in probe_all():
@@ -114,7 +114,7 @@ def variant_options(variant: str) -> tuple[str, dict]:
 
 
 def create_variant(variant: str):
-    from backends import create_backend
+    from compact_distributions.backends import create_backend
 
     name, options = variant_options(variant)
     return create_backend(name, **options)
@@ -149,8 +149,8 @@ class BackendCache:
 
 
 def build_problem(spec: RunSpec):
-    from cvt.metrics import make_metric
-    from cvt.problem import Grid, Problem
+    from compact_distributions.cvt.metrics import make_metric
+    from compact_distributions.cvt.problem import Grid, Problem
 
     aspect = spec.aspect if spec.metric.endswith("-axial") else None
     return Problem(Grid(spec.width, spec.height), spec.n_sites, make_metric(spec.metric, aspect),
@@ -164,8 +164,8 @@ def execute(spec: RunSpec, backend=None, picture_path: Path | None = None,
     ``backend``: a live backend of ``spec.backend`` (created and closed here if None).
     ``keep_sites``: store the final sites (sweeps keep them for seed 0 only: a json of
     4000 sites is ~60 kB, and the digest already tells whether two runs agree)."""
-    from bench.evaluate import evaluate
-    from bench.methods import get_method
+    from compact_distributions.bench.evaluate import evaluate
+    from compact_distributions.bench.methods import get_method
 
     from .outputs import machine, versions
 
@@ -184,7 +184,7 @@ def execute(spec: RunSpec, backend=None, picture_path: Path | None = None,
         elements = dist.elements
         labels = dist.labels
         if elements is None:
-            from cvt.placement import place_elements
+            from compact_distributions.cvt.placement import place_elements
 
             if labels is None:
                 labels = backend.label(dist.sites, dist.scales, dist.angles, problem.metric, problem.grid)
@@ -387,7 +387,7 @@ def fingerprint(specs: list[RunSpec]) -> str:
 
 def parse_list(text: str | None, allowed=None, what: str = "value") -> list[str] | None:
     """'a,b' -> ['a', 'b'] (None stays None); InputError on a name not in ``allowed``."""
-    from cvt.errors import InputError
+    from compact_distributions.cvt.errors import InputError
 
     if text is None:
         return None
@@ -402,7 +402,7 @@ def parse_list(text: str | None, allowed=None, what: str = "value") -> list[str]
 
 
 def parse_positive_int(text, what: str) -> int:
-    from cvt.errors import InputError
+    from compact_distributions.cvt.errors import InputError
 
     try:
         k = int(text)

@@ -301,7 +301,7 @@ def default_out(args) -> Path:
 
 
 def run(args) -> int:
-    from bench.methods import method_names
+    from compact_distributions.bench.methods import method_names
 
     from .outputs import command_line
     from .report import provenance, write_csv, write_markdown

@@ -357,7 +357,7 @@ def make_mosaic(image, n_elements: int = DEFAULT_ELEMENTS, metric: str | None = 
     2000 elements on 1024x768).  ``use_field``: align element sides with the picture's edges; ``use_density``:
     smaller elements where the picture has detail (``contrast`` = densest / sparsest
     cell area).  ``progress(k, iterations, energy)`` is called after each Lloyd step."""
-    from backends import create_backend
+    from compact_distributions.backends import create_backend
 
     from .lloyd import final_labels, lloyd
 
@@ -401,7 +401,7 @@ def make_mosaic(image, n_elements: int = DEFAULT_ELEMENTS, metric: str | None = 
     sizes = element_sizes(polygons, element, shape_aspect)
     colours, _ = element_colours(picture, labels, res.sites, res.angles, sizes, element, shape_aspect)
 
-    from bench.evaluate import evaluate
+    from compact_distributions.bench.evaluate import evaluate
 
     ev = evaluate(polygons, grid)
     return MosaicResult(

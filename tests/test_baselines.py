@@ -8,15 +8,15 @@ import numpy as np
 import pytest
 import shapely
 
-from backends.numpy_backend import NumpyBackend
-from baselines import fritzsche2005, hausner2001, hu2016, smith2005
-from baselines.common import angle_residual, budget_size, rasterize_tiles, tile_shape, tile_voronoi
-from bench.evaluate import evaluate, region_polygon
-from bench.methods import get_method, method_names
-from cvt.errors import InputError
-from cvt.fields import DirectionField
-from cvt.metrics import make_metric
-from cvt.problem import Grid, Problem
+from compact_distributions.backends.numpy_backend import NumpyBackend
+from compact_distributions.baselines import fritzsche2005, hausner2001, hu2016, smith2005
+from compact_distributions.baselines.common import angle_residual, budget_size, rasterize_tiles, tile_shape, tile_voronoi
+from compact_distributions.bench.evaluate import evaluate, region_polygon
+from compact_distributions.bench.methods import get_method, method_names
+from compact_distributions.cvt.errors import InputError
+from compact_distributions.cvt.fields import DirectionField
+from compact_distributions.cvt.metrics import make_metric
+from compact_distributions.cvt.problem import Grid, Problem
 
 NAMES = ("hausner2001", "fritzsche2005", "smith2005", "hu2016")
 SIZE, N = 128, 48
@@ -244,7 +244,7 @@ def test_gap_shrinks_fixed_tiles():
 
 
 def test_cli_runs_a_baseline(tmp_path, capsys):
-    from bench.cli import main
+    from compact_distributions.bench.cli import main
 
     out = tmp_path / "run"
     code = main(["run", "--method", "smith2005", "--metric", "linf", "--size", "96",

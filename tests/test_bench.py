@@ -11,10 +11,10 @@ import numpy as np
 import pandas as pd
 import pytest
 
-from bench import regress_cmd, runner
-from bench.cli import main
-from bench.report import git_commit
-from bench.runner import RunSpec, run_sweep
+from compact_distributions.bench import regress_cmd, runner
+from compact_distributions.bench.cli import main
+from compact_distributions.bench.report import git_commit
+from compact_distributions.bench.runner import RunSpec, run_sweep
 
 ROOT = Path(__file__).resolve().parent.parent
 REPORTS = ROOT / "reports"
@@ -130,8 +130,8 @@ def test_table2_quick_rerun_matches_committed(tmp_path, capsys):
 
 
 def test_committed_table2_covers_every_method_and_backend():
-    from bench.methods import method_names
-    from bench.table2 import problem_set
+    from compact_distributions.bench.methods import method_names
+    from compact_distributions.bench.table2 import problem_set
 
     variants = list(dict.fromkeys(list(runner.VARIANTS) + list(runner.backend_variants())))
     for name, quick in (("table2.csv", False), ("quick/table2.csv", True)):
@@ -257,16 +257,16 @@ def test_bad_bench_options_are_one_line_errors(argv, text, capsys, tmp_path):
 
 
 def test_reproduce_passes_only_options_a_part_knows():
-    from bench.reproduce_cmd import _sub_args
+    from compact_distributions.bench.reproduce_cmd import _sub_args
 
-    args = _sub_args("bench.backends_cmd", ["backends", "--out", "x", "--seeds", "3", "--quick"])
+    args = _sub_args("compact_distributions.bench.backends_cmd", ["backends", "--out", "x", "--seeds", "3", "--quick"])
     assert args.out == "x" and args.quick and args.argv == ["backends", "--out", "x", "--quick"]
 
 
 def test_effect_picture_draws_elements():
     import shapely
 
-    from cvt.problem import Grid
+    from compact_distributions.cvt.problem import Grid
 
     img = runner.effect_picture([shapely.box(0, 0, 16, 16), None], Grid(32, 32), side=64, crop=1.0)
     a = np.asarray(img)
@@ -275,7 +275,7 @@ def test_effect_picture_draws_elements():
 
 
 def test_backend_timings_are_read_back_only_when_this_code_made_them(tmp_path, monkeypatch):
-    from bench import backends_cmd
+    from compact_distributions.bench import backends_cmd
 
     spec = backends_cmd.TimingSpec("t", "numpy", "l2", 40, 64, 0, 1)
     calls = []

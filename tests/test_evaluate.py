@@ -7,9 +7,9 @@ import numpy as np
 import pytest
 import shapely
 
-from bench.evaluate import empty_cell_count, evaluate, region_polygon
-from bench.svg import element_coordinates, elements_png, elements_svg
-from cvt.problem import Grid
+from compact_distributions.bench.evaluate import empty_cell_count, evaluate, region_polygon
+from compact_distributions.bench.svg import element_coordinates, elements_png, elements_svg
+from compact_distributions.cvt.problem import Grid
 
 SVG = "{http://www.w3.org/2000/svg}"
 

@@ -6,16 +6,16 @@ Skipped, with the reason, where moderngl, EGL or an OpenGL 4.3 driver is missing
 import numpy as np
 import pytest
 
-from backends import create_backend
-from backends.numpy_backend import NumpyBackend
-from cvt.errors import BackendUnavailable, InputError
-from cvt.fields import DensityMap, DirectionField
-from cvt.lloyd import final_labels, lloyd
-from cvt.metrics import METRIC_NAMES, make_metric
-from cvt.moments import moments_from_labels
-from cvt.problem import Grid, Problem
+from compact_distributions.backends import create_backend
+from compact_distributions.backends.numpy_backend import NumpyBackend
+from compact_distributions.cvt.errors import BackendUnavailable, InputError
+from compact_distributions.cvt.fields import DensityMap, DirectionField
+from compact_distributions.cvt.lloyd import final_labels, lloyd
+from compact_distributions.cvt.metrics import METRIC_NAMES, make_metric
+from compact_distributions.cvt.moments import moments_from_labels
+from compact_distributions.cvt.problem import Grid, Problem
 
-gl = pytest.importorskip("backends.gl")
+gl = pytest.importorskip("compact_distributions.backends.gl")
 
 
 def _backend(mode):
@@ -104,8 +104,8 @@ def field_problem(name, n=220, w=256, h=256, seed=3):
 
 @pytest.mark.parametrize("name", METRIC_NAMES)
 def test_cone_twenty_iterations_energy_and_coverage(name, cone, reference):
-    from bench.evaluate import evaluate
-    from cvt.placement import element_for, place_elements
+    from compact_distributions.bench.evaluate import evaluate
+    from compact_distributions.cvt.placement import element_for, place_elements
 
     problem = field_problem(name)
     runs = {}
@@ -154,7 +154,7 @@ def test_every_region_pixel_is_reached_by_clustered_sites(mode, cone, exact, ref
 
 def test_cone_heights_bound_every_cell(cone, reference):
     """r_i >= the largest d_i over the pixels of cell i (the reference's cells)."""
-    from cvt.metrics import compile_sites
+    from compact_distributions.cvt.metrics import compile_sites
 
     sites, scales, angles, grid = random_case(9, masked=True)
     for name in ("l2-axial", "triangle"):

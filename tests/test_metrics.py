@@ -5,8 +5,8 @@ import math
 import numpy as np
 import pytest
 
-from cvt.errors import InputError
-from cvt.metrics import METRIC_NAMES, compile_sites, make_metric
+from compact_distributions.cvt.errors import InputError
+from compact_distributions.cvt.metrics import METRIC_NAMES, compile_sites, make_metric
 
 
 @pytest.mark.parametrize("name", METRIC_NAMES)

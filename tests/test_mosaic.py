@@ -14,11 +14,11 @@ import pytest
 import shapely
 from PIL import Image
 
-from bench.cli import main
-from bench.evaluate import evaluate
-from cvt.errors import InputError
-from cvt.image_fields import picture_fields
-from cvt.mosaic import make_mosaic, picture_array, raster_size, resample
+from compact_distributions.bench.cli import main
+from compact_distributions.bench.evaluate import evaluate
+from compact_distributions.cvt.errors import InputError
+from compact_distributions.cvt.image_fields import picture_fields
+from compact_distributions.cvt.mosaic import make_mosaic, picture_array, raster_size, resample
 
 SVG = "{http://www.w3.org/2000/svg}"
 

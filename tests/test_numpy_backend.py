@@ -5,11 +5,11 @@ import pytest
 import shapely
 from scipy.spatial import Voronoi
 
-from backends.numpy_backend import NumpyBackend
-from cvt.lloyd import lloyd
-from cvt.metrics import METRIC_NAMES, compile_sites, make_metric
-from cvt.moments import moments_from_labels
-from cvt.problem import Grid, Problem
+from compact_distributions.backends.numpy_backend import NumpyBackend
+from compact_distributions.cvt.lloyd import lloyd
+from compact_distributions.cvt.metrics import METRIC_NAMES, compile_sites, make_metric
+from compact_distributions.cvt.moments import moments_from_labels
+from compact_distributions.cvt.problem import Grid, Problem
 
 
 def brute_force(sites, angles, scales, metric, grid):

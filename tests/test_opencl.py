@@ -14,16 +14,16 @@ import math
 import numpy as np
 import pytest
 
-from backends.numpy_backend import NumpyBackend
-from cvt.errors import BackendUnavailable, InputError
-from cvt.fields import DensityMap, DirectionField
-from cvt.lloyd import lloyd
-from cvt.metrics import METRIC_NAMES, compile_sites, make_metric
-from cvt.moments import moments_from_labels
-from cvt.problem import Grid, Problem
+from compact_distributions.backends.numpy_backend import NumpyBackend
+from compact_distributions.cvt.errors import BackendUnavailable, InputError
+from compact_distributions.cvt.fields import DensityMap, DirectionField
+from compact_distributions.cvt.lloyd import lloyd
+from compact_distributions.cvt.metrics import METRIC_NAMES, compile_sites, make_metric
+from compact_distributions.cvt.moments import moments_from_labels
+from compact_distributions.cvt.problem import Grid, Problem
 
 try:
-    from backends.opencl import OpenCLBackend, choose_device
+    from compact_distributions.backends.opencl import OpenCLBackend, choose_device
 
     DEVICE = OpenCLBackend.probe()
 except BackendUnavailable as exc:
@@ -271,7 +271,7 @@ def test_bad_pyopencl_ctx_makes_probe_say_why(monkeypatch):
 
 
 def test_kernel_that_fails_to_build_is_one_clear_error(tmp_path, monkeypatch):
-    import backends.opencl as module
+    import compact_distributions.backends.opencl as module
 
     broken = tmp_path / "broken.cl"
     broken.write_text("__kernel void label_blocks(__global int *x) { x[0] = undefined_name; }\n")
@@ -299,7 +299,7 @@ def test_raster_too_large_for_the_device_is_one_clear_error():
 
 
 def test_cli_run_and_info(tmp_path, capsys):
-    from bench.cli import main
+    from compact_distributions.bench.cli import main
 
     out = tmp_path / "run"
     code = main(["run", "--backend", "opencl", "--device", "0:0", "--sites", "150", "--size", "96",

@@ -9,15 +9,15 @@ import pytest
 import shapely
 from PIL import Image
 
-from backends.numpy_backend import NumpyBackend
-from bench.cli import main
-from bench.evaluate import evaluate
-from bench.methods import run_ours
-from cvt.errors import InputError
-from cvt.fields import DensityMap, DirectionField
-from cvt.metrics import METRIC_NAMES, make_metric
-from cvt.placement import contour_samples, element_for, place_elements, placement_sizes
-from cvt.problem import Grid, Problem, lattice_sites
+from compact_distributions.backends.numpy_backend import NumpyBackend
+from compact_distributions.bench.cli import main
+from compact_distributions.bench.evaluate import evaluate
+from compact_distributions.bench.methods import run_ours
+from compact_distributions.cvt.errors import InputError
+from compact_distributions.cvt.fields import DensityMap, DirectionField
+from compact_distributions.cvt.metrics import METRIC_NAMES, make_metric
+from compact_distributions.cvt.placement import contour_samples, element_for, place_elements, placement_sizes
+from compact_distributions.cvt.problem import Grid, Problem, lattice_sites
 
 HEX_DENSITY = math.pi / (2 * math.sqrt(3))
 
@@ -254,7 +254,7 @@ def test_placement_is_fast_enough(backend):
     rng = np.random.default_rng(0)
     sites = rng.random((4000, 2)) * 1024
     grid = Grid(1024, 1024)
-    from bench.ckdtree_step import ckdtree_labels
+    from compact_distributions.bench.ckdtree_step import ckdtree_labels
 
     labels = ckdtree_labels(sites, 1024, 1024, "l2")
     t0 = time.perf_counter()
@@ -327,8 +327,8 @@ def test_figures_quick(tmp_path, capsys):
 @pytest.mark.parametrize("metric,shape", [("linf", "square"), ("l2", "circle"),
                                           ("l2-axial", "ellipse"), ("triangle", "triangle")])
 def test_centre_fit_grows_elements_and_stays_in_cell(metric, shape):
-    from cvt.lloyd import final_labels, lloyd
-    from cvt.placement import fit_centres
+    from compact_distributions.cvt.lloyd import final_labels, lloyd
+    from compact_distributions.cvt.placement import fit_centres
 
     p = Problem(Grid(160, 128), 70, make_metric(metric), seed=2)
     b = NumpyBackend()

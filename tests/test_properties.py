@@ -4,9 +4,9 @@ import numpy as np
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from backends.numpy_backend import NumpyBackend
-from cvt.metrics import METRIC_NAMES, compile_sites, make_metric
-from cvt.problem import Grid
+from compact_distributions.backends.numpy_backend import NumpyBackend
+from compact_distributions.cvt.metrics import METRIC_NAMES, compile_sites, make_metric
+from compact_distributions.cvt.problem import Grid
 
 metrics = st.sampled_from(METRIC_NAMES)
 aspects = st.floats(0.2, 1.0)

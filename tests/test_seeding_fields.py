@@ -5,11 +5,11 @@ import math
 import numpy as np
 import pytest
 
-from cvt.errors import InputError
-from cvt.fields import DensityMap, DirectionField
-from cvt.metrics import make_metric
-from cvt.problem import Grid, Problem
-from cvt.seeding import initial_sites
+from compact_distributions.cvt.errors import InputError
+from compact_distributions.cvt.fields import DensityMap, DirectionField
+from compact_distributions.cvt.metrics import make_metric
+from compact_distributions.cvt.problem import Grid, Problem
+from compact_distributions.cvt.seeding import initial_sites
 
 
 def test_uniform_seeding_stays_in_region_and_is_deterministic():
@@ -61,8 +61,8 @@ def test_named_fields():
 
 
 def test_angles_are_reread_at_new_positions():
-    from backends.numpy_backend import NumpyBackend
-    from cvt.lloyd import lloyd
+    from compact_distributions.backends.numpy_backend import NumpyBackend
+    from compact_distributions.cvt.lloyd import lloyd
 
     p = Problem(Grid(96, 96), 40, make_metric("linf"), field=DirectionField.named("radial", 96, 96))
     res = lloyd(p, NumpyBackend(), 3)

@@ -11,10 +11,10 @@ import time
 import numpy as np
 import pytest
 
-from bench.ckdtree_step import ckdtree_labels, ckdtree_step
-from bench.evaluate import evaluate, region_polygon
-from cvt.placement import place_elements
-from cvt.problem import Grid
+from compact_distributions.bench.ckdtree_step import ckdtree_labels, ckdtree_step
+from compact_distributions.bench.evaluate import evaluate, region_polygon
+from compact_distributions.cvt.placement import place_elements
+from compact_distributions.cvt.problem import Grid
 
 SIZE, N = 1024, 4000
 

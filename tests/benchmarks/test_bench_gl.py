@@ -14,13 +14,13 @@ import time
 import numpy as np
 import pytest
 
-from bench.ckdtree_step import ckdtree_step
-from cvt.errors import BackendUnavailable
-from cvt.metrics import make_metric
-from cvt.problem import Grid
+from compact_distributions.bench.ckdtree_step import ckdtree_step
+from compact_distributions.cvt.errors import BackendUnavailable
+from compact_distributions.cvt.metrics import make_metric
+from compact_distributions.cvt.problem import Grid
 
 try:
-    from backends.gl import GLBackend
+    from compact_distributions.backends.gl import GLBackend
 
     GLBackend.probe()
 except BackendUnavailable as exc:

@@ -24,10 +24,10 @@ import os
 import numpy as np
 import pytest
 
-from backends.numpy_backend import NumpyBackend
-from bench.runner import BackendCache, backend_variants
-from cvt.metrics import METRIC_NAMES, make_metric
-from cvt.problem import Grid
+from compact_distributions.backends.numpy_backend import NumpyBackend
+from compact_distributions.bench.runner import BackendCache, backend_variants
+from compact_distributions.cvt.metrics import METRIC_NAMES, make_metric
+from compact_distributions.cvt.problem import Grid
 
 SMALL = {"metrics": ["l2", "linf"], "sites": [500], "sizes": [128]}
 ENABLED = {"metrics": list(METRIC_NAMES), "sites": [1000, 4000, 16000], "sizes": [512, 1024]}

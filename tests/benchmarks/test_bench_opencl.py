@@ -10,14 +10,14 @@ kernel build is done before, outside the timed call); 2048² runs only with
 import numpy as np
 import pytest
 
-from backends.base import Backend
-from bench.ckdtree_step import ckdtree_step
-from cvt.errors import BackendUnavailable
-from cvt.metrics import make_metric
-from cvt.problem import Grid
+from compact_distributions.backends.base import Backend
+from compact_distributions.bench.ckdtree_step import ckdtree_step
+from compact_distributions.cvt.errors import BackendUnavailable
+from compact_distributions.cvt.metrics import make_metric
+from compact_distributions.cvt.problem import Grid
 
 try:
-    from backends.opencl import OpenCLBackend
+    from compact_distributions.backends.opencl import OpenCLBackend
 
     OpenCLBackend.probe()
 except BackendUnavailable as exc:
