@@ -10,7 +10,13 @@ import shapely
 
 from compact_distributions.backends.numpy_backend import NumpyBackend
 from compact_distributions.baselines import fritzsche2005, hausner2001, hu2016, smith2005
-from compact_distributions.baselines.common import angle_residual, budget_size, rasterize_tiles, tile_shape, tile_voronoi
+from compact_distributions.baselines.common import (
+    angle_residual,
+    budget_size,
+    rasterize_tiles,
+    tile_shape,
+    tile_voronoi,
+)
 from compact_distributions.bench.evaluate import evaluate, region_polygon
 from compact_distributions.bench.methods import get_method, method_names
 from compact_distributions.cvt.errors import InputError
