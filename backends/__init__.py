@@ -1,7 +1,10 @@
-"""Backends compute the label raster of a CVT iteration; see :mod:`backends.base`.
+"""Backends compute the label raster of a CVT iteration; see :mod:`.base`.
 
-The registry imports each backend lazily so that a missing runtime (no OpenCL platform,
-no EGL) only matters to the user who asks for that backend.
+``REGISTRY`` names each backend's class; it is imported only when asked for, so a missing
+runtime (no OpenCL platform, no EGL) only matters to the user who asks for that backend.
+A *variant* is a backend with options under one name (``gl-cone``, ``gl-exact``): the
+vocabulary of ``--backend`` and of the reports.  A registry name alone is a variant with
+the backend's default options (``gl`` is ``gl-cone``).
 """
 
 from __future__ import annotations
@@ -17,27 +20,59 @@ REGISTRY = {
     "numpy": "compact_distributions.backends.numpy_backend:NumpyBackend",
     "opencl": "compact_distributions.backends.opencl:OpenCLBackend",
     "gl": "compact_distributions.backends.gl:GLBackend",
+    "ckdtree": "compact_distributions.backends.ckdtree:CKDTreeBackend",
 }
+# variant -> (registry name, constructor options), for backends offered in several modes;
+# a backend with no entry here is its own one variant
+VARIANTS = {
+    "gl-cone": ("gl", {"mode": "cone"}),
+    "gl-exact": ("gl", {"mode": "exact"}),
+}
+REFERENCE = "numpy"  # the oracle every other backend is tested against
+
+
+def variant_names() -> list[str]:
+    """Every variant, in registry order."""
+    out = []
+    for name in REGISTRY:
+        out += [v for v, (base, _) in VARIANTS.items() if base == name] or [name]
+    return out
+
+
+def resolve(name: str, **options) -> tuple[str, dict]:
+    """(registry name, options) of a backend or variant name plus explicit options."""
+    if name in VARIANTS:
+        base, preset = VARIANTS[name]
+        return base, {**preset, **options}
+    if name in REGISTRY:
+        return name, options
+    raise InputError(f"unknown backend {name!r}; choose one of {', '.join(dict.fromkeys([*REGISTRY, *VARIANTS]))}")
 
 
 def backend_class(name: str) -> type[Backend]:
-    if name not in REGISTRY:
-        raise InputError(f"unknown backend {name!r}; choose one of {', '.join(REGISTRY)}")
-    module, _, cls = REGISTRY[name].partition(":")
+    base, _ = resolve(name)
+    module, _, cls = REGISTRY[base].partition(":")
     try:
         mod = importlib.import_module(module)
     except ModuleNotFoundError as exc:
-        raise BackendUnavailable(f"backend {name!r} is not available: {exc}") from None
+        raise BackendUnavailable(f"backend {base!r} is not available: {exc}") from None
     return getattr(mod, cls)
 
 
 def create_backend(name: str, **options) -> Backend:
-    """An instance of backend ``name``; raises BackendUnavailable naming what is missing."""
-    return backend_class(name)(**options)
+    """An instance of backend or variant ``name`` (options override the variant's);
+    raises BackendUnavailable naming what is missing."""
+    if isinstance(name, Backend):
+        return name
+    if not isinstance(name, str):
+        raise InputError(f"backend must be a backend name or a Backend, got {name!r}")
+    base, opts = resolve(name, **options)
+    return backend_class(base)(**opts)
 
 
 def probe_all() -> list[tuple[str, bool, str]]:
-    """(name, available, device description or the reason it is unavailable)."""
+    """(name, available, device description or the reason it is unavailable), per
+    registry entry."""
     rows = []
     for name in REGISTRY:
         try:
@@ -49,4 +84,20 @@ def probe_all() -> list[tuple[str, bool, str]]:
     return rows
 
 
-__all__ = ["Backend", "BackendUnavailable", "REGISTRY", "create_backend", "probe_all", "backend_class"]
+def variant_metrics(name: str) -> tuple[str, ...] | None:
+    """The metrics a backend or variant computes (None: all six, or unknown because its
+    runtime is missing: then its runs are skipped with the reason anyway)."""
+    try:
+        return backend_class(name).metrics
+    except BackendUnavailable:
+        return None
+
+
+def variant_status() -> dict[str, tuple[bool, str]]:
+    """variant -> (available, device text or the reason it is unavailable)."""
+    probed = {name: (ok, text) for name, ok, text in probe_all()}
+    return {v: probed[resolve(v)[0]] for v in variant_names()}
+
+
+__all__ = ["Backend", "BackendUnavailable", "REGISTRY", "VARIANTS", "REFERENCE", "create_backend",
+           "probe_all", "variant_status", "variant_metrics", "variant_names", "backend_class", "resolve"]

@@ -58,6 +58,7 @@ from compact_distributions.cvt.errors import BackendUnavailable, InputError
 from compact_distributions.cvt.metrics import Metric, compile_sites
 from compact_distributions.cvt.moments import Moments
 from compact_distributions.cvt.problem import Grid
+from compact_distributions.cvt.validate import one_of, real_number, whole_number
 
 from .base import Backend
 
@@ -425,19 +426,9 @@ class GLBackend(Backend):
     name = "gl"
 
     def __init__(self, mode: str = "cone", max_error_px: float = 0.1, block: int = 8):
-        if mode not in MODES:
-            raise InputError(f"gl mode must be one of {', '.join(MODES)}, got {mode!r}")
-        try:
-            max_error_px = float(max_error_px)
-        except (TypeError, ValueError):
-            raise InputError(f"max_error_px must be a number, got {max_error_px!r}") from None
-        if not max_error_px > 0 or not math.isfinite(max_error_px):
-            raise InputError(f"max_error_px must be a finite number > 0, got {max_error_px!r}")
-        if int(block) < 1:
-            raise InputError(f"block must be a whole number >= 1, got {block!r}")
-        self.mode = mode
-        self.max_error_px = max_error_px
-        self.block = int(block)
+        self.mode = one_of(mode, "gl mode", MODES)
+        self.max_error_px = real_number(max_error_px, "max_error_px", above=0.0)
+        self.block = whole_number(block, "block", minimum=1)
         self.ctx = shared_context()
         self._programs: dict = {}
         self._geometry: dict = {}
@@ -456,8 +447,12 @@ class GLBackend(Backend):
         info = self.ctx.info
         return f"{info['GL_RENDERER']}, OpenGL {info['GL_VERSION']} ({self.mode} mode)"
 
-    def label(self, sites, scales, angles, metric: Metric, grid: Grid) -> np.ndarray:
-        self._render(sites, scales, angles, metric, grid)
+    @property
+    def variant(self) -> str:
+        return f"gl-{self.mode}"
+
+    def _label(self, sites, angles, scales, metric: Metric, grid: Grid) -> np.ndarray:
+        self._render(sites, angles, scales, metric, grid)
         w, h = grid.width, grid.height
         raw = np.frombuffer(self._target[2].read(alignment=1), dtype=np.uint32).reshape(h, w)
         labels = raw.astype(np.int32) - 1
@@ -467,10 +462,10 @@ class GLBackend(Backend):
         self._check_covered(missing)
         return labels
 
-    def moments(self, sites, scales, angles, metric: Metric, grid: Grid) -> Moments:
-        n = self._render(sites, scales, angles, metric, grid)
+    def _moments(self, sites, angles, scales, metric: Metric, grid: Grid) -> Moments:
+        n = self._render(sites, angles, scales, metric, grid)
         ctx = self.ctx
-        prog = self._moments()
+        prog = self._sums_program()
         nbytes = n * SUM_WORDS * 4
         if self._sums is None or self._sums.size < nbytes:
             if self._sums is not None:
@@ -521,8 +516,7 @@ class GLBackend(Backend):
         self._geometry = {}
 
     # ------------------------------------------------------------------ drawing
-    def _render(self, sites, scales, angles, metric: Metric, grid: Grid) -> int:
-        sites, scales, angles = _check_inputs(sites, scales, angles)
+    def _render(self, sites, angles, scales, metric: Metric, grid: Grid) -> int:
         n = len(sites)
         coeffs = compile_sites(metric, sites, angles, scales)
         blocks = self._grid_blocks(grid)
@@ -591,7 +585,7 @@ class GLBackend(Backend):
             self._programs[key] = self.ctx.program(vertex_shader=_VERTEX_SHADER, fragment_shader=frag)
         return self._programs[key]
 
-    def _moments(self):
+    def _sums_program(self):
         if self._moments_program is None:
             self._moments_program = self.ctx.compute_shader(_MOMENTS_SHADER)
         return self._moments_program
@@ -670,18 +664,3 @@ class GLBackend(Backend):
             raise RuntimeError(f"gl backend: {missing} region pixels were reached by no cone "
                                "(cone heights too small: a bug)")
 
-
-def _check_inputs(sites, scales, angles):
-    sites = np.asarray(sites, dtype=np.float64)
-    if sites.ndim != 2 or sites.shape[1] != 2 or len(sites) == 0:
-        raise InputError(f"sites must be a non-empty (N, 2) array, got shape {sites.shape}")
-    n = len(sites)
-    scales = np.ones(n) if scales is None else np.asarray(scales, dtype=np.float64).reshape(-1)
-    angles = np.zeros(n) if angles is None else np.asarray(angles, dtype=np.float64).reshape(-1)
-    if len(scales) != n or len(angles) != n:
-        raise InputError(f"{n} sites but {len(scales)} scales and {len(angles)} angles")
-    if not (np.isfinite(sites).all() and np.isfinite(angles).all()):
-        raise InputError("sites and angles must be finite")
-    if not (np.isfinite(scales).all() and (scales > 0).all()):
-        raise InputError("scales must be finite and > 0")
-    return sites, scales, angles

@@ -47,9 +47,7 @@ class NumpyBackend(Backend):
     def device(self) -> str:
         return f"CPU, NumPy {np.__version__} float64 (reference)"
 
-    def label(self, sites, scales, angles, metric: Metric, grid: Grid) -> np.ndarray:
-        sites = np.asarray(sites, dtype=np.float64)
-        scales = np.ones(len(sites)) if scales is None else np.asarray(scales, dtype=np.float64)
+    def _label(self, sites, angles, scales, metric: Metric, grid: Grid) -> np.ndarray:
         coeffs = compile_sites(metric, sites, angles, scales)
         t = self.tile or self.auto_tile(grid, len(sites))
         w, h = grid.width, grid.height

@@ -238,12 +238,12 @@ class OpenCLBackend(Backend):
         return buf
 
     # ------------------------------------------------------------------ labels
-    def _site_records(self, sites, scales, angles, metric: Metric):
+    def _site_records(self, sites, angles, scales, metric: Metric):
         """Per-site float32 records (see the kernel file) and the search reach."""
         n = len(sites)
-        uniform = (angles is None or np.ptp(angles) == 0) and np.ptp(scales) == 0
+        uniform = np.ptp(angles) == 0 and np.ptp(scales) == 0
         if uniform:  # one shape for all: compile it once and repeat it (N-fold less work)
-            one = compile_sites(metric, sites[:1], None if angles is None else angles[:1], scales[:1])
+            one = compile_sites(metric, sites[:1], angles[:1], scales[:1])
             coeffs = one if n == 1 else type(one)(
                 one.kind, sites,
                 facets=None if one.facets is None else np.broadcast_to(one.facets, (n,) + one.facets.shape[1:]),
@@ -266,25 +266,13 @@ class OpenCLBackend(Backend):
         reach = metric.circumradius * float(scales.max()) * (1 + REACH_MARGIN)
         return records, k, reach
 
-    def _run_labels(self, sites, scales, angles, metric: Metric, grid: Grid):
+    def _run_labels(self, sites, angles, scales, metric: Metric, grid: Grid):
         """Enqueue the label kernel; the labels stay in the device buffer 'labels'."""
-        sites = np.asarray(sites, dtype=np.float64).reshape(-1, 2)
         n = len(sites)
-        if n == 0:
-            raise InputError("no sites to label")
-        if not np.isfinite(sites).all():
-            raise InputError("sites contain NaN or infinite coordinates")
-        scales = np.ones(n) if scales is None else np.asarray(scales, dtype=np.float64)
-        if scales.shape != (n,) or not (np.isfinite(scales).all() and (scales > 0).all()):
-            raise InputError("scales must be N finite numbers > 0")
-        if angles is not None:
-            angles = np.asarray(angles, dtype=np.float64)
-            if angles.shape != (n,) or not np.isfinite(angles).all():
-                raise InputError("angles must be N finite numbers (radians)")
         if self._queue is None:
             raise RuntimeError("opencl: this backend was closed; create a new one")
         w, h = grid.width, grid.height
-        records, k, reach = self._site_records(sites, scales, angles, metric)
+        records, k, reach = self._site_records(sites, angles, scales, metric)
         label_kernel, _ = self._kernels(metric, k)
 
         use_mask = grid.mask is not None
@@ -336,8 +324,8 @@ class OpenCLBackend(Backend):
             raise BackendUnavailable(f"opencl: label kernel failed on {self.device()}: {exc}") from None
         return labels_buf, n
 
-    def label(self, sites, scales, angles, metric: Metric, grid: Grid) -> np.ndarray:
-        labels_buf, _ = self._run_labels(sites, scales, angles, metric, grid)
+    def _label(self, sites, angles, scales, metric: Metric, grid: Grid) -> np.ndarray:
+        labels_buf, _ = self._run_labels(sites, angles, scales, metric, grid)
         out = np.empty((grid.height, grid.width), dtype=np.int32)
         self._read(out, labels_buf)
         return out
@@ -349,10 +337,10 @@ class OpenCLBackend(Backend):
             raise BackendUnavailable(f"opencl: device error on {self.device()}: {exc}") from None
 
     # ----------------------------------------------------------------- moments
-    def moments(self, sites, scales, angles, metric: Metric, grid: Grid) -> Moments:
+    def _moments(self, sites, angles, scales, metric: Metric, grid: Grid) -> Moments:
         """Labels and their integer moments on the device; reads back 5·N sums."""
         cl = self._cl
-        labels_buf, n = self._run_labels(sites, scales, angles, metric, grid)
+        labels_buf, n = self._run_labels(sites, angles, scales, metric, grid)
         k = 0 if metric.kind == "ellipse" else np.asarray(metric.normals).shape[0]
         _, moments_kernel = self._kernels(metric, k)
         words = 5 * n if self.int64_atomics else 10 * n

@@ -28,11 +28,14 @@ import numpy as np
 import shapely
 from scipy import ndimage
 
-from compact_distributions.bench.evaluate import region_polygon
-from compact_distributions.cvt.metrics import Metric, make_metric
-from compact_distributions.cvt.placement import check_shape, contour_samples, parse_gap
-from compact_distributions.cvt.problem import Grid, Problem
-from compact_distributions.cvt.shapes import _BALL, element_polygons, unit_outline
+from compact_distributions.cvt.distribution import Distribution
+from compact_distributions.cvt.evaluate import region_polygon
+from compact_distributions.cvt.lloyd import iterate
+from compact_distributions.cvt.metrics import Metric
+from compact_distributions.cvt.placement import contour_samples, parse_gap
+from compact_distributions.cvt.problem import Grid, Problem, in_own_cell
+from compact_distributions.cvt.seeding import initial_sites
+from compact_distributions.cvt.shapes import check_shape, element_ball, element_polygons, unit_outline
 
 BUDGET_DELTA = 0.95
 # rotational symmetry of each element's outline: a rotation by this angle maps it onto itself
@@ -93,22 +96,17 @@ class TileShape:
 
 def tile_shape(problem: Problem, element: str | None, default: str | None = None) -> TileShape:
     """The element shape: ``element``, else ``default``, else the metric's own shape."""
-    name = element or default or problem.metric.natural_element
-    check_shape(name)
+    name = check_shape(element or default or problem.metric.natural_element)
     aspect = problem.metric.aspect
     outline = unit_outline(name, aspect)
     x, y = outline[:, 0], outline[:, 1]
     area = 0.5 * abs(float(np.dot(x, np.roll(y, -1)) - np.dot(y, np.roll(x, -1))))
-    return TileShape(name, aspect, make_metric(_BALL[name], aspect), area)
+    return TileShape(name, aspect, element_ball(name, aspect), area)
 
 
 def budget_size(shape: TileShape, grid: Grid, n: int, delta: float = BUDGET_DELTA) -> float:
     """Element size whose area is that of a square of side δ·sqrt(area/N)."""
     return shape.size_for_area(delta * delta * grid.pixel_count / n)
-
-
-def gap_value(gap) -> float:
-    return parse_gap(gap)
 
 
 # ------------------------------------------------------------------ tiles on the raster
@@ -242,12 +240,7 @@ class Contours:
         r = shape.reach(self.x - centers[o, 0], self.y - centers[o, 1], angles[o], gap)
         sizes = np.full(n, np.inf)
         np.minimum.at(sizes, o, r)
-        h, w = self.labels.shape
-        inside = ((centers[:, 0] >= 0) & (centers[:, 0] < w)
-                  & (centers[:, 1] >= 0) & (centers[:, 1] < h))
-        j = np.clip(np.floor(centers[:, 0]).astype(np.int64), 0, w - 1)
-        i = np.clip(np.floor(centers[:, 1]).astype(np.int64), 0, h - 1)
-        own = inside & (self.labels[i, j] == np.arange(n))
+        own = in_own_cell(self.labels, centers)
         return np.where(own & np.isfinite(sizes) & (sizes > 0), sizes, 0.0)
 
 
@@ -280,10 +273,6 @@ def make_elements(shape: TileShape, centers, angles, sizes, grid: Grid, region=N
     return out, clipped_area / float(shapely.area(region))
 
 
-def region_inside(grid: Grid) -> np.ndarray:
-    return grid.inside()
-
-
 # ------------------------------------------------------------------ Lloyd over tiles
 def fixed_sizes(problem: Problem, shape: TileShape, base: float, centers, gap: float) -> np.ndarray:
     """Fixed tile sizes: the budget size times the density's size factor at the tile,
@@ -303,37 +292,27 @@ def tile_lloyd(problem: Problem, shape: TileShape, base_size: float, iterations:
     ``turn(moments, labels, new_centers, old_angles, sizes) -> angles``.  A tile whose
     region is empty (covered entirely by lower-index tiles) stays where it is.
 
-    Returns (centers, angles, sizes, labels, energy, seconds, empty, empty_sites)
-    where energy is the mean squared distance of the region's pixels to their tile."""
-    from compact_distributions.cvt.seeding import initial_sites
-
+    Returns (centers, angles, sizes, labels, log) where the log's energy is the mean
+    squared distance of the region's pixels to their tile."""
     grid = problem.grid
     inside = grid.inside()
     centers = initial_sites(problem)
-    angles = problem.angles_at(centers)
     n = len(centers)
-    energy, seconds, empty = [], [], []
-    empty_sites: list[int] = []
-    for k in range(iterations):
-        t0 = time.perf_counter()
+
+    def step(state):
+        centers, angles = state
         sizes = fixed_sizes(problem, shape, base_size, centers, gap)
         tiles = rasterize_tiles(shape, centers, angles, sizes, grid)
         labels, dist = tile_voronoi(tiles, inside)
-        e = float(np.mean(dist[inside] ** 2))
         mom = cell_moments(labels, n, centers)
-        new_centers = mom.centroids
-        angles = turn(mom, labels, new_centers, angles, sizes)
-        centers = new_centers
-        seconds.append(time.perf_counter() - t0)
-        energy.append(e)
-        empty.append(int(mom.empty.sum()))
-        empty_sites = np.flatnonzero(mom.empty).tolist()
-        if progress is not None:
-            progress(k + 1, iterations, e)
+        angles = turn(mom, labels, mom.centroids, angles, sizes)
+        return (mom.centroids, angles), float(np.mean(dist[inside] ** 2)), mom.empty
+
+    (centers, angles), log = iterate((centers, problem.angles_at(centers)), step, iterations, progress)
     sizes = fixed_sizes(problem, shape, base_size, centers, gap)
     tiles = rasterize_tiles(shape, centers, angles, sizes, grid)
     labels, _ = tile_voronoi(tiles, inside)
-    return centers, angles, sizes, labels, energy, seconds, empty, empty_sites
+    return centers, angles, sizes, labels, log
 
 
 def run_fixed_tiles(method: str, problem: Problem, iterations: int, progress, element, gap,
@@ -341,25 +320,21 @@ def run_fixed_tiles(method: str, problem: Problem, iterations: int, progress, el
     """The frame shared by the fixed-size tile methods (Fritzsche, Smith): set up the tile
     shape and budget size (timed apart), run :func:`tile_lloyd` with the method's turning
     rule ``make_turn(problem, shape)``, and package the result as a Distribution."""
-    from compact_distributions.cvt.distribution import Distribution
-
     t_setup = time.perf_counter()
-    if iterations < 0:
-        raise ValueError(f"iterations must be >= 0, got {iterations}")
-    gap = gap_value(gap)
+    gap = parse_gap(gap)
     shape = tile_shape(problem, element)
     base = budget_size(shape, problem.grid, problem.n_sites, delta)
     setup = time.perf_counter() - t_setup
 
     t0 = time.perf_counter()
-    centers, angles, sizes, labels, energy, seconds, empty, empty_sites = tile_lloyd(
+    centers, angles, sizes, labels, log = tile_lloyd(
         problem, shape, base, iterations, make_turn(problem, shape), progress, gap)
     elements, clipped = make_elements(shape, centers, angles, sizes, problem.grid)
     total = time.perf_counter() - t0
     return Distribution(
         method=method, sites=centers, angles=angles, scales=sizes / base,
-        elements=elements, energy=energy, seconds=seconds, setup_seconds=setup,
-        total_seconds=total, empty=empty, empty_sites=empty_sites, labels=labels,
+        elements=elements, energy=log.energy, seconds=log.seconds, setup_seconds=setup,
+        total_seconds=total, empty=log.empty, empty_sites=log.empty_sites, labels=labels,
         extra={
             **extra,
             "element": shape.name,

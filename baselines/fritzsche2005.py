@@ -23,7 +23,7 @@ Tiles have a fixed size: all of them the area of a square of side δ·sqrt(area/
 δ = 0.95 (the budget of ``baselines.common``), times the density's size factor where the
 problem has a density.  Nothing keeps two tiles apart: the method relies on the regions
 to separate them, tiles can overlap (initially they do, at random seeds), and the overlap
-is counted by bench.evaluate, not hidden.  Tiles are clipped to the region.
+is counted by cvt.evaluate, not hidden.  Tiles are clipped to the region.
 
 Energy per iteration: mean squared distance of the region's pixels to their nearest tile
 (0 inside tiles), the quantity the tile Lloyd step lowers.
@@ -46,7 +46,6 @@ from __future__ import annotations
 
 import numpy as np
 
-from compact_distributions.bench.methods import METHODS
 from compact_distributions.cvt.distribution import Distribution
 from compact_distributions.cvt.problem import Problem
 
@@ -67,7 +66,7 @@ def principal_axis_turn(problem: Problem, shape):
     return turn
 
 
-def run(problem: Problem, backend=None, iterations: int = 20, progress=None,
+def run(problem: Problem, backend=None, *, iterations: int = 20, progress=None,
         element: str | None = None, gap: float = 0.0, delta: float = BUDGET_DELTA) -> Distribution:
     """Fritzsche et al. 2005 on ``problem``; ``backend`` is not used (the distance is to
     the tiles, which no point-metric backend computes)."""
@@ -78,5 +77,3 @@ def run(problem: Problem, backend=None, iterations: int = 20, progress=None,
                                         "authentic looking mosaics using Voronoi structures, ISVD 2005",
                                "turn": turn})
 
-
-METHODS["fritzsche2005"] = run

@@ -23,7 +23,7 @@ Algorithm as implemented
 4. Tiles: equal squares (or the ``element`` shape with the same area) of side
    δ·sqrt(area/N), δ = 0.95 (Hausner's tile size rule; ``baselines.common``), centred at
    the sites, turned by the field angle at each site.  Tiles are never resized or moved
-   to avoid each other: overlap is allowed and counted by bench.evaluate.  Tiles are
+   to avoid each other: overlap is allowed and counted by cvt.evaluate.  Tiles are
    clipped to the region (the clipped area is reported in ``extra``).
 
 Energy per iteration: mean squared Euclidean distance of the counted pixels to their
@@ -51,13 +51,13 @@ import time
 import numpy as np
 from scipy import ndimage
 
-from compact_distributions.bench.methods import METHODS
 from compact_distributions.cvt.distribution import Distribution
+from compact_distributions.cvt.lloyd import LloydSetup, final_labels, lloyd
 from compact_distributions.cvt.metrics import make_metric
-from compact_distributions.cvt.problem import Grid, Problem
-from compact_distributions.cvt.seeding import initial_sites
+from compact_distributions.cvt.placement import parse_gap
+from compact_distributions.cvt.problem import Grid, Problem, pixel_index
 
-from .common import BUDGET_DELTA, budget_size, gap_value, make_elements, tile_shape
+from .common import BUDGET_DELTA, budget_size, make_elements, tile_shape
 
 # The L1 ball is a diamond, and Lloyd under L1 drives the cells towards copies of it: a
 # lattice of squares turned 45° from the metric's axes.  Turning the metric by the field
@@ -85,18 +85,14 @@ class EdgeField:
 
     def angles_at(self, sites: np.ndarray) -> np.ndarray:
         h, w = self.angles.shape
-        j = np.clip(np.floor(sites[:, 0]).astype(np.int64), 0, w - 1)
-        i = np.clip(np.floor(sites[:, 1]).astype(np.int64), 0, h - 1)
-        return self.angles[i, j]
+        return self.angles[pixel_index(sites, w, h)]
 
 
-def run(problem: Problem, backend, iterations: int = 20, progress=None,
+def run(problem: Problem, backend, *, iterations: int = 20, progress=None,
         element: str | None = None, gap: float = 0.0, delta: float = BUDGET_DELTA) -> Distribution:
     """Hausner 2001 on ``problem`` (see the module docstring)."""
     t_setup = time.perf_counter()
-    if iterations < 0:
-        raise ValueError(f"iterations must be >= 0, got {iterations}")
-    gap = gap_value(gap)
+    gap = parse_gap(gap)
     shape = tile_shape(problem, element, default="square")
     grid = problem.grid
     n = problem.n_sites
@@ -107,31 +103,15 @@ def run(problem: Problem, backend, iterations: int = 20, progress=None,
     interior = (dist >= band) & grid.inside()
     if not interior.any():  # region thinner than a tile: keep every pixel
         interior = grid.inside()
-    inner_grid = Grid(grid.width, grid.height, interior)
     field = problem.field if problem.field is not None else EdgeField(dist)
-    metric = make_metric("l1")
-    sites = initial_sites(problem)
+    setup_l1 = LloydSetup.of(problem, metric=make_metric("l1"), grid=Grid(grid.width, grid.height, interior),
+                             angles_at=field.angles_at, turn=DIAMOND_TURN)
     setup = time.perf_counter() - t_setup
 
     t0 = time.perf_counter()
-    energy, seconds, empty = [], [], []
-    empty_sites: list[int] = []
-    for k in range(iterations):
-        t_it = time.perf_counter()
-        angles = field.angles_at(sites)
-        scales = problem.scales_at(sites)
-        mom = backend.moments(sites, scales, angles + DIAMOND_TURN, metric, inner_grid)
-        e = mom.energy(sites)
-        sites = mom.centroids(sites)
-        seconds.append(time.perf_counter() - t_it)
-        energy.append(e)
-        empty.append(int(mom.empty.sum()))
-        empty_sites = np.flatnonzero(mom.empty).tolist()
-        if progress is not None:
-            progress(k + 1, iterations, e)
-    angles = field.angles_at(sites)
-    scales = problem.scales_at(sites)
-    labels = backend.label(sites, scales, angles + DIAMOND_TURN, metric, grid)
+    res = lloyd(problem, backend, iterations, progress=progress, setup=setup_l1)
+    sites, angles, scales = res.sites, res.angles, res.scales
+    labels = final_labels(problem, backend, res, setup=setup_l1)
     tile_sizes = size * scales
     if gap > 0:
         tile_sizes = np.maximum(tile_sizes - 0.5 * gap * _gap_factor(shape), 0.0)
@@ -139,8 +119,8 @@ def run(problem: Problem, backend, iterations: int = 20, progress=None,
     total = time.perf_counter() - t0
     return Distribution(
         method="hausner2001", sites=sites, angles=angles, scales=scales, elements=elements,
-        energy=energy, seconds=seconds, setup_seconds=setup, total_seconds=total,
-        empty=empty, empty_sites=empty_sites, labels=labels,
+        energy=res.energy, seconds=res.seconds, setup_seconds=setup, total_seconds=total,
+        empty=res.empty, empty_sites=res.empty_sites, labels=labels,
         extra={
             "paper": "Hausner, Simulating decorative mosaics, SIGGRAPH 2001",
             "element": shape.name,
@@ -160,5 +140,3 @@ def _gap_factor(shape) -> float:
     """Size units per pixel of offset along an edge normal (1/inradius of the unit ball)."""
     return 1.0 / shape.ball.inradius
 
-
-METHODS["hausner2001"] = run

@@ -22,7 +22,7 @@ iteration (20 by default) alternates:
    ones first) are offered the largest holes (local maxima of the distance to the
    nearest other tile or the region's border; the offered tiles count as holes); the tile is moved there, turned and scaled to
    the largest fit in the hole, and the move is accepted only if the exact coverage
-   (shapely, the same quantity bench.evaluate reports) strictly grows.  The step can
+   (shapely, the same quantity cvt.evaluate reports) strictly grows.  The step can
    therefore never lower coverage.
 
 The scale is per tile and free: tiles grow until they touch their regions' borders, so
@@ -56,18 +56,19 @@ import numpy as np
 import shapely
 from scipy import ndimage
 
-from compact_distributions.bench.evaluate import region_polygon
-from compact_distributions.bench.methods import METHODS
 from compact_distributions.cvt.distribution import Distribution
+from compact_distributions.cvt.evaluate import region_polygon
+from compact_distributions.cvt.lloyd import iterate
+from compact_distributions.cvt.placement import parse_gap
 from compact_distributions.cvt.problem import Grid, Problem
 from compact_distributions.cvt.seeding import initial_sites
+from compact_distributions.cvt.shapes import transform, unit_outline
 
 from .common import (
     BUDGET_DELTA,
     Contours,
     budget_size,
     cell_moments,
-    gap_value,
     make_elements,
     rasterize_tiles,
     tile_shape,
@@ -147,7 +148,7 @@ def combinatorial_step(shape, centers, angles, sizes, grid: Grid, moves: int | N
                        gap: float = 0.0, region=None):
     """Replace the smallest tiles by tiles fitted into the largest holes, one at a time,
     accepting a replacement only if the coverage (area of the union of the tiles within
-    the region, exactly as bench.evaluate measures it) strictly grows.
+    the region, exactly as cvt.evaluate measures it) strictly grows.
 
     Returns (centers, angles, sizes, info) as new arrays; info counts tried and accepted
     moves and the coverage gained (fraction of the region)."""
@@ -229,19 +230,15 @@ def combinatorial_step(shape, centers, angles, sizes, grid: Grid, moves: int | N
 
 
 def _outline(shape, center, angle, size) -> np.ndarray:
-    from compact_distributions.cvt.shapes import transform, unit_outline
-
     return transform(unit_outline(shape.name, shape.aspect), center, angle, size)[0]
 
 
-def run(problem: Problem, backend=None, iterations: int = 20, progress=None,
+def run(problem: Problem, backend=None, *, iterations: int = 20, progress=None,
         element: str | None = None, gap: float = 0.0, delta: float = BUDGET_DELTA) -> Distribution:
     """Hu et al. 2016 on ``problem`` (2D); ``backend`` is not used (the distance is to
     the tiles, which no point-metric backend computes)."""
     t_setup = time.perf_counter()
-    if iterations < 0:
-        raise ValueError(f"iterations must be >= 0, got {iterations}")
-    gap = gap_value(gap)
+    gap = parse_gap(gap)
     shape = tile_shape(problem, element)
     grid = problem.grid
     n = problem.n_sites
@@ -254,36 +251,31 @@ def run(problem: Problem, backend=None, iterations: int = 20, progress=None,
     setup = time.perf_counter() - t_setup
 
     t0 = time.perf_counter()
-    energy, seconds, empty, raster_cov = [], [], [], []
-    accepted, gained = [], []
-    empty_sites: list[int] = []
-    for k in range(iterations):
-        t_it = time.perf_counter()
+    raster_cov, accepted, gained = [], [], []
+
+    def step(state):
+        centers, angles, sizes = state
         tiles = rasterize_tiles(shape, centers, angles, sizes, grid)
         labels, dist = tile_voronoi(tiles, inside)
-        e = float(np.mean(dist[inside] ** 2))
         mom = cell_moments(labels, n, centers)
         centers, angles, sizes = continuous_step(shape, Contours.of(labels), centers, angles,
                                                  mom.centroids, gap)
         centers, angles, sizes, info = combinatorial_step(shape, centers, angles, sizes, grid,
                                                           gap=gap, region=region)
-        seconds.append(time.perf_counter() - t_it)
-        energy.append(e)
-        empty.append(int(mom.empty.sum()))
-        empty_sites = np.flatnonzero(mom.empty).tolist()
         accepted.append(info["accepted"])
         gained.append(info["gain"])
         raster_cov.append(float((tiles[inside] >= 0).mean()))
-        if progress is not None:
-            progress(k + 1, iterations, e)
+        return (centers, angles, sizes), float(np.mean(dist[inside] ** 2)), mom.empty
+
+    (centers, angles, sizes), log = iterate((centers, angles, sizes), step, iterations, progress)
     tiles = rasterize_tiles(shape, centers, angles, sizes, grid)
     labels, _ = tile_voronoi(tiles, inside)
     elements, clipped = make_elements(shape, centers, angles, sizes, grid, region)
     total = time.perf_counter() - t0
     return Distribution(
         method="hu2016", sites=centers, angles=angles, scales=sizes / base,
-        elements=elements, energy=energy, seconds=seconds, setup_seconds=setup,
-        total_seconds=total, empty=empty, empty_sites=empty_sites, labels=labels,
+        elements=elements, energy=log.energy, seconds=log.seconds, setup_seconds=setup,
+        total_seconds=total, empty=log.empty, empty_sites=log.empty_sites, labels=labels,
         extra={
             "paper": "Hu, Chen, Pan, Yu, Grinspun, Wang, Surface mosaic synthesis with "
                      "irregular tiles, IEEE TVCG 22(3) 2016",
@@ -300,5 +292,3 @@ def run(problem: Problem, backend=None, iterations: int = 20, progress=None,
         },
     )
 
-
-METHODS["hu2016"] = run

@@ -20,7 +20,7 @@ tile's area than to any other tile.  Each iteration (20 by default):
 Tiles have a fixed size: the area of a square of side δ·sqrt(area/N), δ = 0.95 (the
 budget of ``baselines.common``), times the density's size factor where there is one.
 Tiles may overlap (nothing but the regions keeps them apart); the overlap is counted by
-bench.evaluate.  Tiles are clipped to the region.
+cvt.evaluate.  Tiles are clipped to the region.
 
 Energy per iteration: mean squared distance of the region's pixels to their nearest tile.
 
@@ -42,7 +42,6 @@ import math
 
 import numpy as np
 
-from compact_distributions.bench.methods import METHODS
 from compact_distributions.cvt.distribution import Distribution
 from compact_distributions.cvt.problem import Problem
 
@@ -100,14 +99,12 @@ def best_fit_turn(shape):
     return turn
 
 
-def run(problem: Problem, backend=None, iterations: int = 20, progress=None,
+def run(problem: Problem, backend=None, *, iterations: int = 20, progress=None,
         element: str | None = None, gap: float = 0.0, delta: float = BUDGET_DELTA) -> Distribution:
     """Smith et al. 2005 on ``problem``; ``backend`` is not used (the distance is to the
     tiles' areas, which no point-metric backend computes)."""
     return run_fixed_tiles("smith2005", problem, iterations, progress, element, gap, delta,
-                           lambda _problem, shape: best_fit_turn(shape), {
+                           lambda problem, shape: best_fit_turn(shape), {
                                "paper": "Smith, Liu, Klein, Animosaics, SCA 2005",
                                "turn": "best fit: angle covering most of the tile's own region"})
 
-
-METHODS["smith2005"] = run

@@ -5,18 +5,19 @@ scales at the sites, the backend's labels and integer moments, the centroids), o
 uniform random sites of seed 0 that then move as Lloyd moves them.  Each configuration
 runs ``warmup`` iterations first (kernel builds, buffer allocation), then ``repeats``
 timed ones; the report gives their median.  The NumPy reference backend is the unit
-(``x numpy`` = NumPy's time / this backend's time, higher is faster); the cKDTree +
-np.bincount step (:mod:`bench.ckdtree_step`, the common CPU tool; l2, l1 and linf only)
-is an extra reference row.
+(``x numpy`` = NumPy's time / this backend's time, higher is faster); the ``ckdtree``
+backend (scipy's cKDTree + np.bincount, the common CPU tool; l2, l1 and linf only) is
+an extra reference row.
 
-Full sweep: every available backend variant (numpy, opencl, gl-cone, gl-exact) x N in
+Full sweep: every backend variant (numpy, opencl, gl-cone, gl-exact, ckdtree) x N in
 {1000, 4000, 16000} x raster {512, 1024, 2048} x the six metrics, 1 warm-up + 5 timed
 iterations.  Quick: N in {1000, 4000} x raster {256, 512, 1024} x l2, linf and
 triangle, 1 + 3.
 
 Writes ``OUT/backends.md``, ``.csv``, ``.png`` (log-log: time against N and against
-pixels) and one raw json per configuration under ``OUT/raw/backends*/`` (resumable: a
-configuration whose json exists is read back unless --force).  ``--from-benchmark-json``
+pixels) and one raw json per configuration under ``OUT/raw/backends*/``, through the
+sweep engine of ``cvtbench table2`` (resumable: a configuration whose json exists is
+read back unless --force).  ``--from-benchmark-json``
 builds the same report from a pytest-benchmark ``--benchmark-json`` file instead.
 """
 
@@ -26,15 +27,16 @@ import argparse
 import json
 import sys
 import time
-from dataclasses import dataclass
+from dataclasses import asdict, dataclass
 from pathlib import Path
 
 import numpy as np
 
+from compact_distributions.backends import REFERENCE, variant_metrics, variant_names, variant_status
 from compact_distributions.cvt.metrics import METRIC_NAMES
+from compact_distributions.cvt.validate import name_list, whole_number
 
-CKDTREE = "ckdtree"  # the cKDTree + bincount reference row
-CKDTREE_METRICS = ("l2", "l1", "linf")
+from . import options
 
 FULL = {"sites": [1000, 4000, 16000], "sizes": [512, 1024, 2048], "metrics": list(METRIC_NAMES),
         "warmup": 1, "repeats": 5}
@@ -47,8 +49,10 @@ COLUMNS = ["backend", "metric", "n_sites", "size", "pixels", "ms_median", "ms_mi
 
 @dataclass(frozen=True)
 class TimingSpec:
+    """One timed configuration of a sweep spec (see bench/sweep.py)."""
+
     suite: str
-    backend: str  # a variant, or "ckdtree"
+    backend: str  # a backend variant
     metric: str
     n_sites: int
     size: int
@@ -59,46 +63,47 @@ class TimingSpec:
     def key(self) -> str:
         return f"{self.backend}__{self.metric}__{self.size}__n{self.n_sites}__w{self.warmup}r{self.repeats}"
 
+    def describe(self) -> str:
+        return f"{self.backend} {self.metric} N={self.n_sites} {self.size}²"
 
-def time_lloyd(backend, metric_name: str, n_sites: int, size: int, warmup: int, repeats: int,
-               seed: int = 0) -> list[float]:
-    """Seconds of each timed Lloyd iteration (after ``warmup`` untimed ones)."""
-    from compact_distributions.cvt.lloyd import lloyd
+    def params(self) -> dict:
+        return {"backend": self.backend, "metric": self.metric, "n_sites": self.n_sites, "size": self.size,
+                "pixels": self.size * self.size, "warmup": self.warmup, "repeats": self.repeats,
+                "ms_median": np.nan, "ms_min": np.nan, "ms_max": np.nan, "device": ""}
 
-    problem = _problem(metric_name, n_sites, size, seed)
-    res = lloyd(problem, backend, warmup + repeats)
-    return [float(s) for s in res.seconds[warmup:]]
+    def execute(self, backend) -> dict:
+        from .outputs import machine, versions
 
-
-def time_ckdtree(metric_name: str, n_sites: int, size: int, warmup: int, repeats: int,
-                 seed: int = 0) -> list[float]:
-    """The same loop with :func:`bench.ckdtree_step.ckdtree_step` as the backend."""
-    from compact_distributions.cvt.seeding import initial_sites
-
-    from .ckdtree_step import ckdtree_step
-
-    problem = _problem(metric_name, n_sites, size, seed)
-    sites = initial_sites(problem)
-    out = []
-    for _ in range(warmup + repeats):
-        t0 = time.perf_counter()
-        sites = ckdtree_step(sites, size, size, metric_name).centroids(sites)
-        out.append(time.perf_counter() - t0)
-    return out[warmup:]
+        secs = time_lloyd(backend, self.metric, self.n_sites, self.size, self.warmup, self.repeats)
+        ms = np.asarray(secs) * 1000
+        row = {"key": self.key, **self.params(), "status": "ok", "reason": "", "ms_median": float(np.median(ms)),
+               "ms_min": float(ms.min()), "ms_max": float(ms.max()), "device": backend.device()}
+        return {"row": row, "seconds": secs, "spec": asdict(self), "machine": machine(), "versions": versions()}
 
 
-def _problem(metric_name: str, n_sites: int, size: int, seed: int):
+def timing_problem(metric_name: str, n_sites: int, size: int, seed: int = 0):
+    """Uniform random sites of ``seed`` on the whole ``size``² raster."""
     from compact_distributions.cvt.metrics import make_metric
     from compact_distributions.cvt.problem import Grid, Problem
 
     return Problem(Grid(size, size), n_sites, make_metric(metric_name), seed=seed)
 
 
+def time_lloyd(backend, metric_name: str, n_sites: int, size: int, warmup: int, repeats: int,
+               seed: int = 0) -> list[float]:
+    """Seconds of each timed Lloyd iteration (after ``warmup`` untimed ones)."""
+    from compact_distributions.cvt.lloyd import lloyd
+
+    res = lloyd(timing_problem(metric_name, n_sites, size, seed), backend, warmup + repeats)
+    return [float(s) for s in res.seconds[warmup:]]
+
+
 def sweep_specs(cfg: dict, variants: list[str], suite: str) -> list[TimingSpec]:
     specs = []
-    for b in variants + [CKDTREE]:
+    for b in variants:
+        computes = variant_metrics(b)
         for metric in cfg["metrics"]:
-            if b == CKDTREE and metric not in CKDTREE_METRICS:
+            if computes is not None and metric not in computes:
                 continue
             for size in cfg["sizes"]:
                 for n in cfg["sites"]:
@@ -106,84 +111,16 @@ def sweep_specs(cfg: dict, variants: list[str], suite: str) -> list[TimingSpec]:
     return specs
 
 
-def run_timings(specs: list[TimingSpec], out: Path | None, force: bool = False, quiet: bool = False,
-                unavailable: dict | None = None) -> list[dict]:
-    """Time every spec (one backend instance per variant, one alive at a time); raw json
-    per spec under ``out/raw/<suite>/`` when ``out`` is given (read back unless force)."""
-    from tqdm import tqdm
-
-    from compact_distributions.cvt.errors import BackendUnavailable
-
-    from .outputs import machine, versions
-    from .runner import BackendCache, read_stored, write_stored
-
-    unavailable = dict(unavailable or {})
-    cache = BackendCache()
-    rows = []
-    bar = tqdm(specs, desc="timings", unit="cfg", disable=quiet, file=sys.stderr, dynamic_ncols=True,
-               mininterval=0.5)
-    base = {"ms_median": np.nan, "ms_min": np.nan, "ms_max": np.nan, "device": ""}
-    try:
-        for spec in bar:
-            bar.set_postfix_str(f"{spec.backend} {spec.metric} N={spec.n_sites} {spec.size}²")
-            row = {"key": spec.key, "backend": spec.backend, "metric": spec.metric, "n_sites": spec.n_sites,
-                   "size": spec.size, "pixels": spec.size * spec.size, "warmup": spec.warmup,
-                   "repeats": spec.repeats, "status": "ok", "reason": ""}
-            path = Path(out) / "raw" / spec.suite / f"{spec.key}.json" if out is not None else None
-            if spec.backend in unavailable:
-                rows.append({**row, **base, "status": "skipped", "reason": unavailable[spec.backend]})
-                continue
-            stored = read_stored(path) if path is not None and not force else None
-            if stored is not None:
-                rows.append({**stored, "cached": True})
-                continue
-            try:
-                if spec.backend == CKDTREE:
-                    secs = time_ckdtree(spec.metric, spec.n_sites, spec.size, spec.warmup, spec.repeats)
-                    device = "CPU, scipy cKDTree (2 workers) + np.bincount"
-                else:
-                    backend = cache.get(spec.backend)
-                    secs = time_lloyd(backend, spec.metric, spec.n_sites, spec.size, spec.warmup, spec.repeats)
-                    device = backend.device()
-            except BackendUnavailable as exc:
-                unavailable[spec.backend] = str(exc)
-                rows.append({**row, **base, "status": "skipped", "reason": str(exc)})
-                continue
-            except (KeyboardInterrupt, MemoryError):
-                raise
-            except Exception as exc:
-                rows.append({**row, **base, "status": "failed", "reason": f"{type(exc).__name__}: {exc}"})
-                cache.close()
-                continue
-            ms = np.asarray(secs) * 1000
-            row.update(ms_median=float(np.median(ms)), ms_min=float(ms.min()), ms_max=float(ms.max()),
-                       device=device)
-            rows.append(row)
-            if path is not None:
-                write_stored(path, {"row": row, "seconds": secs, "spec": spec.__dict__,
-                                    "machine": machine(), "versions": versions()})
-    except KeyboardInterrupt:
-        print(f"\ninterrupted: finished configurations are stored under {Path(out or '.') / 'raw'}; "
-              "run the same command again to resume", file=sys.stderr)
-        raise
-    finally:
-        bar.close()
-        cache.close()
-    return rows
-
-
 def with_ratios(rows: list[dict]):
     """DataFrame of the rows with ``x_numpy`` = NumPy's median / this median, per
     (metric, N, size): measured in the same sweep, so never across machines."""
     import pandas as pd
 
-    from .runner import REFERENCE_BACKEND
-
     df = pd.DataFrame(rows)
     for c in COLUMNS:
         if c not in df:
             df[c] = np.nan
-    ref = df[(df["backend"] == REFERENCE_BACKEND) & (df["status"] == "ok")]
+    ref = df[(df["backend"] == REFERENCE) & (df["status"] == "ok")]
     ref = ref.set_index(["metric", "n_sites", "size"])["ms_median"]
     idx = list(zip(df["metric"], df["n_sites"], df["size"], strict=True))
     df["x_numpy"] = [float(ref.get(k, np.nan)) / m if m and m == m else np.nan
@@ -305,60 +242,54 @@ def rows_from_benchmark_json(path) -> list[dict]:
 def add_parser(sub):
     p = sub.add_parser("backends", help="ms per Lloyd iteration per backend, N, raster and metric",
                        description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
-    p.add_argument("--quick", action="store_true", help="small subset (N 1000/4000, 256²-1024², l2, linf, triangle)")
-    p.add_argument("--force", action="store_true", help="re-time configurations whose raw json exists")
-    p.add_argument("--out", default=None, help="report folder (default reports, or reports/quick with --quick)")
-    p.add_argument("--backends", default=None, help="comma list of backend variants (default: all available)")
-    p.add_argument("--metrics", default=None, help="comma list of metrics")
+    options.add_sweep_options(p, "small subset (N 1000/4000, 256²-1024², l2, linf, triangle)")
+    options.add_list_options(p, "backends", "metrics")
     p.add_argument("--sites", default=None, help="comma list of N")
     p.add_argument("--sizes", default=None, help="comma list of square raster sides")
     p.add_argument("--repeats", default=None, help="timed iterations per configuration")
     p.add_argument("--no-ckdtree", action="store_true", help="leave out the cKDTree reference row")
     p.add_argument("--from-benchmark-json", metavar="FILE", default=None,
                    help="build the report from a pytest-benchmark json instead of timing here")
-    p.add_argument("--quiet", action="store_true", help="no progress bar")
     p.set_defaults(func=run)
 
 
 def _int_list(text, what):
-    from .runner import parse_list, parse_positive_int
-
-    items = parse_list(text, None, what)
-    return None if items is None else [parse_positive_int(t, what) for t in items]
+    items = name_list(text, what)
+    return None if items is None else [whole_number(t, what, minimum=1) for t in items]
 
 
 def run(args) -> int:
     from .outputs import command_line
     from .report import provenance, write_csv, write_markdown
-    from .runner import VARIANTS, backend_variants, parse_list, parse_positive_int
+    from .sweep import run_sweep
 
     t0 = time.perf_counter()
     out = Path(args.out) if args.out else (Path("reports/quick") if args.quick else Path("reports"))
     cfg = dict(QUICK if args.quick else FULL)
-    cfg["metrics"] = parse_list(args.metrics, METRIC_NAMES, "metric") or cfg["metrics"]
+    cfg["metrics"] = name_list(args.metrics, "metric", METRIC_NAMES) or cfg["metrics"]
     cfg["sites"] = _int_list(args.sites, "--sites") or cfg["sites"]
     cfg["sizes"] = _int_list(args.sizes, "--sizes") or cfg["sizes"]
     if args.repeats is not None:
-        cfg["repeats"] = parse_positive_int(args.repeats, "--repeats")
-    variants = backend_variants()
-    known = list(dict.fromkeys(list(VARIANTS) + list(variants)))
-    chosen = parse_list(args.backends, known, "backend") or known
-    unavailable = {v: text for v, (ok, text) in variants.items() if not ok}
+        cfg["repeats"] = whole_number(args.repeats, "--repeats", minimum=1)
+    status = variant_status()
+    chosen = name_list(args.backends, "backend", variant_names()) or variant_names()
+    if args.no_ckdtree:
+        chosen = [b for b in chosen if b != "ckdtree"]
+    unavailable = {v: text for v, (ok, text) in status.items() if not ok}
     if args.from_benchmark_json:
         rows = rows_from_benchmark_json(args.from_benchmark_json)
     else:
         specs = sweep_specs(cfg, chosen, "backends-quick" if args.quick else "backends")
-        if args.no_ckdtree:
-            specs = [s for s in specs if s.backend != CKDTREE]
-        rows = run_timings(specs, out, force=args.force, quiet=args.quiet, unavailable=unavailable)
+        rows = run_sweep(specs, out, force=args.force, quiet=args.quiet, unavailable=unavailable)
     df = with_ratios(rows)
     elapsed = time.perf_counter() - t0
     cached = sum(1 for r in rows if r.get("cached"))
     cmd = command_line(getattr(args, "argv", None) or ["backends"] + (["--quick"] if args.quick else []))
     md = render_markdown(df, provenance(), cmd, args.quick, cfg, elapsed, cached)
-    out.mkdir(parents=True, exist_ok=True)
-    render_plot(df, out / "backends.png")
+    written = ["backends.md", "backends.csv"]
+    if render_plot(df, out / "backends.png"):
+        written.append("backends.png")
     write_csv(out / "backends.csv", df)
     write_markdown(out / "backends.md", md)
-    print(f"wrote {out}/backends.md, backends.csv, backends.png ({elapsed:.0f} s)", file=sys.stderr)
+    print(f"wrote {out}/{', '.join(written)} ({elapsed:.0f} s)", file=sys.stderr)
     return 0

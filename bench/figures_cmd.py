@@ -6,10 +6,12 @@ fig14_elements.png  squares, rectangles, ellipses, triangles, elements of varyin
                     (paper Figure 14 a-f), each panel captioned with its coverage
 fig15_regions.png   elements in regions that are not rectangles: a star and a ring
                     (paper Figure 15)
+fig18_*.png, fig19_*.png  mosaics of the sample pictures without and with the direction
+                    field (Figure 18) and the density (Figure 19)
 
 Every panel is a real run of the suite: Lloyd relaxation (ours, 20 iterations, ~400
 sites by default) on the chosen backend, the elements placed by cvt.placement and the
-coverage measured by bench/evaluate.py.  Seeds are fixed, so the pictures are
+coverage measured by cvt/evaluate.py.  Seeds are fixed, so the pictures are
 reproducible.  Files are written atomically (temporary file, then a rename).
 """
 
@@ -18,9 +20,7 @@ from __future__ import annotations
 import argparse
 import io
 import math
-import os
 import sys
-import tempfile
 import time
 from dataclasses import dataclass
 from pathlib import Path
@@ -32,6 +32,8 @@ from compact_distributions.cvt.fields import DensityMap, DirectionField
 from compact_distributions.cvt.metrics import make_metric
 from compact_distributions.cvt.problem import Grid, Problem
 
+from . import options
+
 DEFAULT_OUT = "reports/figures"
 
 
@@ -41,20 +43,20 @@ class Settings:
     sites: int
     iterations: int
     scale: float  # drawing scale of a panel
+    fewer_mosaic_elements: int = 1  # divides the elements of the mosaic figures
 
 
 FULL = Settings(size=256, sites=400, iterations=20, scale=1.5)
-QUICK = Settings(size=96, sites=60, iterations=4, scale=1.0)
+QUICK = Settings(size=96, sites=60, iterations=4, scale=1.0, fewer_mosaic_elements=8)
 
 
 def add_parser(sub):
     p = sub.add_parser("figures", help="regenerate the figures (paper Figures 3, 14, 15) as PNG",
                        description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
-    p.add_argument("--out", default=DEFAULT_OUT, help=f"output folder (default {DEFAULT_OUT})")
     p.add_argument("--quick", action="store_true",
                    help="small rasters, few sites and iterations (a smoke test, seconds)")
-    p.add_argument("--backend", default="numpy", help="numpy (default), opencl or gl")
-    p.add_argument("--quiet", action="store_true", help="no progress output")
+    options.add_backend_options(p)
+    options.add_output_options(p, DEFAULT_OUT)
     p.set_defaults(func=run)
 
 
@@ -84,7 +86,7 @@ def ring_mask(size: int) -> np.ndarray:
     return (r < 0.48 * size) & (r > 0.18 * size)
 
 
-def _problem(st: Settings, metric: str, *, density=None, field=None, mask=None, seed=1) -> Problem:
+def panel_problem(st: Settings, metric: str, *, density=None, field=None, mask=None, seed=1) -> Problem:
     grid = Grid(st.size, st.size, mask)
     n = st.sites if mask is None else max(1, round(st.sites * grid.pixel_count / st.size ** 2))
     fld = None if field is None else DirectionField.named(field, st.size, st.size)
@@ -140,49 +142,34 @@ def png_bytes(img, colours: int = 128) -> bytes:
     return buf.getvalue()
 
 
-def atomic_write_bytes(path: Path, data: bytes) -> None:
-    path.parent.mkdir(parents=True, exist_ok=True)
-    fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", dir=path.parent)
-    try:
-        with os.fdopen(fd, "wb") as fh:
-            fh.write(data)
-        umask = os.umask(0)
-        os.umask(umask)
-        os.chmod(tmp, 0o666 & ~umask)  # mkstemp makes 0600; a picture is for everyone
-        os.replace(tmp, path)
-    except BaseException:
-        Path(tmp).unlink(missing_ok=True)
-        raise
-
-
 # ------------------------------------------------------------------ figures
 def _elements_panel(problem: Problem, backend, st: Settings, element=None):
     """Run ours, place the elements, return (picture, coverage, the distribution)."""
-    from .evaluate import evaluate, region_polygon
-    from .methods import run_ours
-    from .svg import elements_png
+    from compact_distributions.cvt.evaluate import evaluate, region_polygon
+    from compact_distributions.cvt.methods import run_ours
+    from compact_distributions.cvt.render import PAPER, draw_elements
 
-    dist = run_ours(problem, backend, st.iterations, element=element)
+    dist = run_ours(problem, backend, iterations=st.iterations, element=element)
     g = problem.grid
     ev = evaluate(dist.elements, g, region=region_polygon(g), labels=dist.labels)
-    img = elements_png(dist.elements, g.width, g.height, region_mask=g.mask, scale=st.scale,
-                       supersample=2)
+    img = draw_elements(dist.elements, g.width, g.height, region_colour=PAPER, region_mask=g.mask,
+                        scale=st.scale, supersample=2)
     return img, ev, dist
 
 
 def figure_metrics(backend, st: Settings):
     from PIL import Image
 
-    from .methods import run_ours
-    from .outputs import cells_image
+    from compact_distributions.cvt.methods import run_ours
+    from compact_distributions.cvt.render import cells_image
 
     names = [("l2", "(a) L2"), ("l1", "(b) L1 (Manhattan)"), ("linf", "(c) L∞ (Chebyshev)"),
              ("linf-axial", "(d) L∞, axial β=0.5"), ("l2-axial", "(e) L2, axial β=0.5"),
              ("triangle", "(f) triangle (equidistant line)")]
     panels, caps = [], []
     for metric, cap in names:
-        problem = _problem(st, metric)
-        dist = run_ours(problem, backend, st.iterations)
+        problem = panel_problem(st, metric)
+        dist = run_ours(problem, backend, iterations=st.iterations)
         side = round(st.size * st.scale)
         panels.append(cells_image(dist.labels, len(dist.sites), dist.sites).resize((side, side), Image.NEAREST))
         caps.append(cap)
@@ -193,12 +180,12 @@ def figure_metrics(backend, st: Settings):
 
 def figure_elements(backend, st: Settings):
     runs = [
-        ("(a) squares", _problem(st, "linf"), None),
-        ("(b) rectangles β=0.5", _problem(st, "linf-axial"), None),
-        ("(c) ellipses β=0.5", _problem(st, "l2-axial"), None),
-        ("(d) triangles", _problem(st, "triangle"), None),
-        ("(e) sizes: radial density", _problem(st, "linf", density=radial_density(st.size)), None),
-        ("(f) directions: circular field", _problem(st, "linf-axial", field="circular"), None),
+        ("(a) squares", panel_problem(st, "linf"), None),
+        ("(b) rectangles β=0.5", panel_problem(st, "linf-axial"), None),
+        ("(c) ellipses β=0.5", panel_problem(st, "l2-axial"), None),
+        ("(d) triangles", panel_problem(st, "triangle"), None),
+        ("(e) sizes: radial density", panel_problem(st, "linf", density=radial_density(st.size)), None),
+        ("(f) directions: circular field", panel_problem(st, "linf-axial", field="circular"), None),
     ]
     panels, caps = [], []
     for cap, problem, element in runs:
@@ -211,11 +198,11 @@ def figure_elements(backend, st: Settings):
 
 def figure_regions(backend, st: Settings):
     runs = [
-        ("(a) squares in a star", _problem(st, "linf", mask=star_mask(st.size))),
+        ("(a) squares in a star", panel_problem(st, "linf", mask=star_mask(st.size))),
         ("(b) ellipses in a ring, circular field",
-         _problem(st, "l2-axial", mask=ring_mask(st.size), field="circular")),
+         panel_problem(st, "l2-axial", mask=ring_mask(st.size), field="circular")),
         ("(c) triangles in a star, radial field",
-         _problem(st, "triangle", mask=star_mask(st.size), field="radial")),
+         panel_problem(st, "triangle", mask=star_mask(st.size), field="radial")),
     ]
     panels, caps = [], []
     for cap, problem in runs:
@@ -233,21 +220,21 @@ FIGURES = {
 
 
 def run(args) -> int:
-    from compact_distributions.backends import create_backend
+    from .mosaic_cmd import write_paper_figures
+    from .outputs import atomic_write
 
     st = QUICK if args.quick else FULL
     out = Path(args.out)
     if out.exists() and not out.is_dir():
         raise InputError(f"--out {args.out} exists and is not a folder")
-    backend = create_backend(args.backend)
-    try:
+    with options.open_backend(args) as backend:
         for name, make in FIGURES.items():
             t0 = time.perf_counter()
             data = png_bytes(make(backend, st))
-            atomic_write_bytes(out / name, data)
+            atomic_write(out / name, data)
             if not args.quiet:
                 print(f"wrote {out / name} ({len(data) // 1024} KB, {time.perf_counter() - t0:.1f} s)",
                       file=sys.stderr)
-    finally:
-        backend.close()
+        write_paper_figures(out, backend, iterations=st.iterations, fewer=st.fewer_mosaic_elements,
+                            quiet=args.quiet)
     return 0

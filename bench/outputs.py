@@ -60,19 +60,31 @@ def _umask() -> int:
     return mask
 
 
-def atomic_write_text(path, text: str) -> None:
-    """Write a file via a temporary sibling and a rename."""
+@contextmanager
+def atomic_path(path):
+    """Yield a temporary path beside ``path`` to write to; on success rename it over
+    ``path`` (readable by everyone, as a report should be), on any error remove it: the
+    one way the suite writes a file, so none is ever half-written."""
     path = Path(path)
     path.parent.mkdir(parents=True, exist_ok=True)
-    fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", dir=path.parent)
+    fd, tmp = tempfile.mkstemp(prefix=f".{path.stem}.", suffix=path.suffix, dir=path.parent)
+    os.close(fd)
     try:
-        with os.fdopen(fd, "w") as fh:
-            fh.write(text)
-        os.chmod(tmp, 0o666 & ~_umask())  # mkstemp makes 0600; a report is for everyone
+        yield Path(tmp)
+        os.chmod(tmp, 0o666 & ~_umask())  # mkstemp makes 0600
         os.replace(tmp, path)
     except BaseException:
         Path(tmp).unlink(missing_ok=True)
         raise
+
+
+def atomic_write(path, data: str | bytes) -> None:
+    """Write text or bytes to ``path`` atomically (:func:`atomic_path`)."""
+    with atomic_path(path) as tmp:
+        if isinstance(data, bytes):
+            tmp.write_bytes(data)
+        else:
+            tmp.write_text(data)
 
 
 def to_jsonable(obj):
@@ -105,35 +117,6 @@ def write_sites_csv(path, sites, angles, scales) -> None:
     for (x, y), a, s in zip(sites, angles, scales, strict=True):
         lines.append(f"{x:.6f},{y:.6f},{np.degrees(a):.6f},{s:.6f}")
     Path(path).write_text("\n".join(lines) + "\n")
-
-
-def label_colours(n: int, seed: int = 12345) -> np.ndarray:
-    """(n + 1, 3) uint8: distinct, well-spread colours per label; the last one (for -1,
-    outside the region) is black."""
-    rng = np.random.default_rng(seed)
-    hue = (np.arange(n) * 0.618033988749895) % 1.0
-    sat = 0.45 + 0.35 * rng.random(n)
-    val = 0.70 + 0.30 * rng.random(n)
-    import matplotlib.colors as mcolors
-
-    rgb = mcolors.hsv_to_rgb(np.stack([hue, sat, val], axis=1))
-    out = np.zeros((n + 1, 3), dtype=np.uint8)
-    out[:n] = np.round(rgb * 255).astype(np.uint8)
-    return out
-
-
-def cells_image(labels: np.ndarray, n_sites: int, sites=None):
-    """The cells in distinct colours (PIL image); sites drawn as dark dots if given."""
-    from PIL import Image
-
-    pal = label_colours(n_sites)
-    rgb = pal[np.where(labels >= 0, labels, n_sites)]
-    if sites is not None:
-        h, w = labels.shape
-        j = np.clip(np.floor(sites[:, 0]).astype(int), 0, w - 1)
-        i = np.clip(np.floor(sites[:, 1]).astype(int), 0, h - 1)
-        rgb[i, j] = (20, 20, 20)
-    return Image.fromarray(rgb, mode="RGB")
 
 
 def command_line(argv=None) -> str:

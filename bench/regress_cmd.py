@@ -36,7 +36,14 @@ from pathlib import Path
 
 import numpy as np
 
+from compact_distributions.backends import REFERENCE as REFERENCE_BACKEND
+from compact_distributions.backends import variant_metrics
 from compact_distributions.cvt.errors import InputError
+from compact_distributions.cvt.validate import name_list
+
+from . import options
+
+CKDTREE = "ckdtree"  # the common CPU tool NumPy is timed against
 
 BASELINE_FILE = Path(__file__).with_name("regress_baseline.json")
 COVERAGE_DROP_PP = 0.5  # percentage points
@@ -109,7 +116,7 @@ def merge(baseline: dict, current: dict) -> dict:
 
 
 def coverage_specs(cfg: dict, methods: list[str], backends: list[str]):
-    from .runner import REFERENCE_BACKEND, RunSpec
+    from .runs import RunSpec
 
     specs = []
     for element in cfg["elements"]:
@@ -133,7 +140,7 @@ def speed_key(backend: str, reference: str, metric: str, n: int, size: int) -> s
 
 
 def measure_coverage(cfg, methods, backends, unavailable, quiet) -> tuple[dict, dict, list[str]]:
-    from .runner import run_sweep
+    from .sweep import run_sweep
 
     specs = coverage_specs(cfg, methods, backends)
     rows = run_sweep(specs, out=".", store=False, quiet=quiet, unavailable=dict(unavailable))
@@ -155,29 +162,22 @@ def measure_coverage(cfg, methods, backends, unavailable, quiet) -> tuple[dict, 
     return cov, skipped, failed
 
 
-def lloyd_stepper(backend_or_ckdtree, metric: str, n: int, size: int, cache):
-    """A function that runs one Lloyd iteration (from its own evolving sites) and returns
-    its seconds; the cKDTree step when ``backend_or_ckdtree`` is "ckdtree"."""
+def lloyd_stepper(variant: str, metric: str, n: int, size: int, cache):
+    """A function that runs one Lloyd iteration of ``variant`` (from its own evolving
+    sites) and returns its seconds."""
     from compact_distributions.cvt.seeding import initial_sites
 
-    from .backends_cmd import CKDTREE, _problem
-    from .ckdtree_step import ckdtree_step
+    from .backends_cmd import timing_problem
 
-    problem = _problem(metric, n, size, 0)
+    problem = timing_problem(metric, n, size, 0)
     state = {"sites": initial_sites(problem)}
-    if backend_or_ckdtree == CKDTREE:
-        def step() -> float:
-            t0 = time.perf_counter()
-            state["sites"] = ckdtree_step(state["sites"], size, size, metric).centroids(state["sites"])
-            return time.perf_counter() - t0
-        return step
-    backend = cache.get(backend_or_ckdtree)
+    backend = cache.get(variant)
 
     def step() -> float:
         t0 = time.perf_counter()
         sites = state["sites"]
-        mom = backend.moments(sites, problem.scales_at(sites), problem.angles_at(sites), problem.metric,
-                              problem.grid)
+        mom = backend.moments(sites, angles=problem.angles_at(sites), scales=problem.scales_at(sites),
+                              metric=problem.metric, grid=problem.grid)
         state["sites"] = mom.centroids(sites)
         return time.perf_counter() - t0
     return step
@@ -188,13 +188,11 @@ def measure_speed_pair(backend: str, reference: str, metric: str, n: int, size: 
     """Ratio of ``backend``'s time to ``reference``'s on the same problem, their Lloyd
     iterations interleaved (ref, backend, ref, backend, ...) so that a neighbour's load
     hits both alike, each the fastest of its timed iterations (the least disturbed one)."""
-    from .backends_cmd import CKDTREE
+    from .sweep import BackendCache
 
     # the reference's backend instance is made first and kept only while it is timed:
     # BackendCache holds one backend at a time, so the pair gets two caches
-    from .runner import BackendCache
-
-    ref_cache = BackendCache() if reference != CKDTREE else None
+    ref_cache = BackendCache()
     try:
         ref_step = lloyd_stepper(reference, metric, n, size, ref_cache)
         b_step = lloyd_stepper(backend, metric, n, size, cache)
@@ -205,24 +203,21 @@ def measure_speed_pair(backend: str, reference: str, metric: str, n: int, size: 
             ref_s.append(ref_step())
             b_s.append(b_step())
     finally:
-        if ref_cache is not None:
-            ref_cache.close()
+        ref_cache.close()
     b_ms, ref_ms = 1000 * min(b_s), 1000 * min(ref_s)
     return {"ratio": b_ms / ref_ms, "ms": round(b_ms, 3), "reference_ms": round(ref_ms, 3)}
 
 
 def speed_pairs(cfg: dict, backends: list[str]):
     """(backend, reference, metric): each variant against NumPy, NumPy against cKDTree."""
-    from .backends_cmd import CKDTREE, CKDTREE_METRICS
-    from .runner import REFERENCE_BACKEND
-
     sp = cfg["speed"]
     pairs = []
     for metric in sp["metrics"]:
-        if REFERENCE_BACKEND in backends and metric in CKDTREE_METRICS:
+        if REFERENCE_BACKEND in backends and metric in (variant_metrics(CKDTREE) or ()):
             pairs.append((REFERENCE_BACKEND, CKDTREE, metric))
         for b in backends:
-            if b != REFERENCE_BACKEND:
+            computes = variant_metrics(b)
+            if b not in (REFERENCE_BACKEND, CKDTREE) and (computes is None or metric in computes):
                 pairs.append((b, REFERENCE_BACKEND, metric))
     return pairs
 
@@ -232,7 +227,7 @@ def measure_speed(cfg, backends, unavailable, baseline_speed: dict, quiet) -> tu
     better of the two kept (a noisy neighbour must not fail CI)."""
     from tqdm import tqdm
 
-    from .runner import BackendCache
+    from .sweep import BackendCache
 
     sp = cfg["speed"]
     n, size = sp["n_sites"], sp["size"]
@@ -283,8 +278,7 @@ def add_parser(sub):
     p.add_argument("--quick", action="store_true", help="the CI set (well under a minute)")
     p.add_argument("--update", action="store_true", help="write the current figures into the baseline file")
     p.add_argument("--baseline", default=None, help=f"baseline file (default {BASELINE_FILE})")
-    p.add_argument("--methods", default=None, help="comma list of methods (default all)")
-    p.add_argument("--backends", default=None, help="comma list of backend variants (default all available)")
+    options.add_list_options(p, "methods", "backends")
     p.add_argument("--no-speed", action="store_true", help="check coverage only")
     p.add_argument("--no-coverage", action="store_true", help="check speed only")
     p.add_argument("--quiet", action="store_true", help="no progress bars")
@@ -292,11 +286,11 @@ def add_parser(sub):
 
 
 def run(args) -> int:
-    from compact_distributions.bench.methods import method_names
+    from compact_distributions.baselines import method_names
 
-    from .outputs import atomic_write_text, dumps
+    from .outputs import atomic_write, dumps
     from .report import provenance
-    from .runner import VARIANTS, backend_variants, parse_list
+    from .table2 import sweep_backends
 
     t0 = time.perf_counter()
     mode = "quick" if args.quick else "full"
@@ -309,11 +303,8 @@ def run(args) -> int:
                          f"{'--quick ' if args.quick else ''}--update`")
     baseline = baseline or {}
     all_methods = method_names()
-    methods = parse_list(args.methods, all_methods, "method") or all_methods
-    variants = backend_variants()
-    known = list(dict.fromkeys(list(VARIANTS) + list(variants)))
-    backends = parse_list(args.backends, known, "backend") or [v for v in known if v in variants]
-    unavailable = {v: text for v, (ok, text) in variants.items() if not ok}
+    methods = name_list(args.methods, "method", all_methods) or all_methods
+    backends, unavailable = sweep_backends(args.backends)
 
     current: dict = {"coverage": {}, "speed": {}, "unavailable": {}}
     run_failures: list[str] = []
@@ -351,7 +342,7 @@ def run(args) -> int:
         merged["provenance"] = provenance()
         baseline_all[mode] = merged
         baseline_all["tolerances"] = {"coverage_drop_pp": COVERAGE_DROP_PP, "slowdown": SLOWDOWN}
-        atomic_write_text(path, dumps(baseline_all))
+        atomic_write(path, dumps(baseline_all))
         print(f"updated {path} ({mode}; {len(current['coverage'])} coverage and {len(current['speed'])} "
               f"speed entries; {elapsed:.0f} s)")
         return 1 if run_failures else 0

@@ -13,7 +13,7 @@ import datetime as _dt
 import subprocess
 from pathlib import Path
 
-from .outputs import atomic_write_text, machine, versions
+from .outputs import atomic_path, atomic_write, machine, versions
 
 
 def git_commit(cwd=None) -> str:
@@ -79,28 +79,17 @@ def markdown_table(columns: list[str], rows: list[list]) -> str:
 def write_csv(path, frame, prov: dict | None = None) -> None:
     """The frame as csv; provenance goes to the markdown and json, not into the csv, so
     the csv stays loadable by any reader."""
-    atomic_write_text(path, frame.to_csv(index=False, float_format="%.6g"))
+    atomic_write(path, frame.to_csv(index=False, float_format="%.6g"))
 
 
 def write_markdown(path, text: str) -> None:
-    atomic_write_text(path, text if text.endswith("\n") else text + "\n")
+    atomic_write(path, text if text.endswith("\n") else text + "\n")
 
 
 def save_figure(fig, path) -> None:
-    """Save a matplotlib figure atomically (to a temp sibling, then rename)."""
-    import os
-    import tempfile
-
-    path = Path(path)
-    path.parent.mkdir(parents=True, exist_ok=True)
-    fd, tmp = tempfile.mkstemp(prefix=f".{path.stem}.", suffix=path.suffix, dir=path.parent)
-    os.close(fd)
-    try:
+    """Save a matplotlib figure atomically."""
+    with atomic_path(path) as tmp:
         fig.savefig(tmp, dpi=fig.dpi)
-        os.replace(tmp, path)
-    except BaseException:
-        Path(tmp).unlink(missing_ok=True)
-        raise
 
 
 def fmt_pct(mean, sd=None, digits: int = 1) -> str:

@@ -1,8 +1,7 @@
 """`cvtbench reproduce`: every table and figure of the suite, in one command.
 
-Runs, in order, `cvtbench table2`, `cvtbench backends`, `cvtbench figures` and the
-mosaic Figures 18-19 (`python -m bench.mosaic_cmd`), each into the same
-report folder, then writes ``OUT/reproduce.md``: what ran, how long each part took, and
+Runs, in order, `cvtbench table2`, `cvtbench backends` and `cvtbench figures` (which
+includes the mosaic Figures 18-19), each into the same report folder, then writes ``OUT/reproduce.md``: what ran, how long each part took, and
 the machine, devices, versions and commit.  ``--quick`` runs the quick form of each
 (under 5 minutes on 2 cores) into ``reports/quick``; the full form writes ``reports``.
 Like its parts it resumes: runs whose raw json exists are read back unless --force.
@@ -12,20 +11,18 @@ from __future__ import annotations
 
 import argparse
 import importlib
-import importlib.util
 import sys
 import time
 from pathlib import Path
+
+from . import options
 
 
 def add_parser(sub):
     p = sub.add_parser("reproduce", help="table2 + backends + figures into reports/",
                        description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
-    p.add_argument("--quick", action="store_true", help="the quick form of every part (< 5 min on 2 cores)")
-    p.add_argument("--force", action="store_true", help="re-run runs whose raw json exists")
-    p.add_argument("--out", default=None, help="report folder (default reports, or reports/quick with --quick)")
-    p.add_argument("--seeds", default=None, help="seeds for table2 (default 5; quick 2)")
-    p.add_argument("--quiet", action="store_true", help="no progress bars")
+    options.add_sweep_options(p, "the quick form of every part (< 5 min on 2 cores)")
+    options.add_seeds_option(p, "table2's: default 5; quick 2")
     p.set_defaults(func=run)
 
 
@@ -67,31 +64,21 @@ def run(args) -> int:
         ("table2", "compact_distributions.bench.table2", ["table2", "--out", str(out)] + common
          + (["--seeds", str(args.seeds)] if args.seeds else [])),
         ("backends", "compact_distributions.bench.backends_cmd", ["backends", "--out", str(out)] + common),
-        ("figures", "compact_distributions.bench.figures_cmd", ["figures", "--out", str(out / "figures")] + common),
-        ("mosaic figures", "compact_distributions.bench.mosaic_cmd", None),
+        ("figures", "compact_distributions.bench.figures_cmd",
+         ["figures", "--out", str(out / "figures")] + [a for a in common if a != "--force"]),
     ]
+    # every part's options are checked before the first one starts
+    options.seeds_value(args.seeds, 1)
+    parsed = [(name, _sub_args(module, argv)) for name, module, argv in parts]
     results = []
     t_all = time.perf_counter()
     status = 0
-    for name, module, argv in parts:
-        if importlib.util.find_spec(module) is None:
-            results.append((name, "skipped", 0.0, f"{module.replace('.', '/')}.py does not exist yet"))
-            print(f"reproduce: {name} skipped ({module} does not exist)", file=sys.stderr)
-            continue
+    for name, sub_args in parsed:
         print(f"reproduce: {name} ...", file=sys.stderr)
         t0 = time.perf_counter()
         try:
-            if argv is None:  # paper Figures 18-19 from the sample pictures
-                from .mosaic_cmd import write_paper_figures
-
-                iterations = 5 if args.quick else 20
-                write_paper_figures(out / "figures", iterations=iterations)
-                rc, note = 0, f"`python -m bench.mosaic_cmd {out / 'figures'}` ({iterations} iterations)"
-            else:
-                sub_args = _sub_args(module, argv)
-                rc = int(sub_args.func(sub_args) or 0)
-                note = "" if rc == 0 else f"exit status {rc}"
-                note = note or "`" + command_line(sub_args.argv) + "`"
+            rc = int(sub_args.func(sub_args) or 0)
+            note = f"exit status {rc}" if rc else "`" + command_line(sub_args.argv) + "`"
         except KeyboardInterrupt:
             raise
         except Exception as exc:  # one broken part must not hide the others' results

@@ -13,7 +13,7 @@ The problem set (also written into the report):
   ball is that shape; variants of ours (``ours-fit``: the same cells, each element moved
   inside its cell to grow it) on every shape on the reference backend.
 
-Coverage and overlap are those of :func:`bench.evaluate.evaluate`; time is the method's
+Coverage and overlap are those of :func:`compact_distributions.cvt.evaluate.evaluate`; time is the method's
 own wall time (``Distribution.total_seconds``: the 20 iterations, setup and element
 placement excluded, as the paper's "average time" of its synthesis).  The paper's
 figures stand beside ours on the square rows; the paper gives neither N nor its raster.
@@ -31,7 +31,15 @@ from pathlib import Path
 
 import numpy as np
 
-from .runner import ELEMENT_METRIC, REFERENCE_BACKEND, RunSpec
+from compact_distributions.backends import REFERENCE as REFERENCE_BACKEND
+from compact_distributions.backends import variant_metrics, variant_names, variant_status
+from compact_distributions.baselines import FIXED_SIZE as FIXED_SIZE_BASELINES
+from compact_distributions.baselines import method_names
+from compact_distributions.cvt.shapes import ELEMENT_SHAPES
+from compact_distributions.cvt.validate import name_list
+
+from . import options
+from .runs import RunSpec
 
 # the paper's Table 2 (coverage, time), by our method names
 PAPER = {
@@ -41,14 +49,11 @@ PAPER = {
     "ours": (0.856, "19 s"),
     "ours-fit": (0.856, "19 s"),  # ours with the element moved inside its cell (paper §3.4)
 }
-PAPER_NAMES = {"fritzsche2005": "Fritzsche L. P.", "smith2005": "K. Smith", "hu2016": "Hu W.",
-               "ours": "Author (Chen et al.)"}
-ELEMENTS = ["square", "rectangle", "ellipse", "triangle", "circle"]
+ELEMENTS = list(ELEMENT_SHAPES)
 
 # Fixed-size tile baselines also run with smaller tile budgets: their coverage at the
 # default δ = 0.95 is bought with overlap, and the paper states neither its tile sizes
 # nor how it counts overlap, so the report shows where they stand when tiles barely overlap.
-FIXED_SIZE_BASELINES = ("hausner2001", "fritzsche2005", "smith2005")
 SMALLER_BUDGETS = (0.85, 0.80)
 
 FULL = {"size": 1024, "n_sites": 4000, "iterations": 20, "seeds": 5}
@@ -195,7 +200,7 @@ def render_markdown(table, prov: dict, command: str, quick: bool, cfg: dict, see
         + " and ".join(f"{d:g}" for d in SMALLER_BUDGETS) + " (rows 'δ=...')",
         "ours runs on every available backend; ours-fit and the baselines run on the NumPy reference "
         "backend",
-        "coverage and overlap: bench.evaluate (area of the union of the elements inside the region / "
+        "coverage and overlap: cvt.evaluate (area of the union of the elements inside the region / "
         "area of the region; overlap: summed element area minus union area, / region area)",
         "time: the method's wall time for its iterations (setup and element placement excluded), "
         "mean over seeds; ms/it: median per iteration",
@@ -243,7 +248,8 @@ def render_picture(table, out: Path, suite_specs: list[RunSpec], path: Path) -> 
     from PIL import Image
 
     from .report import save_figure
-    from .runner import picture_crop, picture_path
+    from .runs import picture_crop
+    from .sweep import picture_path
 
     cov = {(r["method"], r["backend"], r["element"]): r["coverage_mean"] for _, r in table.iterrows()}
     panels = []
@@ -277,22 +283,12 @@ def render_picture(table, out: Path, suite_specs: list[RunSpec], path: Path) -> 
     return True
 
 
-def add_arguments(p: argparse.ArgumentParser) -> None:
-    p.add_argument("--quick", action="store_true", help="small version (256² px, N=250, 2 seeds): < 2 min")
-    p.add_argument("--seeds", default=None, help="seeds 0..K-1 (default 5; quick 2)")
-    p.add_argument("--force", action="store_true", help="re-run runs whose raw json exists")
-    p.add_argument("--out", default=None, help="report folder (default reports, or reports/quick with --quick)")
-    p.add_argument("--methods", default=None, help="comma list of methods (default: all registered)")
-    p.add_argument("--backends", default=None, help="comma list of backend variants for ours "
-                   "(default: numpy, opencl, gl-cone, gl-exact and any other registered)")
-    p.add_argument("--elements", default=None, help=f"comma list of element shapes (default all: {', '.join(ELEMENTS)})")
-    p.add_argument("--quiet", action="store_true", help="no progress bar")
-
-
 def add_parser(sub):
     p = sub.add_parser("table2", help="regenerate the paper's Table 2 into reports/",
                        description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
-    add_arguments(p)
+    options.add_sweep_options(p, "small version (256² px, N=250, 2 seeds): < 2 min")
+    options.add_seeds_option(p)
+    options.add_list_options(p, "methods", "backends", "shapes")
     p.set_defaults(func=run)
 
 
@@ -300,27 +296,31 @@ def default_out(args) -> Path:
     return Path(args.out) if args.out else (Path("reports/quick") if args.quick else Path("reports"))
 
 
-def run(args) -> int:
-    from compact_distributions.bench.methods import method_names
+def sweep_backends(text) -> tuple[list[str], dict[str, str]]:
+    """The variants ``--backends`` names (default: every variant that computes every
+    metric) and the reasons of those that cannot run here."""
+    status = variant_status()
+    default = [v for v in variant_names() if variant_metrics(v) is None]
+    backends = name_list(text, "backend", variant_names()) or default
+    return backends, {v: text for v, (ok, text) in status.items() if not ok}
 
+
+def run(args) -> int:
     from .outputs import command_line
     from .report import provenance, write_csv, write_markdown
-    from .runner import VARIANTS, backend_variants, parse_list, parse_positive_int, run_sweep
+    from .sweep import run_sweep
 
     t0 = time.perf_counter()
     out = default_out(args)
     cfg = QUICK if args.quick else FULL
-    seeds = cfg["seeds"] if args.seeds is None else parse_positive_int(args.seeds, "--seeds")
+    seeds = options.seeds_value(args.seeds, cfg["seeds"])
     all_methods = method_names()
-    methods = parse_list(args.methods, all_methods, "method") or all_methods
+    methods = name_list(args.methods, "method", all_methods) or all_methods
     if "ours" in methods:  # ours first, then the baselines in the paper's order
         methods = ["ours"] + [m for m in methods if m != "ours"]
-    variants = backend_variants()
-    known = list(dict.fromkeys(list(VARIANTS) + list(variants)))
-    backends = parse_list(args.backends, known, "backend") or [v for v in known if v in variants]
-    elements = parse_list(args.elements, ELEMENTS, "element")
-    unavailable = {v: text for v, (ok, text) in variants.items() if not ok}
-    specs = problem_set(args.quick, seeds, methods, backends, elements)
+    backends, unavailable = sweep_backends(args.backends)
+    shapes = name_list(args.shapes, "shape", ELEMENTS)
+    specs = problem_set(args.quick, seeds, methods, backends, shapes)
     rows = run_sweep(specs, out, force=args.force, quiet=args.quiet, unavailable=unavailable)
     table = aggregate(rows)
     elapsed = time.perf_counter() - t0
@@ -328,15 +328,16 @@ def run(args) -> int:
     prov = provenance()
     cmd = command_line(getattr(args, "argv", None) or ["table2"] + (["--quick"] if args.quick else []))
     md = render_markdown(table, prov, cmd, args.quick, cfg, seeds, elapsed, cached, len(rows))
-    out.mkdir(parents=True, exist_ok=True)
-    render_picture(table, out, specs, out / "table2.png")
+    written = ["table2.md", "table2.csv"]
+    if render_picture(table, out, specs, out / "table2.png"):
+        written.append("table2.png")
     write_csv(out / "table2.csv", table)
     write_markdown(out / "table2.md", md)
-    _print_summary(table, out)
+    _print_summary(table, out, written)
     return 0
 
 
-def _print_summary(table, out: Path) -> None:
+def _print_summary(table, out: Path, written: list[str]) -> None:
     from .report import fmt_pct, fmt_seconds
 
     for _, r in table.iterrows():
@@ -347,7 +348,7 @@ def _print_summary(table, out: Path) -> None:
         else:
             print(f"{r['method']:<14} {r['backend']:<9} {r['element']:<9} {r['status']}: {r['reason']}",
                   file=sys.stderr)
-    print(f"wrote {out}/table2.md, table2.csv, table2.png", file=sys.stderr)
+    print(f"wrote {out}/{', '.join(written)}", file=sys.stderr)
 
 
-__all__ = ["problem_set", "aggregate", "PAPER", "ELEMENT_METRIC", "run"]
+__all__ = ["problem_set", "aggregate", "PAPER", "run"]

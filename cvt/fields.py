@@ -25,15 +25,15 @@ from dataclasses import dataclass
 import numpy as np
 
 from .errors import InputError
+from .problem import pixel_index
 
 DENSITY_FLOOR = 0.01
 
 
-def _sample(img: np.ndarray, sites: np.ndarray) -> np.ndarray:
+def sample_at(img: np.ndarray, points: np.ndarray) -> np.ndarray:
+    """The value of the pixel that contains each point."""
     h, w = img.shape
-    j = np.clip(np.floor(sites[:, 0]).astype(np.int64), 0, w - 1)
-    i = np.clip(np.floor(sites[:, 1]).astype(np.int64), 0, h - 1)
-    return img[i, j]
+    return img[pixel_index(points, w, h)]
 
 
 @dataclass
@@ -58,7 +58,7 @@ class DensityMap:
         return self.values.shape
 
     def scales_at(self, sites: np.ndarray) -> np.ndarray:
-        return np.sqrt(self._mean / _sample(self._clipped, sites))
+        return np.sqrt(self._mean / sample_at(self._clipped, sites))
 
     def acceptance(self) -> np.ndarray:
         """Per-pixel acceptance probability for rejection sampling (density / max)."""
@@ -107,7 +107,7 @@ class DirectionField:
     def angles_at(self, sites: np.ndarray) -> np.ndarray:
         sites = np.asarray(sites, dtype=np.float64)
         if self._angles is not None:
-            return _sample(self._angles, sites)
+            return sample_at(self._angles, sites)
         name, _, arg = self.spec.partition(":")
         cx, cy = self.width / 2.0, self.height / 2.0
         if name == "constant":

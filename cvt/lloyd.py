@@ -1,68 +1,119 @@
-"""The Lloyd loop, backend-agnostic (paper §3.2, steps 1-5).
+"""The Lloyd loop (paper §3.2, steps 1-5), backend-agnostic, and the one iteration loop
+that every method built on Lloyd's idea reuses.
 
-Each iteration: angles and scales are read at the sites' current positions; the backend
-gives the integer moments of the cells; every site moves to its cell's centroid.  A site
-whose cell holds no pixel stays where it is and is counted as empty.  The energy of
-iteration k is that of the sites *before* the k-th move, over their own cells.
+:func:`iterate` is the loop itself: it calls a method's ``step`` a number of times and
+records, per iteration, the energy, the wall time and the empty cells, and reports
+progress.  :func:`lloyd` is the paper's step on a backend: angles and scales are read at
+the sites' current positions; the backend gives the integer moments of the cells; every
+site moves to its cell's centroid.  A site whose cell holds no pixel stays where it is
+and is counted as empty.  The energy of iteration k is that of the sites *before* the
+k-th move, over their own cells.  The baselines' tile Lloyd steps run through
+:func:`iterate` as well, and Hausner's point Lloyd step through :func:`lloyd` with its
+own metric, region and angles (the hooks below).
 """
 
 from __future__ import annotations
 
 import time
 from dataclasses import dataclass, field
+from typing import Callable
 
 import numpy as np
 
-from .problem import Problem
+from .metrics import Metric
+from .problem import Grid, Problem
 from .seeding import initial_sites
+from .validate import whole_number
 
 
 @dataclass
-class LloydResult:
-    initial_sites: np.ndarray
-    sites: np.ndarray  # final sites (N, 2)
-    angles: np.ndarray  # at the final sites (radians)
-    scales: np.ndarray  # at the final sites
-    energy: list[float] = field(default_factory=list)  # per iteration
+class IterationLog:
+    """What :func:`iterate` records, one entry per iteration."""
+
+    energy: list[float] = field(default_factory=list)
     seconds: list[float] = field(default_factory=list)  # wall time per iteration
     empty: list[int] = field(default_factory=list)  # empty cells per iteration
     empty_sites: list[int] = field(default_factory=list)  # indices empty in the last iteration
 
     @property
     def iterations(self) -> int:
-        return len(self.energy)
+        return len(self.seconds)
+
+
+def iterate(state, step: Callable, iterations: int, progress=None, log: IterationLog | None = None):
+    """Run ``step(state) -> (state, energy, empty_mask)`` ``iterations`` times.
+
+    ``progress(k, iterations, energy)`` is called after each step when given.
+    Returns the final state and the :class:`IterationLog`."""
+    iterations = whole_number(iterations, "iterations", minimum=0)
+    log = IterationLog() if log is None else log
+    for k in range(iterations):
+        t0 = time.perf_counter()
+        state, energy, empty = step(state)
+        log.seconds.append(time.perf_counter() - t0)
+        log.energy.append(float(energy))
+        log.empty.append(int(np.count_nonzero(empty)))
+        log.empty_sites = np.flatnonzero(empty).tolist()
+        if progress is not None:
+            progress(k + 1, iterations, energy)
+    return state, log
+
+
+@dataclass
+class LloydResult(IterationLog):
+    initial_sites: np.ndarray | None = None
+    sites: np.ndarray | None = None  # final sites (N, 2)
+    angles: np.ndarray | None = None  # at the final sites (radians)
+    scales: np.ndarray | None = None  # at the final sites
+
+
+@dataclass(frozen=True)
+class LloydSetup:
+    """How a Lloyd step reads a problem.  The defaults are the paper's; Hausner 2001 uses
+    another metric, a smaller region for the centroid sums and a turn of the angles."""
+
+    metric: Metric
+    grid: Grid  # the region whose pixels enter the centroid sums
+    angles_at: Callable  # sites -> angles (radians) of the elements
+    scales_at: Callable  # sites -> size factors
+    turn: float = 0.0  # added to the angles the backend sees (not to the elements')
+
+    @classmethod
+    def of(cls, problem: Problem, **changes) -> LloydSetup:
+        base = dict(metric=problem.metric, grid=problem.grid, angles_at=problem.angles_at,
+                    scales_at=problem.scales_at)
+        return cls(**{**base, **changes})
+
+    def cell_angles(self, sites: np.ndarray) -> np.ndarray:
+        return self.angles_at(sites) + self.turn if self.turn else self.angles_at(sites)
 
 
 def lloyd(problem: Problem, backend, iterations: int = 20, progress=None,
-          sites: np.ndarray | None = None) -> LloydResult:
+          sites: np.ndarray | None = None, setup: LloydSetup | None = None) -> LloydResult:
     """Run ``iterations`` Lloyd steps of ``problem`` on ``backend``.
 
-    ``progress(k, iterations, energy)`` is called after each step when given.
-    ``sites`` overrides the problem's seeding (used by baselines and tests)."""
-    if iterations < 0:
-        raise ValueError(f"iterations must be >= 0, got {iterations}")
+    ``sites`` overrides the problem's seeding; ``setup`` the metric, region and angles
+    of the step (:class:`LloydSetup`, default: the problem's own)."""
+    setup = LloydSetup.of(problem) if setup is None else setup
     start = initial_sites(problem) if sites is None else np.array(sites, dtype=np.float64)
-    sites = start.copy()
-    metric, grid = problem.metric, problem.grid
-    result = LloydResult(start, sites, problem.angles_at(sites), problem.scales_at(sites))
-    for k in range(iterations):
-        t0 = time.perf_counter()
-        angles, scales = problem.angles_at(sites), problem.scales_at(sites)
-        mom = backend.moments(sites, scales, angles, metric, grid)
-        energy = mom.energy(sites)
-        sites = mom.centroids(sites)
-        result.seconds.append(time.perf_counter() - t0)
-        result.energy.append(energy)
-        result.empty.append(int(mom.empty.sum()))
-        result.empty_sites = np.flatnonzero(mom.empty).tolist()
-        if progress is not None:
-            progress(k + 1, iterations, energy)
-    result.sites = sites
-    result.angles = problem.angles_at(sites)
-    result.scales = problem.scales_at(sites)
+
+    def step(current):
+        mom = backend.moments(current, angles=setup.cell_angles(current),
+                              scales=setup.scales_at(current), metric=setup.metric, grid=setup.grid)
+        return mom.centroids(current), mom.energy(current), mom.empty
+
+    result = LloydResult(initial_sites=start)
+    final, _ = iterate(start.copy(), step, iterations, progress, log=result)
+    result.sites = final
+    result.angles = setup.angles_at(final)
+    result.scales = setup.scales_at(final)
     return result
 
 
-def final_labels(problem: Problem, backend, result: LloydResult) -> np.ndarray:
-    """The label raster of the final sites (for pictures and element placement)."""
-    return backend.label(result.sites, result.scales, result.angles, problem.metric, problem.grid)
+def final_labels(problem: Problem, backend, result: LloydResult,
+                 setup: LloydSetup | None = None) -> np.ndarray:
+    """The label raster of the final sites over the whole region (for pictures and
+    element placement)."""
+    setup = LloydSetup.of(problem) if setup is None else setup
+    return backend.label(result.sites, angles=setup.cell_angles(result.sites), scales=result.scales,
+                         metric=setup.metric, grid=problem.grid)

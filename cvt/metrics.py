@@ -41,15 +41,17 @@ METRIC_NAMES = ("l2", "l1", "linf", "linf-axial", "l2-axial", "triangle")
 AXIAL_METRICS = ("linf-axial", "l2-axial")
 DEFAULT_ASPECT = 0.5  # the paper's examples use β = 1/2
 
-# The element shape whose outline is the metric's unit ball (issue: placement default).
-NATURAL_ELEMENT = {
-    "l2": "circle",
-    "l1": "square",
-    "linf": "square",
-    "linf-axial": "rectangle",
-    "l2-axial": "ellipse",
+# The one element <-> metric table: each element shape is the unit ball of its metric
+# (cvt/shapes.py draws the shapes from it).  The reverse, a metric's natural element,
+# adds the l1 ball, a diamond, which is drawn as a square turned by 45°.
+ELEMENT_METRIC = {
+    "square": "linf",
+    "rectangle": "linf-axial",
+    "ellipse": "l2-axial",
     "triangle": "triangle",
+    "circle": "l2",
 }
+NATURAL_ELEMENT = {**{m: e for e, m in ELEMENT_METRIC.items()}, "l1": "square"}
 
 
 @dataclass(frozen=True)

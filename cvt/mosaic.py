@@ -1,7 +1,9 @@
 """Picture to mosaic (paper §4.1, Figures 16-19): the Python API.
 
-    >>> from cvt.mosaic import make_mosaic
-    >>> m = make_mosaic("samples/shapes.png", n_elements=1500, element="square")
+    >>> from compact_distributions.backends import create_backend
+    >>> from compact_distributions.cvt.mosaic import make_mosaic
+    >>> with create_backend("numpy") as backend:
+    ...     m = make_mosaic("samples/shapes.png", backend, n_elements=1500, element="square")
     >>> m.coverage, len(m.sites), m.colours.shape
     >>> open("mosaic.svg", "w").write(m.svg())
     >>> m.render().save("mosaic.png")
@@ -12,7 +14,7 @@ there is detail) and a direction field (element sides along the nearby edges); L
 relaxation under the element's metric runs on the chosen backend with both fields;
 :func:`cvt.placement.place_elements` puts one element in each cell; each element gets
 the mean colour of the picture's pixels whose centres lie inside it; coverage comes from
-:func:`bench.evaluate.evaluate`, the suite's one definition.
+:func:`compact_distributions.cvt.evaluate.evaluate`, the suite's one definition.
 
 Colours are RGB floats in 0..1.  A numpy picture is (H, W) grey, (H, W, 3) RGB or
 (H, W, 4) RGBA (composited on white, as :func:`cvt.images.load_rgb` does for files);
@@ -30,19 +32,20 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from .errors import InputError
+from .evaluate import evaluate
 from .image_fields import DEFAULT_CONTRAST, PictureFields, picture_fields
-from .metrics import AXIAL_METRICS, METRIC_NAMES, NATURAL_ELEMENT, compile_sites, make_metric
-from .placement import check_shape, parse_gap, place_elements
-from .problem import Grid, Problem, parse_size
-from .shapes import ELEMENT_SHAPES, unit_outline
+from .lloyd import final_labels, lloyd
+from .metrics import AXIAL_METRICS, ELEMENT_METRIC, METRIC_NAMES, NATURAL_ELEMENT, compile_sites, make_metric
+from .placement import parse_gap, place_elements
+from .problem import Grid, Problem, parse_size, pixel_index
+from .render import draw_elements, ellipse_parameters, parse_colour, svg_document
+from .shapes import ELEMENT_SHAPES, check_shape, element_ball, unit_outline
+from .validate import real_number, whole_number
 
 DEFAULT_ELEMENTS = 2000
 MAX_DEFAULT_SIDE = 1024  # the picture's own size, capped at this on the long side
 AUTO_GAP = 0.05  # default grout: this share of the mean element spacing
 DEFAULT_GROUT = (0.22, 0.22, 0.22)
-# the metric whose unit ball is each element (the inverse of NATURAL_ELEMENT)
-ELEMENT_METRIC = {"square": "linf", "rectangle": "linf-axial", "ellipse": "l2-axial",
-                  "triangle": "triangle", "circle": "l2"}
 
 
 # --------------------------------------------------------------------------- picture
@@ -160,7 +163,7 @@ def element_colours(picture: np.ndarray, labels: np.ndarray, sites, angles, size
     and a site with an empty cell the colour of the pixel it sits on."""
     h, w = labels.shape
     n = len(sites)
-    ball = make_metric(ELEMENT_METRIC[element], aspect)
+    ball = element_ball(element, aspect)
     safe = np.where(sizes > 0, sizes, 1.0)
     coef = compile_sites(ball, sites, angles, safe)
     flat = labels.ravel()
@@ -183,31 +186,8 @@ def element_colours(picture: np.ndarray, labels: np.ndarray, sites, angles, size
     colours[use_cell] = cell_colours[use_cell]
     none = use_cell & (cell_count == 0)
     if none.any():
-        j = np.clip(np.floor(sites[none, 0]).astype(int), 0, w - 1)
-        i = np.clip(np.floor(sites[none, 1]).astype(int), 0, h - 1)
-        colours[none] = picture[i, j]
+        colours[none] = picture[pixel_index(sites[none], w, h)]
     return colours, count.astype(np.int64)
-
-
-def hex_colour(rgb) -> str:
-    r, g, b = (int(round(float(np.clip(v, 0, 1)) * 255)) for v in rgb)
-    return f"#{r:02x}{g:02x}{b:02x}"
-
-
-def parse_colour(text) -> tuple[float, float, float]:
-    """A colour as a CSS name, ``#rrggbb`` or an (r, g, b) tuple in 0..1 -> floats 0..1."""
-    if isinstance(text, (tuple, list, np.ndarray)):
-        vals = np.asarray(text, dtype=np.float64)
-        if vals.shape != (3,) or not np.isfinite(vals).all() or vals.min() < 0 or vals.max() > 1:
-            raise InputError(f"colour must be three numbers in 0..1, got {text!r}")
-        return tuple(float(v) for v in vals)
-    from PIL import ImageColor
-
-    try:
-        rgb = ImageColor.getrgb(str(text))
-    except ValueError:
-        raise InputError(f"unknown colour {text!r}; use a name like grey or #rrggbb") from None
-    return tuple(v / 255.0 for v in rgb[:3])
 
 
 # --------------------------------------------------------------------------- result
@@ -223,7 +203,7 @@ class MosaicResult:
     polygons: list  # shapely polygons, one per site, None where skipped
     colours: np.ndarray  # (N, 3) RGB in 0..1: the picture's mean colour under each element
     sizes: np.ndarray  # (N,) element size (1 = the unit ball: square side 2), 0 where skipped
-    coverage: float  # bench.evaluate: area(union of elements) / area(raster)
+    coverage: float  # cvt.evaluate: area(union of elements) / area(raster)
     overlap: float
     width: int
     height: int
@@ -253,57 +233,21 @@ class MosaicResult:
     def svg(self, grout=None, precision: int = 2) -> str:
         """The mosaic as SVG text: a grout-coloured background and one filled element per
         placed site, in pixel units (viewBox = the raster).  Squares, rectangles and
-        triangles are ``<polygon>``s with their exact corners; circles and ellipses are
+        triangles are paths with their exact corners; circles and ellipses are
         ``<ellipse>``s rotated by the site's angle."""
         grout = self.grout if grout is None else parse_colour(grout)
-        w, h = self.width, self.height
-        out = [
-            '<?xml version="1.0" encoding="UTF-8"?>',
-            f'<svg xmlns="http://www.w3.org/2000/svg" width="{w}" height="{h}" '
-            f'viewBox="0 0 {w} {h}">',
-            f'<rect id="grout" x="0" y="0" width="{w}" height="{h}" fill="{hex_colour(grout)}"/>',
-            f'<g id="elements" class="{self.element}" stroke="none">',
-        ]
-        fmt = f"{{:.{precision}f}}"
-        curved = self.element in ("circle", "ellipse")
-        if curved:
-            outline = unit_outline(self.element, self.aspect)
-            a, b = float(outline[:, 0].max()), float(outline[:, 1].max())
-        for k, poly in enumerate(self.polygons):
-            if poly is None:
-                continue
-            fill = hex_colour(self.colours[k])
-            if curved:
-                x, y = (fmt.format(v) for v in self.sites[k])
-                rx, ry = fmt.format(a * self.sizes[k]), fmt.format(b * self.sizes[k])
-                rot = fmt.format(math.degrees(self.angles[k]))
-                out.append(f'<ellipse cx="{x}" cy="{y}" rx="{rx}" ry="{ry}" '
-                           f'transform="rotate({rot} {x} {y})" fill="{fill}"/>')
-            else:
-                pts = " ".join(f"{fmt.format(px)},{fmt.format(py)}" for px, py in poly.exterior.coords[:-1])
-                out.append(f'<polygon points="{pts}" fill="{fill}"/>')
-        out += ["</g>", "</svg>", ""]
-        return "\n".join(out)
+        ellipses = None
+        if self.element in ("circle", "ellipse"):
+            ellipses = ellipse_parameters(self.sites, self.angles, self.sizes,
+                                          element_ball(self.element, self.aspect).semi_axes)
+        return svg_document(self.polygons, self.width, self.height, self.colours, background=grout,
+                            region_colour=None, stroke=None, ellipses=ellipses, digits=precision)
 
     def render(self, scale: float = 1.0, grout=None, supersample: int = 3):
-        """The mosaic as a PIL RGB image ``scale`` times the raster size, drawn
-        ``supersample`` times larger and shrunk with a box filter (antialiased edges, and no
-        ringing: a pixel inside an element keeps its colour exactly)."""
-        from PIL import Image, ImageDraw
-
+        """The mosaic as a PIL RGB image ``scale`` times the raster size (antialiased)."""
         grout = self.grout if grout is None else parse_colour(grout)
-        ss = max(1, int(supersample))
-        f = float(scale) * ss
-        W, H = max(1, round(self.width * f)), max(1, round(self.height * f))
-        img = Image.new("RGB", (W, H), tuple(int(round(v * 255)) for v in grout))
-        draw = ImageDraw.Draw(img)
-        for k, poly in enumerate(self.polygons):
-            if poly is None:
-                continue
-            pts = [(x * f, y * f) for x, y in poly.exterior.coords[:-1]]
-            draw.polygon(pts, fill=tuple(int(round(float(v) * 255)) for v in self.colours[k]))
-        out_size = (max(1, round(self.width * scale)), max(1, round(self.height * scale)))
-        return img.resize(out_size, Image.Resampling.BOX) if ss > 1 else img
+        return draw_elements(self.polygons, self.width, self.height, self.colours, background=grout,
+                             scale=scale, supersample=supersample)
 
     def to_distribution(self):
         """The run as a :class:`cvt.distribution.Distribution` (what bench/ reports)."""
@@ -314,34 +258,11 @@ class MosaicResult:
                             total_seconds=self.total_seconds, empty=list(self.empty),
                             empty_sites=list(self.empty_sites), labels=self.labels)
 
-    def colour_error(self) -> float:
-        """Mean absolute difference (0..1) between each placed element's colour and the
-        picture under it, per channel: 0 for a flat-colour picture tiled perfectly."""
-        if self.picture is None or self.labels is None:
-            raise ValueError("colour_error needs the picture and labels")
-        col, count = element_colours(self.picture, self.labels, self.sites, self.angles,
-                                     self.sizes, self.element, self.aspect)
-        placed = self.sizes > 0
-        return float(np.abs(col[placed] - self.colours[placed]).mean()) if placed.any() else 0.0
-
 
 # --------------------------------------------------------------------------- the API
 
-def _count(value, name: str, minimum: int) -> int:
-    if isinstance(value, bool) or not isinstance(value, (int, np.integer)):
-        try:
-            if isinstance(value, bool) or float(value) != int(value):
-                raise ValueError
-            value = int(value)
-        except (TypeError, ValueError):
-            raise InputError(f"{name} must be a whole number >= {minimum}, got {value!r}") from None
-    if value < minimum:
-        raise InputError(f"{name} must be >= {minimum}, got {value}")
-    return int(value)
-
-
-def make_mosaic(image, n_elements: int = DEFAULT_ELEMENTS, metric: str | None = None,
-                element: str | None = None, size=None, backend="numpy", gap: float | None = None,
+def make_mosaic(image, backend, *, n_elements: int = DEFAULT_ELEMENTS, metric: str | None = None,
+                element: str | None = None, size=None, gap: float | None = None,
                 use_field: bool = True, use_density: bool = True, iterations: int = 20,
                 seed: int = 0, aspect: float | None = None, contrast: float = DEFAULT_CONTRAST,
                 grout=DEFAULT_GROUT, progress=None) -> MosaicResult:
@@ -351,20 +272,19 @@ def make_mosaic(image, n_elements: int = DEFAULT_ELEMENTS, metric: str | None = 
     other follows: square <-> linf, rectangle <-> linf-axial, ellipse <-> l2-axial,
     triangle <-> triangle, circle <-> l2), both, or neither (squares).  ``aspect``: β of
     rectangles and ellipses (default 0.5).  ``size``: raster (see :func:`raster_size`;
-    default the picture's size, long side capped at 1024).  ``backend``: a name
-    ("numpy", "opencl", "gl") or a Backend instance (left open).  ``gap``: grout width in
+    default the picture's size, long side capped at 1024).  ``backend``: a live
+    backend (``compact_distributions.backends.create_backend``), left open.  ``gap``: grout width in
     pixels (default ``None``: 5 % of the mean element spacing sqrt(W·H/N), e.g. 1 px for
     2000 elements on 1024x768).  ``use_field``: align element sides with the picture's edges; ``use_density``:
     smaller elements where the picture has detail (``contrast`` = densest / sparsest
     cell area).  ``progress(k, iterations, energy)`` is called after each Lloyd step."""
-    from compact_distributions.backends import create_backend
-
-    from .lloyd import final_labels, lloyd
-
     t_start = time.perf_counter()
-    n_elements = _count(n_elements, "number of elements", 1)
-    iterations = _count(iterations, "iterations", 0)
-    seed = _count(seed, "seed", 0)
+    if not callable(getattr(backend, "moments", None)):
+        raise InputError(f"backend must be a live Backend (backends.create_backend), got {backend!r}")
+    n_elements = whole_number(n_elements, "n_elements", minimum=1)
+    iterations = whole_number(iterations, "iterations", minimum=0)
+    seed = whole_number(seed, "seed", minimum=0)
+    contrast = real_number(contrast, "contrast", minimum=1.0)
     grout = parse_colour(grout)
     metric_name, element = resolve_shapes(metric, element)
     metric_obj = make_metric(metric_name, aspect)
@@ -387,22 +307,12 @@ def make_mosaic(image, n_elements: int = DEFAULT_ELEMENTS, metric: str | None = 
                       density=fields.density if use_density else None,
                       field=fields.field if use_field else None, seed=seed)
 
-    own_backend = isinstance(backend, str)
-    bk = create_backend(backend) if own_backend else backend
-    try:
-        res = lloyd(problem, bk, iterations, progress=progress)
-        labels = final_labels(problem, bk, res)
-        device = bk.device()
-    finally:
-        if own_backend:
-            bk.close()
+    res = lloyd(problem, backend, iterations, progress=progress)
+    labels = final_labels(problem, backend, res)
     grid = problem.grid
-    polygons = place_elements(labels, res.sites, res.angles, res.scales, element, shape_aspect, grid, gap)
+    polygons = place_elements(labels, res.sites, res.angles, element, shape_aspect, grid, gap)
     sizes = element_sizes(polygons, element, shape_aspect)
     colours, _ = element_colours(picture, labels, res.sites, res.angles, sizes, element, shape_aspect)
-
-    from compact_distributions.bench.evaluate import evaluate
-
     ev = evaluate(polygons, grid)
     return MosaicResult(
         sites=res.sites, angles=res.angles, scales=res.scales, polygons=polygons,
@@ -410,10 +320,10 @@ def make_mosaic(image, n_elements: int = DEFAULT_ELEMENTS, metric: str | None = 
         width=w, height=h, metric=metric_name, element=element, aspect=shape_aspect, gap=gap, contrast=contrast,
         grout=grout, picture=picture, labels=labels, fields=fields, problem=problem, energy=res.energy,
         seconds=res.seconds, empty=res.empty, empty_sites=list(res.empty_sites),
-        backend=bk.name, device=device, source=source,
+        backend=backend.variant, device=backend.device(), source=source,
         total_seconds=time.perf_counter() - t_start,
     )
 
 
 __all__ = ["make_mosaic", "MosaicResult", "picture_array", "raster_size", "resample",
-           "resolve_shapes", "element_colours", "parse_colour", "ELEMENT_SHAPES"]
+           "resolve_shapes", "element_colours", "ELEMENT_SHAPES"]

@@ -47,8 +47,8 @@ We keep the direction the field gave the site (so a direction field reads the sa
 elements as in the cells) and the site as the element's centre (a CVT site is its cell's
 centroid), and take the largest inscribed scale.  Fitting the angle or moving the centre
 per cell might cover more (not measured here); it would also bend the direction field
-and loosen the link between a site and its element.  ``scales`` (the density's size factor)
-is accepted for symmetry with the backends but not used: the cell already reflects it.
+and loosen the link between a site and its element.  The density's size factor needs no
+term of its own: the cell already reflects it.
 
 Cost: one pass over the raster (``np.nonzero`` on neighbour differences), one gauge per
 sample and ``np.minimum.at``; no Python loop over pixels or sites.  About 40 ms for
@@ -67,26 +67,15 @@ import math
 import numpy as np
 
 from .errors import InputError
-from .metrics import Metric, compile_sites, make_metric
-from .problem import Grid
-from .shapes import _BALL, ELEMENT_SHAPES, element_polygons
+from .metrics import Metric, compile_sites
+from .problem import Grid, in_own_cell
+from .shapes import check_shape, element_ball, element_polygons
+from .validate import one_of, real_number
 
 
-def parse_gap(value) -> float:
-    """The grout gap in pixels: a finite number >= 0 (InputError otherwise)."""
-    try:
-        gap = float(value)
-    except (TypeError, ValueError):
-        raise InputError(f"gap must be a number of pixels >= 0, got {value!r}") from None
-    if not math.isfinite(gap) or gap < 0:
-        raise InputError(f"gap must be a finite number of pixels >= 0, got {value!r}")
-    return gap
-
-
-def check_shape(shape) -> str:
-    if shape not in ELEMENT_SHAPES:
-        raise InputError(f"unknown element {shape!r}; choose one of {', '.join(ELEMENT_SHAPES)}")
-    return shape
+def parse_gap(value, name: str = "gap") -> float:
+    """The grout gap in pixels: a finite number >= 0."""
+    return real_number(value, name, minimum=0.0)
 
 
 def element_for(metric: Metric, element: str | None = None) -> tuple[str, float]:
@@ -141,16 +130,6 @@ def _reach(coef, owner, vx, vy, half):
     return rho - half * grad
 
 
-def _own_pixel(labels, sites) -> np.ndarray:
-    """True where a site lies in a pixel of its own cell."""
-    h, w = labels.shape
-    n = len(sites)
-    inside = (sites[:, 0] >= 0) & (sites[:, 0] < w) & (sites[:, 1] >= 0) & (sites[:, 1] < h)
-    j = np.clip(np.floor(sites[:, 0]).astype(np.int64), 0, w - 1)
-    i = np.clip(np.floor(sites[:, 1]).astype(np.int64), 0, h - 1)
-    return inside & (labels[i, j] == np.arange(n))
-
-
 def placement_sizes(labels, sites, angles, shape: str, aspect, gap: float = 0.0) -> np.ndarray:
     """(N,) element size per site by the rule of this module; 0 where the site is skipped.
 
@@ -164,7 +143,7 @@ def placement_sizes(labels, sites, angles, shape: str, aspect, gap: float = 0.0)
     angles = np.zeros(n) if angles is None else np.broadcast_to(np.asarray(angles, np.float64), (n,))
     if n == 0:
         return np.zeros(0)
-    ball = make_metric(_BALL[shape], aspect)
+    ball = element_ball(shape, aspect)
     coef = compile_sites(ball, sites, angles, None)
     owner, qx, qy = contour_samples(labels)
     reach = _reach(coef, owner, qx - sites[owner, 0], qy - sites[owner, 1], 0.5 * gap)
@@ -172,7 +151,7 @@ def placement_sizes(labels, sites, angles, shape: str, aspect, gap: float = 0.0)
     np.minimum.at(sizes, owner, reach)
 
     # a site must sit in a pixel of its own cell, or its element would grow into another
-    ok = _own_pixel(labels, sites) & np.isfinite(sizes) & (sizes > 0)
+    ok = in_own_cell(labels, sites) & np.isfinite(sizes) & (sizes > 0)
     return np.where(ok, sizes, 0.0)
 
 
@@ -197,7 +176,7 @@ def fit_centres(labels, sites, angles, shape: str, aspect, gap: float = 0.0):
     n = len(sites)
     angles = np.zeros(n) if angles is None else np.broadcast_to(np.asarray(angles, np.float64), (n,))
     gap = parse_gap(gap)
-    ball = make_metric(_BALL[check_shape(shape)], aspect)
+    ball = element_ball(shape, aspect)
     owner, qx, qy = contour_samples(labels)
     order = np.argsort(owner, kind="stable")
     owner, qx, qy = owner[order], qx[order], qy[order]
@@ -209,7 +188,7 @@ def fit_centres(labels, sites, angles, shape: str, aspect, gap: float = 0.0):
         reach = _reach(coef, owner, qx - centres[owner, 0], qy - centres[owner, 1], 0.5 * gap)
         out = np.zeros(n)
         out[has] = np.minimum.reduceat(reach, starts)
-        return np.where(_own_pixel(labels, centres) & has, np.maximum(out, 0.0), 0.0)
+        return np.where(in_own_cell(labels, centres) & has, np.maximum(out, 0.0), 0.0)
 
     centres = sites.copy()
     best = sizes_at(centres)
@@ -228,7 +207,7 @@ def fit_centres(labels, sites, angles, shape: str, aspect, gap: float = 0.0):
     return centres, best
 
 
-def place_elements(labels, sites, angles, scales, shape: str, aspect, grid: Grid,
+def place_elements(labels, sites, angles, shape: str, aspect, grid: Grid,
                    gap: float = 0.0, fit: str = "site") -> list:
     """One shapely Polygon per site (``None`` where the cell is empty or too small):
     the ``shape`` element, rotated by the site's angle, centred at the site, at the
@@ -237,8 +216,7 @@ def place_elements(labels, sites, angles, scales, shape: str, aspect, grid: Grid
     ``labels`` is the final (H, W) int32 label raster of these sites (-1 outside the
     region); ``aspect`` is β of rectangles and ellipses; ``gap`` the grout width in px;
     ``fit`` "site" (centred at the site, the default) or "centre" (:func:`fit_centres`)."""
-    if fit not in FITS:
-        raise InputError(f"unknown fit {fit!r}; choose one of {', '.join(FITS)}")
+    one_of(fit, "fit", FITS)
     labels = np.asarray(labels)
     if labels.shape != grid.shape:
         raise InputError(f"label raster is {labels.shape[1]}x{labels.shape[0]}, "

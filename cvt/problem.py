@@ -6,14 +6,17 @@ right, y grows down; every coordinate is in pixel units.
 
 from __future__ import annotations
 
-import math
 from dataclasses import dataclass, field
+from typing import TYPE_CHECKING
 
 import numpy as np
 
 from .errors import InputError
-from .fields import DensityMap, DirectionField
 from .metrics import Metric, make_metric
+from .validate import whole_number
+
+if TYPE_CHECKING:
+    from .fields import DensityMap, DirectionField
 
 MAX_SIDE = 32768
 
@@ -100,10 +103,7 @@ class Problem:
                 )
             self.init_sites = pts
             self.n_sites = len(pts)
-        n = self.n_sites
-        if isinstance(n, bool) or not isinstance(n, (int, np.integer)) or n < 1:
-            raise InputError(f"number of sites must be a whole number >= 1, got {n!r}")
-        self.n_sites = int(n)
+        self.n_sites = whole_number(self.n_sites, "number of sites", minimum=1)
         if self.n_sites > self.grid.pixel_count:
             raise InputError(
                 f"{self.n_sites} sites do not fit in a region of {self.grid.pixel_count} pixels"
@@ -123,11 +123,22 @@ class Problem:
         return self.density.scales_at(sites)
 
 
-def pixel_index(sites: np.ndarray, width: int, height: int) -> tuple[np.ndarray, np.ndarray]:
-    """Row and column of the pixel that contains each site (clamped to the raster)."""
-    j = np.clip(np.floor(sites[:, 0]).astype(np.int64), 0, width - 1)
-    i = np.clip(np.floor(sites[:, 1]).astype(np.int64), 0, height - 1)
+def pixel_index(points, width: int, height: int) -> tuple[np.ndarray, np.ndarray]:
+    """Row and column of the pixel that contains each point (x, y), clamped to the raster:
+    the one pixel lookup of the suite (fields, placement, colours and pictures use it)."""
+    points = np.asarray(points, dtype=np.float64).reshape(-1, 2)
+    j = np.clip(np.floor(points[:, 0]).astype(np.int64), 0, width - 1)
+    i = np.clip(np.floor(points[:, 1]).astype(np.int64), 0, height - 1)
     return i, j
+
+
+def in_own_cell(labels: np.ndarray, points) -> np.ndarray:
+    """(N,) True where point k lies on the raster in a pixel labelled k."""
+    h, w = labels.shape
+    points = np.asarray(points, dtype=np.float64).reshape(-1, 2)
+    on_raster = ((points[:, 0] >= 0) & (points[:, 0] < w) & (points[:, 1] >= 0) & (points[:, 1] < h))
+    i, j = pixel_index(points, w, h)
+    return on_raster & (labels[i, j] == np.arange(len(points)))
 
 
 def lattice_sites(width: int, height: int, k: int) -> np.ndarray:
@@ -136,8 +147,3 @@ def lattice_sites(width: int, height: int, k: int) -> np.ndarray:
     ys = (np.arange(k) + 0.5) * (height / k)
     gx, gy = np.meshgrid(xs, ys)
     return np.stack([gx.ravel(), gy.ravel()], axis=1)
-
-
-def default_site_count(width: int, height: int) -> int:
-    """A pleasant default: one site per ~16x16 pixels."""
-    return max(1, int(math.ceil(width * height / 256)))

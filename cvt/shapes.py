@@ -14,19 +14,27 @@ import numpy as np
 import shapely
 
 from .errors import InputError
-from .metrics import make_metric
+from .metrics import ELEMENT_METRIC, Metric, make_metric
 
-ELEMENT_SHAPES = ("square", "rectangle", "ellipse", "triangle", "circle")
-_BALL = {"square": "linf", "rectangle": "linf-axial", "ellipse": "l2-axial",
-         "triangle": "triangle", "circle": "l2"}
+ELEMENT_SHAPES = tuple(ELEMENT_METRIC)
 CURVE_SEGMENTS = 128  # inscribed 128-gon: area within 0.04 % of the ellipse
 
 
 def unit_outline(shape: str, aspect: float = 0.5) -> np.ndarray:
     """(M, 2) vertices of the element at size 1, centred at the origin, angle 0."""
+    return element_ball(shape, aspect).outline(CURVE_SEGMENTS)
+
+
+def check_shape(shape) -> str:
+    """``shape`` if it names an element shape, else InputError naming it."""
     if shape not in ELEMENT_SHAPES:
         raise InputError(f"unknown element {shape!r}; choose one of {', '.join(ELEMENT_SHAPES)}")
-    return make_metric(_BALL[shape], aspect).outline(CURVE_SEGMENTS)
+    return shape
+
+
+def element_ball(shape: str, aspect: float | None = 0.5) -> Metric:
+    """The unit ball (as a metric) whose outline is the element ``shape``."""
+    return make_metric(ELEMENT_METRIC[check_shape(shape)], aspect)
 
 
 def transform(outline: np.ndarray, centers, angles, sizes) -> np.ndarray:

@@ -9,7 +9,14 @@ import pytest
 import shapely
 
 from compact_distributions.backends.numpy_backend import NumpyBackend
-from compact_distributions.baselines import fritzsche2005, hausner2001, hu2016, smith2005
+from compact_distributions.baselines import (
+    fritzsche2005,
+    get_method,
+    hausner2001,
+    hu2016,
+    method_names,
+    smith2005,
+)
 from compact_distributions.baselines.common import (
     angle_residual,
     budget_size,
@@ -17,9 +24,8 @@ from compact_distributions.baselines.common import (
     tile_shape,
     tile_voronoi,
 )
-from compact_distributions.bench.evaluate import evaluate, region_polygon
-from compact_distributions.bench.methods import get_method, method_names
 from compact_distributions.cvt.errors import InputError
+from compact_distributions.cvt.evaluate import evaluate, region_polygon
 from compact_distributions.cvt.fields import DirectionField
 from compact_distributions.cvt.metrics import make_metric
 from compact_distributions.cvt.problem import Grid, Problem
@@ -34,7 +40,7 @@ def square_problem(seed=0, n=N, size=SIZE, field=None, mask=None, metric="linf")
 
 
 def run(name, problem, iterations=6, **kw):
-    return get_method(name)(problem, NumpyBackend(), iterations, **kw)
+    return get_method(name)(problem, NumpyBackend(), iterations=iterations, **kw)
 
 
 def test_every_baseline_is_registered():
@@ -232,7 +238,7 @@ def test_fixed_size_budget_is_the_same_for_every_fixed_tile_method():
     want = budget_size(tile_shape(problem, "square"), problem.grid, N)
     assert want == pytest.approx(0.95 * math.sqrt(SIZE * SIZE / N) / 2)
     for mod in (hausner2001, fritzsche2005, smith2005):
-        dist = mod.run(problem, NumpyBackend(), 2)
+        dist = mod.run(problem, NumpyBackend(), iterations=2)
         inner = [e for e in dist.elements if e is not None
                  and min(e.bounds) > 1e-6 and max(e.bounds) < SIZE - 1e-6]  # not clipped
         assert len(inner) > N // 2
@@ -241,8 +247,8 @@ def test_fixed_size_budget_is_the_same_for_every_fixed_tile_method():
 
 def test_gap_shrinks_fixed_tiles():
     problem = square_problem()
-    plain = fritzsche2005.run(problem, None, 2)
-    grout = fritzsche2005.run(problem, None, 2, gap=2.0)
+    plain = fritzsche2005.run(problem, None, iterations=2)
+    grout = fritzsche2005.run(problem, None, iterations=2, gap=2.0)
     a = shapely.area(np.array([e for e in plain.elements if e is not None])).max()
     b = shapely.area(np.array([e for e in grout.elements if e is not None])).max()
     side = math.sqrt(a)

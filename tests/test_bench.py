@@ -1,6 +1,6 @@
-"""bench/: the sweep runner (resume, interrupt), the reports (header, committed files
-up to date with the code), and the regression guard (its logic on fabricated figures,
-and end to end with a fabricated baseline that must fail)."""
+"""bench/: the sweep engine (resume, interrupt, failures), the reports (aggregation by
+hand, the committed files complete), and the regression guard (its logic on fabricated
+figures, and end to end with a fabricated baseline that must fail)."""
 
 from __future__ import annotations
 
@@ -11,10 +11,11 @@ import numpy as np
 import pandas as pd
 import pytest
 
-from compact_distributions.bench import regress_cmd, runner
+from compact_distributions.bench import regress_cmd, sweep
 from compact_distributions.bench.cli import main
 from compact_distributions.bench.report import git_commit
-from compact_distributions.bench.runner import RunSpec, run_sweep
+from compact_distributions.bench.runs import RunSpec, effect_picture
+from compact_distributions.bench.sweep import run_sweep
 
 ROOT = Path(__file__).resolve().parent.parent
 REPORTS = ROOT / "reports"
@@ -25,7 +26,7 @@ def tiny(seed=0, suite="t", method="ours", element="square", picture=False):
 
 
 # ---------------------------------------------------------------------------------------
-# runner
+# the sweep engine
 
 
 def test_run_row_has_coverage_from_placement(tmp_path):
@@ -33,17 +34,17 @@ def test_run_row_has_coverage_from_placement(tmp_path):
     (row,) = rows
     assert row["status"] == "ok", row
     assert 0.3 < row["coverage"] <= 1.0 and row["placed"] + row["skipped"] == 20
-    raw = json.loads(runner.raw_path(tmp_path, tiny()).read_text())
+    raw = json.loads(sweep.raw_path(tmp_path, tiny()).read_text())
     assert raw["row"]["coverage"] == row["coverage"] and len(raw["sites"]) == 20
-    assert runner.picture_path(tmp_path, tiny()).exists()
+    assert sweep.picture_path(tmp_path, tiny()).exists()
 
 
 def test_sweep_resumes_and_force_reruns(tmp_path, monkeypatch):
     specs = [tiny(0), tiny(1)]
     first = run_sweep(specs, tmp_path, quiet=True)
     calls = []
-    real = runner.execute
-    monkeypatch.setattr(runner, "execute", lambda *a, **k: calls.append(1) or real(*a, **k))
+    real = sweep.execute
+    monkeypatch.setattr(sweep, "execute", lambda *a, **k: calls.append(1) or real(*a, **k))
     again = run_sweep(specs, tmp_path, quiet=True)
     assert calls == [] and all(r.get("cached") for r in again)
     assert [r["coverage"] for r in again] == [r["coverage"] for r in first]
@@ -54,21 +55,21 @@ def test_sweep_resumes_and_force_reruns(tmp_path, monkeypatch):
 def test_runs_stored_by_other_code_or_host_are_recomputed(tmp_path, monkeypatch):
     spec = tiny(0)
     run_sweep([spec], tmp_path, quiet=True)
-    path = runner.raw_path(tmp_path, spec)
+    path = sweep.raw_path(tmp_path, spec)
     stored = json.loads(path.read_text())
-    assert stored["made_by"] == runner.made_by()
+    assert stored["made_by"] == sweep.made_by()
     stored["made_by"] = {"code": "0123456789abcdef", "host": stored["made_by"]["host"]}
     path.write_text(json.dumps(stored))
     calls = []
-    real = runner.execute
-    monkeypatch.setattr(runner, "execute", lambda *a, **k: calls.append(1) or real(*a, **k))
+    real = sweep.execute
+    monkeypatch.setattr(sweep, "execute", lambda *a, **k: calls.append(1) or real(*a, **k))
     (row,) = run_sweep([spec], tmp_path, quiet=True)
     assert calls == [1] and not row.get("cached")
-    assert json.loads(path.read_text())["made_by"] == runner.made_by()
+    assert json.loads(path.read_text())["made_by"] == sweep.made_by()
 
 
 def test_interrupt_keeps_finished_runs_only(tmp_path, monkeypatch):
-    real = runner.execute
+    real = sweep.execute
     done = []
 
     def flaky(spec, *a, **k):
@@ -77,7 +78,7 @@ def test_interrupt_keeps_finished_runs_only(tmp_path, monkeypatch):
         done.append(spec.key)
         return real(spec, *a, **k)
 
-    monkeypatch.setattr(runner, "execute", flaky)
+    monkeypatch.setattr(sweep, "execute", flaky)
     with pytest.raises(KeyboardInterrupt):
         run_sweep([tiny(0), tiny(1)], tmp_path, quiet=True)
     files = sorted(p.name for p in (tmp_path / "raw" / "t").iterdir())
@@ -91,10 +92,10 @@ def test_unavailable_and_failing_runs_become_rows(tmp_path, monkeypatch):
     def broken(*a, **k):
         raise RuntimeError("kaputt")
 
-    monkeypatch.setattr(runner, "execute", broken)
+    monkeypatch.setattr(RunSpec, "execute", broken)
     rows = run_sweep([tiny(1)], tmp_path, quiet=True)
     assert rows[0]["status"] == "failed" and "kaputt" in rows[0]["reason"]
-    assert not runner.raw_path(tmp_path, tiny(1)).exists()  # retried next time
+    assert not sweep.raw_path(tmp_path, tiny(1)).exists()  # retried next time
 
 
 def test_git_commit_outside_a_repository(tmp_path):
@@ -114,26 +115,35 @@ def _committed(name):
     return pd.read_csv(path)
 
 
-def test_table2_quick_rerun_matches_committed(tmp_path, capsys):
-    code = main(["table2", "--quick", "--methods", "ours", "--backends", "numpy", "--elements",
-                 "square,circle", "--out", str(tmp_path), "--quiet"])
+def test_table2_aggregates_seeds_by_hand(tmp_path):
+    from compact_distributions.bench.table2 import aggregate
+
+    rows = [{**tiny(seed).params(), "key": tiny(seed).key, "status": "ok", "reason": "", "device": "cpu",
+             "coverage": c, "overlap": o, "total_seconds": t, "ms_per_iteration": 1.0, "placed": 20,
+             "empty_cells": 0} for seed, (c, o, t) in enumerate([(0.70, 0.0, 1.0), (0.80, 0.02, 3.0)])]
+    rows.append({**tiny(2).params(), "key": tiny(2).key, "status": "failed", "reason": "boom"})
+    (line,) = aggregate(rows).to_dict("records")
+    assert line["coverage_mean"] == pytest.approx(0.75) and line["overlap_mean"] == pytest.approx(0.01)
+    assert line["coverage_sd"] == pytest.approx(np.sqrt(0.005))  # sample sd of 0.70, 0.80
+    assert line["time_mean_s"] == pytest.approx(2.0)
+    assert line["runs"] == 2 and line["seeds"] == 3 and line["status"] == "partial" and "boom" in line["reason"]
+
+
+def test_table2_quick_writes_its_report(tmp_path):
+    code = main(["table2", "--quick", "--methods", "ours", "--backends", "numpy", "--shapes",
+                 "square,circle", "--seeds", "1", "--out", str(tmp_path), "--quiet"])
     assert code == 0
     new = pd.read_csv(tmp_path / "table2.csv")
-    old = _committed("quick/table2.csv")
-    assert list(new.columns) == list(old.columns)
+    assert list(new.columns) == list(_committed("quick/table2.csv").columns)
+    assert sorted(new.element) == ["circle", "square"] and (new.runs == 1).all()
     assert (tmp_path / "table2.md").read_text().count("QUICK") >= 1 and (tmp_path / "table2.png").exists()
-    for _, r in new.iterrows():  # the NumPy reference is deterministic: same figures
-        o = old[(old.method == r.method) & (old.backend == r.backend) & (old.element == r.element)]
-        assert len(o) == 1, f"{r.method}/{r.backend}/{r.element} missing from reports/quick/table2.csv"
-        assert o.iloc[0].coverage_mean == pytest.approx(r.coverage_mean, abs=1e-6)
-        assert o.iloc[0].overlap_mean == pytest.approx(r.overlap_mean, abs=1e-6)
 
 
 def test_committed_table2_covers_every_method_and_backend():
-    from compact_distributions.bench.methods import method_names
-    from compact_distributions.bench.table2 import problem_set
+    from compact_distributions.baselines import method_names
+    from compact_distributions.bench.table2 import problem_set, sweep_backends
 
-    variants = list(dict.fromkeys(list(runner.VARIANTS) + list(runner.backend_variants())))
+    variants, _ = sweep_backends(None)
     for name, quick in (("table2.csv", False), ("quick/table2.csv", True)):
         table = _committed(name)
         expected = {(s.method, s.backend, s.element) for s in problem_set(quick, 1, method_names(), variants)}
@@ -146,7 +156,7 @@ def test_committed_table2_covers_every_method_and_backend():
 
 
 def test_backends_quick_rerun_matches_committed_columns(tmp_path):
-    code = main(["backends", "--quick", "--backends", "numpy", "--metrics", "l2", "--sites", "300",
+    code = main(["backends", "--quick", "--backends", "numpy,ckdtree", "--metrics", "l2", "--sites", "300",
                  "--sizes", "96", "--repeats", "1", "--out", str(tmp_path), "--quiet"])
     assert code == 0
     new = pd.read_csv(tmp_path / "backends.csv")
@@ -246,7 +256,7 @@ def test_regress_without_baseline_is_an_input_error(tmp_path, capsys):
 @pytest.mark.parametrize("argv, text", [
     (["table2", "--seeds", "0"], "--seeds"),
     (["table2", "--backends", "cuda"], "cuda"),
-    (["table2", "--elements", "hexagon"], "hexagon"),
+    (["table2", "--shapes", "hexagon"], "hexagon"),
     (["backends", "--sizes", "big"], "--sizes"),
     (["regress", "--quick", "--methods", "magic"], "magic"),
 ])
@@ -268,7 +278,7 @@ def test_effect_picture_draws_elements():
 
     from compact_distributions.cvt.problem import Grid
 
-    img = runner.effect_picture([shapely.box(0, 0, 16, 16), None], Grid(32, 32), side=64, crop=1.0)
+    img = effect_picture([shapely.box(0, 0, 16, 16), None], Grid(32, 32), side=64, crop=1.0)
     a = np.asarray(img)
     assert a.shape == (64, 64, 3)
     assert a[5, 5].sum() > a[50, 50].sum()  # the box is drawn, the rest is background
@@ -281,12 +291,12 @@ def test_backend_timings_are_read_back_only_when_this_code_made_them(tmp_path, m
     calls = []
     real = backends_cmd.time_lloyd
     monkeypatch.setattr(backends_cmd, "time_lloyd", lambda *a, **k: calls.append(1) or real(*a, **k))
-    backends_cmd.run_timings([spec], tmp_path, quiet=True)
-    (again,) = backends_cmd.run_timings([spec], tmp_path, quiet=True)
+    run_sweep([spec], tmp_path, quiet=True)
+    (again,) = run_sweep([spec], tmp_path, quiet=True)
     assert calls == [1] and again.get("cached")
     path = tmp_path / "raw" / "t" / f"{spec.key}.json"
     stored = json.loads(path.read_text())
     stored["made_by"] = {"code": "0123456789abcdef", "host": "elsewhere"}
     path.write_text(json.dumps(stored))
-    (fresh,) = backends_cmd.run_timings([spec], tmp_path, quiet=True)
+    (fresh,) = run_sweep([spec], tmp_path, quiet=True)
     assert calls == [1, 1] and not fresh.get("cached")

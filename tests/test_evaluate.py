@@ -1,5 +1,5 @@
 """Coverage and overlap (bench/evaluate.py) against hand-computed areas and against the
-plain union_all formula; the SVG and PNG drawings (bench/svg.py)."""
+plain union_all formula; the SVG and PNG drawings (cvt/render.py)."""
 
 import xml.etree.ElementTree as ET
 
@@ -7,9 +7,9 @@ import numpy as np
 import pytest
 import shapely
 
-from compact_distributions.bench.evaluate import empty_cell_count, evaluate, region_polygon
-from compact_distributions.bench.svg import element_coordinates, elements_png, elements_svg
+from compact_distributions.cvt.evaluate import empty_cell_count, evaluate, region_polygon
 from compact_distributions.cvt.problem import Grid
+from compact_distributions.cvt.render import PAPER, draw_elements, element_coordinates, svg_document
 
 SVG = "{http://www.w3.org/2000/svg}"
 
@@ -93,7 +93,7 @@ def sample_elements():
 
 
 def test_svg_is_valid_xml_with_one_closed_path_per_element():
-    text = elements_svg(sample_elements(), 50, 30)
+    text = svg_document(sample_elements(), 50, 30)
     root = ET.fromstring(text)
     assert root.tag == f"{SVG}svg"
     assert root.get("viewBox") == "0 0 50 30"
@@ -112,7 +112,7 @@ def test_svg_of_a_masked_region_draws_the_region():
     mask = np.zeros((30, 50), dtype=bool)
     mask[5:25, 5:45] = True
     region = region_polygon(Grid(50, 30, mask))
-    root = ET.fromstring(elements_svg(sample_elements(), 50, 30, region=region,
+    root = ET.fromstring(svg_document(sample_elements(), 50, 30, region=region,
                                       fills=["#ff0000", "#00ff00", "#0000ff", (1, 2, 3)]))
     top = root.findall(f"{SVG}path")
     assert len(top) == 1 and "5,5" in top[0].get("d")
@@ -122,7 +122,7 @@ def test_svg_of_a_masked_region_draws_the_region():
 
 def test_png_paints_elements_in_their_colours():
     fills = np.array([[255, 0, 0], [0, 0, 0], [0, 255, 0], [0, 0, 255]], dtype=np.uint8)
-    img = np.asarray(elements_png(sample_elements(), 50, 30, fills=fills, scale=2.0))
+    img = np.asarray(draw_elements(sample_elements(), 50, 30, fills, region_colour=PAPER, scale=2.0))
     assert img.shape == (60, 100, 3)
     assert tuple(img[10, 12]) == (255, 0, 0)  # inside the square (x 6, y 5)
     assert tuple(img[40, 80]) == (0, 0, 255)  # centre of the circle

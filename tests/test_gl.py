@@ -72,13 +72,13 @@ def test_labels_agree_with_reference(name, mode, floor, cone, exact, reference):
     backend = exact if mode == "exact" else cone
     sites, scales, angles, grid = random_case(METRIC_NAMES.index(name), masked=name in ("l1", "l2-axial"))
     metric = make_metric(name, 0.6)
-    got = backend.label(sites, scales, angles, metric, grid)
-    want = reference.label(sites, scales, angles, metric, grid)
+    got = backend.label(sites, angles=angles, scales=scales, metric=metric, grid=grid)
+    want = reference.label(sites, angles=angles, scales=scales, metric=metric, grid=grid)
     check_region(got, grid)
     agree = (got == want)[grid.inside()].mean()
     assert agree >= floor, f"{mode} {name}: {agree:.5f} of region pixels agree"
     # moments on the device equal the host sums of the device's own labels, exactly
-    mom = backend.moments(sites, scales, angles, metric, grid)
+    mom = backend.moments(sites, angles=angles, scales=scales, metric=metric, grid=grid)
     host = moments_from_labels(got, len(sites))
     for field in ("count", "sx", "sy", "sxx", "syy"):
         np.testing.assert_array_equal(getattr(mom, field), getattr(host, field), err_msg=field)
@@ -88,8 +88,8 @@ def test_labels_agree_with_reference(name, mode, floor, cone, exact, reference):
 def test_exact_one_lloyd_step_lands_with_reference(name, exact, reference):
     sites, scales, angles, grid = random_case(100 + METRIC_NAMES.index(name), w=256, h=256, n=250)
     metric = make_metric(name, 0.5)
-    ours = exact.moments(sites, scales, angles, metric, grid).centroids(sites)
-    theirs = reference.moments(sites, scales, angles, metric, grid).centroids(sites)
+    ours = exact.moments(sites, angles=angles, scales=scales, metric=metric, grid=grid).centroids(sites)
+    theirs = reference.moments(sites, angles=angles, scales=scales, metric=metric, grid=grid).centroids(sites)
     gap = np.hypot(*(ours - theirs).T)
     assert gap.max() <= 0.5 and gap.mean() <= 0.01, (gap.max(), gap.mean())
 
@@ -104,7 +104,7 @@ def field_problem(name, n=220, w=256, h=256, seed=3):
 
 @pytest.mark.parametrize("name", METRIC_NAMES)
 def test_cone_twenty_iterations_energy_and_coverage(name, cone, reference):
-    from compact_distributions.bench.evaluate import evaluate
+    from compact_distributions.cvt.evaluate import evaluate
     from compact_distributions.cvt.placement import element_for, place_elements
 
     problem = field_problem(name)
@@ -114,8 +114,7 @@ def test_cone_twenty_iterations_energy_and_coverage(name, cone, reference):
         labels = final_labels(problem, backend, res)
         check_region(labels, problem.grid)
         shape, turn = element_for(problem.metric)
-        elements = place_elements(labels, res.sites, res.angles + turn, res.scales, shape,
-                                  problem.metric.aspect, problem.grid)
+        elements = place_elements(labels, res.sites, res.angles + turn, shape, problem.metric.aspect, problem.grid)
         runs[label] = (res.energy[-1], evaluate(elements, problem.grid).coverage)
     (e_gl, c_gl), (e_ref, c_ref) = runs["gl"], runs["ref"]
     assert abs(e_gl - e_ref) <= 0.01 * e_ref, (e_gl, e_ref)
@@ -128,9 +127,9 @@ def test_ties_go_to_the_lower_index(mode, cone, exact):
     # sites 1 and 2 coincide with equal angle and scale: they tie on every pixel
     sites = np.array([[10.0, 12.0], [30.5, 20.25], [30.5, 20.25], [50.0, 40.0]])
     for name in ("l1", "l2", "triangle"):
-        lab = backend.label(sites, np.ones(4), np.full(4, 0.3), make_metric(name), Grid(64, 48))
+        lab = backend.label(sites, angles=np.full(4, 0.3), scales=np.ones(4), metric=make_metric(name), grid=Grid(64, 48))
         assert (lab == 1).any() and not (lab == 2).any(), name
-        assert backend.moments(sites, np.ones(4), np.full(4, 0.3), make_metric(name), Grid(64, 48)).count[2] == 0
+        assert backend.moments(sites, angles=np.full(4, 0.3), scales=np.ones(4), metric=make_metric(name), grid=Grid(64, 48)).count[2] == 0
 
 
 @pytest.mark.parametrize("mode", ["cone", "exact"])
@@ -145,11 +144,11 @@ def test_every_region_pixel_is_reached_by_clustered_sites(mode, cone, exact, ref
     grid = Grid(256, 200)
     for name in ("linf-axial", "l2"):
         metric = make_metric(name, 0.5)
-        got = backend.label(sites, scales, angles, metric, grid)
+        got = backend.label(sites, angles=angles, scales=scales, metric=metric, grid=grid)
         check_region(got, grid)
-        want = reference.label(sites, scales, angles, metric, grid)
+        want = reference.label(sites, angles=angles, scales=scales, metric=metric, grid=grid)
         assert (got == want).mean() >= 0.99
-        assert backend.moments(sites, scales, angles, metric, grid).count.sum() == grid.pixel_count
+        assert backend.moments(sites, angles=angles, scales=scales, metric=metric, grid=grid).count.sum() == grid.pixel_count
 
 
 def test_cone_heights_bound_every_cell(cone, reference):
@@ -161,7 +160,7 @@ def test_cone_heights_bound_every_cell(cone, reference):
         metric = make_metric(name, 0.5)
         coeffs = compile_sites(metric, sites, angles, scales)
         heights = gl.cone_heights(coeffs, scales, metric, gl._Blocks(grid, 8))
-        labels = reference.label(sites, scales, angles, metric, grid)
+        labels = reference.label(sites, angles=angles, scales=scales, metric=metric, grid=grid)
         ys, xs = np.nonzero(labels >= 0)
         d = coeffs.distance(labels[ys, xs], xs + 0.5, ys + 0.5)
         largest = np.zeros(len(sites))
@@ -194,11 +193,11 @@ def test_deterministic(mode, cone, exact):
     backend = exact if mode == "exact" else cone
     sites, scales, angles, grid = random_case(11, w=256, h=256, n=200)
     metric = make_metric("l2", 1.0)
-    a = backend.label(sites, scales, angles, metric, grid)
-    m1 = backend.moments(sites, scales, angles, metric, grid)
-    backend.label(sites[:50], scales[:50], angles[:50], make_metric("triangle"), Grid(100, 70))
-    b = backend.label(sites, scales, angles, metric, grid)
-    m2 = backend.moments(sites, scales, angles, metric, grid)
+    a = backend.label(sites, angles=angles, scales=scales, metric=metric, grid=grid)
+    m1 = backend.moments(sites, angles=angles, scales=scales, metric=metric, grid=grid)
+    backend.label(sites[:50], angles=angles[:50], scales=scales[:50], metric=make_metric("triangle"), grid=Grid(100, 70))
+    b = backend.label(sites, angles=angles, scales=scales, metric=metric, grid=grid)
+    m2 = backend.moments(sites, angles=angles, scales=scales, metric=metric, grid=grid)
     np.testing.assert_array_equal(a, b)
     np.testing.assert_array_equal(m1.sxx, m2.sxx)
 
@@ -207,7 +206,7 @@ def test_moment_sums_beyond_32_bits(exact):
     """Σj² of one cell over a 2048-pixel-wide raster exceeds 2**32: the shader carries."""
     grid = Grid(2048, 40)
     sites = np.array([[1000.0, 20.0]])
-    mom = exact.moments(sites, None, None, make_metric("linf"), grid)
+    mom = exact.moments(sites, metric=make_metric("linf"), grid=grid)
     j = np.arange(2048, dtype=np.int64)
     i = np.arange(40, dtype=np.int64)
     assert mom.sxx[0] == 40 * (j * j).sum() > 2**32
@@ -233,9 +232,9 @@ def test_registry_device_and_options():
 def test_bad_inputs(exact):
     grid = Grid(32, 32)
     with pytest.raises(InputError, match="sites"):
-        exact.label(np.zeros((0, 2)), None, None, make_metric("l2"), grid)
+        exact.label(np.zeros((0, 2)), metric=make_metric("l2"), grid=grid)
     with pytest.raises(InputError, match="scales"):
-        exact.label(np.ones((2, 2)), np.array([1.0, -1.0]), None, make_metric("l2"), grid)
+        exact.label(np.ones((2, 2)), angles=None, scales=np.array([1.0, -1.0]), metric=make_metric("l2"), grid=grid)
 
 
 def test_missing_moderngl_is_one_clear_error(monkeypatch):

@@ -14,13 +14,15 @@ import pytest
 import shapely
 from PIL import Image
 
+from compact_distributions.backends.numpy_backend import NumpyBackend
 from compact_distributions.bench.cli import main
-from compact_distributions.bench.evaluate import evaluate
 from compact_distributions.cvt.errors import InputError
+from compact_distributions.cvt.evaluate import evaluate
 from compact_distributions.cvt.image_fields import picture_fields
 from compact_distributions.cvt.mosaic import make_mosaic, picture_array, raster_size, resample
 
 SVG = "{http://www.w3.org/2000/svg}"
+NUMPY = NumpyBackend()
 
 
 def stripes(n=160, deg=30.0, period=24.0):
@@ -57,7 +59,7 @@ def test_flat_picture_gives_uniform_density_and_zero_field():
 
 @pytest.mark.parametrize("deg,element,period", [(30.0, "square", 90.0), (-20.0, "rectangle", 180.0)])
 def test_elements_follow_the_edges(deg, element, period):
-    m = make_mosaic(stripes(deg=deg), n_elements=200, element=element, iterations=6, use_density=False)
+    m = make_mosaic(stripes(deg=deg), NUMPY, n_elements=200, element=element, iterations=6, use_density=False)
     err = angle_error_deg(m.angles, deg, period)
     assert err.mean() < 10.0, err.mean()
     # the placed polygons carry the angle: a rectangle's long side lies along the stripes
@@ -70,7 +72,7 @@ def test_elements_follow_the_edges(deg, element, period):
 
 
 def test_without_field_every_element_is_upright():
-    m = make_mosaic(stripes(deg=30.0), n_elements=120, iterations=2, use_field=False, use_density=False)
+    m = make_mosaic(stripes(deg=30.0), NUMPY, n_elements=120, iterations=2, use_field=False, use_density=False)
     assert np.all(m.angles == 0)
 
 
@@ -80,7 +82,7 @@ def test_smaller_elements_where_the_picture_has_detail():
     pic = np.full((h, w, 3), 0.6)
     blocks = rng.random((h // 8, w // 16, 3)).repeat(8, axis=0).repeat(8, axis=1)
     pic[:, : w // 2] = blocks  # busy left half, flat right half
-    m = make_mosaic(pic, n_elements=250, iterations=8, use_field=False)
+    m = make_mosaic(pic, NUMPY, n_elements=250, iterations=8, use_field=False)
     areas = np.array([0.0 if p is None else p.area for p in m.polygons])
     placed = areas > 0
     left = placed & (m.sites[:, 0] < w / 2 - 10)
@@ -88,7 +90,7 @@ def test_smaller_elements_where_the_picture_has_detail():
     assert left.sum() > right.sum()  # more elements where the detail is
     assert areas[left].mean() < 0.7 * areas[right].mean()
     # and without the density both halves are alike
-    u = make_mosaic(pic, n_elements=250, iterations=8, use_field=False, use_density=False)
+    u = make_mosaic(pic, NUMPY, n_elements=250, iterations=8, use_field=False, use_density=False)
     ua = np.array([0.0 if p is None else p.area for p in u.polygons])
     ul, ur = u.sites[:, 0] < w / 2 - 10, u.sites[:, 0] > w / 2 + 10
     assert 0.8 < ua[ul].mean() / ua[ur].mean() < 1.25
@@ -98,7 +100,7 @@ def test_colours_match_a_flat_colour_picture():
     pic = np.zeros((160, 160, 3))
     quads = np.array([[0.9, 0.1, 0.1], [0.1, 0.7, 0.2], [0.2, 0.3, 0.9], [0.95, 0.9, 0.2]])
     pic[:80, :80], pic[:80, 80:], pic[80:, :80], pic[80:, 80:] = quads
-    m = make_mosaic(pic, n_elements=200, iterations=6, element="square")
+    m = make_mosaic(pic, NUMPY, n_elements=200, iterations=6, element="square")
     assert m.colours.shape == (200, 3)
     i = (m.sites[:, 1] >= 80).astype(int) * 2 + (m.sites[:, 0] >= 80).astype(int)
     err = np.abs(m.colours - quads[i]).mean(axis=1)
@@ -117,8 +119,8 @@ def test_colours_match_a_flat_colour_picture():
 def test_same_seed_same_mosaic_and_numpy_input_equals_file(tmp_path):
     pic = (stripes(n=128, deg=10.0) * 200 + 20).astype(np.uint8)
     Image.fromarray(pic).save(tmp_path / "s.png")
-    a = make_mosaic(pic, n_elements=100, iterations=3, seed=5)
-    b = make_mosaic(tmp_path / "s.png", n_elements=100, iterations=3, seed=5)
+    a = make_mosaic(pic, NUMPY, n_elements=100, iterations=3, seed=5)
+    b = make_mosaic(tmp_path / "s.png", NUMPY, n_elements=100, iterations=3, seed=5)
     np.testing.assert_array_equal(a.sites, b.sites)
     np.testing.assert_allclose(a.colours, b.colours, atol=1e-12)
 
@@ -157,7 +159,7 @@ def test_bad_arrays_raise_input_error(bad, match):
 ])
 def test_bad_options_raise_input_error(kwargs, match):
     with pytest.raises(InputError, match=match):
-        make_mosaic(np.zeros((40, 40)), **{"n_elements": 20, "iterations": 1, **kwargs})
+        make_mosaic(np.zeros((40, 40)), NUMPY, **{"n_elements": 20, "iterations": 1, **kwargs})
 
 
 # ----------------------------------------------------------------------- the CLI
@@ -179,7 +181,7 @@ def picture_file(tmp_path):
     return path
 
 
-@pytest.mark.parametrize("element,tag", [("square", "polygon"), ("ellipse", "ellipse")])
+@pytest.mark.parametrize("element,tag", [("square", "path"), ("ellipse", "ellipse")])
 def test_cli_writes_svg_png_and_result(picture_file, tmp_path, capsys, element, tag):
     out = tmp_path / "out"
     code, err = _run(["mosaic", str(picture_file), "--out", str(out), "--elements", "150",
@@ -189,7 +191,7 @@ def test_cli_writes_svg_png_and_result(picture_file, tmp_path, capsys, element, 
     root = ET.parse(out / "mosaic.svg").getroot()
     elements = root.findall(f".//{SVG}{tag}")
     res = json.loads((out / "result.json").read_text())
-    assert len(elements) == res["elements"] == 150 - res["skipped"]
+    assert len(elements) == res["placed"] == 150 - res["skipped"]
     assert res["skipped"] <= 3
     assert root.find(f"{SVG}rect").get("fill") == "#101010"
     for key in ("backend", "device", "metric", "aspect", "size", "sites", "angles", "scales",

@@ -37,7 +37,7 @@ def test_labels_equal_brute_force(name, varied):
     scales = 0.4 + 1.2 * rng.random(n) if varied else None
     grid = Grid(w, h, disc_mask(w, h) if varied else None)
     metric = make_metric(name, 0.6)
-    got = NumpyBackend().label(sites, scales, angles, metric, grid)
+    got = NumpyBackend().label(sites, angles=angles, scales=scales, metric=metric, grid=grid)
     want = brute_force(sites, angles, scales, metric, grid)
     assert got.dtype == np.int32 and got.shape == (h, w)
     np.testing.assert_array_equal(got, want)
@@ -49,20 +49,20 @@ def test_tile_size_does_not_change_labels(tile):
     sites = rng.random((200, 2)) * 150
     metric = make_metric("linf")
     ref = brute_force(sites, None, None, metric, Grid(150, 150))
-    got = NumpyBackend(tile=tile).label(sites, None, None, metric, Grid(150, 150))
+    got = NumpyBackend(tile=tile).label(sites, metric=metric, grid=Grid(150, 150))
     np.testing.assert_array_equal(got, ref)
 
 
 def test_ties_go_to_the_lower_index():
     # two sites at the same place tie everywhere; the lower index must win
     sites = np.array([[20.0, 20.0], [10.0, 10.0], [10.0, 10.0]])
-    lab = NumpyBackend().label(sites, None, None, make_metric("l1"), Grid(40, 40))
+    lab = NumpyBackend().label(sites, metric=make_metric("l1"), grid=Grid(40, 40))
     assert 2 not in lab and (lab == 1).any()
     # L∞ with sites mirrored about x = 20: pixel centres on x = 20.5 vs 19.5 are not ties,
     # but diagonal ties exist; compare to the brute force rule on them
     sites = np.array([[10.0, 20.0], [30.0, 20.0], [20.0, 10.0]])
     g = Grid(41, 41)
-    np.testing.assert_array_equal(NumpyBackend().label(sites, None, None, make_metric("linf"), g),
+    np.testing.assert_array_equal(NumpyBackend().label(sites, metric=make_metric("linf"), grid=g),
                                   brute_force(sites, None, None, make_metric("linf"), g))
 
 
@@ -85,7 +85,7 @@ def test_one_lloyd_step_matches_exact_voronoi_at_512():
     rng = np.random.default_rng(11)
     sites = rng.random((400, 2)) * 512
     grid = Grid(512, 512)
-    labels = NumpyBackend().label(sites, None, None, make_metric("l2"), grid)
+    labels = NumpyBackend().label(sites, metric=make_metric("l2"), grid=grid)
     raster = moments_from_labels(labels, len(sites)).centroids(sites)
     exact = exact_voronoi_centroids(sites, 512, 512)
     err = np.hypot(*(raster - exact).T)

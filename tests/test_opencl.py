@@ -93,8 +93,8 @@ def test_probe_names_platform_and_device():
 @pytest.mark.parametrize("name", METRIC_NAMES)
 def test_labels_agree_with_reference(backends, reference, name, varied, kernel):
     sites, angles, scales, metric, grid = random_case(name, varied, seed=METRIC_NAMES.index(name))
-    got = backends[kernel].label(sites, scales, angles, metric, grid)
-    want = reference.label(sites, scales, angles, metric, grid)
+    got = backends[kernel].label(sites, angles=angles, scales=scales, metric=metric, grid=grid)
+    want = reference.label(sites, angles=angles, scales=scales, metric=metric, grid=grid)
     assert_labels_match(got, want, sites, angles, scales, metric)
 
 
@@ -110,8 +110,8 @@ def test_search_bound_holds_for_clusters_and_extreme_shapes(backends, reference,
     scales = np.exp(rng.uniform(np.log(0.15), np.log(3.0), len(sites)))
     metric = make_metric(name, 0.25)
     grid = Grid(w, h)
-    got = backends[kernel].label(sites, scales, angles, metric, grid)
-    want = reference.label(sites, scales, angles, metric, grid)
+    got = backends[kernel].label(sites, angles=angles, scales=scales, metric=metric, grid=grid)
+    want = reference.label(sites, angles=angles, scales=scales, metric=metric, grid=grid)
     assert_labels_match(got, want, sites, angles, scales, metric)
 
 
@@ -125,8 +125,8 @@ def test_far_from_the_origin(backends, reference, name, kernel):
     sites = rng.random((1500, 2)) * [w, h]
     angles, scales = None, None
     metric, grid = make_metric(name), Grid(w, h)
-    got = backends[kernel].label(sites, scales, angles, metric, grid)
-    want = reference.label(sites, scales, angles, metric, grid)
+    got = backends[kernel].label(sites, angles=angles, scales=scales, metric=metric, grid=grid)
+    want = reference.label(sites, angles=angles, scales=scales, metric=metric, grid=grid)
     assert_labels_match(got, want, sites, angles, scales, metric)
 
 
@@ -135,7 +135,7 @@ def test_ties_go_to_the_lower_index(backends, kernel):
     # sites 1 and 2 coincide: they tie everywhere, 1 must win; the grid puts them in one
     # cell after site 3, whose index order must not matter
     sites = np.array([[30.0, 30.0], [10.0, 10.0], [10.0, 10.0], [10.2, 10.1]])
-    lab = backends[kernel].label(sites, None, None, make_metric("l1"), Grid(40, 40))
+    lab = backends[kernel].label(sites, metric=make_metric("l1"), grid=Grid(40, 40))
     assert 2 not in lab and (lab == 1).any()
 
 
@@ -146,7 +146,7 @@ def test_exact_ties_across_cells_go_to_the_lower_index(backends, name, kernel):
     x = 30.5: pixels there search their own cell, meet site 1 first, and must still
     end with site 0."""
     sites = np.array([[50.5, 10.5], [10.5, 10.5]])
-    lab = backends[kernel].label(sites, None, None, make_metric(name), Grid(64, 64))
+    lab = backends[kernel].label(sites, metric=make_metric(name), grid=Grid(64, 64))
     assert (lab[:, 30] == 0).all() and (lab[:20, 29] == 1).all() and (lab[:, 31] == 0).all()
 
 
@@ -156,8 +156,8 @@ def test_device_moments_equal_host_sums_of_device_labels(name, split):
     sites, angles, scales, metric, grid = random_case(name, True, seed=5)
     ocl = OpenCLBackend(split_atomics=split)
     try:
-        labels = ocl.label(sites, scales, angles, metric, grid)
-        got = ocl.moments(sites, scales, angles, metric, grid)
+        labels = ocl.label(sites, angles=angles, scales=scales, metric=metric, grid=grid)
+        got = ocl.moments(sites, angles=angles, scales=scales, metric=metric, grid=grid)
     finally:
         ocl.close()
     want = moments_from_labels(labels, len(sites))
@@ -171,7 +171,7 @@ def test_moment_sums_past_32_bits(split):
     split counters wrap their low word many times."""
     ocl = OpenCLBackend(split_atomics=split)
     try:
-        mom = ocl.moments(np.array([[5.0, 5.0]]), None, None, make_metric("l2"), Grid(4096, 300))
+        mom = ocl.moments(np.array([[5.0, 5.0]]), metric=make_metric("l2"), grid=Grid(4096, 300))
     finally:
         ocl.close()
     j, i = np.arange(4096, dtype=np.int64), np.arange(300, dtype=np.int64)
@@ -185,8 +185,8 @@ def test_moment_sums_past_32_bits(split):
 @pytest.mark.parametrize("name", METRIC_NAMES)
 def test_one_lloyd_step_lands_where_the_reference_does(backends, reference, name, varied):
     sites, angles, scales, metric, grid = random_case(name, varied, seed=20 + METRIC_NAMES.index(name))
-    got = backends["blocks"].moments(sites, scales, angles, metric, grid).centroids(sites)
-    ref_labels = reference.label(sites, scales, angles, metric, grid)
+    got = backends["blocks"].moments(sites, angles=angles, scales=scales, metric=metric, grid=grid).centroids(sites)
+    ref_labels = reference.label(sites, angles=angles, scales=scales, metric=metric, grid=grid)
     want = moments_from_labels(ref_labels, len(sites)).centroids(sites)
     moved = np.hypot(*(got - want).T)
     assert moved.max() <= 0.5 and moved.mean() <= 0.01, (moved.max(), moved.mean())
@@ -208,11 +208,11 @@ def test_energy_after_20_iterations_matches_reference(backends, reference, name)
 
 def test_same_input_same_labels(backends):
     sites, angles, scales, metric, grid = random_case("linf", True, seed=9)
-    first = backends["blocks"].label(sites, scales, angles, metric, grid)
-    again = backends["blocks"].label(sites, scales, angles, metric, grid)
+    first = backends["blocks"].label(sites, angles=angles, scales=scales, metric=metric, grid=grid)
+    again = backends["blocks"].label(sites, angles=angles, scales=scales, metric=metric, grid=grid)
     fresh = OpenCLBackend()
     try:
-        other = fresh.label(sites, scales, angles, metric, grid)
+        other = fresh.label(sites, angles=angles, scales=scales, metric=metric, grid=grid)
     finally:
         fresh.close()
     np.testing.assert_array_equal(first, again)
@@ -224,7 +224,7 @@ def test_programs_are_built_once_per_metric_kind():
     try:
         sites = np.random.default_rng(0).random((50, 2)) * 64
         for name in ("l1", "linf", "l1", "l2", "l2-axial", "triangle"):
-            ocl.label(sites, None, None, make_metric(name), Grid(64, 64))
+            ocl.label(sites, metric=make_metric(name), grid=Grid(64, 64))
         kinds = sorted((kind, k) for kind, k, *_ in ocl._programs)
         assert kinds == [("ellipse", 0), ("polygon", 3), ("polygon", 4)]
     finally:
@@ -253,7 +253,7 @@ def test_bad_site_data_is_an_input_error(backends, bad):
     args = dict(sites=np.array([[1.0, 1.0], [2, 2], [3, 3]]), scales=None, angles=None)
     args.update(bad)
     with pytest.raises(InputError):
-        backends["blocks"].label(args["sites"], args["scales"], args["angles"], make_metric("l2"), Grid(8, 8))
+        backends["blocks"].label(args["sites"], angles=args["angles"], scales=args["scales"], metric=make_metric("l2"), grid=Grid(8, 8))
 
 
 @pytest.mark.parametrize("spec", ["99", "0:99", "no-such-platform", "0:0:0"])
@@ -279,7 +279,7 @@ def test_kernel_that_fails_to_build_is_one_clear_error(tmp_path, monkeypatch):
     ocl = OpenCLBackend()
     try:
         with pytest.raises(BackendUnavailable, match="failed to build") as err:
-            ocl.label(np.array([[1.0, 1.0]]), None, None, make_metric("l2"), Grid(8, 8))
+            ocl.label(np.array([[1.0, 1.0]]), metric=make_metric("l2"), grid=Grid(8, 8))
         assert "\n" not in str(err.value)
     finally:
         ocl.close()
@@ -293,7 +293,7 @@ def test_raster_too_large_for_the_device_is_one_clear_error():
         if side > 32768:
             pytest.skip(f"device allows {limit} bytes per buffer: no raster is too large")
         with pytest.raises(BackendUnavailable, match="MiB"):
-            ocl.label(np.array([[1.0, 1.0]]), None, None, make_metric("l2"), Grid(side, side))
+            ocl.label(np.array([[1.0, 1.0]]), metric=make_metric("l2"), grid=Grid(side, side))
     finally:
         ocl.close()
 

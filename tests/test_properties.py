@@ -32,7 +32,7 @@ def test_reference_labels_equal_brute_force(name, aspect, n, seed, varied):
     angles = rng.random(n) * 6.3 if varied else None
     scales = 0.3 + 2 * rng.random(n) if varied else None
     metric = make_metric(name, aspect)
-    got = NumpyBackend().label(sites, scales, angles, metric, Grid(w, h))
+    got = NumpyBackend().label(sites, angles=angles, scales=scales, metric=metric, grid=Grid(w, h))
     co = compile_sites(metric, sites, angles, scales)
     ys, xs = np.mgrid[0:h, 0:w] + 0.5
     d = co.distance(np.arange(n)[None, None, :], xs[..., None], ys[..., None])

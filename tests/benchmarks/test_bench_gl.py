@@ -14,7 +14,7 @@ import time
 import numpy as np
 import pytest
 
-from compact_distributions.bench.ckdtree_step import ckdtree_step
+from compact_distributions.backends.ckdtree import CKDTreeBackend
 from compact_distributions.cvt.errors import BackendUnavailable
 from compact_distributions.cvt.metrics import make_metric
 from compact_distributions.cvt.problem import Grid
@@ -49,12 +49,12 @@ def relaxed_sites(n, side, steps=10):
     """Sites after a few Lloyd steps: cells close to a CVT, as in most iterations."""
     sites = uniform_sites(n, side)
     for _ in range(steps):
-        sites = ckdtree_step(sites, side, side, "l2").centroids(sites)
+        sites = CKDTreeBackend().moments(sites, metric=make_metric("l2"), grid=Grid(side, side)).centroids(sites)
     return sites
 
 
 def step(backend, sites, metric, grid):
-    return backend.moments(sites, None, None, metric, grid).centroids(sites)
+    return backend.moments(sites, metric=metric, grid=grid).centroids(sites)
 
 
 @pytest.mark.parametrize("mode", MODES)
@@ -69,15 +69,16 @@ def test_bench_gl_step(benchmark, backends, mode, name):
                                 device=backend.device())
     moved = benchmark(step, backend, sites, metric, grid)
     assert moved.shape == sites.shape and np.isfinite(moved).all()
-    assert backend.moments(sites, None, None, metric, grid).count.sum() == side * side
+    assert backend.moments(sites, metric=metric, grid=grid).count.sum() == side * side
 
 
 @pytest.mark.parametrize("name", ["l2", "linf"])
 def test_bench_ckdtree_step(benchmark, name):
     side, n = size_and_n(benchmark)
-    benchmark.group = f"lloyd step, N={n}, {side}x{side}, uniform sites"
+    benchmark.group = f"lloyd step {name} N={n}, {side}x{side}, uniform sites"
     benchmark.extra_info.update(backend="ckdtree", metric=name, n=n, size=side)
-    mom = benchmark(ckdtree_step, uniform_sites(n, side), side, side, name)
+    mom = benchmark(CKDTreeBackend().moments, uniform_sites(n, side), metric=make_metric(name),
+                    grid=Grid(side, side))
     assert mom.count.sum() == side * side
 
 
@@ -92,9 +93,9 @@ def test_speedup_over_ckdtree(benchmark, backends):
     for label, sites in (("uniform", uniform_sites(n, side)), ("relaxed", relaxed_sites(n, side))):
         for name in ("l2", "linf"):
             metric = make_metric(name)
-            calls = {"ckdtree": lambda s=sites, nm=name: ckdtree_step(s, side, side, nm)}
+            calls = {"ckdtree": lambda s=sites, m=metric, t=CKDTreeBackend(): t.moments(s, metric=m, grid=grid)}
             for mode, b in backends.items():
-                calls[mode] = lambda s=sites, m=metric, b=b: b.moments(s, None, None, m, grid)
+                calls[mode] = lambda s=sites, m=metric, b=b: b.moments(s, metric=m, grid=grid)
             times = {k: [] for k in calls}
             for f in calls.values():
                 f()

@@ -24,8 +24,9 @@ import os
 import numpy as np
 import pytest
 
+from compact_distributions.backends import variant_metrics, variant_status
 from compact_distributions.backends.numpy_backend import NumpyBackend
-from compact_distributions.bench.runner import BackendCache, backend_variants
+from compact_distributions.bench.sweep import BackendCache
 from compact_distributions.cvt.metrics import METRIC_NAMES, make_metric
 from compact_distributions.cvt.problem import Grid
 
@@ -33,7 +34,7 @@ SMALL = {"metrics": ["l2", "linf"], "sites": [500], "sizes": [128]}
 ENABLED = {"metrics": list(METRIC_NAMES), "sites": [1000, 4000, 16000], "sizes": [512, 1024]}
 FULL = {"metrics": list(METRIC_NAMES), "sites": [1000, 4000, 16000], "sizes": [512, 1024, 2048]}
 
-VARIANTS = backend_variants()  # variant -> (available, device or reason)
+VARIANTS = variant_status()  # variant -> (available, device or reason)
 
 
 def _grid_of_cases(config) -> list:
@@ -45,7 +46,8 @@ def _grid_of_cases(config) -> list:
         cfg = SMALL
     # backend-major order: consecutive cases share one backend instance (see _cache)
     return [pytest.param(v, m, n, s, id=f"{v}-{m}-N{n}-{s}")
-            for v in VARIANTS for m in cfg["metrics"] for n in cfg["sites"] for s in cfg["sizes"]]
+            for v in VARIANTS for m in cfg["metrics"] for n in cfg["sites"] for s in cfg["sizes"]
+            if variant_metrics(v) is None or m in variant_metrics(v)]
 
 
 def pytest_generate_tests(metafunc):
@@ -74,22 +76,22 @@ def _problem(metric_name: str, n: int, size: int):
 
 
 def _step(backend, sites, scales, angles, metric, grid):
-    mom = backend.moments(sites, scales, angles, metric, grid)
+    mom = backend.moments(sites, angles=angles, scales=scales, metric=metric, grid=grid)
     return mom, mom.centroids(sites)
 
 
 def _reference(metric_name, n, size):
     sites, scales, angles, metric, grid = _problem(metric_name, n, size)
-    return NumpyBackend().label(sites, scales, angles, metric, grid)
+    return NumpyBackend().label(sites, angles=angles, scales=scales, metric=metric, grid=grid)
 
 
 def test_bench_label(benchmark, backend, variant, metric, n_sites, size):
     sites, scales, angles, metric_obj, grid = _problem(metric, n_sites, size)
-    backend.label(sites, scales, angles, metric_obj, grid)  # warm-up: kernel builds, buffers
+    backend.label(sites, angles=angles, scales=scales, metric=metric_obj, grid=grid)  # warm-up: kernel builds, buffers
     benchmark.group = f"label {metric} N={n_sites} {size}²"
     benchmark.extra_info.update(kind="label", backend=variant, metric=metric, n_sites=n_sites,
                                 size=size, device=backend.device())
-    labels = benchmark(backend.label, sites, scales, angles, metric_obj, grid)
+    labels = benchmark(backend.label, sites, angles=angles, scales=scales, metric=metric_obj, grid=grid)
     assert labels.shape == (size, size) and labels.dtype == np.int32
     assert labels.min() >= 0 and labels.max() < n_sites
     # against the float64 reference: only ties and the cones' facets may differ

@@ -11,7 +11,7 @@ import numpy as np
 import pytest
 
 from compact_distributions.backends.base import Backend
-from compact_distributions.bench.ckdtree_step import ckdtree_step
+from compact_distributions.backends.ckdtree import CKDTreeBackend
 from compact_distributions.cvt.errors import BackendUnavailable
 from compact_distributions.cvt.metrics import make_metric
 from compact_distributions.cvt.problem import Grid
@@ -36,7 +36,7 @@ def uniform_sites(n, w, h, seed=0):
 
 
 def step(backend: Backend, sites, scales, angles, metric, grid):
-    mom = backend.moments(sites, scales, angles, metric, grid)
+    mom = backend.moments(sites, angles=angles, scales=scales, metric=metric, grid=grid)
     return mom.centroids(sites)
 
 
@@ -48,7 +48,7 @@ def test_bench_opencl_step_l2_1024(benchmark, ocl, n):
     benchmark.extra_info.update(backend="opencl", device=ocl.device(), n=n)
     moved = benchmark(step, ocl, sites, None, None, metric, grid)
     assert moved.shape == sites.shape and np.isfinite(moved).all()
-    mom = ocl.moments(sites, None, None, metric, grid)
+    mom = ocl.moments(sites, metric=metric, grid=grid)
     assert mom.count.sum() == 1024 * 1024
 
 
@@ -57,7 +57,7 @@ def test_bench_ckdtree_step_l2_1024(benchmark, n):
     benchmark.group = "lloyd step, l2, 1024x1024"
     sites = uniform_sites(n, 1024, 1024)
     benchmark.extra_info.update(backend="ckdtree", n=n)
-    mom = benchmark(ckdtree_step, sites, 1024, 1024, "l2")
+    mom = benchmark(CKDTreeBackend().moments, sites, metric=make_metric("l2"), grid=Grid(1024, 1024))
     assert mom.count.sum() == 1024 * 1024
 
 

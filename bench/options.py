@@ -1,0 +1,126 @@
+"""Command-line options shared by the subcommands: one definition each, so that the same
+option has the same name, type and meaning in every command (``--element`` is a shape,
+``--elements N`` a count, ``--shapes`` a list of shapes, ``--backend`` a backend or
+variant name).  Values arrive as strings and are parsed by
+:mod:`compact_distributions.cvt.validate`, which the Python API uses too.
+"""
+
+from __future__ import annotations
+
+import sys
+import time
+
+from compact_distributions.backends import REGISTRY, VARIANTS, create_backend, resolve
+from compact_distributions.cvt.errors import InputError
+from compact_distributions.cvt.metrics import METRIC_NAMES
+from compact_distributions.cvt.shapes import ELEMENT_SHAPES
+from compact_distributions.cvt.validate import whole_number
+
+BACKEND_NAMES = list(dict.fromkeys([*REGISTRY, *VARIANTS]))
+SIZE_HELP = ("raster: WxH, or N for the long side (the other side follows the picture's aspect; "
+             "square when there is no picture)")
+
+
+# ------------------------------------------------------------------ one run
+def add_backend_options(p, default: str = "numpy") -> None:
+    p.add_argument("--backend", default=default,
+                   help=f"{', '.join(BACKEND_NAMES)} (default {default}; numpy is the float64 reference; "
+                   "gl is gl-cone)")
+    p.add_argument("--gl-mode", default=None, choices=["cone", "exact"],
+                   help="gl backend: cone (the paper's cones and pyramids, default) or exact (per-fragment "
+                   "metric); the same as --backend gl-cone / gl-exact")
+    p.add_argument("--device", default=None,
+                   help="OpenCL device as PLATFORM[:DEVICE] indices, like PYOPENCL_CTX (opencl backend)")
+
+
+def backend_choice(args) -> tuple[str, dict]:
+    """(registry name, constructor options) from --backend, --gl-mode and --device."""
+    name, options = resolve(args.backend)
+    if args.gl_mode is not None:
+        if name != "gl":
+            raise InputError(f"--gl-mode is for the gl backend, not {args.backend!r}")
+        if options.get("mode", args.gl_mode) != args.gl_mode:
+            raise InputError(f"--backend {args.backend} and --gl-mode {args.gl_mode} disagree")
+        options["mode"] = args.gl_mode
+    if args.device is not None:
+        if name != "opencl":
+            raise InputError(f"--device is for the opencl backend, not {args.backend!r}")
+        options["device"] = args.device
+    return name, options
+
+
+def open_backend(args):
+    """The backend the options name, started (BackendUnavailable if it cannot start)."""
+    name, options = backend_choice(args)
+    return create_backend(name, **options)
+
+
+def add_shape_options(p, metric_default: str | None = "l2") -> None:
+    default = metric_default or "the element's own; neither given: squares"
+    p.add_argument("--metric", default=metric_default,
+                   help=f"Lloyd distance: {', '.join(METRIC_NAMES)} (default {default})")
+    p.add_argument("--element", metavar="SHAPE", default=None,
+                   help=f"element placed in each cell: {', '.join(ELEMENT_SHAPES)} (default: the metric's own)")
+    p.add_argument("--aspect", default=None, help="β of rectangles and ellipses and of the axial metrics "
+                   "(default 0.5); > 0")
+
+
+def add_method_option(p) -> None:
+    p.add_argument("--method", default="ours", help="ours (default), ours-fit, or a baseline: hausner2001, "
+                   "fritzsche2005, smith2005, hu2016 (cvtbench info lists them)")
+
+
+def add_run_options(p, iterations: int = 20, seed_help: str = "random seed (default 0)") -> None:
+    p.add_argument("--iterations", default=str(iterations),
+                   help=f"Lloyd iterations (default {iterations}; 0 allowed)")
+    p.add_argument("--seed", default="0", help=seed_help)
+
+
+def add_output_options(p, out_default: str) -> None:
+    p.add_argument("--out", default=out_default, help=f"output folder (default {out_default})")
+    p.add_argument("--quiet", action="store_true", help="no progress output")
+
+
+def progress_printer(quiet: bool):
+    """A Lloyd progress callback ``(k, total, energy)`` that prints to stderr (None when
+    quiet): one updating line on a terminal, ten lines otherwise."""
+    if quiet:
+        return None
+    start = time.perf_counter()
+
+    def report(k, total, energy):
+        elapsed = time.perf_counter() - start
+        tty = sys.stderr.isatty()
+        if tty or k == total or k % max(1, total // 10) == 0:
+            print(f"\riteration {k}/{total}  energy {energy:.4g} px²  {elapsed:.1f} s",
+                  end="\n" if k == total or not tty else "", file=sys.stderr, flush=True)
+
+    return report
+
+
+# ------------------------------------------------------------------ sweeps
+def add_sweep_options(p, quick_help: str) -> None:
+    p.add_argument("--quick", action="store_true", help=quick_help)
+    p.add_argument("--force", action="store_true", help="re-run runs whose raw json exists")
+    p.add_argument("--out", default=None, help="report folder (default reports, or reports/quick with --quick)")
+    p.add_argument("--quiet", action="store_true", help="no progress bar")
+
+
+def add_seeds_option(p, default_text: str = "default 5; quick 2") -> None:
+    p.add_argument("--seeds", default=None, help=f"number of seeds K: seeds 0..K-1 ({default_text})")
+
+
+def add_list_options(p, *names: str) -> None:
+    """Comma-list options of the sweeps: methods, backends, shapes, metrics."""
+    helps = {
+        "methods": "comma list of methods (default: all registered)",
+        "backends": "comma list of backend variants (default: every variant that computes every metric)",
+        "shapes": f"comma list of element shapes (default all: {', '.join(ELEMENT_SHAPES)})",
+        "metrics": f"comma list of metrics ({', '.join(METRIC_NAMES)})",
+    }
+    for name in names:
+        p.add_argument(f"--{name}", default=None, help=helps[name])
+
+
+def seeds_value(text, default: int) -> int:
+    return default if text is None else whole_number(text, "--seeds", minimum=1)

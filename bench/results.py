@@ -1,0 +1,70 @@
+"""The one ``result.json`` of every command that writes one (``cvtbench run``,
+``cvtbench mosaic``).  Its JSON Schema ships beside this module as
+``result.schema.json``; the README lists the fields.
+
+``kind`` says which command wrote it; ``elements`` is always the list of element
+outlines (one per site, null where a site has no element) and ``placed`` their count.
+"""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+import numpy as np
+
+from compact_distributions.cvt.render import element_coordinates
+
+SCHEMA_FILE = Path(__file__).with_name("result.schema.json")
+
+
+def schema() -> dict:
+    return json.loads(SCHEMA_FILE.read_text())
+
+
+def build_result(kind: str, problem, dist, evaluation, backend, *, element: str, gap: float,
+                 command: str, sources: dict | None = None, **fields) -> dict:
+    """The result.json record of one run: the problem, the method's Distribution, the
+    evaluation (coverage, overlap, ...) of its elements, the backend that ran it, plus
+    the command's own ``fields`` (a mosaic's image, colours, ...)."""
+    from .outputs import machine, versions
+
+    g = problem.grid
+    sources = sources or {}
+    record = {
+        "kind": kind,
+        "method": dist.method,
+        "backend": backend.variant,
+        "device": backend.device(),
+        "metric": problem.metric.name,
+        "aspect": problem.metric.aspect,
+        "size": [g.width, g.height],
+        "n_sites": len(dist.sites),
+        "seed": problem.seed,
+        "init": sources.get("init"),
+        "density": sources.get("density"),
+        "field": sources.get("field"),
+        "region": sources.get("region"),
+        "region_pixels": g.pixel_count,
+        "iterations": dist.iterations,
+        "sites": dist.sites,
+        "angles": dist.angles,
+        "scales": dist.scales,
+        "energy": dist.energy,
+        "seconds": dist.seconds,
+        "total_seconds": dist.total_seconds,
+        "setup_seconds": dist.setup_seconds,
+        "median_ms_per_iteration": (float(np.median(dist.seconds)) * 1000 if dist.seconds else None),
+        "empty_cells": dist.empty,
+        "empty_sites": dist.empty_sites,
+        "element": element,
+        "gap": gap,
+        **evaluation.as_dict(),
+        "elements": element_coordinates(dist.elements),
+        "extra": dist.extra,
+        **fields,
+        "versions": versions(),
+        "machine": machine(),
+        "command": command,
+    }
+    return record

@@ -1,0 +1,141 @@
+"""One method run as a sweep spec (Table 2 and the regression checks): the problem, the
+method and the backend variant, and the record a run leaves (its row in the report, its
+sites, timings and, for the first seed, an effect picture).
+
+Coverage and overlap come from :func:`compact_distributions.cvt.evaluate.evaluate`, the
+suite's one definition, on the elements the method placed.
+"""
+
+from __future__ import annotations
+
+import hashlib
+import io
+import time
+from dataclasses import asdict, dataclass
+
+import numpy as np
+
+from compact_distributions.cvt.metrics import DEFAULT_ASPECT, ELEMENT_METRIC
+
+
+@dataclass(frozen=True)
+class RunSpec:
+    """One run of a sweep; ``key`` names its raw json."""
+
+    suite: str  # e.g. "table2", "table2-quick": the raw/ sub-folder
+    method: str
+    backend: str  # a backend variant name
+    element: str
+    width: int
+    height: int
+    n_sites: int
+    iterations: int
+    seed: int
+    aspect: float = DEFAULT_ASPECT
+    gap: float = 0.0
+    picture: bool = False  # also keep an effect picture beside the raw json
+    delta: float | None = None  # tile budget δ of a fixed-size baseline (None: its default)
+
+    @property
+    def metric(self) -> str:
+        return ELEMENT_METRIC[self.element]
+
+    @property
+    def key(self) -> str:
+        gap = f"__gap{self.gap:g}" if self.gap else ""
+        delta = f"__d{self.delta:g}" if self.delta is not None else ""
+        return (f"{self.method}__{self.backend}__{self.element}__{self.width}x{self.height}"
+                f"__n{self.n_sites}__it{self.iterations}__s{self.seed}{gap}{delta}")
+
+    @property
+    def label(self) -> str:
+        """The method as reports name it: with its tile budget where one was set."""
+        return self.method if self.delta is None else f"{self.method} δ={self.delta:g}"
+
+    def describe(self) -> str:
+        return (f"{self.method}/{self.backend} {self.element} {self.width}x{self.height} "
+                f"N={self.n_sites} seed {self.seed}")
+
+    def params(self) -> dict:
+        d = asdict(self)
+        d.pop("picture")
+        return {**d, "metric": self.metric, "label": self.label}
+
+    def problem(self):
+        from compact_distributions.cvt.metrics import make_metric
+        from compact_distributions.cvt.problem import Grid, Problem
+
+        aspect = self.aspect if self.metric.endswith("-axial") else None
+        return Problem(Grid(self.width, self.height), self.n_sites, make_metric(self.metric, aspect),
+                       seed=self.seed)
+
+    def execute(self, backend) -> dict:
+        """Run the spec on ``backend``; the record keeps the final sites for seed 0 only
+        (a json of 4000 sites is ~60 kB, and the digest already tells whether two runs
+        agree)."""
+        from compact_distributions.baselines import get_method
+        from compact_distributions.cvt.evaluate import evaluate
+
+        from .outputs import machine, versions
+
+        problem = self.problem()
+        method = get_method(self.method)
+        budget = {} if self.delta is None else {"delta": self.delta}
+        t0 = time.perf_counter()
+        dist = method(problem, backend, iterations=self.iterations, element=self.element, gap=self.gap, **budget)
+        wall = time.perf_counter() - t0
+        ev = evaluate(dist.elements, problem.grid)
+        secs = list(map(float, dist.seconds))
+        row = {
+            "key": self.key, **self.params(), "status": "ok", "reason": "", "device": backend.device(),
+            "coverage": ev.coverage, "overlap": ev.overlap, "placed": ev.elements, "skipped": ev.skipped,
+            "empty_cells": int(dist.empty[-1]) if dist.empty else 0,
+            "total_seconds": float(dist.total_seconds), "setup_seconds": float(dist.setup_seconds),
+            "wall_seconds": wall, "placement_seconds": float(dist.extra.get("placement_seconds", 0.0)),
+            "ms_per_iteration": float(np.median(secs) * 1000) if secs else None,
+            "final_energy": float(dist.energy[-1]) if dist.energy else None,
+        }
+        record = {"row": row, "sites_sha1": sites_digest(dist.sites), "energy": dist.energy,
+                  "seconds": secs, "empty_per_iteration": list(dist.empty), "extra": dist.extra,
+                  "machine": machine(), "versions": versions()}
+        if self.seed == 0:
+            # 0.01 px is far below a pixel; angles/scales only where they vary (a field, a density)
+            record["sites"] = np.round(dist.sites, 2)
+            for name in ("angles", "scales"):
+                v = np.asarray(getattr(dist, name), dtype=np.float64)
+                record[name] = np.round(v, 5) if len(v) and np.ptp(v) > 0 else (float(v[0]) if len(v) else None)
+        if self.picture:
+            buf = io.BytesIO()
+            effect_picture(dist.elements, problem.grid).save(buf, format="PNG")
+            record["picture_png"] = buf.getvalue()
+        return record
+
+
+def sites_digest(sites) -> str:
+    """sha1 of the float64 sites: equal digests = bit-identical runs (across backends too)."""
+    return hashlib.sha1(np.ascontiguousarray(sites, dtype=np.float64).tobytes()).hexdigest()
+
+
+PICTURE_ELEMENTS = 250  # about this many elements in an effect picture, to stay legible
+PICTURE_PALETTE = np.array([(230, 159, 0), (86, 180, 233), (0, 158, 115), (240, 228, 66), (213, 94, 0),
+                            (204, 121, 167), (0, 114, 178)], dtype=np.uint8)  # colour-blind safe
+
+
+def picture_crop(n_sites: int) -> float:
+    """Side fraction of the region shown in an effect picture: about PICTURE_ELEMENTS
+    elements (the whole region for small problems)."""
+    return float(min(1.0, np.sqrt(PICTURE_ELEMENTS / max(1, n_sites))))
+
+
+def effect_picture(elements, grid, side: int = 512, crop: float | None = None):
+    """The top-left ``crop`` fraction of the region (default :func:`picture_crop`) with its
+    elements drawn (PIL image, ``side`` px on its long side): dark background, the region
+    lighter, elements in a colour-blind safe palette."""
+    from compact_distributions.cvt.render import draw_elements
+
+    crop = picture_crop(len(elements)) if crop is None else crop
+    cw, ch = grid.width * crop, grid.height * crop
+    fills = PICTURE_PALETTE[np.arange(len(elements)) % len(PICTURE_PALETTE)]
+    return draw_elements(elements, grid.width, grid.height, fills, background=(40, 40, 46),
+                         region_colour=None if grid.mask is None else (70, 70, 70), region_mask=grid.mask,
+                         scale=side / max(cw, ch), supersample=2, window=(0, 0, cw, ch))

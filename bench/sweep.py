@@ -1,0 +1,188 @@
+"""The sweep engine: many independent runs, stored one raw json each, resumable.
+
+Every sweep of ``cvtbench`` (Table 2, the backend timings, the regression checks) is a
+list of *specs*.  A spec is a frozen description of one run with
+
+* ``suite`` (the raw/ sub-folder), ``backend`` (a backend variant name), ``key`` (the
+  name of its raw json) and ``describe()`` (the progress line),
+* ``params()``: the fields of its row when it does not run (skipped or failed),
+* ``execute(backend) -> record``: the run itself on a live backend, a pure function of
+  the spec; the record is a JSON-ready dict whose ``"row"`` is the run's line in the
+  report, and which may carry ``"picture_png"`` (bytes) for an effect picture.
+
+:func:`run_sweep` reads back the runs already stored, hands the others to an *executor*
+(the one place where runs are executed: :class:`InProcessExecutor` runs them here, one
+after the other, grouped by backend so that one backend is alive at a time), and stores
+each record as it arrives: the driver is the only writer.  Why a file per run: a sweep of
+many minutes can be interrupted (Ctrl-C) and resumed, a run whose json exists, made by
+the same code on the same host (:func:`made_by`), is read back instead of run again
+(``force`` re-runs it), and the report is always made from what is on disk, so it never
+mixes two half sweeps.  Each json is written atomically: it exists only when the run
+finished.  A backend that cannot start turns its runs into "skipped" rows with the reason,
+a run that raises into a "failed" row (no json, so the next sweep retries it).
+"""
+
+from __future__ import annotations
+
+import hashlib
+import json
+import platform
+import sys
+import traceback
+from functools import lru_cache
+from pathlib import Path
+
+from compact_distributions.cvt.errors import BackendUnavailable
+
+
+class BackendCache:
+    """Keeps at most one live backend: consecutive runs on the same variant share it (a
+    kernel is compiled once), and switching variants closes the old one first (several
+    live moderngl contexts would steal each other's current-context state)."""
+
+    def __init__(self):
+        self.variant: str | None = None
+        self.backend = None
+
+    def get(self, variant: str):
+        from compact_distributions.backends import create_backend
+
+        if variant != self.variant:
+            self.close()
+            self.backend = create_backend(variant)
+            self.variant = variant
+        return self.backend
+
+    def close(self):
+        if self.backend is not None:
+            try:
+                self.backend.close()
+            finally:
+                self.backend, self.variant = None, None
+
+
+def execute(spec, cache: BackendCache) -> tuple[str, object]:
+    """Run one spec: ("ok", record), ("skipped", reason) when its backend cannot start,
+    or ("failed", reason) when the run raised (one broken run must not sink a sweep)."""
+    try:
+        return "ok", spec.execute(cache.get(spec.backend))
+    except BackendUnavailable as exc:
+        return "skipped", str(exc)
+    except (KeyboardInterrupt, MemoryError):
+        raise
+    except Exception as exc:
+        cache.close()  # a failed backend may be in a bad state
+        last = traceback.extract_tb(exc.__traceback__)[-1]
+        return "failed", f"{type(exc).__name__}: {exc} ({Path(last.filename).name}:{last.lineno})"
+
+
+class InProcessExecutor:
+    """Runs specs here, one after the other, grouped by backend."""
+
+    def run(self, items, on_start=None):
+        """Yield (index, (status, value)) for each (index, spec) of ``items``."""
+        cache = BackendCache()
+        dead: dict[str, str] = {}
+        try:
+            for i, spec in sorted(items, key=lambda item: (item[1].backend, item[0])):
+                if spec.backend in dead:
+                    yield i, ("skipped", dead[spec.backend])
+                    continue
+                if on_start is not None:
+                    on_start(spec)
+                status, value = execute(spec, cache)
+                if status == "skipped":
+                    dead[spec.backend] = value
+                yield i, (status, value)
+        finally:
+            cache.close()
+
+
+def raw_path(out, spec) -> Path:
+    return Path(out) / "raw" / spec.suite / f"{spec.key}.json"
+
+
+def picture_path(out, spec) -> Path:
+    return Path(out) / "raw" / spec.suite / f"{spec.key}.png"
+
+
+def not_run_row(spec, reason: str, status: str = "skipped") -> dict:
+    return {"key": spec.key, **spec.params(), "status": status, "reason": reason}
+
+
+def run_sweep(specs: list, out, *, force: bool = False, store: bool = True, quiet: bool = False,
+              unavailable: dict[str, str] | None = None, executor=None) -> list[dict]:
+    """Run every spec (stored raw json read back unless ``force``) and return the rows in
+    the order of ``specs``.  ``unavailable`` maps a backend variant to the reason it
+    cannot run.  ``store=False`` (regression checks) neither reads nor writes raw json.
+    Ctrl-C stops the sweep; finished runs stay on disk, so the same command resumes."""
+    from tqdm import tqdm
+
+    from .outputs import atomic_write
+
+    unavailable = unavailable or {}
+    rows: dict[int, dict] = {}
+    pending = []
+    for i, spec in enumerate(specs):
+        if spec.backend in unavailable:
+            rows[i] = not_run_row(spec, unavailable[spec.backend])
+        elif store and not force and (stored := read_stored(raw_path(out, spec))) is not None:
+            rows[i] = {**stored, "cached": True}
+        else:
+            pending.append((i, spec))
+    executor = executor or InProcessExecutor()
+    bar = tqdm(total=len(specs), initial=len(specs) - len(pending), desc="runs", unit="run", disable=quiet,
+               file=sys.stderr, dynamic_ncols=True, mininterval=0.5)
+    try:
+        for i, (status, value) in executor.run(pending, on_start=lambda s: bar.set_postfix_str(s.describe())):
+            spec = specs[i]
+            if status != "ok":
+                rows[i] = not_run_row(spec, value, status)
+            else:
+                picture = value.pop("picture_png", None)
+                rows[i] = value["row"]
+                if store:
+                    if picture is not None:
+                        atomic_write(picture_path(out, spec), picture)
+                    write_stored(raw_path(out, spec), value)
+            bar.update(1)
+    except KeyboardInterrupt:
+        done = sum(1 for r in rows.values() if r.get("status") == "ok")
+        print(f"\ninterrupted: {done} of {len(specs)} runs are stored under {Path(out) / 'raw'}; "
+              "run the same command again to resume", file=sys.stderr)
+        raise
+    finally:
+        bar.close()
+    return [rows[i] for i in range(len(specs))]
+
+
+@lru_cache(maxsize=1)
+def made_by() -> dict:
+    """What a stored run must share with this process to be read back instead of re-run:
+    the same source code (a hash of every .py and .cl file of the four packages) on the
+    same host.  So a sweep resumes after Ctrl-C, but a fresh clone, a code change or
+    another machine computes its own figures instead of reusing committed ones."""
+    root = Path(__file__).resolve().parent.parent
+    digest = hashlib.sha1()
+    for pkg in ("cvt", "backends", "baselines", "bench"):
+        for f in sorted((root / pkg).rglob("*")):
+            if f.suffix in (".py", ".cl") and f.is_file():
+                digest.update(f.relative_to(root).as_posix().encode() + b"\0" + f.read_bytes())
+    return {"code": digest.hexdigest()[:16], "host": platform.node()}
+
+
+def read_stored(path: Path) -> dict | None:
+    """The row of a stored run, or None when there is none, it is unreadable, or other
+    code or another host made it (then the caller runs it again)."""
+    try:
+        stored = json.loads(Path(path).read_text())
+        return stored["row"] if stored.get("made_by") == made_by() else None
+    except (OSError, ValueError, KeyError, TypeError, AttributeError):
+        return None
+
+
+def write_stored(path: Path, record: dict) -> None:
+    """Store a run's record (with its :func:`made_by`) atomically."""
+    from .outputs import atomic_write, dumps
+
+    atomic_write(path, dumps({**record, "made_by": made_by()}))
