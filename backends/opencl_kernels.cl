@@ -18,7 +18,7 @@
    both are close, so v carries float64-like accuracy into the dot products.
 
    Plain ?: instead of fmin/fmax/fabs: PoCL stops vectorising the work-group loop on
-   those (MEASUREMENTS.md, about 4x slower). */
+   those (measured: about 4x slower). */
 
 #ifdef USE_INT64_ATOMICS
 #pragma OPENCL EXTENSION cl_khr_int64_base_atomics : enable

@@ -30,9 +30,9 @@ Energy per iteration: mean squared distance of the region's pixels to their near
 
 Where this departs from the paper, and why
 ------------------------------------------
-* Only the search tool's abstract of the paper could be read here; the details above
-  (centroid, principal axis) follow the "Beyond stippling" scheme that the paper extends
-  and the issue's summary.  Anything the paper adds beyond that is missing.
+* Only the abstract of the paper could be read; the details above (centroid, principal
+  axis) follow the "Beyond stippling" scheme that the paper extends.  Anything the paper
+  adds beyond that is missing.
 * The paper's tiles come in several shapes and sizes chosen by the user, and the user
   edits contours interactively; Table 2 compares equal tiles on a plain region, so all
   tiles here have one shape and size and there is no interaction.

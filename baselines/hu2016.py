@@ -32,7 +32,7 @@ Energy per iteration: mean squared distance of the region's pixels to their near
 
 Where this departs from the paper, and why
 ------------------------------------------
-* Only the abstract could be read through the search tool here; the pose search is our
+* Only the abstract of the paper could be read; the pose search is our
   concrete version of "optimise positions and orientations for a tight fit" (the paper
   solves a polygon-containment optimisation per tile).
 * The paper works on surfaces with a library of irregular tiles; here the plane and one

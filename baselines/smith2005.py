@@ -26,9 +26,8 @@ Energy per iteration: mean squared distance of the region's pixels to their near
 
 Where this departs from the paper, and why
 ------------------------------------------
-* Only the abstract could be read through the search tool here; the best-fit rotation
-  rule above ("rotate the tile to fit its cell", as the issue summarises the paper) is
-  our concrete reading.  The paper's own rotation rule may differ in detail.
+* Only the abstract of the paper could be read; the best-fit rotation rule above
+  ("rotate the tile to fit its cell") is our concrete reading.  The paper's own rotation rule may differ in detail.
 * The animation part (temporal coherence, groups of tiles moving together, tiles
   entering and leaving) is irrelevant to a static Table 2 problem and left out.
 * Regions are computed with a CPU distance transform, not with distance meshes on

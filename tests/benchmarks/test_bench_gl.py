@@ -1,5 +1,5 @@
 """Time per Lloyd iteration (labels + moments) of the GL backend in both modes, beside
-the cKDTree step the speed target is stated against (issue #5: >= 3x faster at 1024²,
+the cKDTree step the speed target is stated against (target: >= 3x faster at 1024²,
 N = 4000, on llvmpipe).
 
 With the suite's default --benchmark-disable each timed case runs once as a plain test

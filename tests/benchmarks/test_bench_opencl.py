@@ -1,5 +1,5 @@
 """Time per Lloyd iteration (labels + moments) of the OpenCL backend, beside the cKDTree
-step the speed target is stated against (issue #4: >= 5x faster at 1024², N = 4000, and
+step the speed target is stated against (target: >= 5x faster at 1024², N = 4000, and
 roughly flat in N from 1000 to 16000).
 
 With the suite's default --benchmark-disable each case runs once as a plain test (the
