@@ -187,8 +187,6 @@ class DaskExecutor:
                 run_spec, spec, mine, key=f"cvtbench-{spec.key}-{uuid.uuid4().hex[:8]}", pure=False, retries=1,
                 workers=[host] if host else None, allow_other_workers=False)
             pending[future] = (i, spec, host)
-            if on_start is not None:
-                on_start(spec)
 
         try:
             if not self.exclusive:
@@ -199,6 +197,8 @@ class DaskExecutor:
                     yield from self._dispatch_exclusive(queue, pending, submit)
                     if not pending:
                         continue
+                if on_start is not None:  # the oldest run not finished: most likely one in hand
+                    on_start(next(iter(pending.values()))[1])
                 try:
                     done, _ = wait(list(pending), timeout=POLL_S if self.exclusive else None,
                                    return_when="FIRST_COMPLETED")
@@ -208,8 +208,8 @@ class DaskExecutor:
                     i, spec, _ = pending.pop(future)
                     yield i, self.outcome(future)
         finally:
-            for future in pending:
-                future.cancel()
+            if pending:
+                self.client.cancel(list(pending))
 
     def _dispatch_exclusive(self, queue, pending, submit):
         """Give each host without a run of this sweep the next queued run, pinned to that
