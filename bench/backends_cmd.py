@@ -44,7 +44,7 @@ QUICK = {"sites": [1000, 4000], "sizes": [256, 512, 1024], "metrics": ["l2", "li
          "repeats": 3}
 
 COLUMNS = ["backend", "metric", "n_sites", "size", "pixels", "ms_median", "ms_min", "ms_max", "repeats",
-           "warmup", "x_numpy", "status", "reason", "device"]
+           "warmup", "x_numpy", "status", "reason", "device", "host"]
 
 
 @dataclass(frozen=True)
@@ -113,23 +113,25 @@ def sweep_specs(cfg: dict, variants: list[str], suite: str) -> list[TimingSpec]:
 
 def with_ratios(rows: list[dict]):
     """DataFrame of the rows with ``x_numpy`` = NumPy's median / this median, per
-    (metric, N, size): measured in the same sweep, so never across machines."""
+    (metric, N, size, host): measured in the same sweep on the same host, so never across
+    machines (NaN where NumPy ran on another host)."""
     import pandas as pd
 
     df = pd.DataFrame(rows)
     for c in COLUMNS:
         if c not in df:
             df[c] = np.nan
+    df["host"] = df["host"].fillna("")
     ref = df[(df["backend"] == REFERENCE) & (df["status"] == "ok")]
-    ref = ref.set_index(["metric", "n_sites", "size"])["ms_median"]
-    idx = list(zip(df["metric"], df["n_sites"], df["size"], strict=True))
+    ref = ref.set_index(["metric", "n_sites", "size", "host"])["ms_median"]
+    idx = list(zip(df["metric"], df["n_sites"], df["size"], df["host"], strict=True))
     df["x_numpy"] = [float(ref.get(k, np.nan)) / m if m and m == m else np.nan
                      for k, m in zip(idx, df["ms_median"], strict=True)]
     return df[COLUMNS]
 
 
 def render_markdown(df, prov: dict, command: str, quick: bool, cfg: dict, elapsed: float, cached: int) -> str:
-    from .report import header_markdown, markdown_table
+    from .report import header_markdown, markdown_table, several_hosts
 
     notes = [
         "what is timed: one Lloyd iteration (angles/scales at the sites, labels + integer moments on the "
@@ -146,6 +148,11 @@ def render_markdown(df, prov: dict, command: str, quick: bool, cfg: dict, elapse
     ok = df[df["status"] == "ok"]
     order = [b for b in dict.fromkeys(df["backend"]) if b in set(ok["backend"])]
     cols = ["metric", "N", "raster"] + [f"{b} ms" if b == "numpy" else f"{b} ms (x numpy)" for b in order]
+    by_host = several_hosts(ok["host"])  # a line from several machines says which ran what
+    if by_host:
+        cols.append("host")
+        text += ("\nThese timings come from several hosts (each configuration ran alone on its host); "
+                 "x numpy compares with NumPy on the same host only.\n")
     body = []
     for (metric, n, size), g in ok.groupby(["metric", "n_sites", "size"], sort=False):
         cells = []
@@ -159,7 +166,8 @@ def render_markdown(df, prov: dict, command: str, quick: bool, cfg: dict, elapse
             else:
                 cells.append(f"{r['ms_median']:.3g} ({r['x_numpy']:.2g}x)" if r["x_numpy"] == r["x_numpy"]
                              else f"{r['ms_median']:.3g}")
-        body.append([metric, n, f"{size}²"] + cells)
+        body.append([metric, n, f"{size}²"] + cells
+                    + ([", ".join(sorted({str(r["host"]) for r in by.values()}))] if by_host else []))
     text += "\n" + markdown_table(cols, body)
     gm = ok[ok["backend"] != "numpy"].groupby("backend", sort=False)["x_numpy"].apply(
         lambda s: float(np.exp(np.log(s.dropna()).mean())) if s.notna().any() else np.nan)
@@ -244,6 +252,7 @@ def add_parser(sub):
                        description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     options.add_sweep_options(p, "small subset (N 1000/4000, 256²-1024², l2, linf, triangle)")
     options.add_list_options(p, "backends", "metrics")
+    options.add_cluster_options(p)
     p.add_argument("--sites", default=None, help="comma list of N")
     p.add_argument("--sizes", default=None, help="comma list of square raster sides")
     p.add_argument("--repeats", default=None, help="timed iterations per configuration")
@@ -259,6 +268,7 @@ def _int_list(text, what):
 
 
 def run(args) -> int:
+    from .cluster import executor_for
     from .outputs import command_line
     from .report import provenance, write_csv, write_markdown
     from .sweep import run_sweep
@@ -280,7 +290,10 @@ def run(args) -> int:
         rows = rows_from_benchmark_json(args.from_benchmark_json)
     else:
         specs = sweep_specs(cfg, chosen, "backends-quick" if args.quick else "backends")
-        rows = run_sweep(specs, out, force=args.force, quiet=args.quiet, unavailable=unavailable)
+        # a timing never shares its host with another run of the sweep
+        with executor_for(args, exclusive=True) as executor:
+            rows = run_sweep(specs, out, force=args.force, quiet=args.quiet, unavailable=unavailable,
+                             executor=executor)
     df = with_ratios(rows)
     elapsed = time.perf_counter() - t0
     cached = sum(1 for r in rows if r.get("cached"))

@@ -106,6 +106,20 @@ def add_sweep_options(p, quick_help: str) -> None:
     p.add_argument("--quiet", action="store_true", help="no progress bar")
 
 
+def add_cluster_options(p, exclusive: bool = False) -> None:
+    """Where a sweep's runs go: a Dask cluster (--scheduler), a local one (--workers), or
+    in-process (neither).  ``exclusive``: also offer --exclusive (table2's time columns)."""
+    p.add_argument("--scheduler", metavar="ADDRESS", default=None,
+                   help="run on the Dask cluster of this scheduler, e.g. tcp://10.0.0.5:8786 "
+                   "(needs the cluster extra)")
+    p.add_argument("--workers", metavar="N", default=None,
+                   help="run on a local Dask cluster of N worker processes (needs the cluster extra)")
+    if exclusive:
+        p.add_argument("--exclusive", action="store_true",
+                       help="with --scheduler/--workers: each run has its host to itself, so its time is "
+                       "not shared with other runs (fewer runs at once)")
+
+
 def add_seeds_option(p, default_text: str = "default 5; quick 2") -> None:
     p.add_argument("--seeds", default=None, help=f"number of seeds K: seeds 0..K-1 ({default_text})")
 

@@ -92,6 +92,23 @@ def save_figure(fig, path) -> None:
         fig.savefig(tmp, dpi=fig.dpi)
 
 
+def hosts_of(rows) -> str:
+    """The hosts a group of rows ran on, comma-separated ('' where rows do not say)."""
+    return ", ".join(sorted(set(rows["host"].dropna().astype(str)))) if "host" in rows else ""
+
+
+def host_slots_of(rows) -> int:
+    """The most runs of its sweep that could share a host with one of these rows (1: each
+    ran alone on its host, as in-process runs do)."""
+    slots = rows["host_slots"].dropna() if "host_slots" in rows else []
+    return int(max(slots)) if len(slots) else 1
+
+
+def several_hosts(hosts) -> bool:
+    """Whether the comma-separated host lists of a report's rows name more than one host."""
+    return len({h for text in hosts if isinstance(text, str) for h in text.split(", ") if h}) > 1
+
+
 def fmt_pct(mean, sd=None, digits: int = 1) -> str:
     import math
 

@@ -23,6 +23,7 @@ def add_parser(sub):
                        description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     options.add_sweep_options(p, "the quick form of every part (< 5 min on 2 cores)")
     options.add_seeds_option(p, "table2's: default 5; quick 2")
+    options.add_cluster_options(p, exclusive=True)
     p.set_defaults(func=run)
 
 
@@ -54,15 +55,24 @@ def _sub_args(module_name: str, argv: list[str]):
 
 
 def run(args) -> int:
+    from .cluster import chosen, scheduler_address
+
+    chosen(args)  # bad cluster options fail before anything starts
+    # with --workers one local cluster serves every part
+    with scheduler_address(args) as address:
+        return _run(args, address)
+
+
+def _run(args, address: str | None) -> int:
     from .outputs import command_line
     from .report import header_markdown, markdown_table, provenance, write_markdown
 
     out = Path(args.out) if args.out else (Path("reports/quick") if args.quick else Path("reports"))
     common = (["--quick"] if args.quick else []) + (["--force"] if args.force else []) + \
-        (["--quiet"] if args.quiet else [])
+        (["--quiet"] if args.quiet else []) + (["--scheduler", address] if address else [])
     parts = [
         ("table2", "compact_distributions.bench.table2", ["table2", "--out", str(out)] + common
-         + (["--seeds", str(args.seeds)] if args.seeds else [])),
+         + (["--seeds", str(args.seeds)] if args.seeds else []) + (["--exclusive"] if args.exclusive else [])),
         ("backends", "compact_distributions.bench.backends_cmd", ["backends", "--out", str(out)] + common),
         ("figures", "compact_distributions.bench.figures_cmd",
          ["figures", "--out", str(out / "figures")] + [a for a in common if a != "--force"]),

@@ -12,7 +12,8 @@ list of *specs*.  A spec is a frozen description of one run with
 
 :func:`run_sweep` reads back the runs already stored, hands the others to an *executor*
 (the one place where runs are executed: :class:`InProcessExecutor` runs them here, one
-after the other, grouped by backend so that one backend is alive at a time), and stores
+after the other, grouped by backend so that one backend is alive at a time;
+:class:`.cluster.DaskExecutor` sends them to the workers of a Dask cluster), and stores
 each record as it arrives: the driver is the only writer.  Why a file per run: a sweep of
 many minutes can be interrupted (Ctrl-C) and resumed, a run whose json exists, made by
 the same code on the same host (:func:`made_by`), is read back instead of run again
@@ -61,11 +62,16 @@ class BackendCache:
                 self.backend, self.variant = None, None
 
 
-def execute(spec, cache: BackendCache) -> tuple[str, object]:
+def execute(spec, cache: BackendCache, worker: str = "in-process") -> tuple[str, object]:
     """Run one spec: ("ok", record), ("skipped", reason) when its backend cannot start,
-    or ("failed", reason) when the run raised (one broken run must not sink a sweep)."""
+    or ("failed", reason) when the run raised (one broken run must not sink a sweep).
+    The record says where it ran: ``worker`` (a Dask worker's address, or "in-process")
+    and ``host``, which its row repeats so that reports can tell hosts apart."""
     try:
-        return "ok", spec.execute(cache.get(spec.backend))
+        record = spec.execute(cache.get(spec.backend))
+        record["worker"], record["host"] = worker, platform.node()
+        record["row"]["host"] = record["host"]
+        return "ok", record
     except BackendUnavailable as exc:
         return "skipped", str(exc)
     except (KeyboardInterrupt, MemoryError):

@@ -62,7 +62,7 @@ QUICK = {"size": 256, "n_sites": 250, "iterations": 20, "seeds": 2}
 COLUMNS = ["method", "backend", "element", "metric", "width", "height", "n_sites", "iterations",
            "seeds", "runs", "coverage_mean", "coverage_sd", "overlap_mean", "overlap_sd",
            "time_mean_s", "time_sd_s", "ms_per_iteration", "placed_mean", "empty_cells_mean",
-           "paper_coverage", "paper_time", "status", "reason", "device"]
+           "paper_coverage", "paper_time", "status", "reason", "device", "hosts", "host_slots"]
 
 
 def problem_set(quick: bool, seeds: int | None, methods: list[str], backends: list[str],
@@ -107,6 +107,8 @@ def aggregate(rows: list[dict]):
     """One line per (method, backend, element): mean ± sd over the seeds that ran."""
     import pandas as pd
 
+    from .report import host_slots_of, hosts_of
+
     df = pd.DataFrame(rows)
     if "label" in df:  # a baseline run with another tile budget is a line of its own
         df["method"] = df["label"].fillna(df["method"])
@@ -130,7 +132,7 @@ def aggregate(rows: list[dict]):
                 placed_mean=float(ok["placed"].mean()), empty_cells_mean=float(ok["empty_cells"].mean()),
                 status="ok" if len(ok) == len(g) else "partial",
                 reason="; ".join(sorted(set(g.loc[g["status"] != "ok", "reason"].astype(str)))),
-                device=str(ok.iloc[0]["device"]),
+                device=str(ok.iloc[0]["device"]), hosts=hosts_of(ok), host_slots=host_slots_of(ok),
             )
         else:
             rec.update(status=str(first["status"]), reason=str(first["reason"]), device="")
@@ -187,7 +189,7 @@ def discussion(table) -> str:
 
 def render_markdown(table, prov: dict, command: str, quick: bool, cfg: dict, seeds: int,
                     elapsed: float, cached: int, total: int) -> str:
-    from .report import fmt_pct, fmt_seconds, header_markdown, markdown_table
+    from .report import fmt_pct, fmt_seconds, header_markdown, markdown_table, several_hosts
 
     title = "Table 2, regenerated" + (" (QUICK: small raster, 2 seeds; not the paper's scale)" if quick else "")
     notes = [
@@ -214,17 +216,24 @@ def render_markdown(table, prov: dict, command: str, quick: bool, cfg: dict, see
         text += f"\n**{title}**\n"
     cols = ["method", "backend", "element", "coverage", "overlap", "time", "ms/it", "runs",
             "paper coverage", "paper time"]
+    by_host = several_hosts(table["hosts"])  # rows from several machines say which
+    shared = table["host_slots"].fillna(1) > 1  # times taken beside other runs of the sweep
     body = []
-    for _, r in table.iterrows():
+    for k, r in table.iterrows():
         if r["status"] not in ("ok", "partial"):
             continue
         body.append([
             r["method"], r["backend"], r["element"],
             fmt_pct(r["coverage_mean"], r["coverage_sd"]), fmt_pct(r["overlap_mean"], r["overlap_sd"]),
-            fmt_seconds(r["time_mean_s"]), f"{r['ms_per_iteration']:.3g}", f"{r['runs']}/{r['seeds']}",
+            fmt_seconds(r["time_mean_s"]) + (" ‡" if shared[k] else ""), f"{r['ms_per_iteration']:.3g}",
+            f"{r['runs']}/{r['seeds']}",
             fmt_pct(r["paper_coverage"]) if r["paper_time"] else "", r["paper_time"] or "",
-        ])
-    text += "\n" + markdown_table(cols, body)
+        ] + ([r["hosts"]] if by_host else []))
+    text += "\n" + markdown_table(cols + (["host"] if by_host else []), body)
+    if shared.any():
+        text += (f"\n‡ time taken while up to {int(table['host_slots'].max())} runs of this sweep shared the "
+                 "host (--workers or --scheduler without --exclusive): compare it only with times taken the "
+                 "same way; coverage and overlap do not depend on it.\n")
     missing = table[~table["status"].isin(["ok"])]
     if len(missing):
         text += "\n## Not run, failed or partial\n\n"
@@ -289,6 +298,7 @@ def add_parser(sub):
     options.add_sweep_options(p, "small version (256² px, N=250, 2 seeds): < 2 min")
     options.add_seeds_option(p)
     options.add_list_options(p, "methods", "backends", "shapes")
+    options.add_cluster_options(p, exclusive=True)
     p.set_defaults(func=run)
 
 
@@ -306,6 +316,7 @@ def sweep_backends(text) -> tuple[list[str], dict[str, str]]:
 
 
 def run(args) -> int:
+    from .cluster import executor_for
     from .outputs import command_line
     from .report import provenance, write_csv, write_markdown
     from .sweep import run_sweep
@@ -321,7 +332,9 @@ def run(args) -> int:
     backends, unavailable = sweep_backends(args.backends)
     shapes = name_list(args.shapes, "shape", ELEMENTS)
     specs = problem_set(args.quick, seeds, methods, backends, shapes)
-    rows = run_sweep(specs, out, force=args.force, quiet=args.quiet, unavailable=unavailable)
+    with executor_for(args, exclusive=args.exclusive) as executor:
+        rows = run_sweep(specs, out, force=args.force, quiet=args.quiet, unavailable=unavailable,
+                         executor=executor)
     table = aggregate(rows)
     elapsed = time.perf_counter() - t0
     cached = sum(1 for r in rows if r.get("cached"))
