@@ -188,7 +188,8 @@ def side_by_side(panels, captions, scale: float = 1.0):
 
 
 def measures_line(m) -> str:
-    return (f"coverage {m.coverage:.3f}, ΔE {m.colour_error:.1f},\n"
+    # plain ASCII: the default bitmap font has no Δ
+    return (f"coverage {m.coverage:.3f}, colour error {m.colour_error:.1f} dE,\n"
             f"straddling {100 * m.straddling:.1f} %, {m.placed} tiles")
 
 
@@ -258,31 +259,48 @@ PAPER_FIGURES = [
 
 
 SAMPLES_DIR = Path(__file__).resolve().parent.parent / "samples"
+# the README's full-size mosaic and its comparisons: a photograph-like picture, defaults
+SCENE = "scene.jpg"
+SCENE_FIGURES = {"mosaic": "mosaic_scene.png", "edges": "mosaic_scene_edges.png",
+                 "method": "mosaic_scene_methods.png"}
 
 
 def write_paper_figures(out_dir, backend, samples_dir=None, iterations: int = 20, fewer: int = 1,
                         quiet: bool = False) -> list[Path]:
-    """Re-make Figures 18-19 (original | without | with) from the sample pictures
-    (``fewer``: divide the number of elements, for a quick smoke test)."""
-    from compact_distributions.cvt.mosaic import make_mosaic, picture_array
+    """Re-make Figures 18-19 (original | without | with) from the sample pictures, and
+    the README's mosaic of samples/scene.jpg (2000 tiles, the defaults) with its
+    comparisons without walls and by method (``fewer``: divide the number of elements,
+    for a quick smoke test)."""
+    from compact_distributions.cvt.mosaic import DEFAULT_ELEMENTS, make_mosaic, picture_array
 
     from .outputs import atomic_path
 
     samples_dir = Path(samples_dir or SAMPLES_DIR)
     out_dir = Path(out_dir)
     written = []
+
+    def save(image, name, note):
+        path = out_dir / name
+        with atomic_path(path) as tmp:
+            image.save(tmp, format="PNG", optimize=True)
+        if not quiet:
+            print(f"wrote {path}: {note}", file=sys.stderr)
+        written.append(path)
+
     for name, sample, what, opts in PAPER_FIGURES:
         picture, _ = picture_array(samples_dir / sample)
         key = COMPARE[what]
         opts = dict(opts, n_elements=max(1, opts["n_elements"] // fewer))
         with_ = make_mosaic(picture, backend, iterations=iterations, **dict(opts, **{key: True}))
         without = make_mosaic(picture, backend, iterations=iterations, **dict(opts, **{key: False}))
-        path = out_dir / name
-        with atomic_path(path) as tmp:
-            comparison_figure(with_.picture, without, with_, what).save(tmp, format="PNG", optimize=True)
-        if not quiet:
-            print(f"wrote {path}: {opts['element']} x {opts['n_elements']}, coverage without "
-                  f"{without.coverage:.3f}, with {with_.coverage:.3f}", file=sys.stderr)
-        written.append(path)
-    return written
+        save(comparison_figure(with_.picture, without, with_, what), name,
+             f"{opts['element']} x {opts['n_elements']}, coverage without {without.coverage:.3f}, "
+             f"with {with_.coverage:.3f}")
 
+    picture, _ = picture_array(samples_dir / SCENE)
+    opts = dict(n_elements=max(1, DEFAULT_ELEMENTS // fewer), iterations=iterations)
+    m = make_mosaic(picture, backend, **opts)
+    save(m.render(), SCENE_FIGURES["mosaic"], f"{m.method}, {measures_line(m).replace(chr(10), ' ')}")
+    for what in ("edges", "method"):
+        save(compare_figure(picture, backend, opts, what, done=m), SCENE_FIGURES[what], f"--compare {what}")
+    return written

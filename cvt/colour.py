@@ -6,10 +6,10 @@ exactly L* = 100, a* = b* = 0 and black L* = 0.  Distances between Lab colours a
 ΔE*ab (CIE76, Euclidean): about 2.3 is a just noticeable difference, pure black to pure
 white is 100.
 
-Why Lab: a mosaic tile's fill is an average of the pixels under it, and the mean in
-Lab is the colour that minimises the mean squared *perceived* difference to them; in
-sRGB the mean of a dark and a light pixel comes out too dark (sRGB values are
-gamma-encoded, not proportional to light or to lightness).
+Why Lab: a mosaic tile's fill stands for the pixels under it, and a distance in Lab is a
+*perceived* difference, so the mean in Lab is the colour with the least mean squared
+perceived difference to them; in sRGB (gamma-encoded, proportional neither to light nor
+to lightness) the mean of a dark and a light pixel comes out too dark.
 """
 
 from __future__ import annotations

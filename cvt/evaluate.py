@@ -126,7 +126,9 @@ def evaluate(elements, grid: Grid, region=None, labels=None) -> Evaluation:
 #                        (8-bit sRGB): the mean perceived difference over the tiled area
 #   straddling         = share of placed tiles that hold a strong-edge pixel centre at
 #                        least 1 px inside their outline (tile eroded by 1 px): the edge runs
-#                        through the tile with at least 1 px of the tile on each side
+#                        through the tile with at least 1 px of the tile on each side.  A
+#                        tile that a method clipped (to a region with walls) is taken as its
+#                        convex hull: its pieces on both sides of a wall still straddle it
 
 
 def pixels_under(elements, width: int, height: int) -> tuple[np.ndarray, np.ndarray]:
@@ -167,14 +169,16 @@ STRADDLE_DEPTH = 1.0  # px of tile on each side of an edge for the tile to strad
 
 
 def straddling_tiles(elements, edges: np.ndarray, depth: float = STRADDLE_DEPTH) -> np.ndarray:
-    """(N,) bool: tile k straddles a strong edge, i.e. its outline eroded by ``depth``
-    px holds (inside or on it) the centre of a pixel of ``edges`` ((H, W) bool)."""
+    """(N,) bool: tile k straddles a strong edge, i.e. its outline (convex hull) eroded
+    by ``depth`` px holds (inside or on it) the centre of a pixel of ``edges`` ((H, W)
+    bool)."""
     h, w = edges.shape
     out = np.zeros(len(elements), dtype=bool)
     placed = [k for k, e in enumerate(elements) if e is not None and not e.is_empty]
     if not placed or not edges.any():
         return out
-    eroded = shapely.buffer(np.array([elements[k] for k in placed], dtype=object), -depth, join_style="mitre")
+    hulls = shapely.convex_hull(np.array([elements[k] for k in placed], dtype=object))
+    eroded = shapely.buffer(hulls, -depth, join_style="mitre")
     tiles, pixels = pixels_under(list(eroded), w, h)
     hit = tiles[edges.ravel()[pixels]]
     out[np.asarray(placed)[np.unique(hit)]] = True

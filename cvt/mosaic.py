@@ -232,10 +232,11 @@ def tile_colours(lab: np.ndarray, polygons, sites, tiles: np.ndarray, pixels: np
     """Fill of every tile: (N, 3) sRGB in 0..1 (8-bit values, as written) and their Lab.
 
     The mean, in CIELAB, of the picture's pixels whose centres lie inside or on the
-    tile's outline (``tiles``, ``pixels`` from :func:`cvt.evaluate.pixels_under`), read
-    from the final polygons, so it holds wherever the method put the tile.  A tile too
-    thin to hold a pixel centre takes the pixel under a point inside it; a site without
-    a tile the pixel under the site (its colour is listed but never drawn)."""
+    tile's outline (``tiles``, ``pixels`` from :func:`cvt.evaluate.pixels_under`): the
+    colour with the least mean *squared* ΔE*ab to them.  Read from the final polygons,
+    so it holds wherever the method put the tile.  A tile too thin to hold a pixel
+    centre takes the pixel under a point inside it; a site without a tile the pixel
+    under the site (its colour is listed but never drawn)."""
     import shapely
 
     h, w = lab.shape[:2]
@@ -243,16 +244,15 @@ def tile_colours(lab: np.ndarray, polygons, sites, tiles: np.ndarray, pixels: np
     flat = lab.reshape(-1, 3)
     count = np.bincount(tiles, minlength=n).astype(np.float64)
     sums = np.stack([np.bincount(tiles, weights=flat[pixels, c], minlength=n) for c in range(3)], axis=1)
-    mean = np.empty((n, 3))
     held = count > 0
-    mean[held] = sums[held] / count[held, None]
+    fill = sums / np.where(held, count, 1.0)[:, None]
     points = np.array(sites, dtype=np.float64).reshape(-1, 2).copy()
     thin = [k for k in np.flatnonzero(~held) if polygons[k] is not None and not polygons[k].is_empty]
     if thin:
         points[thin] = shapely.get_coordinates(shapely.point_on_surface([polygons[k] for k in thin]))
     if (~held).any():
-        mean[~held] = lab[pixel_index(points[~held], w, h)]
-    rgb = quantised(lab_to_srgb(mean))
+        fill[~held] = lab[pixel_index(points[~held], w, h)]
+    rgb = quantised(lab_to_srgb(fill))
     return rgb, srgb_to_lab(rgb)
 
 

@@ -225,7 +225,7 @@ def test_result_json_measures_match_a_hand_computation(tmp_path, capsys):
         assert colour == f"#{grey:02x}{grey:02x}{grey:02x}"
         mean_l = 100 * white / (white + black)
         assert abs(lightness(grey) - mean_l) <= 0.5  # nearest 8-bit grey: within 0.5 L*
-        errors += white * abs(100 - lightness(grey)) + black * lightness(grey)
+        errors += white * (100 - lightness(grey)) + black * lightness(grey)
         pairs += white + black
         # straddling: the strong edge is the pixel column right of the step (x centre
         # 12.5); the square eroded by 1 px holds one of its pixel centres
