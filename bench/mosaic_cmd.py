@@ -279,7 +279,11 @@ def write_paper_figures(out_dir, backend, samples_dir=None, iterations: int = 20
     out_dir = Path(out_dir)
     written = []
 
-    def save(image, name, note):
+    def save(image, name, note, palette=False):
+        from PIL import Image
+
+        if palette:  # a noisy photograph beside its mosaics: 256 colours keep it < 300 KB
+            image = image.quantize(256, method=Image.Quantize.MEDIANCUT, dither=Image.Dither.NONE)
         path = out_dir / name
         with atomic_path(path) as tmp:
             image.save(tmp, format="PNG", optimize=True)
@@ -302,5 +306,6 @@ def write_paper_figures(out_dir, backend, samples_dir=None, iterations: int = 20
     m = make_mosaic(picture, backend, **opts)
     save(m.render(), SCENE_FIGURES["mosaic"], f"{m.method}, {measures_line(m).replace(chr(10), ' ')}")
     for what in ("edges", "method"):
-        save(compare_figure(picture, backend, opts, what, done=m), SCENE_FIGURES[what], f"--compare {what}")
+        save(compare_figure(picture, backend, opts, what, done=m), SCENE_FIGURES[what], f"--compare {what}",
+             palette=True)
     return written
