@@ -1,20 +1,24 @@
 """`cvtbench mosaic IMAGE --out DIR`: a picture turned into a mosaic (paper §4.1).
 
-Element sizes follow a density map and element directions a field, both extracted from
-the picture (cvt/image_fields.py); each element is filled with the picture's mean colour
-under it, on a grout-coloured background.
+Tile sizes follow a density map and tile directions a field, both extracted from the
+picture (cvt/image_fields.py); the picture's strong edges are walls that no tile
+crosses; a method places the tiles (--method); each tile is filled with the mean colour,
+in CIELAB, of the picture under it, on a grout-coloured background.
 
-DIR/mosaic.svg    the mosaic: grout background, one filled element per placed site
+DIR/mosaic.svg    the mosaic: grout background, one filled tile per placed site
 DIR/mosaic.png    the same, rendered (antialiased) at the raster size times --png-scale
 DIR/result.json   the run, in the one result.json schema of `cvtbench run` (backend,
                   device, metric, aspect, size, sites, angles, scales, iterations,
                   energy, seconds, element, gap, coverage, overlap, placed, elements
-                  (outlines), ...) plus image, colours, grout and contrast
+                  (outlines), ...) plus image, colours, grout, contrast, colour_error,
+                  straddling, edge_threshold, walls and edge_pixels
 DIR/sites.csv     x,y,angle_deg,scale per site
-DIR/compare_field.png or compare_density.png  with --compare: original | without | with
+DIR/compare_WHAT.png  with --compare: original and the mosaic without and with the field,
+                  the density or the walls, or with each method (ours, ours-compact,
+                  hausner2001)
 
-The paper's Figures 18-19 from the sample pictures (into reports/figures/):
-    .venv/bin/python -m bench.mosaic_cmd reports/figures
+The paper's Figures 18-19 from the sample pictures (into reports/figures/) are part of
+`cvtbench figures`.
 """
 
 from __future__ import annotations
@@ -33,8 +37,15 @@ from . import options
 DEFAULT_OUT = "out/mosaic"
 
 
+# --compare WHAT: the make_mosaic option that the panels switch off and on
+COMPARE = {"field": "use_field", "density": "use_density", "edges": "edges", "method": "method"}
+COMPARE_METHODS = ("ours", "ours-compact", "hausner2001")
+COMPARE_FALLBACK = "ours-fit"  # stands in for a method of COMPARE_METHODS not registered here
+
+
 def add_parser(sub):
-    from compact_distributions.cvt.mosaic import DEFAULT_ELEMENTS
+    from compact_distributions.cvt.image_fields import DEFAULT_EDGE_THRESHOLD
+    from compact_distributions.cvt.mosaic import DEFAULT_ELEMENTS, DEFAULT_METHOD
 
     p = sub.add_parser("mosaic", help="turn a picture into a mosaic (density and direction from the picture)",
                        description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
@@ -52,10 +63,17 @@ def add_parser(sub):
                    help="densest / sparsest cell area of the density map (default 3; 1 = uniform)")
     p.add_argument("--no-field", action="store_true", help="all elements at angle 0 (no direction field)")
     p.add_argument("--no-density", action="store_true", help="one element size everywhere (no density map)")
+    p.add_argument("--no-edges", action="store_true",
+                   help="strong edges are not walls (tiles may cross them)")
+    p.add_argument("--edge-threshold", default=None,
+                   help=f"contrast of a strong edge in ΔE*ab (CIELAB; default {DEFAULT_EDGE_THRESHOLD:g}): "
+                   "strong edges are walls, and the straddling measure counts tiles across them")
+    options.add_method_option(p, default=DEFAULT_METHOD)
     options.add_run_options(p)
     p.add_argument("--png-scale", default="1", help="mosaic.png size relative to the raster (default 1)")
-    p.add_argument("--compare", choices=["field", "density"], default=None,
-                   help="also write compare_field.png / compare_density.png: original | without | with")
+    p.add_argument("--compare", choices=list(COMPARE), default=None,
+                   help="also write compare_WHAT.png: original | without | with the field, the density or "
+                   "the edge walls; method: original | ours | ours-compact | hausner2001")
     options.add_output_options(p, DEFAULT_OUT)
     p.set_defaults(func=run)
 
@@ -67,10 +85,15 @@ def _say(quiet: bool, text: str) -> None:
 
 def mosaic_options(args) -> dict:
     """make_mosaic keyword arguments from the parsed command line (validated)."""
-    from compact_distributions.cvt.image_fields import DEFAULT_CONTRAST
+    from compact_distributions.baselines import get_method
+    from compact_distributions.cvt.image_fields import DEFAULT_CONTRAST, DEFAULT_EDGE_THRESHOLD
     from compact_distributions.cvt.placement import parse_gap
 
     return dict(
+        method=get_method(args.method),
+        edges=not args.no_edges,
+        edge_threshold=(DEFAULT_EDGE_THRESHOLD if args.edge_threshold is None
+                        else real_number(args.edge_threshold, "--edge-threshold", above=0)),
         n_elements=whole_number(args.elements, "--elements", minimum=1),
         metric=args.metric, element=args.element, aspect=args.aspect, size=args.size,
         gap=None if args.gap is None else parse_gap(args.gap, "--gap"),
@@ -86,18 +109,23 @@ def mosaic_options(args) -> dict:
 def mosaic_result_json(args, m, backend) -> dict:
     """result.json of a mosaic (the schema of bench/results.py)."""
     from compact_distributions.cvt.evaluate import evaluate
+    from compact_distributions.cvt.problem import Grid
     from compact_distributions.cvt.render import hex_colour
 
     from .outputs import command_line
     from .results import build_result
 
-    ev = evaluate(m.polygons, m.problem.grid, labels=m.labels)
+    # coverage of the whole picture: wall pixels count as grout
+    ev = evaluate(m.polygons, Grid(m.width, m.height), labels=m.labels)
     sources = {"density": "picture" if m.problem.density is not None else None,
-               "field": "picture" if m.problem.field is not None else None}
+               "field": "picture" if m.problem.field is not None else None,
+               "region": "picture less its strong edges" if m.walls else None}
     return build_result("mosaic", m.problem, m.to_distribution(), ev, backend, element=m.element, gap=m.gap,
                         command=command_line(getattr(args, "argv", None)), sources=sources, image=m.source,
                         colours=[hex_colour(c) for c in m.colours], grout=hex_colour(m.grout),
-                        contrast=m.contrast)
+                        contrast=m.contrast,
+                        colour_error=m.colour_error if np.isfinite(m.colour_error) else None, straddling=m.straddling,
+                        edge_threshold=m.edge_threshold, walls=m.walls, edge_pixels=int(m.edges.sum()))
 
 
 def run(args) -> int:
@@ -107,9 +135,9 @@ def run(args) -> int:
 
     png_scale = real_number(args.png_scale, "--png-scale", minimum=0.01)
     t0 = time.perf_counter()
+    opts = mosaic_options(args)  # bad options fail before anything is read or said
     _say(args.quiet, f"reading {args.image}")
     picture, _ = picture_array(args.image)  # fails early, before any work, on a bad file
-    opts = mosaic_options(args)
     with options.open_backend(args) as backend:
         _say(args.quiet, f"mosaic of {opts['n_elements']} elements, {opts['iterations']} iterations "
              f"on {backend.variant}")
@@ -117,13 +145,11 @@ def run(args) -> int:
         m.source = args.image
         comparison = None
         if args.compare:
-            _say(args.quiet, f"comparison run without the {args.compare}")
-            other = dict(opts, progress=None)
-            other["use_field" if args.compare == "field" else "use_density"] = False
-            without = make_mosaic(picture, backend, **other)
-            comparison = comparison_figure(m.picture, without, m, args.compare)
+            _say(args.quiet, f"comparison runs for --compare {args.compare}")
+            comparison = compare_figure(picture, backend, dict(opts, progress=None), args.compare, m)
         result = mosaic_result_json(args, m, backend)
-    _say(args.quiet, f"placed {m.placed} of {len(m.sites)} elements, coverage {m.coverage:.3f}; writing {args.out}")
+    _say(args.quiet, f"{m.method}: placed {m.placed} of {len(m.sites)} tiles, coverage {m.coverage:.3f}, "
+         f"colour error {m.colour_error:.2f} ΔE*ab, straddling {100 * m.straddling:.1f} %; writing {args.out}")
     with staged_dir(args.out) as tmp:
         (tmp / "mosaic.svg").write_text(m.svg())
         m.render(scale=png_scale).save(tmp / "mosaic.png")
@@ -138,30 +164,87 @@ def run(args) -> int:
 
 # ----------------------------------------------------------------- figures 18-19
 
-def comparison_figure(picture: np.ndarray, without, with_, what: str, scale: float = 1.0):
-    """original | without | with, side by side with captions (a PIL image)."""
+def side_by_side(panels, captions, scale: float = 1.0):
+    """PIL images side by side, each under its caption (one or two lines)."""
     from PIL import Image, ImageDraw, ImageFont
 
-    panels = [Image.fromarray(np.round(picture * 255).astype(np.uint8), "RGB"),
-              without.render(scale=1.0), with_.render(scale=1.0)]
     if scale != 1.0:
         panels = [p.resize((round(p.width * scale), round(p.height * scale)), Image.Resampling.LANCZOS)
                   for p in panels]
-    names = {"field": ("original", "without the direction field", "with the direction field"),
-             "density": ("original", "without size variation", "with size variation (density)")}[what]
-    pad, caption = 8, 26
+    pad, line = 8, 20
+    caption = line * max(len(c.splitlines()) for c in captions) + 6
     w, h = panels[0].width, panels[0].height
-    canvas = Image.new("RGB", (3 * w + 4 * pad, h + caption + 2 * pad), "white")
+    canvas = Image.new("RGB", (len(panels) * (w + pad) + pad, h + caption + 2 * pad), "white")
     draw = ImageDraw.Draw(canvas)
     try:
         font = ImageFont.load_default(size=16)
     except TypeError:  # Pillow < 10.1: fixed-size bitmap font
         font = ImageFont.load_default()
-    for k, (panel, name) in enumerate(zip(panels, names, strict=True)):
+    for k, (panel, text) in enumerate(zip(panels, captions, strict=True)):
         x = pad + k * (w + pad)
         canvas.paste(panel, (x, pad + caption))
-        draw.text((x, pad), name, fill=(20, 20, 20), font=font)
+        draw.multiline_text((x, pad), text, fill=(20, 20, 20), font=font, spacing=4)
     return canvas
+
+
+def measures_line(m) -> str:
+    # plain ASCII: the default bitmap font has no Δ
+    return (f"coverage {m.coverage:.3f}, colour error {m.colour_error:.1f} dE,\n"
+            f"straddling {100 * m.straddling:.1f} %, {m.placed} tiles")
+
+
+def comparison_figure(picture: np.ndarray, without, with_, what: str, scale: float = 1.0):
+    """original | without | with, side by side with captions (a PIL image)."""
+    from PIL import Image
+
+    names = {"field": ("without the direction field", "with the direction field"),
+             "density": ("without size variation", "with size variation (density)"),
+             "edges": ("edges not walls (--no-edges)", "strong edges as walls")}[what]
+    panels = [Image.fromarray(np.round(picture * 255).astype(np.uint8), "RGB"), without.render(), with_.render()]
+    captions = ["original\n", f"{names[0]}\n{measures_line(without)}", f"{names[1]}\n{measures_line(with_)}"]
+    return side_by_side(panels, captions, scale)
+
+
+def compare_methods(picture, backend, opts: dict, done=None):
+    """Mosaics of ``picture`` by each method of COMPARE_METHODS (one not registered is
+    replaced by COMPARE_FALLBACK, and its caption says so): a list of (caption, mosaic)."""
+    from compact_distributions.baselines import get_method, method_names
+    from compact_distributions.cvt.mosaic import make_mosaic
+
+    out = []
+    for name in COMPARE_METHODS:
+        caption = name
+        if name not in method_names():
+            caption = f"{name} not built yet: {COMPARE_FALLBACK}"
+            name = COMPARE_FALLBACK
+        if done is not None and done.method == name:
+            m = done
+        else:
+            m = make_mosaic(picture, backend, **dict(opts, method=get_method(name)))
+        out.append((caption, m))
+    return out
+
+
+def compare_figure(picture, backend, opts: dict, what: str, done=None):
+    """The --compare figure: original | without | with (field, density, edges), or
+    original | one mosaic per method (``method``).  ``done``: the mosaic already made
+    with ``opts``, reused where a panel asks for the same."""
+    from PIL import Image
+
+    from compact_distributions.cvt.mosaic import make_mosaic
+
+    if what == "method":
+        runs = compare_methods(picture, backend, opts, done)
+        first = runs[0][1]
+        panels = [Image.fromarray(np.round(first.picture * 255).astype(np.uint8), "RGB")]
+        panels += [m.render() for _, m in runs]
+        captions = ["original\n"] + [f"{c}\n{measures_line(m)}" for c, m in runs]
+        return side_by_side(panels, captions)
+    key = COMPARE[what]
+    on = bool(opts.get(key, True))
+    with_ = done if done is not None and on else make_mosaic(picture, backend, **dict(opts, **{key: True}))
+    without = done if done is not None and not on else make_mosaic(picture, backend, **dict(opts, **{key: False}))
+    return comparison_figure(with_.picture, without, with_, what)
 
 
 # (figure, sample, what, make_mosaic options): the paper's Figures 18 and 19 re-made from
@@ -176,31 +259,53 @@ PAPER_FIGURES = [
 
 
 SAMPLES_DIR = Path(__file__).resolve().parent.parent / "samples"
+# the README's full-size mosaic and its comparisons: a photograph-like picture, defaults
+SCENE = "scene.jpg"
+SCENE_FIGURES = {"mosaic": "mosaic_scene.png", "edges": "mosaic_scene_edges.png",
+                 "method": "mosaic_scene_methods.png"}
 
 
 def write_paper_figures(out_dir, backend, samples_dir=None, iterations: int = 20, fewer: int = 1,
                         quiet: bool = False) -> list[Path]:
-    """Re-make Figures 18-19 (original | without | with) from the sample pictures
-    (``fewer``: divide the number of elements, for a quick smoke test)."""
-    from compact_distributions.cvt.mosaic import make_mosaic, picture_array
+    """Re-make Figures 18-19 (original | without | with) from the sample pictures, and
+    the README's mosaic of samples/scene.jpg (2000 tiles, the defaults) with its
+    comparisons without walls and by method (``fewer``: divide the number of elements,
+    for a quick smoke test)."""
+    from compact_distributions.cvt.mosaic import DEFAULT_ELEMENTS, make_mosaic, picture_array
 
     from .outputs import atomic_path
 
     samples_dir = Path(samples_dir or SAMPLES_DIR)
     out_dir = Path(out_dir)
     written = []
+
+    def save(image, name, note, palette=False):
+        from PIL import Image
+
+        if palette:  # a noisy photograph beside its mosaics: 256 colours keep it < 300 KB
+            image = image.quantize(256, method=Image.Quantize.MEDIANCUT, dither=Image.Dither.NONE)
+        path = out_dir / name
+        with atomic_path(path) as tmp:
+            image.save(tmp, format="PNG", optimize=True)
+        if not quiet:
+            print(f"wrote {path}: {note}", file=sys.stderr)
+        written.append(path)
+
     for name, sample, what, opts in PAPER_FIGURES:
         picture, _ = picture_array(samples_dir / sample)
-        key = "use_field" if what == "field" else "use_density"
+        key = COMPARE[what]
         opts = dict(opts, n_elements=max(1, opts["n_elements"] // fewer))
         with_ = make_mosaic(picture, backend, iterations=iterations, **dict(opts, **{key: True}))
         without = make_mosaic(picture, backend, iterations=iterations, **dict(opts, **{key: False}))
-        path = out_dir / name
-        with atomic_path(path) as tmp:
-            comparison_figure(with_.picture, without, with_, what).save(tmp, format="PNG", optimize=True)
-        if not quiet:
-            print(f"wrote {path}: {opts['element']} x {opts['n_elements']}, coverage without "
-                  f"{without.coverage:.3f}, with {with_.coverage:.3f}", file=sys.stderr)
-        written.append(path)
-    return written
+        save(comparison_figure(with_.picture, without, with_, what), name,
+             f"{opts['element']} x {opts['n_elements']}, coverage without {without.coverage:.3f}, "
+             f"with {with_.coverage:.3f}")
 
+    picture, _ = picture_array(samples_dir / SCENE)
+    opts = dict(n_elements=max(1, DEFAULT_ELEMENTS // fewer), iterations=iterations)
+    m = make_mosaic(picture, backend, **opts)
+    save(m.render(), SCENE_FIGURES["mosaic"], f"{m.method}, {measures_line(m).replace(chr(10), ' ')}")
+    for what in ("edges", "method"):
+        save(compare_figure(picture, backend, opts, what, done=m), SCENE_FIGURES[what], f"--compare {what}",
+             palette=True)
+    return written

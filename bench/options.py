@@ -65,9 +65,9 @@ def add_shape_options(p, metric_default: str | None = "l2") -> None:
                    "(default 0.5); > 0")
 
 
-def add_method_option(p) -> None:
-    p.add_argument("--method", default="ours", help="ours (default), ours-fit, or a baseline: hausner2001, "
-                   "fritzsche2005, smith2005, hu2016 (cvtbench info lists them)")
+def add_method_option(p, default: str = "ours") -> None:
+    p.add_argument("--method", default=default, help=f"ours, ours-fit, or a baseline: hausner2001, "
+                   f"fritzsche2005, smith2005, hu2016 (cvtbench info lists them; default {default})")
 
 
 def add_run_options(p, iterations: int = 20, seed_help: str = "random seed (default 0)") -> None:

@@ -115,3 +115,71 @@ def evaluate(elements, grid: Grid, region=None, labels=None) -> Evaluation:
         empty_cells=empty,
         overlapping_pairs=int(len(a)),
     )
+
+
+# ----------------------------------------------------------------- mosaic measures
+#
+#   fill of tile k     = the mean, in CIELAB, of the picture's pixels whose centres lie
+#                        inside or on the outline of tile k (cvt.mosaic.tile_colours)
+#   colour_error       = mean over every (tile, pixel centre inside or on the tile) pair of
+#                        ΔE*ab (CIE76) between the pixel and the tile's fill as written
+#                        (8-bit sRGB): the mean perceived difference over the tiled area
+#   straddling         = share of placed tiles that hold a strong-edge pixel centre at
+#                        least 1 px inside their outline (tile eroded by 1 px): the edge runs
+#                        through the tile with at least 1 px of the tile on each side.  A
+#                        tile that a method clipped (to a region with walls) is taken as its
+#                        convex hull: its pieces on both sides of a wall still straddle it
+
+
+def pixels_under(elements, width: int, height: int) -> tuple[np.ndarray, np.ndarray]:
+    """(tile index, flat pixel index) pairs: every pixel of the ``width`` x ``height``
+    raster whose centre (j + 0.5, i + 0.5) lies inside or on the outline of a tile
+    (None and empty tiles hold none; overlapping tiles each hold the pixel)."""
+    idx = np.array([k for k, e in enumerate(elements) if e is not None and not e.is_empty], dtype=np.int64)
+    if len(idx) == 0:
+        return np.zeros(0, np.int64), np.zeros(0, np.int64)
+    geoms = np.array([elements[k] for k in idx], dtype=object)
+    b = shapely.bounds(geoms)
+    j0 = np.clip(np.ceil(b[:, 0] - 0.5), 0, width).astype(np.int64)
+    i0 = np.clip(np.ceil(b[:, 1] - 0.5), 0, height).astype(np.int64)
+    j1 = np.clip(np.floor(b[:, 2] - 0.5), -1, width - 1).astype(np.int64)
+    i1 = np.clip(np.floor(b[:, 3] - 0.5), -1, height - 1).astype(np.int64)
+    nx, ny = np.maximum(j1 - j0 + 1, 0), np.maximum(i1 - i0 + 1, 0)
+    counts = nx * ny
+    tile = np.repeat(np.arange(len(idx)), counts)
+    offset = np.arange(int(counts.sum())) - np.repeat(np.cumsum(counts) - counts, counts)
+    jj = j0[tile] + offset % nx[tile]
+    ii = i0[tile] + offset // nx[tile]
+    shapely.prepare(geoms)
+    inside = shapely.intersects_xy(geoms[tile], jj + 0.5, ii + 0.5)
+    return idx[tile[inside]], ii[inside] * width + jj[inside]
+
+
+def colour_error(picture_lab: np.ndarray, fills_lab: np.ndarray, tiles: np.ndarray,
+                 pixels: np.ndarray) -> float:
+    """Mean ΔE*ab between each pixel and the fill of the tile it lies under, over the
+    (tile, pixel) pairs of :func:`pixels_under`; NaN when no tile holds a pixel."""
+    if len(tiles) == 0:
+        return float("nan")
+    diff = picture_lab.reshape(-1, 3)[pixels] - np.asarray(fills_lab)[tiles]
+    return float(np.sqrt((diff * diff).sum(axis=1)).mean())
+
+
+STRADDLE_DEPTH = 1.0  # px of tile on each side of an edge for the tile to straddle it
+
+
+def straddling_tiles(elements, edges: np.ndarray, depth: float = STRADDLE_DEPTH) -> np.ndarray:
+    """(N,) bool: tile k straddles a strong edge, i.e. its outline (convex hull) eroded
+    by ``depth`` px holds (inside or on it) the centre of a pixel of ``edges`` ((H, W)
+    bool)."""
+    h, w = edges.shape
+    out = np.zeros(len(elements), dtype=bool)
+    placed = [k for k, e in enumerate(elements) if e is not None and not e.is_empty]
+    if not placed or not edges.any():
+        return out
+    hulls = shapely.convex_hull(np.array([elements[k] for k in placed], dtype=object))
+    eroded = shapely.buffer(hulls, -depth, join_style="mitre")
+    tiles, pixels = pixels_under(list(eroded), w, h)
+    hit = tiles[edges.ravel()[pixels]]
+    out[np.asarray(placed)[np.unique(hit)]] = True
+    return out

@@ -44,12 +44,28 @@ elements, not of a one-pixel line), divided by its 99th percentile and clipped t
 [0, 1], then mapped linearly to ``1 .. contrast``.  ``contrast`` is the ratio of the
 densest to the sparsest cell area (default 3: elements on detail about 1.7 times
 smaller across than on flat areas).  A picture without detail gives a uniform density.
+
+Strong edges: walls for the mosaic's tiles
+------------------------------------------
+:func:`strong_edges` marks the picture's strong edges as thin (one pixel wide,
+4-connected) lines, which the mosaic removes from the region so that no tile crosses
+one.  Strength is measured in the unit that says how different the two sides look: the
+same structure tensor, computed on the picture in CIELAB (:mod:`cvt.colour`) and divided
+by the tensor's response to an ideal step of ΔE*ab = 1, gives at every pixel the
+*edge contrast*: the colour difference (ΔE*ab) of the step edge that would give the
+same response.  A blurred edge scores lower than its two sides differ, so the contrast
+is a lower bound on that difference.  Pixels on the ridge of the contrast across the
+edge (non-maximum suppression, as Canny's detector) with contrast >= ``threshold`` seed an
+edge; it is continued along the ridge while the contrast stays >= ``threshold / 2``
+(hysteresis: one edge does not fall apart where it weakens for a few pixels) and kept
+when it is at least ``min_length`` pixels long (shorter ones are detail below a tile).
 """
 
 from __future__ import annotations
 
 import math
 from dataclasses import dataclass
+from functools import lru_cache
 
 import numpy as np
 from scipy import ndimage
@@ -69,6 +85,13 @@ SIDE_PERIOD = {
 DEFAULT_CONTRAST = 3.0
 EDGE_FRACTION = 0.25  # edge pixels: tensor strength >= this share of its 99th percentile
 EDGE_FLOOR = 0.02  # ... and >= this many intensity units (0..1) per pixel: not just noise
+# A strong edge (a wall for the tiles): contrast >= this ΔE*ab.  A tile centred on a
+# step of this contrast takes the mean of both sides and differs from each by half of
+# it, 20 ΔE*ab: nearly ten times the just noticeable difference (2.3), a muddy tile
+# that stands out.  Lower thresholds wall in more of a picture (hair, folds): each
+# wall is grout, so coverage drops (measured in the README).
+DEFAULT_EDGE_THRESHOLD = 40.0
+EDGE_HYSTERESIS = 0.5  # an edge continues while its contrast >= this share of the threshold
 
 
 @dataclass
@@ -171,3 +194,68 @@ def picture_fields(picture: np.ndarray, spacing: float, element: str = "square",
     detail = np.clip(magnitude / ref, 0.0, 1.0) if ref > EDGE_FLOOR / 10 else np.zeros_like(magnitude)
     density = DensityMap(1.0 + (contrast - 1.0) * detail)
     return PictureFields(density, field, edge_angles, strength, edges, detail)
+
+
+# ----------------------------------------------------------------- strong edges
+
+@lru_cache(maxsize=8)
+def step_response(sigma: float = 1.0, window: float = 2.0) -> float:
+    """Largest strength sqrt(λ₁) of the tensor at a pixel-aligned step of height 1 in
+    one channel: the factor that turns strength into the step's colour difference."""
+    step = np.zeros((8, 64, 1))
+    step[:, 32:] = 1.0
+    _, strength = edge_orientation(*structure_tensor(step, sigma, window))
+    return float(strength.max())
+
+
+def edge_contrast(lab: np.ndarray, sigma: float = 1.0) -> tuple[np.ndarray, np.ndarray]:
+    """(contrast in ΔE*ab, direction across the edge in radians mod π) of a CIELAB
+    picture (H, W, 3); see the module docstring."""
+    window = max(1.0, 2.0 * sigma)
+    jxx, jxy, jyy = structure_tensor(lab, sigma=sigma, window=window)
+    along, strength = edge_orientation(jxx, jxy, jyy)
+    return strength / step_response(sigma, window), along - 0.5 * math.pi
+
+
+# neighbour offsets (row, column) along the direction across the edge, per 45° sector
+_ACROSS = ((0, 1), (1, 1), (1, 0), (1, -1))
+
+
+def strong_edges(lab: np.ndarray, threshold: float = DEFAULT_EDGE_THRESHOLD,
+                 min_length: float = 0.0, sigma: float = 1.0) -> np.ndarray:
+    """(H, W) bool: the strong edges of a CIELAB picture as thin 4-connected lines.
+
+    ``threshold`` in ΔE*ab (see the module docstring), ``min_length`` in pixels."""
+    contrast, across = edge_contrast(lab, sigma)
+    h, w = contrast.shape
+    sector = np.round(across / (0.25 * math.pi)).astype(np.int64) % 4
+    pad = np.pad(contrast, 1)
+    ridge = np.zeros((h, w), dtype=bool)
+    for k, (di, dj) in enumerate(_ACROSS):
+        ahead = pad[1 + di:1 + di + h, 1 + dj:1 + dj + w]
+        behind = pad[1 - di:1 - di + h, 1 - dj:1 - dj + w]
+        # strictly above one neighbour, at least the other: one pixel of a flat ridge
+        ridge |= (sector == k) & (contrast > ahead) & (contrast >= behind)
+    weak = ridge & (contrast >= EDGE_HYSTERESIS * threshold)
+    parts, n = ndimage.label(weak, structure=np.ones((3, 3), dtype=bool))
+    if n == 0:
+        return weak
+    keep = np.zeros(n + 1, dtype=bool)
+    keep[np.unique(parts[weak & (contrast >= threshold)])] = True
+    keep &= np.bincount(parts.ravel(), minlength=n + 1) >= min_length
+    keep[0] = False
+    edges = keep[parts]
+    # a diagonal step leaves two pixels that touch at a corner only; add the one of the
+    # two pixels beside the step that has the higher contrast (the edge passes nearer to
+    # it), so that the line separates 4-connected pixels (cells, tiles)
+    tl, tr, bl, br = edges[:-1, :-1], edges[:-1, 1:], edges[1:, :-1], edges[1:, 1:]
+    ctl, ctr, cbl, cbr = contrast[:-1, :-1], contrast[:-1, 1:], contrast[1:, :-1], contrast[1:, 1:]
+    down = tl & br & ~tr & ~bl  # a step down to the right
+    up = tr & bl & ~tl & ~br  # a step up to the right
+    fill_tr, fill_bl = down & (ctr >= cbl), down & (ctr < cbl)
+    fill_tl, fill_br = up & (ctl >= cbr), up & (ctl < cbr)
+    edges[:-1, 1:] |= fill_tr
+    edges[1:, :-1] |= fill_bl
+    edges[:-1, :-1] |= fill_tl
+    edges[1:, 1:] |= fill_br
+    return edges

@@ -9,12 +9,16 @@
     >>> m.render().save("mosaic.png")
 
 Steps: the picture is read (any format Pillow reads, or a numpy array) and resampled to
-the raster size; :mod:`cvt.image_fields` extracts a density map (smaller elements where
-there is detail) and a direction field (element sides along the nearby edges); Lloyd
-relaxation under the element's metric runs on the chosen backend with both fields;
-:func:`cvt.placement.place_elements` puts one element in each cell; each element gets
-the mean colour of the picture's pixels whose centres lie inside it; coverage comes from
-:func:`compact_distributions.cvt.evaluate.evaluate`, the suite's one definition.
+the raster size; :mod:`cvt.image_fields` extracts a density map (smaller tiles where
+there is detail), a direction field (tile sides along the nearby edges) and the strong
+edges, which become walls: their pixels are taken out of the problem's region.  A method
+(the method interface of :mod:`cvt.methods`: Lloyd relaxation under the tile's metric on
+the chosen backend, then one tile per cell, and for ``ours-compact`` tiles that share
+their walls) places the tiles inside that region, so no tile crosses a wall.  Each tile
+is then filled with the mean, in CIELAB, of the picture's pixels whose centres lie in
+its final polygon.  Coverage and overlap come from
+:func:`compact_distributions.cvt.evaluate.evaluate` over the whole picture; the colour
+error and the share of tiles that straddle a strong edge from the same module.
 
 Colours are RGB floats in 0..1.  A numpy picture is (H, W) grey, (H, W, 3) RGB or
 (H, W, 4) RGBA (composited on white, as :func:`cvt.images.load_rgb` does for files);
@@ -28,24 +32,41 @@ import math
 import os
 import time
 from dataclasses import dataclass, field
+from typing import Callable
 
 import numpy as np
 
+from .colour import lab_to_srgb, quantised, srgb_to_lab
+from .distribution import Distribution
 from .errors import InputError
-from .evaluate import evaluate
-from .image_fields import DEFAULT_CONTRAST, PictureFields, picture_fields
-from .lloyd import final_labels, lloyd
-from .metrics import AXIAL_METRICS, ELEMENT_METRIC, METRIC_NAMES, NATURAL_ELEMENT, compile_sites, make_metric
-from .placement import parse_gap, place_elements
+from .evaluate import colour_error, evaluate, pixels_under, straddling_tiles
+from .image_fields import (
+    DEFAULT_CONTRAST,
+    DEFAULT_EDGE_THRESHOLD,
+    PictureFields,
+    picture_fields,
+    strong_edges,
+)
+from .methods import METHODS
+from .metrics import ELEMENT_METRIC, METRIC_NAMES, NATURAL_ELEMENT, make_metric
+from .moments import moments_from_labels
+from .placement import parse_gap
 from .problem import Grid, Problem, parse_size, pixel_index
 from .render import draw_elements, ellipse_parameters, parse_colour, svg_document
 from .shapes import ELEMENT_SHAPES, check_shape, element_ball, unit_outline
-from .validate import real_number, whole_number
+from .validate import one_of, real_number, whole_number
 
+# The method that places the tiles when none is named (a name in cvt.methods.METHODS).
+# "ours-compact" (compaction: tiles share their walls, the grout is the gap asked for)
+# becomes the default once it is registered there.
+DEFAULT_METHOD = "ours"
 DEFAULT_ELEMENTS = 2000
 MAX_DEFAULT_SIDE = 1024  # the picture's own size, capped at this on the long side
 AUTO_GAP = 0.05  # default grout: this share of the mean element spacing
 DEFAULT_GROUT = (0.22, 0.22, 0.22)
+# strong edges shorter than this many element spacings are no walls: no tile row can
+# line up along them, and each would only cut a tile or two
+EDGE_MIN_LENGTH = 2.0
 
 
 # --------------------------------------------------------------------------- picture
@@ -141,86 +162,156 @@ def resolve_shapes(metric: str | None, element: str | None) -> tuple[str, str]:
     return metric, element
 
 
-# --------------------------------------------------------------------------- colours
+# --------------------------------------------------------------------------- walls
 
-def element_sizes(polygons, element: str, aspect: float) -> np.ndarray:
-    """(N,) size of each placed element (0 where skipped), from its area: an element is a
-    scaled copy of the unit outline, so size = sqrt(area / unit area)."""
-    import shapely
+def split_cells(labels: np.ndarray, sites) -> np.ndarray:
+    """``labels`` with each cell cut down to one 4-connected piece (other pixels -1).
 
-    unit = shapely.area(shapely.polygons(unit_outline(element, aspect)))
-    areas = np.array([0.0 if p is None else p.area for p in polygons])
-    return np.sqrt(areas / unit)
+    Pixels outside the region (-1: the walls) connect nothing, so a cell that a wall
+    cuts falls into pieces; the piece kept is the one that holds its site's pixel, or
+    the largest where the site lies elsewhere.  Pieces are found with one
+    ``scipy.ndimage.label`` on a raster of twice the size whose in-between pixels join
+    two neighbours of the same cell."""
+    from scipy import ndimage
 
-
-def element_colours(picture: np.ndarray, labels: np.ndarray, sites, angles, sizes,
-                    element: str, aspect: float) -> tuple[np.ndarray, np.ndarray]:
-    """Mean colour of the picture under each element, and the pixel count it came from.
-
-    A pixel is under element k when it lies in cell k and its centre is inside the
-    element (the element's own gauge <= its size, evaluated exactly).  An element that
-    covers no pixel centre (tiny) or a skipped site takes the mean colour of its cell,
-    and a site with an empty cell the colour of the pixel it sits on."""
     h, w = labels.shape
     n = len(sites)
+    inside = labels >= 0
+    grid = np.zeros((2 * h - 1, 2 * w - 1), dtype=bool)
+    grid[::2, ::2] = inside
+    grid[::2, 1::2] = inside[:, :-1] & (labels[:, :-1] == labels[:, 1:])
+    grid[1::2, ::2] = inside[:-1, :] & (labels[:-1, :] == labels[1:, :])
+    pieces, count = ndimage.label(grid)
+    pieces = pieces[::2, ::2]
+    if count == np.count_nonzero(np.bincount(labels[inside], minlength=n)):
+        return labels  # every non-empty cell is one piece
+    owner = np.zeros(count + 1, dtype=np.int64)
+    owner[pieces[inside]] = labels[inside]
+    size = np.bincount(pieces.ravel(), minlength=count + 1)
+    # per cell its largest piece, then the site's own piece where the site is in its cell
+    order = np.lexsort((size[1:], owner[1:])) + 1  # by cell, then by size
+    last = np.append(owner[order][1:] != owner[order][:-1], True)
+    keep_piece = np.zeros(n, dtype=np.int64)
+    keep_piece[owner[order[last]]] = order[last]
+    i, j = pixel_index(sites, w, h)
+    own = labels[i, j] == np.arange(n)
+    keep_piece[own] = pieces[i[own], j[own]]
+    kept = np.zeros(count + 1, dtype=bool)
+    kept[keep_piece[keep_piece > 0]] = True
+    return np.where(kept[pieces], labels, -1).astype(labels.dtype, copy=False)
+
+
+class WalledBackend:
+    """A live backend whose cells stop at walls: the labels of ``inner`` (any backend),
+    each cell cut down to the piece on its site's side of the walls
+    (:func:`split_cells`), and the moments of those labels.  Without this the cells of
+    a Lloyd step ignore a thin wall (its pixels only leave the sums), so sites sit
+    astride it and their tiles stay small; with it each centroid moves to its site's
+    side and cells line up along the wall.  Everything else is the inner backend's."""
+
+    def __init__(self, inner):
+        self.inner = inner
+
+    def __getattr__(self, name):
+        return getattr(self.inner, name)
+
+    def label(self, sites, *, angles=None, scales=None, metric, grid) -> np.ndarray:
+        labels = self.inner.label(sites, angles=angles, scales=scales, metric=metric, grid=grid)
+        return split_cells(labels, sites) if grid.mask is not None else labels
+
+    def moments(self, sites, *, angles=None, scales=None, metric, grid):
+        if grid.mask is None:
+            return self.inner.moments(sites, angles=angles, scales=scales, metric=metric, grid=grid)
+        labels = self.label(sites, angles=angles, scales=scales, metric=metric, grid=grid)
+        return moments_from_labels(labels, len(sites))
+
+
+# --------------------------------------------------------------------------- colours
+
+def tile_colours(lab: np.ndarray, polygons, sites, tiles: np.ndarray, pixels: np.ndarray):
+    """Fill of every tile: (N, 3) sRGB in 0..1 (8-bit values, as written) and their Lab.
+
+    The mean, in CIELAB, of the picture's pixels whose centres lie inside or on the
+    tile's outline (``tiles``, ``pixels`` from :func:`cvt.evaluate.pixels_under`): the
+    colour with the least mean *squared* ΔE*ab to them.  Read from the final polygons,
+    so it holds wherever the method put the tile.  A tile too thin to hold a pixel
+    centre takes the pixel under a point inside it; a site without a tile the pixel
+    under the site (its colour is listed but never drawn)."""
+    import shapely
+
+    h, w = lab.shape[:2]
+    n = len(polygons)
+    flat = lab.reshape(-1, 3)
+    count = np.bincount(tiles, minlength=n).astype(np.float64)
+    sums = np.stack([np.bincount(tiles, weights=flat[pixels, c], minlength=n) for c in range(3)], axis=1)
+    held = count > 0
+    fill = sums / np.where(held, count, 1.0)[:, None]
+    points = np.array(sites, dtype=np.float64).reshape(-1, 2).copy()
+    thin = [k for k in np.flatnonzero(~held) if polygons[k] is not None and not polygons[k].is_empty]
+    if thin:
+        points[thin] = shapely.get_coordinates(shapely.point_on_surface([polygons[k] for k in thin]))
+    if (~held).any():
+        fill[~held] = lab[pixel_index(points[~held], w, h)]
+    rgb = quantised(lab_to_srgb(fill))
+    return rgb, srgb_to_lab(rgb)
+
+
+def ellipse_rows(polygons, element: str, aspect: float) -> np.ndarray | None:
+    """(N, 5) exact ellipses (cx, cy, rx, ry, degrees) of circle and ellipse tiles, read
+    from their polygons (centre, size from the area, angle from the first vertex), NaN
+    where a tile is not a whole ellipse (clipped by a method) or missing; None for
+    polygonal shapes."""
+    import shapely
+
+    if element not in ("circle", "ellipse"):
+        return None
     ball = element_ball(element, aspect)
-    safe = np.where(sizes > 0, sizes, 1.0)
-    coef = compile_sites(ball, sites, angles, safe)
-    flat = labels.ravel()
-    inside = np.flatnonzero(flat >= 0)
-    owner = flat[inside]
-    ys, xs = np.divmod(inside, w)
-    d = coef.distance(owner, xs + 0.5, ys + 0.5)
-    under = (d <= 1.0 + 1e-9) & (sizes[owner] > 0)
-    pix = picture.reshape(-1, 3)
-
-    def mean_over(idx, who):
-        count = np.bincount(who, minlength=n).astype(np.float64)
-        sums = np.stack([np.bincount(who, weights=pix[idx, c], minlength=n) for c in range(3)], axis=1)
-        with np.errstate(invalid="ignore", divide="ignore"):
-            return sums / count[:, None], count
-
-    colours, count = mean_over(inside[under], owner[under])
-    cell_colours, cell_count = mean_over(inside, owner)
-    use_cell = count == 0
-    colours[use_cell] = cell_colours[use_cell]
-    none = use_cell & (cell_count == 0)
-    if none.any():
-        colours[none] = picture[pixel_index(sites[none], w, h)]
-    return colours, count.astype(np.int64)
+    unit = unit_outline(element, aspect)
+    unit_area = shapely.area(shapely.polygons(unit))
+    rows = np.full((len(polygons), 5), np.nan)
+    for k, p in enumerate(polygons):
+        if p is None or p.is_empty or p.geom_type != "Polygon" or len(p.exterior.coords) != len(unit) + 1:
+            continue
+        c = np.asarray(p.centroid.coords[0])
+        v = np.asarray(p.exterior.coords[0]) - c
+        size = math.sqrt(p.area / unit_area)
+        rows[k] = ellipse_parameters(c[None], [math.atan2(v[1], v[0])], [size], ball.semi_axes)[0]
+    return rows
 
 
 # --------------------------------------------------------------------------- result
 
 @dataclass
 class MosaicResult:
-    """A picture turned into a mosaic: one element per site (``polygons[k]`` is None
-    where the cell was empty or too small for an element)."""
+    """A picture turned into a mosaic: one tile per site (``polygons[k]`` is None where
+    the method placed none)."""
 
     sites: np.ndarray  # (N, 2) pixel units of the mosaic raster
     angles: np.ndarray  # (N,) radians, positive = clockwise on screen
     scales: np.ndarray  # (N,) size factor from the density (1 without density)
     polygons: list  # shapely polygons, one per site, None where skipped
-    colours: np.ndarray  # (N, 3) RGB in 0..1: the picture's mean colour under each element
-    sizes: np.ndarray  # (N,) element size (1 = the unit ball: square side 2), 0 where skipped
-    coverage: float  # cvt.evaluate: area(union of elements) / area(raster)
+    colours: np.ndarray  # (N, 3) sRGB in 0..1 (8-bit values): each tile's fill (tile_colours)
+    coverage: float  # cvt.evaluate over the whole picture: area(union of tiles) / (W·H)
     overlap: float
+    colour_error: float  # mean ΔE*ab between picture and fill over the tiled area (cvt.evaluate)
+    straddling: float  # share of tiles that straddle a strong edge (cvt.evaluate)
     width: int
     height: int
     metric: str
     element: str
     aspect: float
     gap: float
+    method: str = DEFAULT_METHOD
     contrast: float = DEFAULT_CONTRAST
     grout: tuple = DEFAULT_GROUT
+    edge_threshold: float = DEFAULT_EDGE_THRESHOLD
+    walls: bool = True  # strong edges were walls (removed from the region)
     picture: np.ndarray | None = field(default=None, repr=False)  # (H, W, 3) resampled input
-    labels: np.ndarray | None = field(default=None, repr=False)  # final cells (H, W) int32
+    edges: np.ndarray | None = field(default=None, repr=False)  # (H, W) bool strong edges
+    straddles: np.ndarray | None = field(default=None, repr=False)  # (N,) bool per tile
     fields: PictureFields | None = field(default=None, repr=False)
     problem: Problem | None = field(default=None, repr=False)
-    energy: list = field(default_factory=list)
-    seconds: list = field(default_factory=list)
-    empty: list = field(default_factory=list)
-    empty_sites: list = field(default_factory=list)
+    distribution: Distribution | None = field(default=None, repr=False)  # what the method returned
     backend: str = "numpy"
     device: str = ""
     source: str = ""
@@ -230,18 +321,18 @@ class MosaicResult:
     def placed(self) -> int:
         return sum(p is not None for p in self.polygons)
 
+    @property
+    def labels(self):
+        return None if self.distribution is None else self.distribution.labels
+
     def svg(self, grout=None, precision: int = 2) -> str:
-        """The mosaic as SVG text: a grout-coloured background and one filled element per
-        placed site, in pixel units (viewBox = the raster).  Squares, rectangles and
-        triangles are paths with their exact corners; circles and ellipses are
-        ``<ellipse>``s rotated by the site's angle."""
+        """The mosaic as SVG text: a grout-coloured background and one filled tile per
+        placed site, in pixel units (viewBox = the raster).  Polygonal tiles are paths
+        with their exact corners; circles and ellipses are rotated ``<ellipse>``s."""
         grout = self.grout if grout is None else parse_colour(grout)
-        ellipses = None
-        if self.element in ("circle", "ellipse"):
-            ellipses = ellipse_parameters(self.sites, self.angles, self.sizes,
-                                          element_ball(self.element, self.aspect).semi_axes)
         return svg_document(self.polygons, self.width, self.height, self.colours, background=grout,
-                            region_colour=None, stroke=None, ellipses=ellipses, digits=precision)
+                            region_colour=None, stroke=None, digits=precision,
+                            ellipses=ellipse_rows(self.polygons, self.element, self.aspect))
 
     def render(self, scale: float = 1.0, grout=None, supersample: int = 3):
         """The mosaic as a PIL RGB image ``scale`` times the raster size (antialiased)."""
@@ -249,35 +340,47 @@ class MosaicResult:
         return draw_elements(self.polygons, self.width, self.height, self.colours, background=grout,
                              scale=scale, supersample=supersample)
 
-    def to_distribution(self):
-        """The run as a :class:`cvt.distribution.Distribution` (what bench/ reports)."""
-        from .distribution import Distribution
-
-        return Distribution(method="ours", sites=self.sites, angles=self.angles, scales=self.scales,
-                            elements=self.polygons, energy=list(self.energy), seconds=list(self.seconds),
-                            total_seconds=self.total_seconds, empty=list(self.empty),
-                            empty_sites=list(self.empty_sites), labels=self.labels)
+    def to_distribution(self) -> Distribution:
+        """The run as the :class:`cvt.distribution.Distribution` the method returned."""
+        return self.distribution
 
 
 # --------------------------------------------------------------------------- the API
+
+def resolve_method(method) -> tuple[Callable, str]:
+    """(callable, name) from a method callable or the name of one of the paper's
+    variants (``cvt.methods.METHODS``; baselines come as callables, e.g. from
+    ``compact_distributions.baselines.get_method``)."""
+    if callable(method):
+        return method, getattr(method, "method_name", getattr(method, "__name__", "method"))
+    one_of(method, "method", list(METHODS))
+    return METHODS[method], method
+
 
 def make_mosaic(image, backend, *, n_elements: int = DEFAULT_ELEMENTS, metric: str | None = None,
                 element: str | None = None, size=None, gap: float | None = None,
                 use_field: bool = True, use_density: bool = True, iterations: int = 20,
                 seed: int = 0, aspect: float | None = None, contrast: float = DEFAULT_CONTRAST,
-                grout=DEFAULT_GROUT, progress=None) -> MosaicResult:
+                grout=DEFAULT_GROUT, method=DEFAULT_METHOD, edges: bool = True,
+                edge_threshold: float = DEFAULT_EDGE_THRESHOLD, progress=None) -> MosaicResult:
     """Turn ``image`` (a file path or a numpy array) into a mosaic of ``n_elements``.
 
-    ``metric``/``element``: the Lloyd distance and the placed shape; give either (the
+    ``metric``/``element``: the Lloyd distance and the tile shape; give either (the
     other follows: square <-> linf, rectangle <-> linf-axial, ellipse <-> l2-axial,
     triangle <-> triangle, circle <-> l2), both, or neither (squares).  ``aspect``: β of
     rectangles and ellipses (default 0.5).  ``size``: raster (see :func:`raster_size`;
     default the picture's size, long side capped at 1024).  ``backend``: a live
-    backend (``compact_distributions.backends.create_backend``), left open.  ``gap``: grout width in
-    pixels (default ``None``: 5 % of the mean element spacing sqrt(W·H/N), e.g. 1 px for
-    2000 elements on 1024x768).  ``use_field``: align element sides with the picture's edges; ``use_density``:
-    smaller elements where the picture has detail (``contrast`` = densest / sparsest
-    cell area).  ``progress(k, iterations, energy)`` is called after each Lloyd step."""
+    backend (``compact_distributions.backends.create_backend``), left open.  ``gap``: grout
+    width in pixels (default ``None``: 5 % of the mean element spacing sqrt(W·H/N), e.g.
+    1 px for 2000 elements on 1024x768).  ``use_field``: align tile sides with the
+    picture's edges; ``use_density``: smaller tiles where the picture has detail
+    (``contrast`` = densest / sparsest cell area).  ``method``: what places the tiles, a
+    name from ``cvt.methods.METHODS`` or any method callable (the method interface of
+    :mod:`cvt.methods`; default :data:`DEFAULT_METHOD`).  ``edges``: the picture's strong
+    edges (contrast >= ``edge_threshold`` ΔE*ab, :func:`cvt.image_fields.strong_edges`)
+    are walls: their pixels leave the region, so cells, tiles and the method's region
+    border stop at them.  ``progress(k, iterations, energy)`` is called after each Lloyd
+    step."""
     t_start = time.perf_counter()
     if not callable(getattr(backend, "moments", None)):
         raise InputError(f"backend must be a live Backend (backends.create_backend), got {backend!r}")
@@ -285,13 +388,11 @@ def make_mosaic(image, backend, *, n_elements: int = DEFAULT_ELEMENTS, metric: s
     iterations = whole_number(iterations, "iterations", minimum=0)
     seed = whole_number(seed, "seed", minimum=0)
     contrast = real_number(contrast, "contrast", minimum=1.0)
+    edge_threshold = real_number(edge_threshold, "edge_threshold", above=0.0)
     grout = parse_colour(grout)
+    run_method, method_name = resolve_method(method)
     metric_name, element = resolve_shapes(metric, element)
     metric_obj = make_metric(metric_name, aspect)
-    # β of the placed shape: the metric's own for the axial metrics, else the one given
-    # (validated like the metric's), default 0.5 for rectangles and ellipses
-    shape_aspect = (metric_obj.aspect if metric_name in AXIAL_METRICS
-                    else make_metric("linf-axial", aspect).aspect)
 
     rgb, source = picture_array(image)
     w, h = raster_size(rgb.shape[1], rgb.shape[0], size)
@@ -300,30 +401,35 @@ def make_mosaic(image, backend, *, n_elements: int = DEFAULT_ELEMENTS, metric: s
                          f"(from a {rgb.shape[1]}x{rgb.shape[0]} picture); "
                          f"use fewer elements or a larger size (--size)")
     picture = resample(rgb, w, h)
+    lab = srgb_to_lab(picture)
     spacing = math.sqrt(w * h / n_elements)
     gap = AUTO_GAP * spacing if gap is None else parse_gap(gap)
     fields = picture_fields(picture, spacing, element, contrast=contrast)
-    problem = Problem(Grid(w, h), n_elements, metric_obj,
+    # the edge map is made in any case: the straddling measure reads it
+    edge_map = strong_edges(lab, edge_threshold, min_length=EDGE_MIN_LENGTH * spacing)
+    walls = bool(edges) and bool(edge_map.any())
+    problem = Problem(Grid(w, h, ~edge_map if walls else None), n_elements, metric_obj,
                       density=fields.density if use_density else None,
                       field=fields.field if use_field else None, seed=seed)
 
-    res = lloyd(problem, backend, iterations, progress=progress)
-    labels = final_labels(problem, backend, res)
-    grid = problem.grid
-    polygons = place_elements(labels, res.sites, res.angles, element, shape_aspect, grid, gap)
-    sizes = element_sizes(polygons, element, shape_aspect)
-    colours, _ = element_colours(picture, labels, res.sites, res.angles, sizes, element, shape_aspect)
-    ev = evaluate(polygons, grid)
+    dist = run_method(problem, WalledBackend(backend) if walls else backend, iterations=iterations, progress=progress, element=element, gap=gap)
+    polygons = [None if p is None or p.is_empty else p for p in dist.elements]
+    tiles, pixels = pixels_under(polygons, w, h)
+    colours, fills_lab = tile_colours(lab, polygons, dist.sites, tiles, pixels)
+    ev = evaluate(polygons, Grid(w, h))  # the whole picture: walls are grout
+    straddles = straddling_tiles(polygons, edge_map)
+    placed = sum(p is not None for p in polygons)
     return MosaicResult(
-        sites=res.sites, angles=res.angles, scales=res.scales, polygons=polygons,
-        colours=colours, sizes=sizes, coverage=ev.coverage, overlap=ev.overlap,
-        width=w, height=h, metric=metric_name, element=element, aspect=shape_aspect, gap=gap, contrast=contrast,
-        grout=grout, picture=picture, labels=labels, fields=fields, problem=problem, energy=res.energy,
-        seconds=res.seconds, empty=res.empty, empty_sites=list(res.empty_sites),
-        backend=backend.variant, device=backend.device(), source=source,
+        sites=dist.sites, angles=dist.angles, scales=dist.scales, polygons=polygons, colours=colours,
+        coverage=ev.coverage, overlap=ev.overlap, colour_error=colour_error(lab, fills_lab, tiles, pixels),
+        straddling=float(straddles.sum() / placed) if placed else 0.0,
+        width=w, height=h, metric=metric_name, element=element, aspect=metric_obj.aspect, gap=gap,
+        method=dist.method or method_name, contrast=contrast, grout=grout, edge_threshold=edge_threshold,
+        walls=walls, picture=picture, edges=edge_map, straddles=straddles, fields=fields, problem=problem,
+        distribution=dist, backend=backend.variant, device=backend.device(), source=source,
         total_seconds=time.perf_counter() - t_start,
     )
 
 
 __all__ = ["make_mosaic", "MosaicResult", "picture_array", "raster_size", "resample",
-           "resolve_shapes", "element_colours", "ELEMENT_SHAPES"]
+           "resolve_shapes", "resolve_method", "tile_colours", "DEFAULT_METHOD", "ELEMENT_SHAPES"]

@@ -160,7 +160,7 @@ def svg_document(elements, width: int, height: int, fills=None, *, background=DA
     ``region``: a shapely geometry painted ``region_colour`` (default: the whole raster;
     ``region_colour=None`` paints nothing over the background).  ``ellipses``: an (N, 5)
     array (cx, cy, rx, ry, angle in degrees) to draw element k as an exact ``<ellipse>``
-    instead of its polygon."""
+    instead of its polygon (a row with NaN keeps the polygon)."""
     if fills is None:
         fills = label_colours(len(elements))
     out = [
@@ -181,7 +181,7 @@ def svg_document(elements, width: int, height: int, fills=None, *, background=DA
         if geom is None or geom.is_empty:
             continue
         fill = quoteattr(hex_colour(fills[k]))
-        if ellipses is not None:
+        if ellipses is not None and np.isfinite(ellipses[k]).all():
             cx, cy, rx, ry, deg = (fmt.format(v) for v in ellipses[k])
             out.append(f'<ellipse id="e{k}" cx="{cx}" cy="{cy}" rx="{rx}" ry="{ry}" '
                        f'transform="rotate({deg} {cx} {cy})" fill={fill}/>')

@@ -80,13 +80,57 @@ def leaf(w: int = 440, h: int = 330) -> Image.Image:
     return _finish(img, w, h)
 
 
-SAMPLES = {"shapes.png": shapes, "rings.png": rings, "leaf.png": leaf}
+def scene(w: int = 512, h: int = 512, seed: int = 7) -> Image.Image:
+    """A picture that behaves like a photograph: a sky graded from deep to pale blue with
+    a glow, hills in shaded greens, a shaded red ball, a lit box, a dark post and its
+    shadow, then lens blur and sensor noise: smooth gradients everywhere, hard edges
+    between objects of clearly different colour, and soft ones (the shadow, the glow)."""
+    rng = np.random.default_rng(seed)
+    y, x = (np.mgrid[0:h * SS, 0:w * SS] + 0.5) / SS
+    u, v = x / w, y / h
+    sky = np.stack([60 + 140 * v, 110 + 110 * v, 200 + 45 * v], axis=-1)
+    glow = np.exp(-((u - 0.78) ** 2 + (v - 0.18) ** 2) / 0.02)[..., None]
+    rgb = sky * (1 - 0.6 * glow) + np.array([255, 240, 200]) * 0.6 * glow
+    hill_far = v > 0.55 + 0.06 * np.sin(2 * math.pi * (u * 1.3 + 0.1))
+    rgb[hill_far] = (np.stack([70 + 40 * u, 120 + 30 * u, 60 + 0 * u], -1) * (1.1 - 0.4 * v)[..., None])[hill_far]
+    hill_near = v > 0.70 + 0.05 * np.sin(2 * math.pi * (u * 0.8 + 0.55))
+    rgb[hill_near] = (np.stack([90 + 30 * u, 160 - 20 * u, 50 + 20 * u], -1) * (1.25 - 0.5 * v)[..., None])[hill_near]
+    # the post's shadow on the near hill: soft, a darker band
+    shadow = hill_near & (np.abs((u - 0.22) + 0.6 * (v - 0.80)) < 0.02 + 0.05 * (v - 0.7))
+    rgb[shadow] *= 0.65
+    # a lit box: three faces, each a gradient
+    front = (u > 0.52) & (u < 0.70) & (v > 0.52) & (v < 0.74)
+    rgb[front] = (np.stack([200 - 80 * (u - 0.52), 150 - 60 * (v - 0.52), 60 + 0 * u], -1) * 1.0)[front]
+    side = (u >= 0.70) & (u < 0.78) & (v > 0.52 - (u - 0.70) * 0.8) & (v < 0.74 - (u - 0.70) * 0.8)
+    rgb[side] = np.array([130, 90, 40])
+    top = (v <= 0.52) & (v > 0.46) & (u > 0.52 + (0.52 - v) * 1.25) & (u < 0.70 + (0.52 - v) * 1.25)
+    rgb[top] = np.array([235, 200, 110])
+    # a shaded red ball: lit from the upper right
+    r = np.hypot(u - 0.36, v - 0.60)
+    ball = r < 0.13
+    light = np.clip(1.0 - np.hypot(u - 0.40, v - 0.55) / 0.16, 0, 1)[..., None]
+    rgb[ball] = (np.array([120, 20, 25]) + np.array([130, 90, 80]) * light)[ball]
+    # a dark post
+    post = (np.abs(u - 0.16) < 0.018) & (v > 0.30) & (v < 0.82)
+    rgb[post] = np.array([45, 35, 30])
+    img = _finish(Image.fromarray(np.clip(rgb, 0, 255).astype(np.uint8), "RGB"), w, h)
+    from PIL import ImageFilter
+
+    arr = np.asarray(img.filter(ImageFilter.GaussianBlur(0.8)), dtype=np.float64)
+    arr += rng.normal(0.0, 3.0, arr.shape)  # sensor noise, about 1 % of full scale
+    return Image.fromarray(np.clip(np.round(arr), 0, 255).astype(np.uint8), "RGB")
+
+
+SAMPLES = {"shapes.png": shapes, "rings.png": rings, "leaf.png": leaf, "scene.jpg": scene}
 
 
 def main() -> None:
     for name, draw in SAMPLES.items():
         path = HERE / name
-        draw().save(path, optimize=True)
+        if name.endswith(".jpg"):
+            draw().save(path, quality=90, optimize=True)  # a photograph: a JPEG
+        else:
+            draw().save(path, optimize=True)
         print(f"{path}: {path.stat().st_size // 1024} KB")
 
 

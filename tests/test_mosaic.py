@@ -81,7 +81,8 @@ def test_smaller_elements_where_the_picture_has_detail():
     pic = np.full((h, w, 3), 0.6)
     blocks = rng.random((h // 8, w // 16, 3)).repeat(8, axis=0).repeat(8, axis=1)
     pic[:, : w // 2] = blocks  # busy left half, flat right half
-    m = make_mosaic(pic, NUMPY, n_elements=250, iterations=8, use_field=False)
+    # no walls: the blocks' edges would cut the busy half's tiles smaller on their own
+    m = make_mosaic(pic, NUMPY, n_elements=250, iterations=8, use_field=False, edges=False)
     areas = np.array([0.0 if p is None else p.area for p in m.polygons])
     placed = areas > 0
     left = placed & (m.sites[:, 0] < w / 2 - 10)
@@ -89,7 +90,7 @@ def test_smaller_elements_where_the_picture_has_detail():
     assert left.sum() > right.sum()  # more elements where the detail is
     assert areas[left].mean() < 0.7 * areas[right].mean()
     # and without the density both halves are alike
-    u = make_mosaic(pic, NUMPY, n_elements=250, iterations=8, use_field=False, use_density=False)
+    u = make_mosaic(pic, NUMPY, n_elements=250, iterations=8, use_field=False, use_density=False, edges=False)
     ua = np.array([0.0 if p is None else p.area for p in u.polygons])
     ul, ur = u.sites[:, 0] < w / 2 - 10, u.sites[:, 0] > w / 2 + 10
     assert 0.8 < ua[ul].mean() / ua[ur].mean() < 1.25
@@ -104,12 +105,13 @@ def test_colours_match_a_flat_colour_picture():
     i = (m.sites[:, 1] >= 80).astype(int) * 2 + (m.sites[:, 0] >= 80).astype(int)
     err = np.abs(m.colours - quads[i]).mean(axis=1)
     assert err.mean() < 0.03, err.mean()
-    # an element wholly inside one quadrant has exactly that quadrant's colour
+    # an element wholly inside one quadrant has that quadrant's colour, to the 8 bits of
+    # the '#rrggbb' fill
     inner = [k for k, p in enumerate(m.polygons)
              if p is not None and shapely.box(*(np.array([0, 0, 80, 80]) + 80 * np.array(
                  [i[k] % 2, i[k] // 2, i[k] % 2, i[k] // 2]))).contains(p)]
     assert len(inner) > 100
-    assert np.abs(m.colours[inner] - quads[i[inner]]).max() < 1e-9
+    assert np.abs(m.colours[inner] - quads[i[inner]]).max() <= 0.5 / 255 + 1e-12
     # coverage against an independent estimate: the share of a fine point lattice that
     # falls inside some element
     ys, xs = (np.mgrid[0:640, 0:640] + 0.5) / 4

@@ -299,7 +299,8 @@ def test_figures_quick(tmp_path, capsys):
     assert code == 0, capsys.readouterr().err
     names = sorted(p.name for p in tmp_path.iterdir())
     assert names == ["fig03_metrics.png", "fig14_elements.png", "fig15_regions.png", "fig18_field_leaf.png",
-                     "fig18_field_shapes.png", "fig19_density_rings.png", "fig19_density_shapes.png"]
+                     "fig18_field_shapes.png", "fig19_density_rings.png", "fig19_density_shapes.png",
+                     "mosaic_scene.png", "mosaic_scene_edges.png", "mosaic_scene_methods.png"]
     for name in names:
         assert (tmp_path / name).stat().st_size < 300_000
         with Image.open(tmp_path / name) as im:
