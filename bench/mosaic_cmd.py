@@ -91,6 +91,7 @@ def mosaic_options(args) -> dict:
 
     return dict(
         method=get_method(args.method),
+        method_options=options.method_options(args),
         edges=not args.no_edges,
         edge_threshold=(DEFAULT_EDGE_THRESHOLD if args.edge_threshold is None
                         else real_number(args.edge_threshold, "--edge-threshold", above=0)),

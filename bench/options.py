@@ -66,8 +66,20 @@ def add_shape_options(p, metric_default: str | None = "l2") -> None:
 
 
 def add_method_option(p, default: str = "ours") -> None:
-    p.add_argument("--method", default=default, help=f"ours, ours-fit, or a baseline: hausner2001, "
-                   f"fritzsche2005, smith2005, hu2016 (cvtbench info lists them; default {default})")
+    p.add_argument("--method", default=default, help=f"ours, ours-fit, ours-compact, or a baseline: "
+                   f"hausner2001, fritzsche2005, smith2005, hu2016 (cvtbench info lists them; default {default})")
+    p.add_argument("--alternate", action="store_true",
+                   help="with --method ours-compact and triangles: each triangle points either way (its "
+                   "angle or the angle + 180°), whichever fits larger in its cell")
+
+
+def method_options(args) -> dict:
+    """The method's own keywords from the command line (checked against --method)."""
+    if not args.alternate:
+        return {}
+    if args.method != "ours-compact":
+        raise InputError(f"--alternate is an option of --method ours-compact, not of {args.method!r}")
+    return {"alternate": True}
 
 
 def add_run_options(p, iterations: int = 20, seed_help: str = "random seed (default 0)") -> None:

@@ -132,9 +132,10 @@ def run(args) -> int:
     gap = parse_gap(args.gap, "--gap")
     problem = problem_from_args(args)
     method = get_method(args.method)
+    extra = options.method_options(args)
     with options.open_backend(args) as backend:
         dist = method(problem, backend, iterations=iterations, progress=options.progress_printer(args.quiet),
-                      element=element, gap=gap)
+                      element=element, gap=gap, **extra)
         region = region_polygon(problem.grid)
         ev = evaluate(dist.elements, problem.grid, region=region, labels=dist.labels)
         sources = {k: getattr(args, k) for k in ("init", "density", "field", "region")}

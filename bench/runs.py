@@ -35,6 +35,8 @@ class RunSpec:
     gap: float = 0.0
     picture: bool = False  # also keep an effect picture beside the raw json
     delta: float | None = None  # tile budget δ of a fixed-size baseline (None: its default)
+    alternate: bool = False  # ours-compact: triangles that point either way
+    curve: bool = False  # also measure the coverage-overlap curve (elements scaled)
 
     @property
     def metric(self) -> str:
@@ -44,13 +46,16 @@ class RunSpec:
     def key(self) -> str:
         gap = f"__gap{self.gap:g}" if self.gap else ""
         delta = f"__d{self.delta:g}" if self.delta is not None else ""
+        alternate = "__alt" if self.alternate else ""
         return (f"{self.method}__{self.backend}__{self.element}__{self.width}x{self.height}"
-                f"__n{self.n_sites}__it{self.iterations}__s{self.seed}{gap}{delta}")
+                f"__n{self.n_sites}__it{self.iterations}__s{self.seed}{gap}{delta}{alternate}")
 
     @property
     def label(self) -> str:
-        """The method as reports name it: with its tile budget where one was set."""
-        return self.method if self.delta is None else f"{self.method} δ={self.delta:g}"
+        """The method as reports name it: with its tile budget or its option where set."""
+        if self.delta is not None:
+            return f"{self.method} δ={self.delta:g}"
+        return f"{self.method} alternate" if self.alternate else self.method
 
     def describe(self) -> str:
         return (f"{self.method}/{self.backend} {self.element} {self.width}x{self.height} "
@@ -59,6 +64,7 @@ class RunSpec:
     def params(self) -> dict:
         d = asdict(self)
         d.pop("picture")
+        d.pop("curve")
         return {**d, "metric": self.metric, "label": self.label}
 
     def problem(self):
@@ -74,15 +80,17 @@ class RunSpec:
         (a json of 4000 sites is ~60 kB, and the digest already tells whether two runs
         agree)."""
         from compact_distributions.baselines import get_method
-        from compact_distributions.cvt.evaluate import evaluate
+        from compact_distributions.cvt.evaluate import coverage_at_overlap, coverage_overlap_curve, evaluate
 
         from .outputs import machine, versions
 
         problem = self.problem()
         method = get_method(self.method)
-        budget = {} if self.delta is None else {"delta": self.delta}
+        options = {} if self.delta is None else {"delta": self.delta}
+        if self.alternate:
+            options["alternate"] = True
         t0 = time.perf_counter()
-        dist = method(problem, backend, iterations=self.iterations, element=self.element, gap=self.gap, **budget)
+        dist = method(problem, backend, iterations=self.iterations, element=self.element, gap=self.gap, **options)
         wall = time.perf_counter() - t0
         ev = evaluate(dist.elements, problem.grid)
         secs = list(map(float, dist.seconds))
@@ -95,6 +103,10 @@ class RunSpec:
             "ms_per_iteration": float(np.median(secs) * 1000) if secs else None,
             "final_energy": float(dist.energy[-1]) if dist.energy else None,
         }
+        if self.curve:
+            curve = coverage_overlap_curve(dist.elements, problem.grid)
+            row["coverage_at_1pct_overlap"] = coverage_at_overlap(curve, 0.01)
+            row["coverage_overlap"] = curve  # [[factor, coverage, overlap], ...]
         record = {"row": row, "sites_sha1": sites_digest(dist.sites), "energy": dist.energy,
                   "seconds": secs, "empty_per_iteration": list(dist.empty), "extra": dist.extra,
                   "machine": machine(), "versions": versions()}

@@ -59,7 +59,7 @@ from .validate import one_of, real_number, whole_number
 # The method that places the tiles when none is named (a name in cvt.methods.METHODS).
 # "ours-compact" (compaction: tiles share their walls, the grout is the gap asked for)
 # becomes the default once it is registered there.
-DEFAULT_METHOD = "ours"
+DEFAULT_METHOD = "ours-compact"
 DEFAULT_ELEMENTS = 2000
 MAX_DEFAULT_SIDE = 1024  # the picture's own size, capped at this on the long side
 AUTO_GAP = 0.05  # default grout: this share of the mean element spacing
@@ -362,7 +362,8 @@ def make_mosaic(image, backend, *, n_elements: int = DEFAULT_ELEMENTS, metric: s
                 use_field: bool = True, use_density: bool = True, iterations: int = 20,
                 seed: int = 0, aspect: float | None = None, contrast: float = DEFAULT_CONTRAST,
                 grout=DEFAULT_GROUT, method=DEFAULT_METHOD, edges: bool = True,
-                edge_threshold: float = DEFAULT_EDGE_THRESHOLD, progress=None) -> MosaicResult:
+                edge_threshold: float = DEFAULT_EDGE_THRESHOLD, method_options: dict | None = None,
+                progress=None) -> MosaicResult:
     """Turn ``image`` (a file path or a numpy array) into a mosaic of ``n_elements``.
 
     ``metric``/``element``: the Lloyd distance and the tile shape; give either (the
@@ -379,8 +380,9 @@ def make_mosaic(image, backend, *, n_elements: int = DEFAULT_ELEMENTS, metric: s
     :mod:`cvt.methods`; default :data:`DEFAULT_METHOD`).  ``edges``: the picture's strong
     edges (contrast >= ``edge_threshold`` ΔE*ab, :func:`cvt.image_fields.strong_edges`)
     are walls: their pixels leave the region, so cells, tiles and the method's region
-    border stop at them.  ``progress(k, iterations, energy)`` is called after each Lloyd
-    step."""
+    border stop at them.  ``method_options``: more keywords for the method (e.g.
+    ``{"alternate": True}`` for ours-compact's triangles).  ``progress(k, iterations,
+    energy)`` is called after each Lloyd step."""
     t_start = time.perf_counter()
     if not callable(getattr(backend, "moments", None)):
         raise InputError(f"backend must be a live Backend (backends.create_backend), got {backend!r}")
@@ -412,7 +414,8 @@ def make_mosaic(image, backend, *, n_elements: int = DEFAULT_ELEMENTS, metric: s
                       density=fields.density if use_density else None,
                       field=fields.field if use_field else None, seed=seed)
 
-    dist = run_method(problem, WalledBackend(backend) if walls else backend, iterations=iterations, progress=progress, element=element, gap=gap)
+    dist = run_method(problem, WalledBackend(backend) if walls else backend, iterations=iterations,
+                      progress=progress, element=element, gap=gap, **(method_options or {}))
     polygons = [None if p is None or p.is_empty else p for p in dist.elements]
     tiles, pixels = pixels_under(polygons, w, h)
     colours, fills_lab = tile_colours(lab, polygons, dist.sites, tiles, pixels)

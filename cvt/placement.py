@@ -68,7 +68,7 @@ import numpy as np
 
 from .errors import InputError
 from .metrics import Metric, compile_sites
-from .problem import Grid, in_own_cell
+from .problem import Grid, in_own_cell, pixel_index
 from .shapes import check_shape, element_ball, element_polygons
 from .validate import one_of, real_number
 
@@ -116,9 +116,12 @@ def _reach(coef, owner, vx, vy, half):
     grout ``half`` = G/2 kept clear) reaches the sample."""
     if coef.kind == "polygon":
         f = coef.facets  # (N, K, 2): f_k = R(θ) n_k / h_k, |f_k| = 1 / h_k
-        fo = f[owner]
         slack = half * np.hypot(f[0, :, 0], f[0, :, 1])  # same |f_k| for every site
-        return np.max(fo[..., 0] * vx[:, None] + fo[..., 1] * vy[:, None] - slack, axis=1)
+        out = None
+        for k in range(f.shape[1]):  # one facet at a time: no (S, K, 2) temporaries
+            v = f[:, k, 0][owner] * vx + f[:, k, 1][owner] * vy - slack[k]
+            out = v if out is None else np.maximum(out, v, out=out)
+        return out
     q = coef.quad[owner]
     gx = q[:, 0] * vx + q[:, 1] * vy  # Q v = ρ ∇ρ
     gy = q[:, 1] * vx + q[:, 2] * vy
@@ -161,16 +164,50 @@ _FIT_MOVES = np.array([[1, 0], [-1, 0], [0, 1], [0, -1], [1, 1], [1, -1], [-1, 1
                       dtype=np.float64)
 
 
+def _inscribed_centres(labels, shape: str, aspect, n: int) -> np.ndarray:
+    """(n, 2) per cell, the centre of the pixel farthest from the cell's contour, by a
+    distance transform in the element's own metric (chessboard for squares, Euclidean
+    with the axes scaled by β for rectangles and ellipses, Euclidean otherwise; the
+    site's angle is ignored: this is only a start for the search).  NaN for empty cells."""
+    from scipy import ndimage
+
+    h, w = labels.shape
+    pad = np.pad(labels, 1, constant_values=-1)
+    inner = ((labels >= 0) & (pad[:-2, 1:-1] == labels) & (pad[2:, 1:-1] == labels)
+             & (pad[1:-1, :-2] == labels) & (pad[1:-1, 2:] == labels))
+    if shape == "square":
+        dt = ndimage.distance_transform_cdt(inner, metric="chessboard").astype(np.float64)
+    elif shape in ("rectangle", "ellipse"):
+        beta = element_ball(shape, aspect).aspect  # gauge ~ hypot(β·dx, dy/β)
+        dt = ndimage.distance_transform_edt(inner, sampling=(1.0 / beta, beta))
+    else:
+        dt = ndimage.distance_transform_edt(inner)
+    lab, d = labels.ravel(), dt.ravel()
+    inside = np.flatnonzero(lab >= 0)
+    best = np.full(n, -1.0)
+    np.maximum.at(best, lab[inside], d[inside])
+    top = inside[d[inside] == best[lab[inside]]]
+    cells, first = np.unique(lab[top], return_index=True)
+    out = np.full((n, 2), np.nan)
+    i, j = np.divmod(top[first], w)
+    out[cells] = np.stack([j + 0.5, i + 0.5], axis=1)
+    return out
+
+
 def fit_centres(labels, sites, angles, shape: str, aspect, gap: float = 0.0):
     """``fit="centre"``: move each element's centre inside its cell to the position
     where the same rule allows the largest size.
 
-    A compass (pattern) search per cell, all cells at once: try 8 moves of a step
-    proportional to the element's size, keep any that grows it, up to 3 times per step,
-    then halve the step (0.3, 0.15, 0.075, 0.0375 of the size).  The centre must stay in
-    a pixel of its own cell.  The angle is kept (the field's direction).  Returns the
-    centres (N, 2) and sizes (N,), 0 where skipped.  About 1 s for 1000 cells on 512²;
-    on relaxed linf CVTs it raised square coverage from 0.70 to 0.77 (seed 1, 512²)."""
+    A compass (pattern) search per cell, all cells at once, from two starts: the site, and
+    the centre of the largest inscribed element found by a distance transform of the cell
+    (:func:`_inscribed_centres`); each cell keeps the larger result.  The search tries 8
+    moves of a step proportional to the element's size, keeps any that grows it, repeats
+    while the cell grows (up to 3 times per step), then halves the step (0.3, 0.15,
+    0.075, 0.0375 of the size); only the cells still growing are evaluated.  The centre
+    must stay in a pixel of its own cell.  The angle is kept (the field's direction).
+    Returns the centres (N, 2) and sizes (N,), 0 where skipped.  Relaxed linf CVT at
+    1024², N = 4000, seed 1: square coverage 0.769 searching from the site alone, 0.780
+    from both starts (circles 0.723 / 0.728, triangles 0.516 / 0.522), about 1-1.5 s CPU."""
     labels = np.asarray(labels)
     sites = np.asarray(sites, dtype=np.float64).reshape(-1, 2)
     n = len(sites)
@@ -180,31 +217,57 @@ def fit_centres(labels, sites, angles, shape: str, aspect, gap: float = 0.0):
     owner, qx, qy = contour_samples(labels)
     order = np.argsort(owner, kind="stable")
     owner, qx, qy = owner[order], qx[order], qy[order]
-    has = np.bincount(owner, minlength=n) > 0
-    starts = np.searchsorted(owner, np.flatnonzero(has))
+    counts = np.bincount(owner, minlength=n)[:n]
+    first = np.cumsum(counts) - counts
+    cells = np.flatnonzero(counts > 0)
+    h, w = labels.shape
 
-    def sizes_at(centres):
-        coef = compile_sites(ball, centres, angles, None)
-        reach = _reach(coef, owner, qx - centres[owner, 0], qy - centres[owner, 1], 0.5 * gap)
-        out = np.zeros(n)
-        out[has] = np.minimum.reduceat(reach, starts)
-        return np.where(in_own_cell(labels, centres) & has, np.maximum(out, 0.0), 0.0)
+    def sizes_of(sub, centres):
+        """Sizes of the elements of cells ``cells[sub]`` centred at ``centres``."""
+        ids = cells[sub]
+        cnt = counts[ids]
+        offs = np.cumsum(cnt) - cnt
+        idx = np.repeat(first[ids] - offs, cnt) + np.arange(int(cnt.sum()))
+        loc = np.repeat(np.arange(len(ids)), cnt)
+        coef = compile_sites(ball, centres, angles[ids], None)
+        reach = _reach(coef, loc, qx[idx] - centres[loc, 0], qy[idx] - centres[loc, 1], 0.5 * gap)
+        size = np.minimum.reduceat(reach, offs) if len(ids) else np.zeros(0)
+        x, y = centres[:, 0], centres[:, 1]
+        own = (x >= 0) & (x < w) & (y >= 0) & (y < h) & (labels[pixel_index(centres, w, h)] == ids)
+        return np.where(own, np.maximum(size, 0.0), 0.0)
 
-    centres = sites.copy()
-    best = sizes_at(centres)
-    for frac in _FIT_STEPS:
-        for _ in range(3):
-            step = frac * np.maximum(best, 1.0)
-            grew = False
-            for move in _FIT_MOVES:
-                trial = centres + step[:, None] * move
-                size = sizes_at(trial)
-                better = size > best * (1 + 1e-9)
-                if better.any():
-                    centres[better], best[better], grew = trial[better], size[better], True
-            if not grew:
-                break
-    return centres, best
+    def search(start):
+        centres = start[cells].copy()
+        best = sizes_of(np.arange(len(cells)), centres)
+        for frac in _FIT_STEPS:
+            active = np.arange(len(cells))
+            for _ in range(3):
+                if len(active) == 0:
+                    break
+                step = frac * np.maximum(best[active], 1.0)
+                grew = np.zeros(len(active), dtype=bool)
+                for move in _FIT_MOVES:
+                    trial = centres[active] + step[:, None] * move
+                    size = sizes_of(active, trial)
+                    better = size > best[active] * (1 + 1e-9)
+                    if better.any():
+                        a = active[better]
+                        centres[a], best[a] = trial[better], size[better]
+                        grew |= better
+                active = active[grew]
+        return centres, best
+
+    out_c, out_s = sites.copy(), np.zeros(n)
+    if len(cells) == 0:
+        return out_c, out_s
+    c1, s1 = search(sites)
+    start2 = _inscribed_centres(labels, shape, aspect, n)
+    start2[~np.isfinite(start2).all(axis=1)] = sites[~np.isfinite(start2).all(axis=1)]
+    c2, s2 = search(start2)
+    second = s2 > s1
+    out_c[cells] = np.where(second[:, None], c2, c1)
+    out_s[cells] = np.where(second, s2, s1)
+    return out_c, out_s
 
 
 def place_elements(labels, sites, angles, shape: str, aspect, grid: Grid,

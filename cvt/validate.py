@@ -39,9 +39,13 @@ def whole_number(value, name: str, minimum: int | None = 0, maximum: int | None 
 
 
 def real_number(value, name: str, minimum: float | None = None, maximum: float | None = None,
-                above: float | None = None) -> float:
-    """A finite float in [minimum, maximum] (and > ``above`` when given)."""
-    limits = _range_text(minimum, maximum) if above is None else f" > {above:g}"
+                above: float | None = None, below: float | None = None) -> float:
+    """A finite float in [minimum, maximum] (and > ``above``, < ``below`` when given)."""
+    limits = _range_text(minimum, maximum)
+    if above is not None:
+        limits += f" > {above:g}"
+    if below is not None:
+        limits += f"{' and' if limits else ''} < {below:g}"
     bad = InputError(f"{name} must be a finite number{limits}, got {value!r}")
     if isinstance(value, bool) or not isinstance(value, (numbers.Real, str)):
         raise bad
@@ -53,7 +57,7 @@ def real_number(value, name: str, minimum: float | None = None, maximum: float |
         raise bad
     if (minimum is not None and x < minimum) or (maximum is not None and x > maximum):
         raise bad
-    if above is not None and not x > above:
+    if (above is not None and not x > above) or (below is not None and not x < below):
         raise bad
     return x
 

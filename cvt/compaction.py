@@ -1,0 +1,710 @@
+"""Compaction of placed elements: neighbours share their walls (method ``ours-compact``).
+
+After placement every element sits in its own raster cell, so two neighbours are kept
+apart by two half-cells of slack.  Compaction moves the centres and grows the sizes of all
+elements at once, in a few rounds; the angles (the direction field's) are never changed.
+
+One round
+---------
+Elements are convex: element i is ``c_i + r_i·R(θ_i)·K`` with K the unit element
+(:mod:`cvt.shapes`) and h_i(n) = max_{k in K} (R(θ_i)k)·n its support function.  Two
+elements are disjoint with a joint of at least G when a unit direction n gives
+
+    n·(c_j − c_i) − h_i(n)·r_i − h_j(−n)·r_j >= G                                  (1)
+
+(the gap between the two along n; its maximum over n is their Euclidean distance).  With
+n fixed, (1) is linear in (c_i, c_j, r_i, r_j).  The region (a raster mask, possibly
+non-convex, with thin parts) is kept by the same rule against its boundary: the boundary
+(raster edge included) is cut into straight pieces of pixel edges, at most
+``SEGMENT_LENGTH`` px long, and element i stays clear of a piece with end points p, q when
+
+    min(n·p, n·q) − n·c_i − h_i(n)·r_i >= G/2                                        (2)
+
+(a convex element against a segment: exact, so an element may stand beside a reflex
+corner of the region or in a thin part).  A round is the linear program over the
+displacements (Δc_i, Δr_i):
+
+    maximise   Σ_i r_i·Δr_i                (the covered area, linearised: d(r²)/2)
+    subject to (1) for every near pair, (2) for every near boundary piece,
+               |Δc_i|_∞ <= δ_i = move·inradius(K)·r_i,   −shrink·r_i <= Δr_i <= growth·r_i.
+
+n is fixed per pair and round: the candidate with the largest left side of (1)/(2) now,
+among the face normals of both polygons, the centre line (or the nearest point of the
+piece and its normal) and last round's n of that pair; curved shapes add 16 sampled
+directions refined by a golden-section search.  The program is split into square tiles of
+about ``tile_elements`` elements: a pair cut by a tile border becomes a wall between the
+two, each side keeping to its half of the current slack of (1) (the two halves add up to
+(1)), so each tile is an independent program; tiles shift by half a tile every other
+round.  Each tile is solved by HiGHS' dual simplex (``highspy``).
+
+Why every round is overlap-free (the guarantee)
+-----------------------------------------------
+* A pair (a piece) enters the program when its current gap lower bound g (the best
+  candidate's left side of (1)/(2), never more than the true distance) is below G (G/2)
+  plus what the two can approach in one round: element i moves by at most √2·δ_i and
+  grows by at most growth·r_i·ρ (ρ = circumradius of K), and the distance between two
+  convex sets drops by at most the sum of these (it is 1-Lipschitz in each set's
+  Hausdorff distance).  Pairs and pieces left out therefore stay at least G (G/2) apart.
+* Pairs and pieces in the program are separated by (1)/(2), which the solution meets.  The
+  solver meets constraints only to its tolerance (~1e-7), so after every solve each
+  constraint is evaluated again in float64 and elements short of ``SLACK`` (1e-7 px) are
+  shrunk about their centres (both elements of a row by the same factor, each element by
+  the smallest factor of its rows); shrinking only adds to every left side of (1)/(2)
+  (h >= 0), so one pass restores them all.  The guarantee rests on this exact check, not
+  on the solver: a tile that HiGHS does not solve to optimality stays where it is
+  (Δ = 0 is feasible) and is counted in the round's ``history``.
+* Containment: (1)/(2) are linear, so they hold all along the straight path from the old
+  state to the new one; an element moves continuously without crossing the boundary, so
+  an element whose centre starts in the region stays in it (a centre outside the region
+  is an InputError).
+* The start may be slightly off (placement lets a corner cross its cell's contour by up to
+  half a pixel): before every program the same shrinking makes every row hold; a row no
+  size can meet (two centres closer than G, a centre closer than G/2 to the border) drops
+  one element (the smaller; counted in ``dropped``).
+
+Sizes and density
+-----------------
+The objective weighs growth by the current size (area), and each element's growth and
+shrinking per round are capped relative to its own size, so a field of sizes keeps its
+contrast: with a density 4:1 between two halves (sizes 2:1) the median size ratio went
+from 2.02 to 2.00 (squares, 1024², N = 4000) while coverage rose from 0.78 to 0.97.
+Uniform weights (Σ Δr_i) and relative ones (Σ Δr_i·r0_i²/r_i) were measured 0.15-0.5
+points lower on every shape.  ``max_growth`` (off by default) caps every size at
+(1 + max_growth) × its placed size; ``move_cost`` > 0 puts a price on moves (columns
+Δc⁺, Δc⁻), which keeps regular lattices from drifting (a lattice of circles then reaches
+its optimum π/4 exactly) but measured up to 0.4 points lower and 30-60 % slower on CVTs.
+
+Speed (4000 squares, 1024², after 20 Lloyd iterations; 2-core machine shared with other
+jobs, so CPU seconds are the steadier figure)
+-------------------------------------------------------------------------------------
+One program for all elements (12 000 columns, ~16 000 rows): HiGHS dual simplex 0.7 s for
+the first round, then 5-23 s per round as more rows become tight (17 700 iterations at
+1.3 ms: the basis couples long chains of touching elements); interior point 2.5 s per
+round; PDLP 8 s at 1e-4.  The same program as one block-diagonal model (tiles, cross
+pairs as walls) fell to ~1 s per round; carrying its basis from round to round (an alien
+basis mapped by pair) cut the iterations by a quarter but the time by under 10 %, as
+every round moves all bounds.  One small model per tile: ~0.25 s CPU per round, with
+about 2 points less coverage than the untiled program at equal rounds (squares after 3
+rounds 0.956 against 0.977), which one more round makes up.  Solving tiles in two
+threads gave no gain here.  Defaults (4 rounds, growth 0.15, move 0.5, 64 elements per
+tile): ~1.1 s CPU, coverage 0.97; building a round (kd-trees, directions, rows) in numpy
+is ~0.07 s of each round.
+
+Where this departs from the issue's sketch
+------------------------------------------
+* (1) uses h_j(−n), not h_j(n): the two are equal for centrally symmetric elements, not
+  for triangles.
+* Variables are displacements from the round's start (the program is equally well scaled
+  at any raster size); sizes are capped per round relative to each size, not by one
+  absolute cap; the objective is the area Σ r_i·Δr_i.
+* The region is kept by (2) against boundary pieces with a best direction per piece.
+* The program is solved per tile with walls between tiles (see Speed).
+"""
+
+from __future__ import annotations
+
+import math
+import time
+from dataclasses import dataclass, field
+
+import numpy as np
+from scipy.spatial import cKDTree
+
+from .errors import InputError
+from .placement import parse_gap
+from .problem import Grid
+from .shapes import check_shape, element_ball
+from .validate import real_number, whole_number
+
+SLACK = 1e-7  # px: every kept constraint holds with at least this much after a round
+SEGMENT_LENGTH = 32  # px: longest boundary piece
+_SELECT = 1e-6  # px: extra reach when choosing near pairs and pieces
+_SAMPLES = 16  # directions sampled for curved shapes (then refined)
+_REFINE = 14  # golden-section steps of that refinement
+_GOLD = (math.sqrt(5) - 1) / 2
+_TIE = 1e-6  # px: candidate directions this close count as equally good (> SLACK·√2)
+
+
+@dataclass
+class CompactionResult:
+    centres: np.ndarray  # (N, 2) px
+    sizes: np.ndarray  # (N,) 0 where there is no element
+    angles: np.ndarray  # (N,) radians, as given
+    rounds: int  # rounds run
+    seconds: float  # wall time of compact()
+    lp_seconds: float = 0.0  # of which in the LP solver
+    dropped: int = 0  # elements given size 0 (centre closer than the gap to another)
+    history: list = field(default_factory=list)  # per round: pairs, pieces, area, seconds
+
+    def as_dict(self) -> dict:
+        return {"compaction_rounds": self.rounds, "compaction_seconds": self.seconds,
+                "compaction_lp_seconds": self.lp_seconds, "compaction_dropped": self.dropped}
+
+
+# --------------------------------------------------------------------- unit element
+class _Unit:
+    """The unit element of a shape: support function, face normals, radii."""
+
+    def __init__(self, shape: str, aspect):
+        m = element_ball(shape, aspect)
+        self.kind = m.kind
+        self.rho = m.circumradius
+        self.inr = m.inradius
+        if m.kind == "polygon":
+            self.verts = m.outline()
+            self.normals = m.normals / np.hypot(*m.normals.T)[:, None]
+        else:
+            self.axes = m.semi_axes
+
+    def support(self, nx, ny, cos, sin):
+        """h(n) of elements turned by θ (cos, sin broadcast against nx, ny)."""
+        ux = cos * nx + sin * ny  # R(−θ) n: n in the element's own frame
+        uy = cos * ny - sin * nx
+        if self.kind == "ellipse":
+            a, b = self.axes
+            ux *= a
+            uy *= b
+            return np.sqrt(ux * ux + uy * uy)  # |diag(a, b) u|; faster than np.hypot
+        v = self.verts
+        out = v[0, 0] * ux + v[0, 1] * uy
+        for k in range(1, len(v)):
+            np.maximum(out, v[k, 0] * ux + v[k, 1] * uy, out=out)
+        return out
+
+    def face_normals(self, cos, sin):
+        """(..., K) x and y of the outward face normals, turned by θ."""
+        nx, ny = self.normals[:, 0], self.normals[:, 1]
+        c, s = cos[..., None], sin[..., None]
+        return c * nx - s * ny, s * nx + c * ny
+
+
+def _argmax_rows(g, tie=_TIE):
+    """Per row, the first candidate within ``tie`` of the row's best (candidates come in
+    order of preference: ties are common, e.g. a square's corner on a piece's end point
+    is as far along the diagonal as along the border's normal, and the diagonal would
+    lock the element in place), and its value."""
+    top = g.max(axis=1, initial=-np.inf)
+    k = np.argmax(g >= (top - tie)[:, None], axis=1)
+    return k, g[np.arange(len(g)), k]
+
+
+def _refine_angles(gap_at, phi, width):
+    """Golden-section search of each row's best angle in [phi − width, phi + width]."""
+    lo, hi = phi - width, phi + width
+    a = hi - _GOLD * (hi - lo)
+    b = lo + _GOLD * (hi - lo)
+    ga, gb = gap_at(a), gap_at(b)
+    for _ in range(_REFINE):
+        left = ga > gb  # the maximum is in [lo, b]
+        hi = np.where(left, b, hi)
+        lo = np.where(left, lo, a)
+        na = np.where(left, hi - _GOLD * (hi - lo), b)
+        nb = np.where(left, a, lo + _GOLD * (hi - lo))
+        fresh = np.where(left, na, nb)
+        gf = gap_at(fresh)
+        ga, gb = np.where(left, gf, gb), np.where(left, ga, gf)
+        a, b = na, nb
+    best = np.where(ga > gb, a, b)
+    return best, np.maximum(ga, gb)
+
+
+def _best_direction(gap_of, nx, ny, curved_from=None, enough=None):
+    """Per row, the preferred candidate direction (columns of ``nx``, ``ny``, in order of
+    preference) and its gap.  For curved shapes (``curved_from``: a reference angle per
+    row) the rows whose gap is below ``enough`` also try _SAMPLES directions within ±90°
+    of it, refined by golden section, taken when clearly better.  ``gap_of(nx, ny, rows)``
+    evaluates the rows ``rows`` (a slice or indices), broadcasting over columns."""
+    g = gap_of(nx, ny, slice(None))
+    g = np.where(np.isfinite(g), g, -np.inf)  # last round's n is NaN for new rows
+    k, best = _argmax_rows(g)
+    rows = np.arange(len(k))
+    bx, by = nx[rows, k], ny[rows, k]
+    sub = np.flatnonzero(best < enough) if curved_from is not None else rows[:0]
+    if len(sub):  # rows far apart already are left out of the program: no need to refine
+        off = np.linspace(-math.pi / 2, math.pi / 2, _SAMPLES)
+        phis = curved_from[sub, None] + off[None, :]
+        ks, _ = _argmax_rows(gap_of(np.cos(phis), np.sin(phis), sub))
+        phi, gref = _refine_angles(
+            lambda p: gap_of(np.cos(p)[:, None], np.sin(p)[:, None], sub)[:, 0],
+            phis[np.arange(len(sub)), ks], off[1] - off[0])
+        better = gref > best[sub] + _TIE
+        take = sub[better]
+        bx[take], by[take], best[take] = np.cos(phi[better]), np.sin(phi[better]), gref[better]
+    return bx, by, best
+
+
+# --------------------------------------------------------------------- pairs
+def _pair_gap(unit, dx, dy, ri, rj, ci, si, cj, sj, nx, ny):
+    """Left side of (1) without G: the gap between two elements along n (broadcasting)."""
+    return (nx * dx + ny * dy - ri * unit.support(nx, ny, ci, si)
+            - rj * unit.support(-nx, -ny, cj, sj))
+
+
+def _best_pair_directions(unit, c, r, cos, sin, i, j, prev_n, enough=None):
+    """Per pair: the unit n (from i to j) to separate them along, and their gap along it."""
+    dx, dy = c[j, 0] - c[i, 0], c[j, 1] - c[i, 1]
+    d = np.hypot(dx, dy)
+    with np.errstate(invalid="ignore", divide="ignore"):
+        clx, cly = np.where(d > 0, dx / d, 1.0), np.where(d > 0, dy / d, 0.0)
+    # in order of preference: faces (walls to slide along), last round's n, centre line
+    cands_x, cands_y = [prev_n[:, 0:1], clx[:, None]], [prev_n[:, 1:2], cly[:, None]]
+    if unit.kind == "polygon":
+        fx, fy = unit.face_normals(cos[i], sin[i])
+        gx, gy = unit.face_normals(cos[j], sin[j])
+        cands_x = [fx, -gx] + cands_x
+        cands_y = [fy, -gy] + cands_y
+    args = tuple(v[:, None] for v in (dx, dy, r[i], r[j], cos[i], sin[i], cos[j], sin[j]))
+    curved = unit.kind == "ellipse" and unit.axes[0] != unit.axes[1]  # circles: centre line
+    return _best_direction(lambda nx, ny, k: _pair_gap(unit, *(a[k] for a in args), nx, ny),
+                           np.concatenate(cands_x, axis=1), np.concatenate(cands_y, axis=1),
+                           np.arctan2(cly, clx) if curved else None, enough)
+
+
+def _near_pairs(unit, c, r, cos, sin, budget, gap, prev):
+    """Pairs whose gap could close to < gap this round; their n and current gap."""
+    act = np.flatnonzero(r > 0)
+    if len(act) < 2:
+        e = np.zeros(0)
+        return np.zeros(0, np.int64), np.zeros(0, np.int64), e, e, e
+    reach = unit.rho * r[act] + budget[act]
+    tree = cKDTree(c[act])
+    ij = tree.query_pairs(2 * reach.max() + gap + _SELECT, output_type="ndarray")
+    i, j = act[ij[:, 0]], act[ij[:, 1]]
+    d = np.hypot(*(c[j] - c[i]).T)
+    keep = d < unit.rho * (r[i] + r[j]) + budget[i] + budget[j] + gap + _SELECT
+    i, j = i[keep], j[keep]
+    prev_n = _lookup(prev, i * len(r) + j)
+    enough = gap + budget[i] + budget[j] + _SELECT
+    nx, ny, g = _best_pair_directions(unit, c, r, cos, sin, i, j, prev_n, enough)
+    keep = g < enough
+    return i[keep], j[keep], nx[keep], ny[keep], g[keep]
+
+
+def _lookup(prev, keys):
+    """Last round's direction of each key (NaN where the key is new)."""
+    out = np.full((len(keys), 2), np.nan)
+    if prev is None or len(prev[0]) == 0:
+        return out
+    pk, pn = prev
+    pos = np.clip(np.searchsorted(pk, keys), 0, len(pk) - 1)
+    hit = pk[pos] == keys
+    out[hit] = pn[pos[hit]]
+    return out
+
+
+# --------------------------------------------------------------------- region
+def boundary_segments(mask: np.ndarray, length: int = SEGMENT_LENGTH) -> np.ndarray:
+    """(S, 4) pieces (x0, y0, x1, y1) of the region's boundary: maximal straight runs of
+    pixel edges between an inside and an outside pixel (the raster's edge counts as
+    outside), cut into pieces of at most ``length`` px."""
+    mask = np.asarray(mask, dtype=bool)
+    h, w = mask.shape
+    pad = np.zeros((h + 2, w + 2), dtype=bool)
+    pad[1:-1, 1:-1] = mask
+    out = []
+    # horizontal edges at y = row between pixel rows row-1 and row; runs along x
+    hb = pad[:-1, 1:-1] != pad[1:, 1:-1]  # (h+1, w)
+    # vertical edges at x = col between pixel columns col-1 and col; runs along y
+    vb = (pad[1:-1, :-1] != pad[1:-1, 1:]).T  # (w+1, h)
+    for edges, horizontal in ((hb, True), (vb, False)):
+        e = np.zeros((edges.shape[0], edges.shape[1] + 2), dtype=np.int8)
+        e[:, 1:-1] = edges
+        step = np.diff(e, axis=1)
+        line, start = np.nonzero(step == 1)
+        _, stop = np.nonzero(step == -1)  # same row order, so runs pair up
+        n = -(-(stop - start) // length)  # pieces per run
+        rep = np.repeat(np.arange(len(start)), n)
+        first = np.cumsum(n) - n
+        k = np.arange(len(rep)) - first[rep]
+        a = start[rep] + k * length
+        b = np.minimum(a + length, stop[rep])
+        fixed = line[rep].astype(np.float64)
+        if horizontal:
+            out.append(np.stack([a, fixed, b, fixed], axis=1))
+        else:
+            out.append(np.stack([fixed, a, fixed, b], axis=1))
+    return np.concatenate(out).astype(np.float64)
+
+
+def _seg_gap(unit, px, py, qx, qy, cx, cy, r, cos, sin, nx, ny):
+    """Left side of (2): gap between an element and a segment along n (element → segment)."""
+    return (np.minimum(nx * px + ny * py, nx * qx + ny * qy) - nx * cx - ny * cy
+            - r * unit.support(nx, ny, cos, sin))
+
+
+def _closest_on_segment(px, py, qx, qy, x, y):
+    ex, ey = qx - px, qy - py
+    ll = ex * ex + ey * ey
+    t = np.clip(((x - px) * ex + (y - py) * ey) / np.where(ll > 0, ll, 1.0), 0.0, 1.0)
+    return px + t * ex, py + t * ey
+
+
+def _near_segments(unit, c, r, cos, sin, budget, half, segs, seg_tree, prev):
+    act = np.flatnonzero(r > 0)
+    empty = np.zeros(0)
+    if len(act) == 0 or len(segs) == 0:
+        return np.zeros(0, np.int64), np.zeros(0, np.int64), empty, empty, empty
+    reach = unit.rho * r[act] + budget[act]
+    cut = reach.max() + SEGMENT_LENGTH / 2 + half + _SELECT
+    m = cKDTree(c[act]).sparse_distance_matrix(seg_tree, cut, output_type="ndarray")
+    e, s = act[m["i"]], m["j"]
+    px, py, qx, qy = segs[s, 0], segs[s, 1], segs[s, 2], segs[s, 3]
+    x, y = c[e, 0], c[e, 1]
+    kx, ky = _closest_on_segment(px, py, qx, qy, x, y)
+    d = np.hypot(kx - x, ky - y)
+    keep = d < unit.rho * r[e] + budget[e] + half + _SELECT
+    e, s, px, py, qx, qy, x, y, kx, ky, d = (v[keep] for v in (e, s, px, py, qx, qy, x, y, kx, ky, d))
+    prev_n = _lookup(prev, e * len(segs) + s)
+    with np.errstate(invalid="ignore", divide="ignore"):
+        tx, ty = np.where(d > 0, (kx - x) / d, 1.0), np.where(d > 0, (ky - y) / d, 0.0)
+    # the piece's normal, turned towards the element's outside
+    sx, sy = -(qy - py), qx - px
+    sl = np.hypot(sx, sy)
+    sx, sy = sx / sl, sy / sl
+    flip = np.where(sx * (kx - x) + sy * (ky - y) < 0, -1.0, 1.0)
+    # in order of preference: the piece's own normal, the element's faces, last round's
+    # n, the direction of the nearest point (beside a reflex corner of the region)
+    cx_, cy_ = [(sx * flip)[:, None]], [(sy * flip)[:, None]]
+    if unit.kind == "polygon":
+        fx, fy = unit.face_normals(cos[e], sin[e])
+        cx_.append(fx)
+        cy_.append(fy)
+    cx_ += [prev_n[:, 0:1], tx[:, None]]
+    cy_ += [prev_n[:, 1:2], ty[:, None]]
+    args = tuple(v[:, None] for v in (px, py, qx, qy, x, y, r[e], cos[e], sin[e]))
+    curved = unit.kind == "ellipse" and unit.axes[0] != unit.axes[1]  # circles: nearest point
+    enough = half + budget[e] + _SELECT
+    bx, by, best = _best_direction(lambda nx, ny, k: _seg_gap(unit, *(a[k] for a in args), nx, ny),
+                                   np.concatenate(cx_, axis=1), np.concatenate(cy_, axis=1),
+                                   np.arctan2(ty, tx) if curved else None, enough)
+    keep = best < enough
+    return e[keep], s[keep], bx[keep], by[keep], best[keep]
+
+
+# --------------------------------------------------------------------- constraints
+@dataclass
+class _Rows:
+    """The round's constraints: (1) for pairs (i, j), (2) for (element e, piece)."""
+
+    i: np.ndarray
+    j: np.ndarray
+    nx: np.ndarray
+    ny: np.ndarray
+    hi: np.ndarray  # h_i(n)
+    hj: np.ndarray  # h_j(−n)
+    e: np.ndarray
+    s: np.ndarray  # piece index
+    sx: np.ndarray
+    sy: np.ndarray
+    he: np.ndarray  # h_e(n)
+    sm: np.ndarray  # min(n·p, n·q) of the piece
+
+    def live(self, r) -> "_Rows":
+        """The rows whose elements are all still present (size > 0)."""
+        kp = (r[self.i] > 0) & (r[self.j] > 0)
+        ks = r[self.e] > 0
+        return _Rows(*(getattr(self, f)[kp] for f in ("i", "j", "nx", "ny", "hi", "hj")),
+                     *(getattr(self, f)[ks] for f in ("e", "s", "sx", "sy", "he", "sm")))
+
+    def pair_slack(self, c, r, gap):
+        i, j = self.i, self.j
+        return (self.nx * (c[j, 0] - c[i, 0]) + self.ny * (c[j, 1] - c[i, 1])
+                - self.hi * r[i] - self.hj * r[j] - gap)
+
+    def seg_slack(self, c, r, half):
+        e = self.e
+        return self.sm - self.sx * c[e, 0] - self.sy * c[e, 1] - self.he * r[e] - half
+
+
+def _shrink_to_fit(rows: _Rows, c, r, gap, need):
+    """Shrink elements about their centres until every row of elements still present has
+    slack >= ``need``.  A row short by v is met by scaling both its elements by
+    1 − v/(h_i·r_i + h_j·r_j) (a piece's row: 1 − v/(h_e·r_e)); each element takes the
+    smallest factor of its rows, and shrinking only adds slack to every other row, so one
+    pass meets them all.  A row that no size > 0 can meet (two centres closer than the
+    gap, a centre closer than gap/2 to the border) drops one element: the smaller of the
+    pair, or the element.  Returns the sizes and how many elements were dropped."""
+    r = r.copy()
+    dropped = 0
+    for _ in range(8):  # one shrinking pass suffices; more only after drops
+        live_p = (r[rows.i] > 0) & (r[rows.j] > 0)
+        live_s = r[rows.e] > 0
+        vp = np.where(live_p, need - rows.pair_slack(c, r, gap), 0.0)
+        vs = np.where(live_s, need - rows.seg_slack(c, r, 0.5 * gap), 0.0)
+        short_p, short_s = vp > 0, vs > 0
+        if not (short_p.any() or short_s.any()):
+            return r, dropped
+        # aim at 2·need so that rounding cannot leave a row a hair short of need
+        with np.errstate(divide="ignore", invalid="ignore"):
+            fp = (vp + need) / (rows.hi * r[rows.i] + rows.hj * r[rows.j])
+            fs = (vs + need) / (rows.he * r[rows.e])
+        hopeless_p = short_p & ~(fp < 1)
+        hopeless_s = short_s & ~(fs < 1)
+        if hopeless_p.any() or hopeless_s.any():
+            i, j = rows.i[hopeless_p], rows.j[hopeless_p]
+            smaller = np.where((r[i] < r[j]) | ((r[i] == r[j]) & (i > j)), i, j)
+            gone = np.unique(np.concatenate([smaller, rows.e[hopeless_s]]))
+            r[gone] = 0.0
+            dropped += len(gone)
+            continue
+        cut = np.zeros(len(r))
+        np.maximum.at(cut, rows.i[short_p], fp[short_p])
+        np.maximum.at(cut, rows.j[short_p], fp[short_p])
+        np.maximum.at(cut, rows.e[short_s], fs[short_s])
+        r *= 1.0 - cut
+    raise RuntimeError("compaction: could not restore separation after shrinking")
+
+
+def _solve_lp(rows: _Rows, act, c, r, gap, delta, lo_dr, hi_dr, weight, tile, options,
+              move_cost=0.0):
+    """The round's program in displacements (Δc, Δr) of the active elements, one HiGHS
+    model per tile; returns Δc (N, 2), Δr (N,), the simplex iterations and the number of
+    tiles HiGHS did not solve to optimality (those keep Δ = 0)."""
+    import highspy
+
+    n = len(r)
+    # active elements ordered by tile: each tile's columns are one contiguous block
+    t_act = tile[act]
+    order = np.argsort(t_act, kind="stable")
+    elems = act[order]
+    tiles, first = np.unique(t_act[order], return_index=True)
+    bounds_e = np.append(first, len(elems))
+    col = np.full(n, -1, dtype=np.int64)
+    col[elems] = np.arange(len(elems))
+    if (col[rows.i] < 0).any() or (col[rows.j] < 0).any() or (col[rows.e] < 0).any():
+        raise RuntimeError("compaction: a row refers to an element without a size")
+    ps = rows.pair_slack(c, r, gap)
+    # a pair across two tiles becomes a wall between them: each side may take half of
+    # the slack, so the tiles' programs are independent
+    cross = tile[rows.i] != tile[rows.j]
+    inner = ~cross
+    # columns per element: Δx⁺, Δx⁻, Δy⁺, Δy⁻, Δr when moves cost (|Δc| in the objective),
+    # else Δx, Δy, Δr
+    split = move_cost > 0
+    k = 5 if split else 3
+
+    def entries(cidx, ax, ay, ah):
+        """Column indices and values of one element's part of the rows."""
+        if split:
+            return (np.stack([cidx, cidx + 1, cidx + 2, cidx + 3, cidx + 4], axis=1),
+                    np.stack([ax, -ax, ay, -ay, ah], axis=1))
+        return np.stack([cidx, cidx + 1, cidx + 2], axis=1), np.stack([ax, ay, ah], axis=1)
+
+    nx, ny, hi_, hj_ = rows.nx[inner], rows.ny[inner], rows.hi[inner], rows.hj[inner]
+    ii, vi = entries(k * col[rows.i[inner]], -nx, -ny, -hi_)
+    ij, vj = entries(k * col[rows.j[inner]], nx, ny, -hj_)
+    p_idx, p_val = np.concatenate([ii, ij], axis=1), np.concatenate([vi, vj], axis=1)
+    p_lo = -ps[inner]
+    p_tile = tile[rows.i[inner]]
+    # one-element rows: pieces, and the two halves of each cross pair
+    one = np.concatenate([rows.e, rows.i[cross], rows.j[cross]])
+    o_idx, o_val = entries(k * col[one], np.concatenate([-rows.sx, -rows.nx[cross], rows.nx[cross]]),
+                           np.concatenate([-rows.sy, -rows.ny[cross], rows.ny[cross]]),
+                           np.concatenate([-rows.he, -rows.hi[cross], -rows.hj[cross]]))
+    half_s = 0.5 * ps[cross]
+    o_lo = -np.concatenate([rows.seg_slack(c, r, 0.5 * gap), half_s, half_s])
+    o_tile = tile[one]
+    po, oo = np.argsort(p_tile, kind="stable"), np.argsort(o_tile, kind="stable")
+    p_idx, p_val, p_lo = p_idx[po], p_val[po], p_lo[po]
+    o_idx, o_val, o_lo = o_idx[oo], o_val[oo], o_lo[oo]
+    p_cut = np.searchsorted(p_tile[po], tiles, side="left"), np.searchsorted(p_tile[po], tiles, side="right")
+    o_cut = np.searchsorted(o_tile[oo], tiles, side="left"), np.searchsorted(o_tile[oo], tiles, side="right")
+
+    ncol = k * len(elems)
+    cost = np.zeros(ncol)
+    lo = np.zeros(ncol)
+    hi = np.empty(ncol)
+    d = delta[elems]
+    if split:
+        for m in range(4):
+            hi[m::5] = d
+            cost[m::5] = move_cost
+    else:
+        lo[0::3] = lo[1::3] = -d
+        hi[0::3] = hi[1::3] = d
+    cost[k - 1::k] = -weight[elems]
+    lo[k - 1::k], hi[k - 1::k] = lo_dr[elems], hi_dr[elems]
+    x = np.empty(ncol)
+
+    h = highspy.Highs()
+    h.setOptionValue("output_flag", False)
+    for key, value in options.items():
+        h.setOptionValue(key, value)
+    iters = failed = 0
+    for t in range(len(tiles)):  # one small model per tile: a loop over tiles, not pairs
+        c0, c1 = k * bounds_e[t], k * bounds_e[t + 1]
+        a0, a1 = p_cut[0][t], p_cut[1][t]
+        b0, b1 = o_cut[0][t], o_cut[1][t]
+        npr, nor = a1 - a0, b1 - b0
+        lp = highspy.HighsLp()
+        lp.num_col_ = c1 - c0
+        lp.num_row_ = npr + nor
+        lp.col_cost_, lp.col_lower_, lp.col_upper_ = cost[c0:c1], lo[c0:c1], hi[c0:c1]
+        row_lo = np.concatenate([p_lo[a0:a1], o_lo[b0:b1]])
+        lp.row_lower_ = np.minimum(row_lo, 0.0)  # the current state (0) is feasible
+        lp.row_upper_ = np.full(npr + nor, highspy.kHighsInf)
+        lp.a_matrix_.format_ = highspy.MatrixFormat.kRowwise
+        lp.a_matrix_.start_ = np.concatenate([np.arange(npr + 1) * 2 * k,
+                                              2 * k * npr + np.arange(1, nor + 1) * k]).astype(np.int32)
+        lp.a_matrix_.index_ = (np.concatenate([p_idx[a0:a1].ravel(), o_idx[b0:b1].ravel()])
+                               - c0).astype(np.int32)
+        lp.a_matrix_.value_ = np.concatenate([p_val[a0:a1].ravel(), o_val[b0:b1].ravel()])
+        h.passModel(lp)
+        h.run()
+        if h.getModelStatus() == highspy.HighsModelStatus.kOptimal:
+            x[c0:c1] = h.getSolution().col_value
+            iters += h.getInfo().simplex_iteration_count
+        else:  # a tile the solver does not finish stays where it is (a feasible point)
+            x[c0:c1] = 0.0
+            failed += 1
+    dc = np.zeros((n, 2))
+    dr = np.zeros(n)
+    if split:
+        dc[elems, 0], dc[elems, 1], dr[elems] = x[0::5] - x[1::5], x[2::5] - x[3::5], x[4::5]
+    else:
+        dc[elems, 0], dc[elems, 1], dr[elems] = x[0::3], x[1::3], x[2::3]
+    return dc, dr, iters, failed
+
+
+# --------------------------------------------------------------------- driver
+def _tiles(c, act, mask, per_tile, k):
+    """Tile id per element: squares holding about ``per_tile`` elements each, shifted by
+    half a tile on odd rounds so that a pair cut by one tiling is whole in the next."""
+    side = math.sqrt(per_tile * mask.sum() / max(len(act), 1))
+    off = 0.5 * side * (k % 2)
+    t = np.floor((c + off) / side).astype(np.int64)
+    return t[:, 0] * (mask.shape[0] // max(int(side), 1) + 3) + t[:, 1]
+
+
+def _region_mask(region) -> np.ndarray:
+    if isinstance(region, Grid):
+        return region.inside()
+    m = np.asarray(region)
+    if m.ndim != 2 or m.size == 0:
+        raise InputError(f"region must be a Grid or a 2-D mask, got shape {m.shape}")
+    if m.dtype != bool:
+        raise InputError(f"region mask must be boolean, got dtype {m.dtype}")
+    if not m.any():
+        raise InputError("region mask is empty: no pixel is inside the region")
+    return m
+
+
+def compact(centres, angles, sizes, shape: str, aspect, region, gap: float = 0.0,
+            rounds: int = 4, move: float = 0.5, growth: float = 0.15, shrink: float = 0.05,
+            max_growth: float | None = None, tol: float = 1e-4, tile_elements: int = 64,
+            move_cost: float = 0.0, lp_options: dict | None = None,
+            on_round=None) -> CompactionResult:
+    """Compact placed elements (module docstring): return new centres and sizes.
+
+    ``centres`` (N, 2) px, ``angles`` (N,) radians (kept), ``sizes`` (N,) in unit-element
+    units (0 = no element; those stay absent); ``shape`` one of ``cvt.shapes.ELEMENT_SHAPES``,
+    ``aspect`` β of rectangles and ellipses; ``region`` a :class:`cvt.problem.Grid` or an
+    (H, W) bool mask (True = inside; the raster's edge is the border too); ``gap`` G px
+    between elements (G/2 to the border).  Per round a centre moves at most ``move`` ×
+    its element's in-radius along each axis, and a size grows by at most ``growth`` or
+    shrinks by at most ``shrink`` of itself; ``max_growth`` caps each size at
+    (1 + max_growth) × its given size.  Stops after ``rounds`` or when a round adds less
+    than ``tol`` of the covered area.  ``lp_options``: extra HiGHS options;
+    ``on_round(k, centres, sizes)`` is called with each round's (overlap-free) state."""
+    shape = check_shape(shape)
+    gap = parse_gap(gap)
+    mask = _region_mask(region)
+    c = np.array(centres, dtype=np.float64).reshape(-1, 2)
+    n = len(c)
+    r = np.array(sizes, dtype=np.float64).reshape(-1)
+    th = np.broadcast_to(np.asarray(angles, dtype=np.float64), (n,)).copy() if angles is not None else np.zeros(n)
+    if len(r) != n or len(th) != n:
+        raise InputError(f"centres, angles and sizes must have one entry per element: "
+                         f"{n}, {len(th)}, {len(r)}")
+    if not (np.isfinite(c).all() and np.isfinite(r).all() and np.isfinite(th).all()):
+        raise InputError("centres, angles and sizes must be finite")
+    if (r < 0).any():
+        raise InputError(f"sizes must be >= 0, got {r.min()!r}")
+    rounds = whole_number(rounds, "rounds", minimum=0)
+    tile_elements = whole_number(tile_elements, "tile_elements", minimum=1)
+    move, growth = real_number(move, "move", above=0.0), real_number(growth, "growth", above=0.0)
+    shrink = real_number(shrink, "shrink", minimum=0.0, below=1.0)
+    tol = real_number(tol, "tol", minimum=0.0)
+    move_cost = real_number(move_cost, "move_cost", minimum=0.0)
+    if max_growth is not None:
+        max_growth = real_number(max_growth, "max_growth", above=0.0)
+    unit = _Unit(shape, aspect)
+    placed = np.flatnonzero(r > 0)
+    if len(placed):
+        widest = 2 * unit.inr * r[placed].max()
+        if gap >= widest:
+            raise InputError(f"gap {gap:g} px is not smaller than the largest element "
+                             f"({widest:.3g} px across its narrowest side)")
+        h, w = mask.shape
+        x, y = c[placed, 0], c[placed, 1]
+        inside = (x >= 0) & (x < w) & (y >= 0) & (y < h)
+        inside[inside] = mask[y[inside].astype(np.int64), x[inside].astype(np.int64)]
+        if not inside.all():
+            k = placed[np.argmin(inside)]
+            raise InputError(f"element {k} has its centre ({c[k, 0]:g}, {c[k, 1]:g}) outside the "
+                             f"region; compaction keeps elements where they start")
+    t0 = time.perf_counter()
+    cos, sin = np.cos(th), np.sin(th)
+    r0 = r.copy()
+    segs = boundary_segments(mask)
+    seg_tree = cKDTree(0.5 * (segs[:, :2] + segs[:, 2:]))
+    prev_p = prev_s = None
+    result = CompactionResult(c, r, th, 0, 0.0)
+    options = {"presolve": "off", **(lp_options or {})}
+    for k in range(max(rounds, 1)):
+        delta = move * unit.inr * r
+        up = growth * r
+        if max_growth is not None:
+            up = np.clip(r0 * (1 + max_growth) - r, 0.0, up)
+        budget = math.sqrt(2) * delta + unit.rho * up
+        i, j, px, py, _ = _near_pairs(unit, c, r, cos, sin, budget, gap, prev_p)
+        e, s, sx, sy, _ = _near_segments(unit, c, r, cos, sin, budget, 0.5 * gap, segs, seg_tree,
+                                         prev_s)
+        seg_m = np.minimum(sx * segs[s, 0] + sy * segs[s, 1], sx * segs[s, 2] + sy * segs[s, 3])
+        rows = _Rows(i, j, px, py, unit.support(px, py, cos[i], sin[i]),
+                     unit.support(-px, -py, cos[j], sin[j]), e, s, sx, sy,
+                     unit.support(sx, sy, cos[e], sin[e]), seg_m)
+        kp = i * n + j
+        order = np.argsort(kp)
+        prev_p = (kp[order], np.stack([px, py], axis=1)[order])
+        ks = e * len(segs) + s
+        order = np.argsort(ks)
+        prev_s = (ks[order], np.stack([sx, sy], axis=1)[order])
+        # the start must meet every row (placement may cross a contour by half a pixel)
+        r, dropped = _shrink_to_fit(rows, c, r, gap, SLACK)
+        result.dropped += dropped
+        if dropped:
+            rows = rows.live(r)
+        if rounds == 0:
+            break
+        act = np.flatnonzero(r > 0)
+        if len(act) == 0:
+            break
+        area0 = float(np.sum(r * r))
+        lo_dr = -shrink * r
+        hi_dr = np.maximum(up, 0.0)
+        weight = r / r[act].mean()  # d(area) = 2·r·dr
+        tl = time.perf_counter()
+        tcpu = time.process_time()
+        tile = _tiles(c, act, mask, tile_elements, k)
+        sol = _solve_lp(rows, act, c, r, gap, delta, lo_dr, hi_dr, weight, tile, options, move_cost)
+        result.lp_seconds += time.perf_counter() - tl
+        tcpu = time.process_time() - tcpu
+        dc, dr, iters, failed = sol
+        new_c = c + dc
+        new_r = np.where(r > 0, np.maximum(r + dr, 0.0), 0.0)
+        new_r, dropped = _shrink_to_fit(rows, new_c, new_r, gap, SLACK)
+        result.dropped += dropped
+        c, r = new_c, new_r
+        if on_round is not None:
+            on_round(k + 1, c.copy(), r.copy())
+        area1 = float(np.sum(r * r))
+        result.rounds = k + 1
+        result.history.append({"pairs": len(i), "pieces": len(e), "area_gain": area1 / area0 - 1,
+                               "lp_cpu": tcpu, "iters": iters, "failed_tiles": failed,
+                               "seconds": time.perf_counter() - t0})
+        if area1 < area0 * (1 + tol):
+            break
+    result.centres, result.sizes = c, r
+    result.seconds = time.perf_counter() - t0
+    return result

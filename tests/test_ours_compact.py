@@ -1,0 +1,75 @@
+"""The method ours-compact end to end: Lloyd, the fit, compaction, on every shape, with a
+field, a density and a region with a hole; checked with exact geometry."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+import shapely
+
+from compact_distributions.backends.numpy_backend import NumpyBackend
+from compact_distributions.bench.cli import main
+from compact_distributions.cvt.errors import InputError
+from compact_distributions.cvt.evaluate import evaluate, region_polygon
+from compact_distributions.cvt.fields import DensityMap, DirectionField
+from compact_distributions.cvt.methods import run_ours, run_ours_compact
+from compact_distributions.cvt.metrics import ELEMENT_METRIC, make_metric
+from compact_distributions.cvt.problem import Grid, Problem
+
+SIZE = 96
+
+
+def annulus_problem(element: str, seed: int = 2, n: int = 70) -> Problem:
+    yy, xx = np.mgrid[0:SIZE, 0:SIZE] + 0.5
+    r = np.hypot(xx - SIZE / 2, yy - SIZE / 2)
+    mask = (r < 0.47 * SIZE) & (r > 0.15 * SIZE)
+    density = DensityMap(1.0 + (xx / SIZE) ** 2)
+    return Problem(Grid(SIZE, SIZE, mask), n, make_metric(ELEMENT_METRIC[element]), density,
+                   DirectionField.named("radial", SIZE, SIZE), seed)
+
+
+@pytest.mark.parametrize("element", ["square", "rectangle", "ellipse", "circle", "triangle"])
+def test_compacted_elements_are_disjoint_inside_the_region_and_cover_more(element):
+    problem = annulus_problem(element)
+    backend = NumpyBackend()
+    dist = run_ours_compact(problem, backend, iterations=6, gap=1.0)
+    polys = [p for p in dist.elements if p is not None]
+    assert len(polys) >= 0.9 * problem.n_sites
+    region = region_polygon(problem.grid)
+    # exact geometry: inside the region's pixels, at least the gap apart (1 px), half of
+    # it from the border
+    assert all(region.buffer(-0.5 + 1e-6).contains(p) for p in polys)
+    tree = shapely.STRtree(polys)
+    a, b = tree.query(polys, predicate="dwithin", distance=1.0 - 1e-6)
+    assert not np.any(a != b), "two elements closer than the 1 px gap"
+    base = run_ours(problem, backend, iterations=6, gap=1.0)
+    assert evaluate(polys, problem.grid).coverage > evaluate(base.elements, problem.grid).coverage
+    # angles stay the field's (radial): each element keeps the angle of its site
+    np.testing.assert_allclose(dist.angles, problem.angles_at(dist.sites))
+    assert dist.extra["compaction_rounds"] >= 1 and dist.extra["compaction_seconds"] > 0
+
+
+def test_alternating_triangles_point_both_ways_and_fill_more():
+    problem = Problem(Grid(SIZE, SIZE), 60, make_metric("triangle"), seed=4)
+    backend = NumpyBackend()
+    plain = run_ours_compact(problem, backend, iterations=8)
+    alt = run_ours_compact(problem, backend, iterations=8, alternate=True)
+    turns = np.round(np.degrees(alt.angles - problem.angles_at(alt.sites)) % 360).astype(int)
+    assert set(turns) == {0, 180} and 0.25 < np.mean(turns == 180) < 0.75
+    assert evaluate(alt.elements, problem.grid).coverage > evaluate(plain.elements, problem.grid).coverage
+    with pytest.raises(InputError, match="triangles only"):
+        run_ours_compact(Problem(Grid(32, 32), 4, make_metric("linf")), backend, iterations=1, alternate=True)
+
+
+@pytest.mark.parametrize("argv,needle", [
+    (["--method", "ours-compacted"], "unknown method"),
+    (["--method", "ours-compact", "--metric", "linf", "--alternate"], "triangles only"),
+    (["--method", "ours", "--metric", "triangle", "--alternate"], "--alternate"),
+    (["--method", "ours-compact", "--gap", "30"], "not smaller than the elements"),
+])
+def test_bad_input_is_one_line_and_writes_nothing(tmp_path, capsys, argv, needle):
+    out = tmp_path / "out"
+    code = main(["run", "--sites", "20", "--size", "64", "--iterations", "1", "--out", str(out), *argv])
+    err = capsys.readouterr().err
+    assert code == 2 and len(err.strip().splitlines()) == 1 and needle in err
+    assert not out.exists()
