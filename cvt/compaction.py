@@ -326,6 +326,30 @@ def boundary_segments(mask: np.ndarray, length: int = SEGMENT_LENGTH) -> np.ndar
     return np.concatenate(out).astype(np.float64)
 
 
+def wall_segments(walls: np.ndarray) -> np.ndarray:
+    """(S, 4) pieces (x0, y0, x1, y1) of the centre lines of thin walls: from each wall
+    pixel's centre to the centre of each wall pixel right of it and below it (a lone
+    wall pixel is a point).  For a 4-connected wall the pieces form one unbroken line."""
+    walls = np.asarray(walls, dtype=bool)
+    i, j = np.nonzero(walls)
+    x, y = j + 0.5, i + 0.5
+    right = np.zeros_like(walls)
+    right[:, :-1] = walls[:, :-1] & walls[:, 1:]
+    down = np.zeros_like(walls)
+    down[:-1, :] = walls[:-1, :] & walls[1:, :]
+    r, d = right[i, j], down[i, j]
+    lone = ~(r | d)
+    if lone.any():  # a wall pixel only reached from the left or from above is already on a piece
+        up = np.zeros_like(walls)
+        up[1:, :] = walls[1:, :] & walls[:-1, :]
+        left = np.zeros_like(walls)
+        left[:, 1:] = walls[:, 1:] & walls[:, :-1]
+        lone &= ~(up[i, j] | left[i, j])
+    pieces = [np.stack([x[r], y[r], x[r] + 1, y[r]], axis=1), np.stack([x[d], y[d], x[d], y[d] + 1], axis=1),
+              np.stack([x[lone], y[lone], x[lone], y[lone]], axis=1)]
+    return np.concatenate(pieces).astype(np.float64).reshape(-1, 4)
+
+
 def _seg_gap(unit, px, py, qx, qy, cx, cy, r, cos, sin, nx, ny):
     """Left side of (2): gap between an element and a segment along n (element → segment)."""
     return (np.minimum(nx * px + ny * py, nx * qx + ny * qy) - nx * cx - ny * cy
@@ -593,7 +617,7 @@ def compact(centres, angles, sizes, shape: str, aspect, region, gap: float = 0.0
             rounds: int = 4, move: float = 0.5, growth: float = 0.15, shrink: float = 0.05,
             max_growth: float | None = None, tol: float = 1e-4, tile_elements: int = 64,
             move_cost: float = 0.0, lp_options: dict | None = None,
-            on_round=None) -> CompactionResult:
+            on_round=None, walls=None) -> CompactionResult:
     """Compact placed elements (module docstring): return new centres and sizes.
 
     ``centres`` (N, 2) px, ``angles`` (N,) radians (kept), ``sizes`` (N,) in unit-element
@@ -605,10 +629,18 @@ def compact(centres, angles, sizes, shape: str, aspect, region, gap: float = 0.0
     shrinks by at most ``shrink`` of itself; ``max_growth`` caps each size at
     (1 + max_growth) × its given size.  Stops after ``rounds`` or when a round adds less
     than ``tol`` of the covered area.  ``lp_options``: extra HiGHS options;
-    ``on_round(k, centres, sizes)`` is called with each round's (overlap-free) state."""
+    ``on_round(k, centres, sizes)`` is called with each round's (overlap-free) state.
+    ``walls`` ((H, W) bool, outside the region): thin walls whose centre lines
+    (:func:`wall_segments`) bound the elements instead of their pixels' sides: each
+    element keeps G/2 from a wall's centre line, as from the border."""
     shape = check_shape(shape)
     gap = parse_gap(gap)
     mask = _region_mask(region)
+    if walls is not None:
+        walls = np.asarray(walls, dtype=bool)
+        if walls.shape != mask.shape:
+            raise InputError(f"walls are {walls.shape[1]}x{walls.shape[0]}, the region {mask.shape[1]}x{mask.shape[0]}")
+        mask = mask | walls
     c = np.array(centres, dtype=np.float64).reshape(-1, 2)
     n = len(c)
     r = np.array(sizes, dtype=np.float64).reshape(-1)
@@ -647,6 +679,8 @@ def compact(centres, angles, sizes, shape: str, aspect, region, gap: float = 0.0
     cos, sin = np.cos(th), np.sin(th)
     r0 = r.copy()
     segs = boundary_segments(mask)
+    if walls is not None and walls.any():
+        segs = np.concatenate([segs, wall_segments(walls)])
     seg_tree = cKDTree(0.5 * (segs[:, :2] + segs[:, 2:]))
     prev_p = prev_s = None
     result = CompactionResult(c, r, th, 0, 0.0)

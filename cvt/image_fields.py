@@ -83,6 +83,7 @@ SIDE_PERIOD = {
 }
 
 DEFAULT_CONTRAST = 3.0
+FIELD_SMOOTHING = 1.5  # the field's Gaussian, in element spacings
 EDGE_FRACTION = 0.25  # edge pixels: tensor strength >= this share of its 99th percentile
 EDGE_FLOOR = 0.02  # ... and >= this many intensity units (0..1) per pixel: not just noise
 # A strong edge (a wall for the tiles): contrast >= this ΔE*ab.  A tile centred on a
@@ -163,7 +164,9 @@ def picture_fields(picture: np.ndarray, spacing: float, element: str = "square",
     """Density map and direction field of ``picture`` ((H, W) or (H, W, C), values 0..1).
 
     ``spacing`` is the mean element spacing in pixels (sqrt(area / N)): the density is
-    smoothed over about one spacing, the field over half of one.  ``element`` picks the
+    smoothed over about one spacing, the field over one and a half (coherent rows of tiles
+    pack tighter: measured +1.7 points of compacted coverage on a portrait against half a
+    spacing, while the tiles still turn with every edge longer than their rows).  ``element`` picks the
     symmetry the field is smoothed in (:data:`SIDE_PERIOD`)."""
     if element not in SIDE_PERIOD:
         raise InputError(f"unknown element {element!r}; choose one of {', '.join(SIDE_PERIOD)}")
@@ -182,7 +185,7 @@ def picture_fields(picture: np.ndarray, spacing: float, element: str = "square",
     if edges.any():
         _, (ii, jj) = ndimage.distance_transform_edt(~edges, return_indices=True)
         carried = edge_angles[ii, jj]
-        angles = smooth_angles(carried, 0.5 * spacing, SIDE_PERIOD[element])
+        angles = smooth_angles(carried, FIELD_SMOOTHING * spacing, SIDE_PERIOD[element])
     else:
         angles = np.zeros(strength.shape)
     field = DirectionField.from_angles(angles, spec="picture")

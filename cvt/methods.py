@@ -68,7 +68,8 @@ def run_ours_fit(problem: Problem, backend, **options) -> Distribution:
 
 
 def run_ours_compact(problem: Problem, backend, *, iterations: int = 20, progress=None,
-                     element: str | None = None, gap: float = 0.0, alternate: bool = False) -> Distribution:
+                     element: str | None = None, gap: float = 0.0, alternate: bool = False,
+                     rounds: int = 4) -> Distribution:
     """Ours, then compaction: Lloyd as ``ours``, each element fitted in its cell from
     several starts (``cvt.placement.fit_centres``), then rounds of a linear program in
     which neighbouring elements share their walls (``cvt.compaction.compact``): every pair
@@ -77,8 +78,11 @@ def run_ours_compact(problem: Problem, backend, *, iterations: int = 20, progres
 
     ``alternate`` (triangles only) lets each triangle point either way: half the sites
     are turned by 180° during Lloyd, so that cells take both shapes, and each cell keeps
-    the orientation whose triangle fits larger (``cvt.alternate``).  The compaction's
-    time and rounds are in ``extra``."""
+    the orientation whose triangle fits larger (``cvt.alternate``).  ``rounds``: at most
+    this many compaction rounds.  The compaction's time and rounds are in ``extra``.
+
+    Where the problem has thin walls (``Problem.walls``), elements come up to the walls'
+    centre lines (G/2 off them) instead of stopping at their pixels."""
     shape, turn = element_for(problem.metric, element)
     check_alternate(shape, alternate)
     gap = parse_gap(gap)
@@ -103,7 +107,8 @@ def run_ours_compact(problem: Problem, backend, *, iterations: int = 20, progres
     else:
         centres, sizes = fit_centres(labels, res.sites, angles, shape, aspect, gap)
     t3 = time.perf_counter()
-    packed = compact(centres, angles, sizes, shape, aspect, problem.grid, gap=gap)
+    packed = compact(centres, angles, sizes, shape, aspect, problem.grid, gap=gap, walls=problem.walls,
+                     rounds=rounds)
     placed = np.flatnonzero(packed.sizes > 0)
     elements = np.full(len(res.sites), None, dtype=object)
     if len(placed):

@@ -60,6 +60,7 @@ from .validate import one_of, real_number, whole_number
 # "ours-compact" (compaction: tiles share their walls, the grout is the gap asked for)
 # becomes the default once it is registered there.
 DEFAULT_METHOD = "ours-compact"
+MOSAIC_COMPACTION_ROUNDS = 6
 DEFAULT_ELEMENTS = 2000
 MAX_DEFAULT_SIDE = 1024  # the picture's own size, capped at this on the long side
 AUTO_GAP = 0.05  # default grout: this share of the mean element spacing
@@ -393,6 +394,11 @@ def make_mosaic(image, backend, *, n_elements: int = DEFAULT_ELEMENTS, metric: s
     edge_threshold = real_number(edge_threshold, "edge_threshold", above=0.0)
     grout = parse_colour(grout)
     run_method, method_name = resolve_method(method)
+    method_options = dict(method_options or {})
+    if run_method is METHODS["ours-compact"]:
+        # tiles turned by a field and stopped by walls settle slower than a plain
+        # lattice: two more rounds measured +1 point of coverage for +1 s at 2000 tiles
+        method_options.setdefault("rounds", MOSAIC_COMPACTION_ROUNDS)
     metric_name, element = resolve_shapes(metric, element)
     metric_obj = make_metric(metric_name, aspect)
 
@@ -412,10 +418,11 @@ def make_mosaic(image, backend, *, n_elements: int = DEFAULT_ELEMENTS, metric: s
     walls = bool(edges) and bool(edge_map.any())
     problem = Problem(Grid(w, h, ~edge_map if walls else None), n_elements, metric_obj,
                       density=fields.density if use_density else None,
-                      field=fields.field if use_field else None, seed=seed)
+                      field=fields.field if use_field else None, seed=seed,
+                      walls=edge_map if walls else None)
 
     dist = run_method(problem, WalledBackend(backend) if walls else backend, iterations=iterations,
-                      progress=progress, element=element, gap=gap, **(method_options or {}))
+                      progress=progress, element=element, gap=gap, **method_options)
     polygons = [None if p is None or p.is_empty else p for p in dist.elements]
     tiles, pixels = pixels_under(polygons, w, h)
     colours, fills_lab = tile_colours(lab, polygons, dist.sites, tiles, pixels)

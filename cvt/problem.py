@@ -85,8 +85,20 @@ class Problem:
     field: DirectionField | None = None
     seed: int = 0
     init_sites: np.ndarray | None = None  # (N, 2) pixel units; overrides seeding
+    # (H, W) bool: thin walls, pixels outside the region that separate parts of it (a
+    # picture's strong edges).  Cells stop at them like at any border; a method that can
+    # (compaction) brings elements up to the walls' centre lines instead of their sides.
+    walls: np.ndarray | None = None
 
     def __post_init__(self):
+        if self.walls is not None:
+            walls = np.ascontiguousarray(self.walls, dtype=bool)
+            if walls.shape != self.grid.shape:
+                raise InputError(f"walls are {walls.shape[1]}x{walls.shape[0]}, raster is "
+                                 f"{self.grid.width}x{self.grid.height}")
+            if (walls & self.grid.inside()).any():
+                raise InputError("walls must lie outside the region")
+            self.walls = walls
         if self.init_sites is not None:
             pts = np.asarray(self.init_sites, dtype=np.float64)
             if pts.ndim != 2 or pts.shape[1] != 2 or len(pts) == 0:

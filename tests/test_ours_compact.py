@@ -73,3 +73,39 @@ def test_bad_input_is_one_line_and_writes_nothing(tmp_path, capsys, argv, needle
     err = capsys.readouterr().err
     assert code == 2 and len(err.strip().splitlines()) == 1 and needle in err
     assert not out.exists()
+
+
+def staircase_walls(size: int) -> np.ndarray:
+    """A 4-connected diagonal wall (pixels (i, i) and (i, i + 1)), as an edge map has."""
+    walls = np.zeros((size, size), dtype=bool)
+    i = np.arange(size)
+    walls[i, i] = True
+    walls[i[:-1], i[:-1] + 1] = True
+    return walls
+
+
+def test_thin_walls_keep_elements_off_their_centre_line_and_cover_more():
+    walls = staircase_walls(SIZE)
+    centre_line = shapely.LineString(np.stack([np.repeat(np.arange(SIZE), 2)[1:] + 0.5,
+                                               np.repeat(np.arange(SIZE), 2)[:-1] + 0.5], axis=1))
+    backend, gap = NumpyBackend(), 0.6
+    thin = Problem(Grid(SIZE, SIZE, ~walls), 60, make_metric("linf"), seed=3, walls=walls)
+    thick = Problem(Grid(SIZE, SIZE, ~walls), 60, make_metric("linf"), seed=3)
+    polys = [p for p in run_ours_compact(thin, backend, iterations=6, gap=gap).elements if p is not None]
+    # exact geometry: no element comes nearer than G/2 to the wall's centre line
+    assert min(p.distance(centre_line) for p in polys) >= gap / 2 - 1e-6
+    # elements on both sides, and some come up to the centre line (past the wall pixels' sides)
+    sides = {bool(p.centroid.x > p.centroid.y) for p in polys}
+    assert sides == {True, False}
+    assert min(p.distance(centre_line) for p in polys) < 0.5 + gap / 2
+    whole = Grid(SIZE, SIZE)
+    thick_polys = run_ours_compact(thick, backend, iterations=6, gap=gap).elements
+    assert evaluate(polys, whole).coverage > evaluate(thick_polys, whole).coverage
+
+
+def test_walls_must_lie_outside_the_region():
+    walls = staircase_walls(16)
+    with pytest.raises(InputError, match="outside the region"):
+        Problem(Grid(16, 16), 4, make_metric("linf"), walls=walls)
+    with pytest.raises(InputError, match="walls are"):
+        Problem(Grid(16, 16, ~walls), 4, make_metric("linf"), walls=walls[:8])
