@@ -23,6 +23,7 @@ def add_parser(sub):
                        description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     options.add_sweep_options(p, "the quick form of every part (< 5 min on 2 cores)")
     options.add_seeds_option(p, "table2's: default 5; quick 2")
+    options.add_memory_option(p)
     p.set_defaults(func=run)
 
 
@@ -54,12 +55,12 @@ def _sub_args(module_name: str, argv: list[str]):
 
 
 def run(args) -> int:
-    from .outputs import command_line
-    from .report import header_markdown, markdown_table, provenance, write_markdown
+    from .outputs import command_line, report_folder
 
     out = Path(args.out) if args.out else (Path("reports/quick") if args.quick else Path("reports"))
     common = (["--quick"] if args.quick else []) + (["--force"] if args.force else []) + \
-        (["--quiet"] if args.quiet else [])
+        (["--quiet"] if args.quiet else []) + \
+        (["--memory-limit", args.memory_limit] if args.memory_limit is not None else [])
     parts = [
         ("table2", "compact_distributions.bench.table2", ["table2", "--out", str(out)] + common
          + (["--seeds", str(args.seeds)] if args.seeds else [])),
@@ -67,9 +68,21 @@ def run(args) -> int:
         ("figures", "compact_distributions.bench.figures_cmd",
          ["figures", "--out", str(out / "figures")] + [a for a in common if a != "--force"]),
     ]
-    # every part's options are checked before the first one starts
+    # every part's options, its output folder and the memory of its runs are checked
+    # before the first one starts
     options.seeds_value(args.seeds, 1)
     parsed = [(name, _sub_args(module, argv)) for name, module, argv in parts]
+    for (_, module, _), (_, sub_args) in zip(parts, parsed, strict=True):
+        importlib.import_module(module).prepare(sub_args)
+    cmd = command_line(getattr(args, "argv", None) or ["reproduce"] + (["--quick"] if args.quick else []))
+    with report_folder(out, command=cmd):
+        return _run_parts(parsed, out, cmd, args.quick)
+
+
+def _run_parts(parsed, out: Path, cmd: str, quick: bool) -> int:
+    from .outputs import command_line
+    from .report import header_markdown, markdown_table, provenance, write_markdown
+
     results = []
     t_all = time.perf_counter()
     status = 0
@@ -87,8 +100,7 @@ def run(args) -> int:
         results.append((name, "ok" if rc == 0 else "failed", time.perf_counter() - t0, note))
         status = status or rc
     total = time.perf_counter() - t_all
-    cmd = command_line(getattr(args, "argv", None) or ["reproduce"] + (["--quick"] if args.quick else []))
-    text = header_markdown("Reproduce" + (" (QUICK)" if args.quick else ""), provenance(), cmd,
+    text = header_markdown("Reproduce" + (" (QUICK)" if quick else ""), provenance(), cmd,
                            [f"total: {total:.0f} s on this machine (runs read back from raw/ take ~0 s; "
                             "--force for a cold run)"])
     text += "\n" + markdown_table(["part", "status", "seconds", "command / note"],
