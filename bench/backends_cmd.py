@@ -297,7 +297,7 @@ def prepare(args) -> dict:
     if args.no_ckdtree:
         chosen = [b for b in chosen if b != "ckdtree"]
     plan["specs"] = sweep_specs(cfg, chosen, "backends-quick" if args.quick else "backends")
-    check_memory(plan["specs"], args.memory_limit)
+    check_memory(plan["specs"], args.memory_limit, lower="leave it out (smaller --sizes or fewer --sites)")
     return plan
 
 

@@ -331,7 +331,7 @@ def prepare(args) -> dict:
     backends, unavailable = sweep_backends(args.backends)
     shapes = name_list(args.shapes, "--shapes", ELEMENTS)
     specs = problem_set(args.quick, seeds, methods, backends, shapes)
-    check_memory(specs, args.memory_limit)
+    check_memory(specs, args.memory_limit, lower="run the --quick set, or fewer --methods or --shapes")
     return {"out": out, "cfg": cfg, "seeds": seeds, "specs": specs, "unavailable": unavailable}
 
 
