@@ -136,11 +136,15 @@ def json_object(path, what: str) -> dict:
     return data
 
 
+def _number_text(x) -> str:
+    return str(x) if isinstance(x, numbers.Integral) else f"{x:g}"
+
+
 def _range_text(minimum, maximum) -> str:
     if minimum is not None and maximum is not None:
-        return f" between {minimum:g} and {maximum:g}"
+        return f" between {_number_text(minimum)} and {_number_text(maximum)}"
     if minimum is not None:
-        return f" >= {minimum:g}"
+        return f" >= {_number_text(minimum)}"
     if maximum is not None:
-        return f" <= {maximum:g}"
+        return f" <= {_number_text(maximum)}"
     return ""
