@@ -33,6 +33,17 @@ from compact_distributions.cvt.problem import Grid
 class Backend(ABC):
     name: str = "?"
     metrics: tuple[str, ...] | None = None  # the metrics it computes; None: all six
+    # peak host memory of one labelling with its moments (measured, rounded up): the
+    # label raster and the moment sums' temporaries on the host; backends that keep
+    # less on the host, or more per site, override these
+    bytes_per_pixel: float = 40
+    bytes_per_site: float = 1_000
+
+    @classmethod
+    def memory_estimate(cls, width: int, height: int, n_sites: int) -> float:
+        """Bytes this backend needs for a CVT iteration of ``n_sites`` on ``width`` x
+        ``height`` (cvt.resources adds them to the rest of a run's estimate)."""
+        return cls.bytes_per_pixel * width * height + cls.bytes_per_site * n_sites
 
     @classmethod
     def probe(cls) -> str:

@@ -30,6 +30,8 @@ def _pixel_centres(width: int, height: int) -> np.ndarray:
 
 class CKDTreeBackend(Backend):
     name = "ckdtree"
+    bytes_per_pixel = 64  # pixel centres (float64 x, y, cached), the query's distances and indices
+    bytes_per_site = 1000
     metrics = tuple(P_OF_METRIC)
 
     def device(self) -> str:

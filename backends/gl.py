@@ -424,6 +424,8 @@ class GLBackend(Backend):
     per-fragment exact distances (``mode="exact"``) into a depth-tested id buffer."""
 
     name = "gl"
+    bytes_per_pixel = 32  # the framebuffer is on the device; per site the instance data and the cone heights' bookkeeping
+    bytes_per_site = 8000
 
     def __init__(self, mode: str = "cone", max_error_px: float = 0.1, block: int = 8):
         self.mode = one_of(mode, "gl mode", MODES)

@@ -56,6 +56,34 @@ def _import_pyopencl():
     return cl
 
 
+def pocl_cache_dir() -> str:
+    """Where PoCL keeps its kernel cache: POCL_CACHE_DIR, else under XDG_CACHE_HOME or
+    ~/.cache.  PoCL offers no device at all when it cannot make this folder."""
+    if os.environ.get("POCL_CACHE_DIR"):
+        return os.environ["POCL_CACHE_DIR"]
+    base = os.environ.get("XDG_CACHE_HOME") or os.path.join(os.path.expanduser("~"), ".cache")
+    return os.path.join(base, "pocl", "kcache")
+
+
+def cache_problem() -> str | None:
+    """Why the kernel cache cannot be written, or None: said instead of "no device"."""
+    import tempfile
+
+    path = pocl_cache_dir()
+    try:
+        os.makedirs(path, exist_ok=True)
+        tempfile.TemporaryFile(dir=path).close()
+    except OSError as exc:
+        return (f"the OpenCL kernel cache folder {path} cannot be written ({exc.strerror or exc}; "
+                f"HOME={os.environ.get('HOME', '')!r}); set POCL_CACHE_DIR or XDG_CACHE_HOME to a writable folder")
+    return None
+
+
+def _no_device(text: str) -> BackendUnavailable:
+    problem = cache_problem()
+    return BackendUnavailable(f"opencl: {problem}" if problem else f"opencl: {text}")
+
+
 def _platforms(cl) -> list:
     try:
         platforms = cl.get_platforms()
@@ -112,7 +140,7 @@ def choose_device(cl, spec: str | None = None):
     if not str(spec).strip():
         devices = [d for p in platforms for d in _devices(cl, p)]
         if not devices:
-            raise BackendUnavailable("opencl: OpenCL platforms exist but none has a device")
+            raise _no_device("OpenCL platforms exist but none has a device")
         return _preferred(cl, devices)
     parts = str(spec).split(":")
     if len(parts) > 2:
@@ -120,7 +148,7 @@ def choose_device(cl, spec: str | None = None):
     platform = _pick(platforms, parts[0], "platform", source, [p.name for p in platforms])
     devices = _devices(cl, platform)
     if not devices:
-        raise BackendUnavailable(f"opencl: platform {platform.name.strip()!r} has no device")
+        raise _no_device(f"platform {platform.name.strip()!r} has no device")
     if len(parts) == 1 or not parts[1].strip():
         return _preferred(cl, devices)
     return _pick(devices, parts[1], "device", source, [d.name for d in devices])
@@ -135,6 +163,8 @@ class OpenCLBackend(Backend):
     spacings; ``local_size``: the label kernel's work-group shape (None: the driver's)."""
 
     name = "opencl"
+    bytes_per_pixel = 24  # labels and moments live on the device; the host reads back the raster for the final labels
+    bytes_per_site = 1000
 
     def __init__(self, device: str | None = None, split_atomics: bool = False,
                  cell_factor: float = 1.0, local_size: tuple[int, int] | None = None,

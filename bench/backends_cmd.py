@@ -24,7 +24,7 @@ builds the same report from a pytest-benchmark ``--benchmark-json`` file instead
 from __future__ import annotations
 
 import argparse
-import json
+import os
 import sys
 import time
 from dataclasses import asdict, dataclass
@@ -33,8 +33,9 @@ from pathlib import Path
 import numpy as np
 
 from compact_distributions.backends import REFERENCE, variant_metrics, variant_names, variant_status
+from compact_distributions.cvt.errors import InputError
 from compact_distributions.cvt.metrics import METRIC_NAMES
-from compact_distributions.cvt.validate import name_list, whole_number
+from compact_distributions.cvt.validate import json_object, name_list, whole_number
 
 from . import options
 
@@ -42,6 +43,8 @@ FULL = {"sites": [1000, 4000, 16000], "sizes": [512, 1024, 2048], "metrics": lis
         "warmup": 1, "repeats": 5}
 QUICK = {"sites": [1000, 4000], "sizes": [256, 512, 1024], "metrics": ["l2", "linf", "triangle"], "warmup": 1,
          "repeats": 3}
+
+MAX_REPEATS = 1000
 
 COLUMNS = ["backend", "metric", "n_sites", "size", "pixels", "ms_median", "ms_min", "ms_max", "repeats",
            "warmup", "x_numpy", "status", "reason", "device", "host"]
@@ -70,6 +73,14 @@ class TimingSpec:
         return {"backend": self.backend, "metric": self.metric, "n_sites": self.n_sites, "size": self.size,
                 "pixels": self.size * self.size, "warmup": self.warmup, "repeats": self.repeats,
                 "ms_median": np.nan, "ms_min": np.nan, "ms_max": np.nan, "device": ""}
+
+    def memory_estimate(self):
+        from compact_distributions.cvt.resources import run_estimate
+
+        from .sweep import memory_class
+
+        return run_estimate(self.size, self.size, self.n_sites, memory_class(self.backend), placement=False,
+                            pictures=False, what=f"timing {self.describe()}")
 
     def execute(self, backend) -> dict:
         from .outputs import machine, versions
@@ -130,7 +141,8 @@ def with_ratios(rows: list[dict]):
     return df[COLUMNS]
 
 
-def render_markdown(df, prov: dict, command: str, quick: bool, cfg: dict, elapsed: float, cached: int) -> str:
+def render_markdown(df, prov: dict, command: str, quick: bool, cfg: dict, elapsed: float, cached: int,
+                    plotted: bool = True) -> str:
     from .report import header_markdown, markdown_table, several_hosts
 
     notes = [
@@ -177,7 +189,7 @@ def render_markdown(df, prov: dict, command: str, quick: bool, cfg: dict, elapse
     if len(bad):
         text += "\n## Not measured\n\n" + markdown_table(
             ["backend", "status", "reason"], [[r["backend"], r["status"], r["reason"]] for _, r in bad.iterrows()])
-    text += "\nPlot: `backends.png`; raw json per configuration under `raw/`.\n"
+    text += ("\nPlot: `backends.png`; raw" if plotted else "\nRaw") + " json per configuration under `raw/`.\n"
     return text
 
 
@@ -193,6 +205,7 @@ def render_plot(df, path: Path) -> bool:
 
     ok = df[df["status"] == "ok"]
     if ok.empty:
+        path.unlink(missing_ok=True)  # a plot of another sweep must not pass for this one's
         return False
     sizes, ns = sorted(ok["size"].unique()), sorted(ok["n_sites"].unique())
     size_mid, n_mid = sizes[len(sizes) // 2], ns[len(ns) // 2]
@@ -225,22 +238,21 @@ def render_plot(df, path: Path) -> bool:
 
 def rows_from_benchmark_json(path) -> list[dict]:
     """Rows from a pytest-benchmark json of tests/benchmarks (the Lloyd-step cases)."""
-    from compact_distributions.cvt.errors import InputError
-
-    try:
-        data = json.loads(Path(path).read_text())
-    except (OSError, ValueError) as exc:
-        raise InputError(f"cannot read benchmark json {path}: {exc}") from None
+    data = json_object(path, "--from-benchmark-json")
     rows = []
-    for b in data.get("benchmarks", []):
-        info = b.get("extra_info", {})
-        if info.get("kind") != "lloyd-step":
-            continue
-        st = b["stats"]
-        rows.append({"backend": info["backend"], "metric": info["metric"], "n_sites": info["n_sites"],
-                     "size": info["size"], "pixels": info["size"] ** 2, "ms_median": st["median"] * 1000,
-                     "ms_min": st["min"] * 1000, "ms_max": st["max"] * 1000, "repeats": st["rounds"],
-                     "warmup": 0, "status": "ok", "reason": "", "device": info.get("device", "")})
+    try:
+        for b in data.get("benchmarks", []):
+            info = b.get("extra_info", {})
+            if info.get("kind") != "lloyd-step":
+                continue
+            st = b["stats"]
+            rows.append({"backend": info["backend"], "metric": info["metric"], "n_sites": info["n_sites"],
+                         "size": info["size"], "pixels": info["size"] ** 2, "ms_median": st["median"] * 1000,
+                         "ms_min": st["min"] * 1000, "ms_max": st["max"] * 1000, "repeats": st["rounds"],
+                         "warmup": 0, "status": "ok", "reason": "", "device": info.get("device", "")})
+    except (AttributeError, KeyError, TypeError) as exc:
+        raise InputError(f"--from-benchmark-json {path}: not a pytest-benchmark json ({type(exc).__name__}: "
+                         f"{exc})") from None
     if not rows:
         raise InputError(f"{path} holds no lloyd-step benchmarks (run pytest tests/benchmarks "
                          "--benchmark-enable --benchmark-json FILE)")
@@ -253,56 +265,77 @@ def add_parser(sub):
     options.add_sweep_options(p, "small subset (N 1000/4000, 256²-1024², l2, linf, triangle)")
     options.add_list_options(p, "backends", "metrics")
     options.add_cluster_options(p)
-    p.add_argument("--sites", default=None, help="comma list of N")
-    p.add_argument("--sizes", default=None, help="comma list of square raster sides")
-    p.add_argument("--repeats", default=None, help="timed iterations per configuration")
+    p.add_argument("--sites", default=None, help="comma list of N (at most the pixels of the smallest raster)")
+    p.add_argument("--sizes", default=None, help="comma list of square raster sides (1 to 32768)")
+    p.add_argument("--repeats", default=None, help="timed iterations per configuration (1 to 1000)")
     p.add_argument("--no-ckdtree", action="store_true", help="leave out the cKDTree reference row")
     p.add_argument("--from-benchmark-json", metavar="FILE", default=None,
                    help="build the report from a pytest-benchmark json instead of timing here")
+    options.add_memory_option(p)
     p.set_defaults(func=run)
 
 
-def _int_list(text, what):
+def _int_list(text, what, maximum=None):
     items = name_list(text, what)
-    return None if items is None else [whole_number(t, what, minimum=1) for t in items]
+    return None if items is None else [whole_number(t, what, minimum=1, maximum=maximum) for t in items]
+
+
+def prepare(args) -> dict:
+    """Every option checked, the report folder and the memory of each configuration
+    too, before anything runs (``cvtbench reproduce`` checks all its parts this way)."""
+    from compact_distributions.cvt.problem import MAX_SIDE
+
+    from .outputs import folder_problem
+    from .sweep import check_memory
+
+    out = Path(args.out) if args.out else (Path("reports/quick") if args.quick else Path("reports"))
+    _, problem = folder_problem(Path(os.path.realpath(out)), "--out", out)
+    if problem:
+        raise InputError(problem)
+    cfg = dict(QUICK if args.quick else FULL)
+    cfg["metrics"] = name_list(args.metrics, "--metrics", METRIC_NAMES) or cfg["metrics"]
+    cfg["sizes"] = _int_list(args.sizes, "--sizes", MAX_SIDE) or cfg["sizes"]
+    cfg["sites"] = _int_list(args.sites, "--sites", min(cfg["sizes"]) ** 2) or cfg["sites"]
+    if args.repeats is not None:
+        cfg["repeats"] = whole_number(args.repeats, "--repeats", minimum=1, maximum=MAX_REPEATS)
+    plan = {"out": out, "cfg": cfg, "specs": None}
+    if args.from_benchmark_json:
+        plan["rows"] = rows_from_benchmark_json(args.from_benchmark_json)
+        return plan
+    chosen = name_list(args.backends, "--backends", variant_names()) or variant_names()
+    if args.no_ckdtree:
+        chosen = [b for b in chosen if b != "ckdtree"]
+    plan["specs"] = sweep_specs(cfg, chosen, "backends-quick" if args.quick else "backends")
+    check_memory(plan["specs"], args.memory_limit, lower="leave it out (smaller --sizes or fewer --sites)")
+    return plan
 
 
 def run(args) -> int:
     from .cluster import executor_for
-    from .outputs import command_line
-    from .report import provenance, write_csv, write_markdown
+    from .outputs import command_line, report_folder
+    from .report import provenance, write_csv, write_markdown, written_files
     from .sweep import run_sweep
 
     t0 = time.perf_counter()
-    out = Path(args.out) if args.out else (Path("reports/quick") if args.quick else Path("reports"))
-    cfg = dict(QUICK if args.quick else FULL)
-    cfg["metrics"] = name_list(args.metrics, "metric", METRIC_NAMES) or cfg["metrics"]
-    cfg["sites"] = _int_list(args.sites, "--sites") or cfg["sites"]
-    cfg["sizes"] = _int_list(args.sizes, "--sizes") or cfg["sizes"]
-    if args.repeats is not None:
-        cfg["repeats"] = whole_number(args.repeats, "--repeats", minimum=1)
-    status = variant_status()
-    chosen = name_list(args.backends, "backend", variant_names()) or variant_names()
-    if args.no_ckdtree:
-        chosen = [b for b in chosen if b != "ckdtree"]
-    unavailable = {v: text for v, (ok, text) in status.items() if not ok}
-    if args.from_benchmark_json:
-        rows = rows_from_benchmark_json(args.from_benchmark_json)
-    else:
-        specs = sweep_specs(cfg, chosen, "backends-quick" if args.quick else "backends")
-        # a timing never shares its host with another run of the sweep
-        with executor_for(args, exclusive=True) as executor:
-            rows = run_sweep(specs, out, force=args.force, quiet=args.quiet, unavailable=unavailable,
-                             executor=executor)
-    df = with_ratios(rows)
-    elapsed = time.perf_counter() - t0
-    cached = sum(1 for r in rows if r.get("cached"))
+    plan = prepare(args)
+    out, cfg = plan["out"], plan["cfg"]
     cmd = command_line(getattr(args, "argv", None) or ["backends"] + (["--quick"] if args.quick else []))
-    md = render_markdown(df, provenance(), cmd, args.quick, cfg, elapsed, cached)
-    written = ["backends.md", "backends.csv"]
-    if render_plot(df, out / "backends.png"):
-        written.append("backends.png")
-    write_csv(out / "backends.csv", df)
-    write_markdown(out / "backends.md", md)
+    with report_folder(out, command=cmd):
+        if plan["specs"] is None:
+            rows = plan["rows"]
+        else:
+            unavailable = {v: text for v, (ok, text) in variant_status().items() if not ok}
+            # a timing never shares its host with another run of the sweep
+            with executor_for(args, exclusive=True) as executor:
+                rows = run_sweep(plan["specs"], out, force=args.force, quiet=args.quiet, unavailable=unavailable,
+                                 executor=executor)
+        df = with_ratios(rows)
+        elapsed = time.perf_counter() - t0
+        cached = sum(1 for r in rows if r.get("cached"))
+        plotted = render_plot(df, out / "backends.png")
+        md = render_markdown(df, provenance(), cmd, args.quick, cfg, elapsed, cached, plotted)
+        write_csv(out / "backends.csv", df)
+        write_markdown(out / "backends.md", md)
+        written = written_files(out, ["backends.md", "backends.csv", "backends.png"])
     print(f"wrote {out}/{', '.join(written)} ({elapsed:.0f} s)", file=sys.stderr)
     return 0

@@ -7,7 +7,9 @@ sets ``func`` on its parser.  Errors in user input print one line and exit with 
 from __future__ import annotations
 
 import argparse
+import errno
 import importlib
+import os
 import sys
 
 from compact_distributions.cvt.errors import BackendUnavailable, InputError
@@ -16,8 +18,15 @@ from compact_distributions.cvt.errors import BackendUnavailable, InputError
 SUBCOMMANDS = ["compact_distributions.bench.run_cmd", "compact_distributions.bench.info_cmd", "compact_distributions.bench.figures_cmd", "compact_distributions.bench.table2", "compact_distributions.bench.mosaic_cmd", "compact_distributions.bench.backends_cmd", "compact_distributions.bench.regress_cmd", "compact_distributions.bench.reproduce_cmd"]
 
 
+class Parser(argparse.ArgumentParser):
+    """argparse with the suite's one-line errors (the usage is under --help)."""
+
+    def error(self, message):
+        self.exit(2, f"{self.prog}: error: {message} (see {self.prog} --help)\n")
+
+
 def build_parser() -> argparse.ArgumentParser:
-    parser = argparse.ArgumentParser(
+    parser = Parser(
         prog="cvtbench",
         description="Compact distributions of discrete elements (Chen, Yang & Yang 2019): "
         "CVTs under shape metrics on NumPy, OpenCL and GL backends, with baselines and reports.",
@@ -29,19 +38,57 @@ def build_parser() -> argparse.ArgumentParser:
     return parser
 
 
-def main(argv=None) -> int:
-    argv = sys.argv[1:] if argv is None else list(argv)
-    parser = build_parser()
-    args = parser.parse_args(argv)
-    args.argv = argv
+def _say(text: str) -> None:
+    """One line on stderr, if anyone still reads it."""
     try:
-        return int(args.func(args) or 0)
+        print(text, file=sys.stderr, flush=True)
+    except OSError:
+        pass
+
+
+def _silence(stream) -> None:
+    """Point a stream whose reader is gone at /dev/null, so that the interpreter's last
+    flush does not fail again."""
+    try:
+        os.dup2(os.open(os.devnull, os.O_WRONLY), stream.fileno())
+    except (OSError, ValueError, AttributeError):
+        pass
+
+
+def main(argv=None) -> int:
+    # a closed standard stream (`cvtbench info >&-`) reads as None: write nowhere instead
+    for name in ("stdout", "stderr"):
+        if getattr(sys, name) is None:
+            setattr(sys, name, open(os.devnull, "w"))
+    argv = sys.argv[1:] if argv is None else list(argv)
+    try:
+        parser = build_parser()
+        args = parser.parse_args(argv)
+        args.argv = argv
+        code = int(args.func(args) or 0)
+        sys.stdout.flush()  # a broken pipe shows here, not in the interpreter's last flush
+        return code
     except (InputError, BackendUnavailable) as exc:
-        print(f"cvtbench: error: {exc}", file=sys.stderr)
+        _say(f"cvtbench: error: {exc}")
         return 2
     except KeyboardInterrupt:
-        print("cvtbench: interrupted", file=sys.stderr)
+        _say("cvtbench: interrupted")
         return 130
+    except SystemExit as exc:  # --help, or an argparse error (its one line is on stderr)
+        try:
+            sys.stdout.flush()
+        except OSError:
+            _silence(sys.stdout)
+        return exc.code if isinstance(exc.code, int) else int(exc.code is not None)
+    except BrokenPipeError:  # the reader left (`cvtbench info | head -1`): end quietly
+        _silence(sys.stdout)
+        return 141  # what a shell reports for a program ended by SIGPIPE
+    except OSError as exc:
+        if exc.errno not in (errno.ENOSPC, errno.EIO, errno.EBADF) or exc.filename:
+            raise
+        _silence(sys.stdout)
+        _say(f"cvtbench: error: cannot write the output ({exc.strerror})")
+        return 1
 
 
 if __name__ == "__main__":

@@ -20,6 +20,7 @@ from __future__ import annotations
 import argparse
 import io
 import math
+import os
 import sys
 import time
 from dataclasses import dataclass
@@ -219,15 +220,25 @@ FIGURES = {
 }
 
 
+def prepare(args) -> dict:
+    """The options and the output folder checked before anything is drawn."""
+    from .outputs import folder_problem
+
+    out = Path(args.out)
+    _, problem = folder_problem(Path(os.path.realpath(out)), "--out", out)
+    if problem:
+        raise InputError(problem)
+    options.backend_choice(args)
+    return {"out": out, "settings": QUICK if args.quick else FULL}
+
+
 def run(args) -> int:
     from .mosaic_cmd import write_paper_figures
-    from .outputs import atomic_write
+    from .outputs import atomic_write, command_line, report_folder
 
-    st = QUICK if args.quick else FULL
-    out = Path(args.out)
-    if out.exists() and not out.is_dir():
-        raise InputError(f"--out {args.out} exists and is not a folder")
-    with options.open_backend(args) as backend:
+    plan = prepare(args)
+    out, st = plan["out"], plan["settings"]
+    with report_folder(out, command=command_line(getattr(args, "argv", None))), options.open_backend(args) as backend:
         for name, make in FIGURES.items():
             t0 = time.perf_counter()
             data = png_bytes(make(backend, st))

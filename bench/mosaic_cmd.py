@@ -30,6 +30,7 @@ from pathlib import Path
 
 import numpy as np
 
+from compact_distributions.cvt.errors import InputError
 from compact_distributions.cvt.validate import real_number, whole_number
 
 from . import options
@@ -60,7 +61,7 @@ def add_parser(sub):
                    help="grout width in pixels (default 5%% of the mean element spacing)")
     p.add_argument("--grout", default="#383838", help="grout colour: a name or #rrggbb (default #383838)")
     p.add_argument("--contrast", default=None,
-                   help="densest / sparsest cell area of the density map (default 3; 1 = uniform)")
+                   help="densest / sparsest cell area of the density map, 1 to 100 (default 3; 1 = uniform)")
     p.add_argument("--no-field", action="store_true", help="all elements at angle 0 (no direction field)")
     p.add_argument("--no-density", action="store_true", help="one element size everywhere (no density map)")
     p.add_argument("--no-edges", action="store_true",
@@ -70,11 +71,13 @@ def add_parser(sub):
                    "strong edges are walls, and the straddling measure counts tiles across them")
     options.add_method_option(p, default=DEFAULT_METHOD)
     options.add_run_options(p)
-    p.add_argument("--png-scale", default="1", help="mosaic.png size relative to the raster (default 1)")
+    p.add_argument("--png-scale", default="1",
+                   help="mosaic.png size relative to the raster, 0.01 to 100 (default 1)")
     p.add_argument("--compare", choices=list(COMPARE), default=None,
                    help="also write compare_WHAT.png: original | without | with the field, the density or "
                    "the edge walls; method: original | ours | ours-compact | hausner2001")
     options.add_output_options(p, DEFAULT_OUT)
+    options.add_memory_option(p)
     p.set_defaults(func=run)
 
 
@@ -84,10 +87,21 @@ def _say(quiet: bool, text: str) -> None:
 
 
 def mosaic_options(args) -> dict:
-    """make_mosaic keyword arguments from the parsed command line (validated)."""
+    """make_mosaic keyword arguments from the parsed command line (validated; the
+    raster size is not among them: it depends on the picture, see :func:`run`)."""
     from compact_distributions.baselines import get_method
-    from compact_distributions.cvt.image_fields import DEFAULT_CONTRAST, DEFAULT_EDGE_THRESHOLD
+    from compact_distributions.cvt.image_fields import (
+        CONTRAST_RANGE,
+        DEFAULT_CONTRAST,
+        DEFAULT_EDGE_THRESHOLD,
+    )
+    from compact_distributions.cvt.lloyd import MAX_ITERATIONS
+    from compact_distributions.cvt.metrics import ASPECT_RANGE, METRIC_NAMES
     from compact_distributions.cvt.placement import parse_gap
+    from compact_distributions.cvt.problem import MAX_SEED
+    from compact_distributions.cvt.render import parse_colour
+    from compact_distributions.cvt.shapes import ELEMENT_SHAPES
+    from compact_distributions.cvt.validate import one_of
 
     return dict(
         method=get_method(args.method),
@@ -96,14 +110,18 @@ def mosaic_options(args) -> dict:
         edge_threshold=(DEFAULT_EDGE_THRESHOLD if args.edge_threshold is None
                         else real_number(args.edge_threshold, "--edge-threshold", above=0)),
         n_elements=whole_number(args.elements, "--elements", minimum=1),
-        metric=args.metric, element=args.element, aspect=args.aspect, size=args.size,
+        metric=None if args.metric is None else one_of(args.metric, "--metric", METRIC_NAMES),
+        element=None if args.element is None else one_of(args.element, "--element", ELEMENT_SHAPES),
+        aspect=None if args.aspect is None else real_number(args.aspect, "--aspect", *ASPECT_RANGE),
         gap=None if args.gap is None else parse_gap(args.gap, "--gap"),
         use_field=not args.no_field, use_density=not args.no_density,
-        iterations=whole_number(args.iterations, "--iterations", minimum=0),
-        seed=whole_number(args.seed, "--seed", minimum=0),
-        contrast=DEFAULT_CONTRAST if args.contrast is None else real_number(args.contrast, "--contrast", minimum=1),
-        grout=args.grout,
+        iterations=whole_number(args.iterations, "--iterations", minimum=0, maximum=MAX_ITERATIONS),
+        seed=whole_number(args.seed, "--seed", minimum=0, maximum=MAX_SEED),
+        contrast=DEFAULT_CONTRAST if args.contrast is None else real_number(args.contrast, "--contrast",
+                                                                           *CONTRAST_RANGE),
+        grout=parse_colour(args.grout, "--grout"),
         progress=options.progress_printer(args.quiet),
+        memory_limit=args.memory_limit,
     )
 
 
@@ -129,30 +147,57 @@ def mosaic_result_json(args, m, backend) -> dict:
                         edge_threshold=m.edge_threshold, walls=m.walls, edge_pixels=int(m.edges.sum()))
 
 
+PNG_SCALE_RANGE = (0.01, 100.0)
+
+
 def run(args) -> int:
-    from compact_distributions.cvt.mosaic import make_mosaic, picture_array
+    from compact_distributions.backends import backend_class
+    from compact_distributions.cvt.images import open_picture, upright_size
+    from compact_distributions.cvt.mosaic import (
+        make_mosaic,
+        picture_array,
+        raster_size,
+        resample,
+        resolve_shapes,
+    )
+    from compact_distributions.cvt.resources import mosaic_estimate
 
-    from .outputs import staged_dir, write_json, write_sites_csv
+    from .outputs import COMMAND_OUTPUTS, OutputFolder, write_json, write_lines, write_sites_csv
 
-    png_scale = real_number(args.png_scale, "--png-scale", minimum=0.01)
+    # every option, the picture's header and the memory it all asks for are checked first
     t0 = time.perf_counter()
-    opts = mosaic_options(args)  # bad options fail before anything is read or said
-    _say(args.quiet, f"reading {args.image}")
-    picture, _ = picture_array(args.image)  # fails early, before any work, on a bad file
-    with options.open_backend(args) as backend:
-        _say(args.quiet, f"mosaic of {opts['n_elements']} elements, {opts['iterations']} iterations "
-             f"on {backend.variant}")
-        m = make_mosaic(picture, backend, **opts)
-        m.source = args.image
-        comparison = None
-        if args.compare:
-            _say(args.quiet, f"comparison runs for --compare {args.compare}")
-            comparison = compare_figure(picture, backend, dict(opts, progress=None), args.compare, m)
-        result = mosaic_result_json(args, m, backend)
-    _say(args.quiet, f"{m.method}: placed {m.placed} of {len(m.sites)} tiles, coverage {m.coverage:.3f}, "
-         f"colour error {m.colour_error:.2f} ΔE*ab, straddling {100 * m.straddling:.1f} %; writing {args.out}")
-    with staged_dir(args.out) as tmp:
-        (tmp / "mosaic.svg").write_text(m.svg())
+    png_scale = real_number(args.png_scale, "--png-scale", *PNG_SCALE_RANGE)
+    opts = mosaic_options(args)
+    _, element = resolve_shapes(opts["metric"], opts["element"])
+    with open_picture(args.image, "IMAGE") as header:
+        pw, ph = upright_size(header)
+    w, h = raster_size(pw, ph, args.size, "--size")
+    if opts["n_elements"] > w * h:
+        raise InputError(f"--elements {opts['n_elements']} do not fit in a {w}x{h} raster (from a {pw}x{ph} "
+                         f"picture); use fewer --elements or a larger --size")
+    name, _ = options.backend_choice(args)
+    mosaic_estimate(w, h, opts["n_elements"], backend_class(name), element=element, png_scale=png_scale,
+                    compare=args.compare is not None).check(
+        args.memory_limit, lower="use a smaller --size, fewer --elements or a smaller --png-scale")
+    opts["size"] = (w, h)
+    with OutputFolder(args.out, "--out", COMMAND_OUTPUTS) as tmp:
+        rgb, _ = picture_array(args.image, at_least=(w, h), memory_limit=args.memory_limit, name="IMAGE")
+        picture = resample(rgb, w, h)
+        _say(args.quiet, f"read {args.image}: {pw}x{ph} px, as {w}x{h} (read at {rgb.shape[1]}x{rgb.shape[0]})")
+        del rgb
+        with options.open_backend(args) as backend:
+            _say(args.quiet, f"mosaic of {opts['n_elements']} elements, {opts['iterations']} iterations "
+                 f"on {backend.variant}")
+            m = make_mosaic(picture, backend, **opts)
+            m.source = args.image
+            comparison = None
+            if args.compare:
+                _say(args.quiet, f"comparison runs for --compare {args.compare}")
+                comparison = compare_figure(picture, backend, dict(opts, progress=None), args.compare, m)
+            result = mosaic_result_json(args, m, backend)
+        _say(args.quiet, f"{m.method}: placed {m.placed} of {len(m.sites)} tiles, coverage {m.coverage:.3f}, "
+             f"colour error {m.colour_error:.2f} ΔE*ab, straddling {100 * m.straddling:.1f} %; writing {args.out}")
+        write_lines(tmp / "mosaic.svg", m.svg_lines())
         m.render(scale=png_scale).save(tmp / "mosaic.png")
         write_json(tmp / "result.json", result)
         write_sites_csv(tmp / "sites.csv", m.sites, m.angles, m.scales)

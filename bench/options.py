@@ -133,7 +133,7 @@ def add_cluster_options(p, exclusive: bool = False) -> None:
 
 
 def add_seeds_option(p, default_text: str = "default 5; quick 2") -> None:
-    p.add_argument("--seeds", default=None, help=f"number of seeds K: seeds 0..K-1 ({default_text})")
+    p.add_argument("--seeds", default=None, help=f"number of seeds K (1 to 1000): seeds 0..K-1 ({default_text})")
 
 
 def add_list_options(p, *names: str) -> None:
@@ -148,5 +148,15 @@ def add_list_options(p, *names: str) -> None:
         p.add_argument(f"--{name}", default=None, help=helps[name])
 
 
+MAX_SEEDS = 1000
+
+
 def seeds_value(text, default: int) -> int:
-    return default if text is None else whole_number(text, "--seeds", minimum=1)
+    return default if text is None else whole_number(text, "--seeds", minimum=1, maximum=MAX_SEEDS)
+
+
+# ------------------------------------------------------------------ memory
+def add_memory_option(p) -> None:
+    p.add_argument("--memory-limit", metavar="SIZE", default=None,
+                   help="memory this command may plan to use, e.g. 8G or 512M (default: what the machine "
+                   "has available now); a configuration estimated to need more is refused before it starts")

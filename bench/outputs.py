@@ -2,17 +2,24 @@
 
 from __future__ import annotations
 
+import errno
+import fcntl
 import json
 import os
 import platform
+import re
 import shutil
+import stat
 import sys
 import tempfile
+import time
 from contextlib import contextmanager
 from importlib import metadata
 from pathlib import Path
 
 import numpy as np
+
+from compact_distributions.cvt.errors import InputError
 
 PACKAGES = ("numpy", "scipy", "shapely", "pandas", "matplotlib", "pillow", "pyopencl",
             "moderngl")
@@ -37,21 +44,99 @@ def machine() -> dict:
             "cpus": os.cpu_count()}
 
 
-@contextmanager
-def staged_dir(out_dir):
-    """Yield a temporary folder beside ``out_dir``; on success move its files into
-    ``out_dir`` (created if needed), on any error remove it: never a partial result."""
-    out_dir = Path(out_dir)
-    parent = out_dir.resolve().parent
-    parent.mkdir(parents=True, exist_ok=True)
-    tmp = Path(tempfile.mkdtemp(prefix=f".{out_dir.name}.", dir=parent))
+# ------------------------------------------------------------------ writing files and folders
+# Every temporary the writers make carries TEMP_MARK in its name and is flock()ed by the
+# process that writes it, so a later command can tell the leftovers of a killed one (no
+# lock) from the work in hand of a live one (locked) and removes only the former.
+TEMP_MARK = ".cvtbench-tmp"
+# what `cvtbench run` and `cvtbench mosaic` write: a folder holding only these may be
+# replaced by another run or mosaic
+COMMAND_OUTPUTS = ("result.json", "sites.csv", "cells.png", "elements.svg", "elements.png", "mosaic.svg",
+                   "mosaic.png", "compare_field.png", "compare_density.png", "compare_edges.png",
+                   "compare_method.png")
+LOCK_NAME = ".cvtbench.lock"
+
+
+def _lock(fd: int, wait: bool = False) -> bool:
     try:
-        yield tmp
-        out_dir.mkdir(parents=True, exist_ok=True)
-        for f in tmp.iterdir():
-            os.replace(f, out_dir / f.name)
+        fcntl.flock(fd, fcntl.LOCK_EX | (0 if wait else fcntl.LOCK_NB))
+        return True
+    except BlockingIOError:
+        return False
+
+
+def _owner_alive(path: Path) -> bool:
+    """Whether a live process holds the lock of a temporary (file or folder)."""
+    try:
+        fd = os.open(path, os.O_RDONLY)
+    except OSError:
+        return False
+    try:
+        return not _lock(fd)
     finally:
-        shutil.rmtree(tmp, ignore_errors=True)
+        os.close(fd)
+
+
+def _remove(path: Path) -> None:
+    if path.is_dir() and not path.is_symlink():
+        shutil.rmtree(path, ignore_errors=True)
+    else:
+        path.unlink(missing_ok=True)
+
+
+def _leftover_target(name: str) -> str | None:
+    """The folder a backup ``.NAME.XXXXXXXX.old.cvtbench-tmp`` was renamed from."""
+    match = re.fullmatch(r"\.(.+)\.[a-z0-9_]{8}\.old" + re.escape(TEMP_MARK), name)
+    return match.group(1) if match else None
+
+
+def remove_leftovers(folder, name: str | None = None, recursive: bool = False) -> list[Path]:
+    """Remove the temporaries that killed commands left in ``folder`` (of the output
+    ``name`` only, when given): those whose writer no longer holds their lock.  The
+    backup of a replaced output folder whose replacement never arrived (a command
+    killed between the two renames of its swap) is put back instead.  Temporaries are
+    made and locked under a lock of their folder (:func:`_new_temporary`), which this
+    holds while it looks, so it never takes one that is being made for a leftover."""
+    folder = Path(folder)
+    removed, below = [], []
+    try:
+        entries = list(folder.iterdir())
+    except OSError:
+        return removed
+    with _locked_folder(folder):
+        for entry in entries:
+            if TEMP_MARK not in entry.name:
+                if recursive and entry.is_dir() and not entry.is_symlink():
+                    below.append(entry)
+                continue
+            if (name is not None and not entry.name.startswith(f".{name}.")) or _owner_alive(entry):
+                continue
+            backup_of = _leftover_target(entry.name)
+            if backup_of is not None:
+                staging = entry.with_name(entry.name.replace(".old" + TEMP_MARK, TEMP_MARK))
+                if _owner_alive(staging):
+                    continue
+                if not (folder / backup_of).exists():
+                    os.rename(entry, folder / backup_of)
+                    continue
+            _remove(entry)
+            removed.append(entry)
+    for sub in below:
+        removed += remove_leftovers(sub, name, recursive=True)
+    return removed
+
+
+def _new_temporary(folder: Path, prefix: str, suffix: str, directory: bool = False) -> tuple[Path, int]:
+    """A temporary file (or folder) in ``folder``, made and locked under the folder's
+    lock; returns its path and the descriptor that holds the lock."""
+    with _locked_folder(folder):
+        if directory:
+            path = tempfile.mkdtemp(prefix=prefix, suffix=suffix, dir=folder)
+            fd = os.open(path, os.O_RDONLY)
+        else:
+            fd, path = tempfile.mkstemp(prefix=prefix, suffix=suffix, dir=folder)
+        _lock(fd)
+    return Path(path), fd
 
 
 def _umask() -> int:
@@ -64,18 +149,23 @@ def _umask() -> int:
 def atomic_path(path):
     """Yield a temporary path beside ``path`` to write to; on success rename it over
     ``path`` (readable by everyone, as a report should be), on any error remove it: the
-    one way the suite writes a file, so none is ever half-written."""
+    one way the suite writes a file, so none is ever half-written.  The temporary keeps
+    the file's suffix (writers pick the format from it), has a name of its own (two
+    writers never collide) and is locked while written; the leftovers of writers that
+    were killed are removed here."""
     path = Path(path)
     path.parent.mkdir(parents=True, exist_ok=True)
-    fd, tmp = tempfile.mkstemp(prefix=f".{path.stem}.", suffix=path.suffix, dir=path.parent)
-    os.close(fd)
+    remove_leftovers(path.parent, path.name)
+    tmp, fd = _new_temporary(path.parent, f".{path.name}.", TEMP_MARK + path.suffix)
     try:
-        yield Path(tmp)
+        yield tmp
         os.chmod(tmp, 0o666 & ~_umask())  # mkstemp makes 0600
         os.replace(tmp, path)
     except BaseException:
         Path(tmp).unlink(missing_ok=True)
         raise
+    finally:
+        os.close(fd)
 
 
 def atomic_write(path, data: str | bytes) -> None:
@@ -85,6 +175,260 @@ def atomic_write(path, data: str | bytes) -> None:
             tmp.write_bytes(data)
         else:
             tmp.write_text(data)
+
+
+def _kind_of(st) -> str:
+    for test, name in ((stat.S_ISREG, "a file"), (stat.S_ISCHR, "a character device"),
+                       (stat.S_ISBLK, "a block device"), (stat.S_ISFIFO, "a named pipe"),
+                       (stat.S_ISSOCK, "a socket")):
+        if test(st.st_mode):
+            return name
+    return "not a folder"
+
+
+def _why(exc: OSError) -> str:
+    return exc.strerror or str(exc)
+
+
+def folder_problem(path: Path, option: str, shown) -> tuple[Path | None, str | None]:
+    """(the nearest folder that exists at or above ``path``, None) or (None, why the
+    folder ``path`` can be neither used nor made)."""
+    probe = path
+    while True:
+        try:
+            st = os.stat(probe)
+        except (FileNotFoundError, NotADirectoryError):
+            if probe.parent == probe:
+                return None, f"{option} {shown}: no such folder"
+            probe = probe.parent
+            continue
+        except OSError as exc:
+            return None, f"{option} {shown}: {_why(exc)}"
+        if stat.S_ISDIR(st.st_mode):
+            return probe, None
+        if probe == path:
+            return None, f"{option} {shown} is {_kind_of(st)}, not a folder"
+        return None, f"{option} {shown}: {probe} is {_kind_of(st)}, so no folder can be made in it"
+
+
+class OutputFolder:
+    """A command's output folder, replaced as a whole: ``with OutputFolder(out) as tmp``.
+
+    Checked when made, before any computing: ``out`` must be a folder (or creatable),
+    writable, and hold nothing but an earlier output (files named in ``replaceable``)
+    so that replacing it never deletes a user's files.  The outputs are written into
+    ``tmp``, a hidden folder beside ``out``; when the block ends without an error ``tmp``
+    takes the place of ``out`` (two renames under a lock of the parent folder), so the
+    folder holds either this command's complete output or the previous one, never a mix.
+    On an error the temporary is removed and ``out`` is left as it was.  Where ``out``
+    cannot be renamed (a mount point, the working folder, another device) the files are
+    copied into it and renamed one by one, ``result.json`` removed first and written
+    last, so a folder with a ``result.json`` always holds one complete output."""
+
+    def __init__(self, path, option: str = "--out", replaceable=()):
+        self.shown = os.fspath(path)
+        self.option = option
+        if not self.shown.strip():
+            raise InputError(f"{option} must name a folder, got {self.shown!r}")
+        self.target = Path(os.path.realpath(path))
+        if self.target.parent == self.target:
+            raise InputError(f"{option} {self.shown}: choose a folder below {self.target}")
+        self.replaceable = set(replaceable)
+        self.tmp: Path | None = None
+        self._fd: int | None = None
+        self._made: list[Path] = []
+        existing, problem = folder_problem(self.target, option, self.shown)
+        if problem:
+            raise InputError(problem)
+        if existing == self.target:
+            self._check_contents()
+        try:
+            for folder in reversed([self.target.parent, *self.target.parent.parents]):
+                if not folder.exists():
+                    folder.mkdir()
+                    self._made.append(folder)
+            remove_leftovers(self.target.parent, self.target.name)
+            self.tmp, self._fd = _new_temporary(self.target.parent, f".{self.target.name}.", TEMP_MARK,
+                                                directory=True)
+            os.chmod(self.tmp, 0o777 & ~_umask())  # mkdtemp makes 0700; an output folder is shared
+            if self.target.is_dir():
+                remove_leftovers(self.target)
+        except OSError as exc:
+            self._abandon()
+            where = exc.filename if exc.filename and TEMP_MARK not in str(exc.filename) else self.target.parent
+            raise InputError(f"{option} {self.shown}: cannot write in {where} ({_why(exc)})") from None
+
+    def _check_contents(self) -> None:
+        try:
+            names = os.listdir(self.target)
+        except OSError as exc:
+            raise InputError(f"{self.option} {self.shown}: cannot read the folder ({_why(exc)})") from None
+        foreign = sorted(n for n in names if n not in self.replaceable and TEMP_MARK not in n)
+        if foreign:
+            more = f" and {len(foreign) - 3} more" if len(foreign) > 3 else ""
+            raise InputError(f"{self.option} {self.shown} holds files that are not the output of a cvtbench "
+                             f"command ({', '.join(foreign[:3])}{more}); give a new or an empty folder")
+
+    def __enter__(self) -> Path:
+        return self.tmp
+
+    def __exit__(self, kind, exc, tb) -> None:
+        if kind is None:
+            try:
+                self._commit()
+            except OSError as err:
+                self._abandon()
+                raise InputError(f"{self.option} {self.shown}: cannot write the output ({_why(err)})") from None
+        else:
+            self._abandon()
+
+    def _release(self) -> None:
+        if self.tmp is not None:
+            shutil.rmtree(self.tmp, ignore_errors=True)
+        if self._fd is not None:
+            os.close(self._fd)
+            self._fd = None
+
+    def _abandon(self) -> None:
+        self._release()
+        for folder in reversed(self._made):
+            try:
+                folder.rmdir()
+            except OSError:
+                break
+
+    def _commit(self) -> None:
+        target, tmp = self.target, self.tmp
+        with _locked_folder(target.parent):
+            try:
+                here = Path.cwd().resolve()
+            except OSError:
+                here = None
+            if target.exists() and (os.path.ismount(target) or (here is not None and (here == target or target in here.parents))):
+                self._commit_in_place()
+            else:
+                old = tmp.with_name(tmp.name.replace(TEMP_MARK, ".old" + TEMP_MARK))
+                try:
+                    if target.exists():
+                        os.rename(target, old)
+                except OSError as exc:
+                    if exc.errno not in (errno.EXDEV, errno.EBUSY, errno.EPERM, errno.EACCES):
+                        raise
+                    self._commit_in_place()
+                else:
+                    try:
+                        os.rename(tmp, target)
+                    except OSError:
+                        if old.exists():
+                            os.rename(old, target)
+                        raise
+                    os.close(self._fd)
+                    self._fd = None
+                    shutil.rmtree(old, ignore_errors=True)
+                    return
+        self._release()
+
+    def _commit_in_place(self) -> None:
+        """Swap file by file inside ``target`` (a folder that cannot be renamed)."""
+        target = self.target
+        inner, fd = _new_temporary(target, ".", TEMP_MARK, directory=True)
+        try:
+            names = sorted(p.name for p in self.tmp.iterdir())
+            for name in names:  # onto the folder's own device: a copy, then renames
+                shutil.copy2(self.tmp / name, inner / name)
+            first = ["result.json"] if (target / "result.json").exists() else []
+            for name in first + sorted(self.replaceable - set(names) - set(first)):
+                (target / name).unlink(missing_ok=True)
+            for name in sorted(names, key=lambda n: n == "result.json"):
+                os.replace(inner / name, target / name)
+        finally:
+            shutil.rmtree(inner, ignore_errors=True)
+            os.close(fd)
+
+
+@contextmanager
+def _locked_folder(folder: Path):
+    """An exclusive flock of a folder itself, held briefly (making temporaries, swaps
+    and clean-ups); a folder that cannot be opened is used unlocked."""
+    try:
+        fd = os.open(folder, os.O_RDONLY)
+    except OSError:
+        yield
+        return
+    try:
+        _lock(fd, wait=True)
+        yield
+    finally:
+        os.close(fd)
+
+
+_HELD: dict[Path, int] = {}  # folder -> depth: a process re-enters its own lock
+
+
+def _take_lock_file(path: Path) -> int | None:
+    """The descriptor of ``path`` locked by this process, or None when another holds it.
+    The file is removed when its lock is given up, so a lock taken on a file that was
+    meanwhile removed (or replaced) is given up again and the file opened anew."""
+    while True:
+        fd = os.open(path, os.O_RDWR | os.O_CREAT, 0o666)
+        if not _lock(fd):
+            os.close(fd)
+            return None
+        try:
+            same = os.stat(path).st_ino == os.fstat(fd).st_ino
+        except FileNotFoundError:
+            same = False
+        if same:
+            return fd
+        os.close(fd)
+
+
+@contextmanager
+def report_folder(path, option: str = "--out", command: str | None = None):
+    """A sweep's report folder, checked, made if needed and locked for the whole
+    command: a second command into the same folder exits 2 naming the one that holds
+    it (pid, command, start), instead of mixing its rows with ours.  The leftovers of
+    killed writers in the folder are removed once the lock is held.  The lock is a
+    hidden file, ``.cvtbench.lock``, that holds who has it and goes when it is given up."""
+    shown = os.fspath(path)
+    folder = Path(os.path.realpath(path))
+    if folder in _HELD:
+        _HELD[folder] += 1
+        try:
+            yield folder
+        finally:
+            _HELD[folder] -= 1
+        return
+    _, problem = folder_problem(folder, option, shown)
+    if problem:
+        raise InputError(problem)
+    lock = folder / LOCK_NAME
+    try:
+        folder.mkdir(parents=True, exist_ok=True)
+        fd = _take_lock_file(lock)
+    except OSError as exc:
+        raise InputError(f"{option} {shown}: cannot write in {exc.filename or folder} ({_why(exc)})") from None
+    if fd is None:
+        try:
+            holder = lock.read_text(errors="replace").strip()
+        except OSError:
+            holder = ""
+        raise InputError(f"{option} {shown} is in use by {holder or 'another cvtbench command'}; wait for it "
+                         f"to end or choose another {option}")
+    try:
+        started = time.strftime("%Y-%m-%d %H:%M:%S")
+        os.ftruncate(fd, 0)
+        os.pwrite(fd, f"cvtbench pid {os.getpid()} on {platform.node()} (`{command or command_line()}`, "
+                      f"since {started})\n".encode(), 0)
+        remove_leftovers(folder, recursive=True)
+        _HELD[folder] = 1
+        try:
+            yield folder
+        finally:
+            del _HELD[folder]
+            lock.unlink(missing_ok=True)  # still locked: a waiting command re-opens the path
+    finally:
+        os.close(fd)
 
 
 def to_jsonable(obj):
@@ -98,18 +442,44 @@ def to_jsonable(obj):
         return obj.item()
     if isinstance(obj, float) and not np.isfinite(obj):
         return None
+    if hasattr(obj, "geom_type"):  # a shapely geometry: its outline, as result.json lists it
+        from compact_distributions.cvt.render import element_coordinates
+
+        return element_coordinates([obj])[0]
     return obj
+
+
+def json_chunks(data: dict):
+    """The text of :func:`dumps` piece by piece: one top-level key per line, each value
+    compact; long lists (sites, element outlines) are converted one item at a time, so
+    writing a result never holds a second copy of it."""
+    yield "{\n"
+    for i, (key, value) in enumerate(data.items()):
+        yield (",\n" if i else "") + f" {json.dumps(str(key))}: "
+        if isinstance(value, (list, tuple, np.ndarray)) and len(value) > 64:
+            yield "["
+            for j, item in enumerate(value):
+                yield (", " if j else "") + json.dumps(to_jsonable(item))
+            yield "]"
+        else:
+            yield json.dumps(to_jsonable(value))
+    yield "\n}\n"
 
 
 def dumps(data: dict) -> str:
     """JSON with one top-level key per line and each value compact (site lists stay short)."""
-    data = to_jsonable(data)
-    body = ",\n".join(f" {json.dumps(k)}: {json.dumps(v)}" for k, v in data.items())
-    return "{\n" + body + "\n}\n"
+    return "".join(json_chunks(data))
 
 
 def write_json(path, data) -> None:
-    Path(path).write_text(dumps(data))
+    write_lines(path, json_chunks(data))
+
+
+def write_lines(path, chunks) -> None:
+    """Write text that comes in pieces (a generator), never held whole."""
+    with open(path, "w") as fh:
+        for chunk in chunks:
+            fh.write(chunk)
 
 
 def write_sites_csv(path, sites, angles, scales) -> None:

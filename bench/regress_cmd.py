@@ -29,7 +29,7 @@ N = 4000, all six metrics.
 from __future__ import annotations
 
 import argparse
-import json
+import os
 import sys
 import time
 from pathlib import Path
@@ -39,7 +39,7 @@ import numpy as np
 from compact_distributions.backends import REFERENCE as REFERENCE_BACKEND
 from compact_distributions.backends import variant_metrics
 from compact_distributions.cvt.errors import InputError
-from compact_distributions.cvt.validate import name_list
+from compact_distributions.cvt.validate import json_object, name_list
 
 from . import options
 
@@ -264,12 +264,17 @@ def measure_speed(cfg, backends, unavailable, baseline_speed: dict, quiet) -> tu
 
 
 def load_baseline(path: Path) -> dict:
+    """The baseline file: a json object whose sections ("quick", "full") are objects too."""
     if not path.exists():
         raise InputError(f"no regression baseline at {path}; create it with `cvtbench regress --update`")
-    try:
-        return json.loads(path.read_text())
-    except ValueError as exc:
-        raise InputError(f"regression baseline {path} is not valid json: {exc}") from None
+    data = json_object(path, "regression baseline")
+    for mode in SETS:
+        section = data.get(mode)
+        if section is not None and not (isinstance(section, dict) and all(
+                isinstance(section.get(k, {}), dict) for k in ("coverage", "speed"))):
+            raise InputError(f"regression baseline {path}: its {mode!r} section is not an object with "
+                             "'coverage' and 'speed' objects")
+    return data
 
 
 def add_parser(sub):
@@ -288,7 +293,7 @@ def add_parser(sub):
 def run(args) -> int:
     from compact_distributions.baselines import method_names
 
-    from .outputs import atomic_write, dumps
+    from .outputs import atomic_write, dumps, folder_problem
     from .report import provenance
     from .table2 import sweep_backends
 
@@ -296,6 +301,10 @@ def run(args) -> int:
     mode = "quick" if args.quick else "full"
     cfg = SETS[mode]
     path = Path(args.baseline) if args.baseline else BASELINE_FILE
+    if args.update:
+        _, problem = folder_problem(Path(os.path.realpath(path)).parent, "--baseline", path.parent)
+        if problem or path.is_dir() or (path.exists() and not path.is_file()):
+            raise InputError(problem or f"--baseline {path} is not a file")
     baseline_all = load_baseline(path) if (path.exists() or not args.update) else {}
     baseline = baseline_all.get(mode)
     if baseline is None and not args.update:

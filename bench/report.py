@@ -86,6 +86,11 @@ def write_markdown(path, text: str) -> None:
     atomic_write(path, text if text.endswith("\n") else text + "\n")
 
 
+def written_files(folder, names) -> list[str]:
+    """The names among ``names`` that exist in ``folder``: what a command says it wrote."""
+    return [name for name in names if (Path(folder) / name).is_file()]
+
+
 def save_figure(fig, path) -> None:
     """Save a matplotlib figure atomically."""
     with atomic_path(path) as tmp:

@@ -24,6 +24,7 @@ def add_parser(sub):
     options.add_sweep_options(p, "the quick form of every part (< 5 min on 2 cores)")
     options.add_seeds_option(p, "table2's: default 5; quick 2")
     options.add_cluster_options(p, exclusive=True)
+    options.add_memory_option(p)
     p.set_defaults(func=run)
 
 
@@ -56,30 +57,40 @@ def _sub_args(module_name: str, argv: list[str]):
 
 def run(args) -> int:
     from .cluster import chosen, scheduler_address
+    from .outputs import command_line, report_folder
 
     chosen(args)  # bad cluster options fail before anything starts
-    # with --workers one local cluster serves every part
-    with scheduler_address(args) as address:
-        return _run(args, address)
-
-
-def _run(args, address: str | None) -> int:
-    from .outputs import command_line
-    from .report import header_markdown, markdown_table, provenance, write_markdown
-
     out = Path(args.out) if args.out else (Path("reports/quick") if args.quick else Path("reports"))
+    # every part's options, its output folder and the memory of its runs are checked
+    # before the first one starts
+    options.seeds_value(args.seeds, 1)
+    for _, module, argv in _parts(args, out, None):
+        importlib.import_module(module).prepare(_sub_args(module, argv))
+    cmd = command_line(getattr(args, "argv", None) or ["reproduce"] + (["--quick"] if args.quick else []))
+    # with --workers one local cluster serves every part
+    with report_folder(out, command=cmd), scheduler_address(args) as address:
+        parsed = [(name, _sub_args(module, argv)) for name, module, argv in _parts(args, out, address)]
+        return _run_parts(parsed, out, cmd, args.quick)
+
+
+def _parts(args, out: Path, address: str | None) -> list:
+    """(name, module, argv) of each part."""
     common = (["--quick"] if args.quick else []) + (["--force"] if args.force else []) + \
-        (["--quiet"] if args.quiet else []) + (["--scheduler", address] if address else [])
-    parts = [
+        (["--quiet"] if args.quiet else []) + (["--scheduler", address] if address else []) + \
+        (["--memory-limit", args.memory_limit] if args.memory_limit is not None else [])
+    return [
         ("table2", "compact_distributions.bench.table2", ["table2", "--out", str(out)] + common
          + (["--seeds", str(args.seeds)] if args.seeds else []) + (["--exclusive"] if args.exclusive else [])),
         ("backends", "compact_distributions.bench.backends_cmd", ["backends", "--out", str(out)] + common),
         ("figures", "compact_distributions.bench.figures_cmd",
          ["figures", "--out", str(out / "figures")] + [a for a in common if a != "--force"]),
     ]
-    # every part's options are checked before the first one starts
-    options.seeds_value(args.seeds, 1)
-    parsed = [(name, _sub_args(module, argv)) for name, module, argv in parts]
+
+
+def _run_parts(parsed, out: Path, cmd: str, quick: bool) -> int:
+    from .outputs import command_line
+    from .report import header_markdown, markdown_table, provenance, write_markdown
+
     results = []
     t_all = time.perf_counter()
     status = 0
@@ -97,8 +108,7 @@ def _run(args, address: str | None) -> int:
         results.append((name, "ok" if rc == 0 else "failed", time.perf_counter() - t0, note))
         status = status or rc
     total = time.perf_counter() - t_all
-    cmd = command_line(getattr(args, "argv", None) or ["reproduce"] + (["--quick"] if args.quick else []))
-    text = header_markdown("Reproduce" + (" (QUICK)" if args.quick else ""), provenance(), cmd,
+    text = header_markdown("Reproduce" + (" (QUICK)" if quick else ""), provenance(), cmd,
                            [f"total: {total:.0f} s on this machine (runs read back from raw/ take ~0 s; "
                             "--force for a cold run)"])
     text += "\n" + markdown_table(["part", "status", "seconds", "command / note"],

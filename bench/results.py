@@ -4,6 +4,8 @@
 
 ``kind`` says which command wrote it; ``elements`` is always the list of element
 outlines (one per site, null where a site has no element) and ``placed`` their count.
+The record holds the elements themselves (shapely polygons); :func:`bench.outputs.dumps`
+and ``write_json`` turn each into its outline as they write it.
 """
 
 from __future__ import annotations
@@ -12,8 +14,6 @@ import json
 from pathlib import Path
 
 import numpy as np
-
-from compact_distributions.cvt.render import element_coordinates
 
 SCHEMA_FILE = Path(__file__).with_name("result.schema.json")
 
@@ -60,7 +60,7 @@ def build_result(kind: str, problem, dist, evaluation, backend, *, element: str,
         "element": element,
         "gap": gap,
         **evaluation.as_dict(),
-        "elements": element_coordinates(dist.elements),
+        "elements": dist.elements,  # outlines, converted one by one as the json is written
         "extra": dist.extra,
         **fields,
         "versions": versions(),

@@ -18,14 +18,15 @@ import argparse
 import csv
 import os
 import sys
+from dataclasses import dataclass
 
 import numpy as np
 
 from compact_distributions.cvt.errors import InputError
 from compact_distributions.cvt.fields import DensityMap, DirectionField, angles_from_grey
-from compact_distributions.cvt.metrics import make_metric
+from compact_distributions.cvt.metrics import METRIC_NAMES, Metric, make_metric
 from compact_distributions.cvt.problem import Grid, Problem, parse_size
-from compact_distributions.cvt.validate import whole_number
+from compact_distributions.cvt.validate import one_of, whole_number
 
 from . import options
 
@@ -48,60 +49,111 @@ def add_problem_arguments(p: argparse.ArgumentParser, sites_default=DEFAULT_SITE
                    help="region mask image (light or opaque = inside); resampled to --size")
 
 
-def read_sites_csv(path) -> np.ndarray:
+def read_sites_csv(path, max_sites: int | None = None) -> np.ndarray:
+    """Sites (N, 2) from a CSV with columns x and y (pixels); a UTF-8 byte-order mark,
+    as spreadsheets write it, is accepted.  More rows than ``max_sites`` is an error
+    found while reading, before the rows are all held."""
     if not os.path.isfile(path):
-        raise InputError(f"init file not found: {path}")
+        raise InputError(f"init file not found: {path}" if not os.path.exists(path)
+                         else f"init file {path} is not a file")
     try:
-        with open(path, newline="") as fh:
+        with open(path, newline="", encoding="utf-8-sig") as fh:
             reader = csv.DictReader(fh)
             cols = [c.strip() for c in (reader.fieldnames or [])]
             if "x" not in cols or "y" not in cols:
                 raise InputError(f"init file {path} needs columns x and y, found {cols or 'none'}")
             reader.fieldnames = cols
-            rows = []
+            xs, ys = [], []
             for line, row in enumerate(reader, start=2):
                 try:
-                    rows.append((float(row["x"]), float(row["y"])))
+                    xs.append(float(row["x"]))
+                    ys.append(float(row["y"]))
                 except (TypeError, ValueError):
                     raise InputError(
                         f"init file {path}, line {line}: x and y must be numbers, got "
                         f"{row.get('x')!r}, {row.get('y')!r}") from None
-    except UnicodeDecodeError:
+                if max_sites is not None and len(xs) > max_sites:
+                    raise InputError(f"init file {path} holds more sites than the raster has pixels ({max_sites})")
+    except (UnicodeDecodeError, csv.Error):
         raise InputError(f"init file {path} is not a text CSV file") from None
-    if not rows:
+    except OSError as exc:
+        raise InputError(f"cannot read init file {path}: {exc.strerror or exc}") from None
+    if not xs:
         raise InputError(f"init file {path} has no sites")
-    pts = np.array(rows, dtype=np.float64)
+    pts = np.column_stack([np.array(xs, dtype=np.float64), np.array(ys, dtype=np.float64)])
     bad = ~np.isfinite(pts).all(axis=1)
     if bad.any():
         raise InputError(f"init file {path}, line {int(np.argmax(bad)) + 2}: NaN or infinite coordinate")
     return pts
 
 
-def problem_from_args(args, sites_default=DEFAULT_SITES) -> Problem:
-    """Build and validate the Problem; raises InputError with a one-line message."""
+@dataclass
+class ProblemOptions:
+    """The problem options of the command line, checked, before any file is read."""
+
+    width: int
+    height: int
+    n_sites: int
+    metric: Metric
+    seed: int
+    init: np.ndarray | None
+    density: str | None  # image paths
+    region: str | None
+    field_file: str | None
+    field_name: str | None  # a named field's spec
+
+
+def parse_problem_options(args, sites_default=DEFAULT_SITES) -> ProblemOptions:
+    """Every problem option checked (the init CSV read, images not yet): InputError
+    with a one-line message naming the option."""
+    from compact_distributions.cvt.fields import FIELD_HELP, parse_field_spec
+    from compact_distributions.cvt.images import open_picture
+    from compact_distributions.cvt.problem import MAX_SEED
+
+    w, h = parse_size(args.size, "--size")
+    metric = make_metric(one_of(args.metric, "--metric", METRIC_NAMES), args.aspect, option="--aspect")
+    n = None if args.sites is None else whole_number(args.sites, "--sites", minimum=1, maximum=w * h)
+    seed = whole_number(args.seed, "--seed", minimum=0, maximum=MAX_SEED)
+    field_file = field_name = None
+    if args.field is not None:
+        kind, _ = parse_field_spec(args.field, "--field")
+        if kind is not None:
+            field_name = args.field
+        elif os.path.isfile(args.field):
+            field_file = args.field
+        else:
+            raise InputError(f"--field {args.field!r} is neither a field nor an image file; use {FIELD_HELP}")
+    for option, path in (("--density", args.density), ("--region", args.region), ("--field", field_file)):
+        if path is not None:
+            with open_picture(path, option):  # exists, is a picture, is no bomb: known before any work
+                pass
+    init = read_sites_csv(args.init, max_sites=w * h) if args.init else None
+    if init is not None and n is not None and len(init) != n:
+        raise InputError(f"--sites {n} but init file {args.init} holds {len(init)} sites")
+    n = len(init) if init is not None else (sites_default if n is None else n)
+    return ProblemOptions(w, h, n, metric, seed, init, args.density, args.region, field_file, field_name)
+
+
+def build_problem(opts: ProblemOptions) -> Problem:
+    """The Problem, with its images read and resampled to the raster."""
     from compact_distributions.cvt.images import load_grey, load_mask
 
-    w, h = parse_size(args.size)
-    metric = make_metric(args.metric, args.aspect)
-    mask = load_mask(args.region, w, h) if args.region else None
-    grid = Grid(w, h, mask)
-    density = None
-    if args.density:
-        grey, _ = load_grey(args.density, w, h)
-        density = DensityMap(grey)
+    w, h = opts.width, opts.height
+    mask = load_mask(opts.region, w, h, name="--region") if opts.region else None
+    density = DensityMap(load_grey(opts.density, w, h, name="--density")[0]) if opts.density else None
     field = None
-    if args.field:
-        if os.path.exists(args.field):
-            grey, full = load_grey(args.field, w, h)
-            field = DirectionField.from_angles(angles_from_grey(grey, full), spec=args.field)
-        else:
-            field = DirectionField.named(args.field, w, h)
-    init = read_sites_csv(args.init) if args.init else None
-    n = sites_default if args.sites is None else whole_number(args.sites, "--sites", minimum=1)
-    if init is not None and args.sites is not None and len(init) != n:
-        raise InputError(f"--sites {n} but init file {args.init} holds {len(init)} sites")
-    seed = whole_number(args.seed, "--seed", minimum=0)
-    return Problem(grid, n, metric, density, field, seed, init)
+    if opts.field_file:
+        grey, full = load_grey(opts.field_file, w, h, name="--field")
+        field = DirectionField.from_angles(angles_from_grey(grey, full, f"--field {opts.field_file}"),
+                                           spec=opts.field_file)
+    elif opts.field_name:
+        field = DirectionField.named(opts.field_name, w, h, name="--field")
+    return Problem(Grid(w, h, mask), opts.n_sites, opts.metric, density, field, opts.seed, opts.init)
+
+
+def problem_from_args(args, sites_default=DEFAULT_SITES) -> Problem:
+    """Build and validate the Problem; raises InputError with a one-line message."""
+    return build_problem(parse_problem_options(args, sites_default))
 
 
 def add_parser(sub):
@@ -114,41 +166,51 @@ def add_parser(sub):
     p.add_argument("--gap", metavar="G", default="0",
                    help="grout: width in pixels of the joint between elements (default 0)")
     options.add_output_options(p, "out/run")
+    options.add_memory_option(p)
     p.set_defaults(func=run)
 
 
 def run(args) -> int:
+    from compact_distributions.backends import backend_class
     from compact_distributions.baselines import get_method
     from compact_distributions.cvt.evaluate import evaluate, region_polygon
+    from compact_distributions.cvt.lloyd import MAX_ITERATIONS
     from compact_distributions.cvt.placement import parse_gap
-    from compact_distributions.cvt.render import PAPER, cells_image, draw_elements, svg_document
+    from compact_distributions.cvt.render import PAPER, cells_image, draw_elements, svg_lines
+    from compact_distributions.cvt.resources import run_estimate
     from compact_distributions.cvt.shapes import check_shape
 
-    from .outputs import command_line, staged_dir, write_json, write_sites_csv
+    from .outputs import COMMAND_OUTPUTS, OutputFolder, command_line, write_json, write_lines, write_sites_csv
     from .results import build_result
 
-    iterations = whole_number(args.iterations, "--iterations", minimum=0)
+    # every option is checked, and the memory it asks for, before anything is computed
+    iterations = whole_number(args.iterations, "--iterations", minimum=0, maximum=MAX_ITERATIONS)
     element = None if args.element is None else check_shape(args.element)
     gap = parse_gap(args.gap, "--gap")
-    problem = problem_from_args(args)
     method = get_method(args.method)
     extra = options.method_options(args)
-    with options.open_backend(args) as backend:
-        dist = method(problem, backend, iterations=iterations, progress=options.progress_printer(args.quiet),
-                      element=element, gap=gap, **extra)
-        region = region_polygon(problem.grid)
-        ev = evaluate(dist.elements, problem.grid, region=region, labels=dist.labels)
-        sources = {k: getattr(args, k) for k in ("init", "density", "field", "region")}
-        result = build_result("run", problem, dist, ev, backend, element=dist.extra["element"], gap=gap,
-                              command=command_line(args.argv), sources=sources)
-    g = problem.grid
-    with staged_dir(args.out) as tmp:
+    opts = parse_problem_options(args)
+    backend_name, _ = options.backend_choice(args)
+    run_estimate(opts.width, opts.height, opts.n_sites, backend_class(backend_name), element=element,
+                 density=bool(opts.density), field=bool(opts.field_file), region=bool(opts.region)).check(
+        args.memory_limit, lower="use a smaller --size or fewer --sites")
+    with OutputFolder(args.out, "--out", COMMAND_OUTPUTS) as tmp:
+        problem = build_problem(opts)
+        with options.open_backend(args) as backend:
+            dist = method(problem, backend, iterations=iterations,
+                          progress=options.progress_printer(args.quiet), element=element, gap=gap, **extra)
+            region = region_polygon(problem.grid)
+            ev = evaluate(dist.elements, problem.grid, region=region, labels=dist.labels)
+            sources = {k: getattr(args, k) for k in ("init", "density", "field", "region")}
+            result = build_result("run", problem, dist, ev, backend, element=dist.extra["element"], gap=gap,
+                                  command=command_line(args.argv), sources=sources)
+        g = problem.grid
         write_json(tmp / "result.json", result)
         write_sites_csv(tmp / "sites.csv", dist.sites, dist.angles, dist.scales)
         if dist.labels is not None:
             cells_image(dist.labels, len(dist.sites), dist.sites).save(tmp / "cells.png")
-        (tmp / "elements.svg").write_text(svg_document(dist.elements, g.width, g.height,
-                                                       region=None if g.mask is None else region))
+        write_lines(tmp / "elements.svg", svg_lines(dist.elements, g.width, g.height,
+                                                    region=None if g.mask is None else region))
         draw_elements(dist.elements, g.width, g.height, region_colour=PAPER,
                       region_mask=g.mask).save(tmp / "elements.png")
     if not args.quiet:

@@ -67,6 +67,14 @@ class RunSpec:
         d.pop("curve")
         return {**d, "metric": self.metric, "label": self.label}
 
+    def memory_estimate(self):
+        from compact_distributions.cvt.resources import run_estimate
+
+        from .sweep import memory_class
+
+        return run_estimate(self.width, self.height, self.n_sites, memory_class(self.backend), element=self.element,
+                            pictures=self.picture, what=f"the run {self.describe()}")
+
     def problem(self):
         from compact_distributions.cvt.metrics import make_metric
         from compact_distributions.cvt.problem import Grid, Problem

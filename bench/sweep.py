@@ -192,3 +192,28 @@ def write_stored(path: Path, record: dict) -> None:
     from .outputs import atomic_write, dumps
 
     atomic_write(path, dumps({**record, "made_by": made_by()}))
+
+
+# ---------------------------------------------------------------------------------------
+# memory
+
+
+def memory_class(variant: str):
+    """The backend class of ``variant`` for memory estimates (the base class's figures
+    when its runtime is missing: its runs are skipped anyway)."""
+    from compact_distributions.backends import Backend, backend_class
+
+    try:
+        return backend_class(variant)
+    except BackendUnavailable:
+        return Backend
+
+
+def check_memory(specs: list, limit=None, lower: str = "leave it out", name: str = "--memory-limit") -> None:
+    """Refuse a sweep, before any run, when one of its specs (``spec.memory_estimate()``)
+    needs more memory than the limit (:mod:`compact_distributions.cvt.resources`)."""
+    if not specs:
+        return
+    estimates = [spec.memory_estimate() for spec in specs]
+    worst = max(range(len(specs)), key=lambda i: estimates[i].total)
+    estimates[worst].check(limit, lower=lower, name=name)

@@ -25,6 +25,7 @@ per method: seed 0, the top-left corner of the region with about 250 elements) a
 from __future__ import annotations
 
 import argparse
+import os
 import sys
 import time
 from pathlib import Path
@@ -35,6 +36,7 @@ from compact_distributions.backends import REFERENCE as REFERENCE_BACKEND
 from compact_distributions.backends import variant_metrics, variant_names, variant_status
 from compact_distributions.baselines import FIXED_SIZE as FIXED_SIZE_BASELINES
 from compact_distributions.baselines import method_names
+from compact_distributions.cvt.errors import InputError
 from compact_distributions.cvt.shapes import ELEMENT_SHAPES
 from compact_distributions.cvt.validate import name_list
 
@@ -214,7 +216,7 @@ def discussion(table) -> str:
 
 
 def render_markdown(table, prov: dict, command: str, quick: bool, cfg: dict, seeds: int,
-                    elapsed: float, cached: int, total: int) -> str:
+                    elapsed: float, cached: int, total: int, pictured: bool = True) -> str:
     from .report import fmt_pct, fmt_seconds, header_markdown, markdown_table, several_hosts
 
     title = "Table 2, regenerated" + (" (QUICK: small raster, 2 seeds; not the paper's scale)" if quick else "")
@@ -270,9 +272,12 @@ def render_markdown(table, prov: dict, command: str, quick: bool, cfg: dict, see
                                [[r["method"], r["backend"], r["element"], r["status"], r["reason"]]
                                 for _, r in missing.iterrows()])
     text += discussion(table)
-    text += ("\nThe picture `table2.png` shows one effect picture per method (seed 0, the top-left "
-             "corner of the region, about 250 elements); the raw json of every run, with its sites and timings, is "
-             "under `raw/`.\n")
+    if pictured:
+        text += ("\nThe picture `table2.png` shows one effect picture per method (seed 0, the top-left "
+                 "corner of the region, about 250 elements); the raw json")
+    else:
+        text += "\nNo run made an effect picture, so there is no `table2.png`; the raw json"
+    text += " of every run, with its sites and timings, is under `raw/`.\n"
     return text
 
 
@@ -346,6 +351,7 @@ def render_picture(table, out: Path, suite_specs: list[RunSpec], path: Path) -> 
         if spec.picture and p.exists():
             panels.append((spec, p))
     if not panels:
+        path.unlink(missing_ok=True)  # a picture of another sweep must not pass for this one's
         return False
     shapes = list(dict.fromkeys(spec.element for spec, _ in panels))
     rows = [[x for x in panels if x[0].element == shape] for shape in shapes]
@@ -378,6 +384,7 @@ def add_parser(sub):
     options.add_seeds_option(p)
     options.add_list_options(p, "methods", "backends", "shapes")
     options.add_cluster_options(p, exclusive=True)
+    options.add_memory_option(p)
     p.set_defaults(func=run)
 
 
@@ -390,7 +397,7 @@ def sweep_backends(text) -> tuple[list[str], dict[str, str]]:
     metric) and the reasons of those that cannot run here."""
     status = variant_status()
     default = [v for v in variant_names() if variant_metrics(v) is None]
-    backends = name_list(text, "backend", variant_names()) or default
+    backends = name_list(text, "--backends", variant_names()) or default
     return backends, {v: text for v, (ok, text) in status.items() if not ok}
 
 
@@ -400,43 +407,58 @@ def variant_backend(unavailable: dict) -> str:
     return "opencl" if "opencl" not in unavailable else REFERENCE_BACKEND
 
 
-def run(args) -> int:
-    from .cluster import executor_for
-    from .outputs import command_line
-    from .report import provenance, write_csv, write_markdown
-    from .sweep import run_sweep
+def prepare(args) -> dict:
+    """Every option checked, the report folder and the memory of each run too, before
+    anything runs (``cvtbench reproduce`` checks all its parts this way)."""
+    from .outputs import folder_problem
+    from .sweep import check_memory
 
-    t0 = time.perf_counter()
     out = default_out(args)
+    _, problem = folder_problem(Path(os.path.realpath(out)), "--out", out)
+    if problem:
+        raise InputError(problem)
     cfg = QUICK if args.quick else FULL
     seeds = options.seeds_value(args.seeds, cfg["seeds"])
     all_methods = method_names()
-    methods = name_list(args.methods, "method", all_methods) or all_methods
+    methods = name_list(args.methods, "--methods", all_methods) or all_methods
     if "ours" in methods:  # ours first, then the baselines in the paper's order
         methods = ["ours"] + [m for m in methods if m != "ours"]
     backends, unavailable = sweep_backends(args.backends)
-    shapes = name_list(args.shapes, "shape", ELEMENTS)
+    shapes = name_list(args.shapes, "--shapes", ELEMENTS)
     specs = problem_set(args.quick, seeds, methods, backends, shapes, variant_backend(unavailable))
-    with executor_for(args, exclusive=args.exclusive) as executor:
-        rows = run_sweep(specs, out, force=args.force, quiet=args.quiet, unavailable=unavailable,
-                         executor=executor)
-    table = aggregate(rows)
-    elapsed = time.perf_counter() - t0
-    cached = sum(1 for r in rows if r.get("cached"))
-    prov = provenance()
+    check_memory(specs, args.memory_limit, lower="run the --quick set, or fewer --methods or --shapes")
+    return {"out": out, "cfg": cfg, "seeds": seeds, "specs": specs, "unavailable": unavailable}
+
+
+def run(args) -> int:
+    from .cluster import executor_for
+    from .outputs import command_line, report_folder
+    from .report import provenance, write_csv, write_markdown, written_files
+    from .sweep import run_sweep
+
+    t0 = time.perf_counter()
+    plan = prepare(args)
+    out, cfg, seeds, specs = plan["out"], plan["cfg"], plan["seeds"], plan["specs"]
     cmd = command_line(getattr(args, "argv", None) or ["table2"] + (["--quick"] if args.quick else []))
-    md = render_markdown(table, prov, cmd, args.quick, cfg, seeds, elapsed, cached, len(rows))
-    written = ["table2.md", "table2.csv"]
-    if render_picture(table, out, specs, out / "table2.png"):
-        written.append("table2.png")
-    curves = coverage_overlap_table(rows)
-    if len(curves):
-        write_csv(out / "coverage_overlap.csv", curves)
-        written.append("coverage_overlap.csv")
-        if render_coverage_overlap(curves, out / "coverage_overlap.png"):
-            written.append("coverage_overlap.png")
-    write_csv(out / "table2.csv", table)
-    write_markdown(out / "table2.md", md)
+    with report_folder(out, command=cmd):
+        with executor_for(args, exclusive=args.exclusive) as executor:
+            rows = run_sweep(specs, out, force=args.force, quiet=args.quiet, unavailable=plan["unavailable"],
+                             executor=executor)
+        table = aggregate(rows)
+        elapsed = time.perf_counter() - t0
+        cached = sum(1 for r in rows if r.get("cached"))
+        pictured = render_picture(table, out, specs, out / "table2.png")
+        md = render_markdown(table, provenance(), cmd, args.quick, cfg, seeds, elapsed, cached, len(rows), pictured)
+        curves = coverage_overlap_table(rows)
+        if len(curves):
+            write_csv(out / "coverage_overlap.csv", curves)
+        if not (len(curves) and render_coverage_overlap(curves, out / "coverage_overlap.png")):
+            for name in ("coverage_overlap.png",) if len(curves) else ("coverage_overlap.csv", "coverage_overlap.png"):
+                (out / name).unlink(missing_ok=True)  # a stale view from an earlier sweep
+        write_csv(out / "table2.csv", table)
+        write_markdown(out / "table2.md", md)
+        written = written_files(out, ["table2.md", "table2.csv", "table2.png", "coverage_overlap.csv",
+                                      "coverage_overlap.png"])
     _print_summary(table, out, written)
     return 0
 

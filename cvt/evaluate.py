@@ -8,8 +8,9 @@ The region is the union of its pixels' squares (the whole raster when there is n
 
 How the union is computed without its full cost: an STRtree gives every pair of clipped
 elements whose bounds meet, one vectorised ``intersection`` keeps the pairs that share
-area, and only the elements of those pairs go through ``union_all``; every other
-element adds its own area.  The result is the same union area (to rounding), and a
+area, and only the elements of those pairs go through ``union_all``, group of
+overlapping elements by group, in batches (memory stays linear even when most
+elements overlap a neighbour); every other element adds its own area.  The result is the same union area (to rounding), and a
 placement with little overlap (ours: a few pairs) is evaluated several times faster
 than by ``union_all`` of everything (4000 circles on 1024²: ~0.03 s instead of ~0.8-1.0 s).
 """
@@ -72,6 +73,41 @@ def empty_cell_count(labels: np.ndarray, n_sites: int) -> int:
     return int((counts == 0).sum())
 
 
+UNION_BATCH = 4096  # elements unioned at once: bounds the memory of a union
+
+
+def _union_area(geoms, a, b) -> float:
+    """Area of the union of the elements that share area with another (pairs a, b).
+
+    Elements of different groups of overlapping elements (connected components of the
+    pairs) share no area, so the union's area is the sum over the groups; the groups
+    are unioned in batches of whole groups, which keeps the memory of one union small
+    however many elements overlap."""
+    if len(a) == 0:
+        return 0.0
+    from scipy.sparse import coo_matrix
+    from scipy.sparse.csgraph import connected_components
+
+    n = len(geoms)
+    _, group = connected_components(coo_matrix((np.ones(len(a)), (a, b)), shape=(n, n)), directed=False)
+    members = np.unique(np.concatenate([a, b]))
+    members = members[np.argsort(group[members], kind="stable")]
+    starts = np.flatnonzero(np.diff(group[members], prepend=-1))  # where each group begins
+    total, begin = 0.0, 0
+    while begin < len(members):
+        # the last group start that keeps the batch at most UNION_BATCH long (one group at least)
+        k = np.searchsorted(starts, begin + UNION_BATCH, side="right") - 1
+        if begin + UNION_BATCH >= len(members):
+            end = len(members)
+        elif starts[k] > begin:
+            end = starts[k]
+        else:
+            end = starts[k + 1] if k + 1 < len(starts) else len(members)
+        total += float(shapely.area(shapely.union_all(geoms[members[begin:end]])))
+        begin = end
+    return total
+
+
 def evaluate(elements, grid: Grid, region=None, labels=None) -> Evaluation:
     """Coverage and overlap of ``elements`` (shapely polygons; None entries are skipped).
 
@@ -100,9 +136,7 @@ def evaluate(elements, grid: Grid, region=None, labels=None) -> Evaluation:
     a, b = a[shared], b[shared]
     involved = np.zeros(len(clipped), dtype=bool)
     involved[a] = involved[b] = True
-    covered = float(clip_areas[~involved].sum())
-    if involved.any():
-        covered += float(shapely.area(shapely.union_all(clipped[involved])))
+    covered = float(clip_areas[~involved].sum()) + _union_area(clipped, a, b)
 
     areas = shapely.area(geoms)
     return Evaluation(

@@ -26,6 +26,7 @@ import numpy as np
 
 from .errors import InputError
 from .problem import pixel_index
+from .validate import real_number
 
 DENSITY_FLOOR = 0.01
 
@@ -48,6 +49,7 @@ class DensityMap:
             raise InputError("density must be finite and non-negative everywhere")
         if v.max() <= 0:
             raise InputError("density image is all zero: nothing to distribute sites by")
+        v = v / v.max()  # only ratios matter; huge values must not overflow the mean
         self.values = v
         floor = DENSITY_FLOOR * v.max()
         self._clipped = np.maximum(v, floor)
@@ -68,10 +70,11 @@ class DensityMap:
 class DirectionField:
     """Angle (radians) as a function of position; ``shape`` is None for analytic fields."""
 
-    def __init__(self, spec: str, angles: np.ndarray | None = None, width=None, height=None):
+    def __init__(self, spec: str, angles: np.ndarray | None = None, width=None, height=None, arg=None):
         self.spec = spec
         self._angles = angles
         self.width, self.height = width, height
+        self._named = arg if arg is not None or angles is not None else parse_field_spec(spec)
 
     @property
     def shape(self):
@@ -80,46 +83,77 @@ class DirectionField:
     @classmethod
     def from_angles(cls, angles: np.ndarray, spec: str = "array") -> DirectionField:
         a = np.asarray(angles, dtype=np.float64)
-        if a.ndim != 2 or not np.isfinite(a).all():
-            raise InputError("direction field must be a finite 2-D array of angles")
+        if a.ndim != 2 or not np.isfinite(a).all() or (a.size and np.abs(a).max() > 1e6):
+            raise InputError("direction field must be a 2-D array of finite angles (radians, |angle| <= 1e6)")
         return cls(spec, a, a.shape[1], a.shape[0])
 
     @classmethod
-    def named(cls, spec: str, width: int, height: int) -> DirectionField:
-        name, _, arg = spec.partition(":")
-        if name == "constant":
-            try:
-                float(arg)
-            except ValueError:
-                raise InputError(f"field {spec!r}: constant needs an angle in degrees, e.g. constant:30") from None
-        elif name == "wave":
-            try:
-                if float(arg or 200) <= 0:
-                    raise ValueError
-            except ValueError:
-                raise InputError(f"field {spec!r}: wave needs a period > 0 in pixels, e.g. wave:200") from None
-        elif name not in ("radial", "circular"):
-            raise InputError(
-                f"unknown field {spec!r}; use constant:DEG, radial, circular, wave:PERIOD or an image file"
-            )
-        return cls(spec, None, width, height)
+    def named(cls, spec: str, width: int, height: int, name: str = "field") -> DirectionField:
+        kind, arg = parse_field_spec(spec, name)
+        if kind is None:
+            raise InputError(f"unknown {name} {spec!r}; use {FIELD_HELP}")
+        return cls(spec, None, width, height, arg=(kind, arg))
 
     def angles_at(self, sites: np.ndarray) -> np.ndarray:
         sites = np.asarray(sites, dtype=np.float64)
         if self._angles is not None:
             return sample_at(self._angles, sites)
-        name, _, arg = self.spec.partition(":")
+        name, arg = self._named
         cx, cy = self.width / 2.0, self.height / 2.0
         if name == "constant":
-            return np.full(len(sites), math.radians(float(arg)))
+            return np.full(len(sites), math.radians(arg))
         if name == "radial":
             return np.arctan2(sites[:, 1] - cy, sites[:, 0] - cx)
         if name == "circular":
             return np.arctan2(sites[:, 1] - cy, sites[:, 0] - cx) + math.pi / 2
-        period = float(arg or 200)
-        return math.radians(30.0) * np.sin(2 * math.pi * sites[:, 0] / period)
+        return math.radians(30.0) * np.sin(2 * math.pi * sites[:, 0] / arg)
 
 
-def angles_from_grey(grey: np.ndarray, full_scale: float) -> np.ndarray:
-    """Grey levels 0..full_scale -> angles 0..π (a line direction, modulo 180°)."""
-    return np.asarray(grey, dtype=np.float64) / full_scale * math.pi
+# the named fields: name -> (argument, its documented range, its default); radial and
+# circular take none
+NAMED_FIELDS = {
+    "constant": ("an angle in degrees", (-360.0, 360.0), None),
+    "radial": (None, None, None),
+    "circular": (None, None, None),
+    "wave": ("a period in pixels", (1.0, 1e6), 200.0),
+}
+FIELD_HELP = ("constant:DEG, radial, circular, wave:PERIOD or an image file (a file named like a field "
+              "is given as a path with a slash, e.g. ./radial)")
+
+
+def parse_field_spec(spec, name: str = "field") -> tuple[str | None, float | None]:
+    """(kind, argument) of a named field such as ``constant:30``; (None, None) when
+    ``spec`` names no field (then it is an image file).  A named field wins over a file
+    of the same name: a file named like a field is given with a slash (``./radial``)."""
+    text = str(spec)
+    kind, colon, arg = text.partition(":")
+    if kind not in NAMED_FIELDS:
+        return None, None
+    what, (low, high) = NAMED_FIELDS[kind][0], NAMED_FIELDS[kind][1] or (None, None)
+    default = NAMED_FIELDS[kind][2]
+    if what is None:
+        if colon:
+            raise InputError(f"{name} {text!r}: {kind} takes no argument; use {kind}")
+        return kind, None
+    if not arg and default is not None:
+        return kind, default
+    example = f"{kind}:30" if kind == "constant" else f"{kind}:200"
+    try:
+        value = real_number(arg, name, minimum=low, maximum=high)
+    except InputError:
+        raise InputError(f"{name} {text!r}: {kind} needs {what} between {low:g} and {high:g}, "
+                         f"e.g. {example}") from None
+    return kind, value
+
+
+def angles_from_grey(grey: np.ndarray, full_scale: float, name: str = "field image") -> np.ndarray:
+    """Grey levels 0..full_scale -> angles 0..π (a line direction, modulo 180°); a float
+    image (full scale 1) must hold finite values in 0..1."""
+    grey = np.asarray(grey, dtype=np.float64)
+    if not np.isfinite(grey).all():
+        raise InputError(f"{name} holds NaN or infinite values")
+    low, high = float(grey.min()), float(grey.max())
+    if low < 0 or high > full_scale:
+        raise InputError(f"{name}: values must lie in 0..{full_scale:g} (0..180 degrees), "
+                         f"found {low:g}..{high:g}")
+    return grey / full_scale * math.pi

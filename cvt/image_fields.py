@@ -72,6 +72,7 @@ from scipy import ndimage
 
 from .errors import InputError
 from .fields import DensityMap, DirectionField
+from .validate import real_number
 
 # rotation (radians) after which an element again has a side along the same line
 SIDE_PERIOD = {
@@ -84,6 +85,7 @@ SIDE_PERIOD = {
 
 DEFAULT_CONTRAST = 3.0
 FIELD_SMOOTHING = 1.5  # the field's Gaussian, in element spacings
+CONTRAST_RANGE = (1.0, 100.0)  # densest / sparsest cell area
 EDGE_FRACTION = 0.25  # edge pixels: tensor strength >= this share of its 99th percentile
 EDGE_FLOOR = 0.02  # ... and >= this many intensity units (0..1) per pixel: not just noise
 # A strong edge (a wall for the tiles): contrast >= this ΔE*ab.  A tile centred on a
@@ -170,8 +172,7 @@ def picture_fields(picture: np.ndarray, spacing: float, element: str = "square",
     symmetry the field is smoothed in (:data:`SIDE_PERIOD`)."""
     if element not in SIDE_PERIOD:
         raise InputError(f"unknown element {element!r}; choose one of {', '.join(SIDE_PERIOD)}")
-    if not (math.isfinite(contrast) and contrast >= 1):
-        raise InputError(f"density contrast must be a number >= 1, got {contrast!r}")
+    contrast = real_number(contrast, "contrast", *CONTRAST_RANGE)
     chans = as_channels(picture)
     if not np.isfinite(chans).all():
         raise InputError("picture contains NaN or infinite values")

@@ -23,7 +23,9 @@ import numpy as np
 from .metrics import Metric
 from .problem import Grid, Problem
 from .seeding import initial_sites
-from .validate import whole_number
+from .validate import live_backend, whole_number
+
+MAX_ITERATIONS = 100_000
 
 
 @dataclass
@@ -45,7 +47,7 @@ def iterate(state, step: Callable, iterations: int, progress=None, log: Iteratio
 
     ``progress(k, iterations, energy)`` is called after each step when given.
     Returns the final state and the :class:`IterationLog`."""
-    iterations = whole_number(iterations, "iterations", minimum=0)
+    iterations = whole_number(iterations, "iterations", minimum=0, maximum=MAX_ITERATIONS)
     log = IterationLog() if log is None else log
     for k in range(iterations):
         t0 = time.perf_counter()
@@ -94,6 +96,8 @@ def lloyd(problem: Problem, backend, iterations: int = 20, progress=None,
 
     ``sites`` overrides the problem's seeding; ``setup`` the metric, region and angles
     of the step (:class:`LloydSetup`, default: the problem's own)."""
+    live_backend(backend)
+    iterations = whole_number(iterations, "iterations", minimum=0, maximum=MAX_ITERATIONS)
     setup = LloydSetup.of(problem) if setup is None else setup
     start = initial_sites(problem) if sites is None else np.array(sites, dtype=np.float64)
 

@@ -35,11 +35,14 @@ from functools import cached_property
 
 import numpy as np
 
-from .errors import InputError
+from .validate import one_of, real_number
 
 METRIC_NAMES = ("l2", "l1", "linf", "linf-axial", "l2-axial", "triangle")
 AXIAL_METRICS = ("linf-axial", "l2-axial")
 DEFAULT_ASPECT = 0.5  # the paper's examples use β = 1/2
+# β beyond this range makes elements thinner than 1/10000 of their length: no raster
+# resolves them, and 1/β overflows long before β reaches the limits of a float
+ASPECT_RANGE = (0.01, 100.0)
 
 # The one element <-> metric table: each element shape is the unit ball of its metric
 # (cvt/shapes.py draws the shapes from it).  The reverse, a metric's natural element,
@@ -141,18 +144,13 @@ def _regular_normals(angles_deg) -> np.ndarray:
     return np.stack([np.cos(t), np.sin(t)], axis=1)
 
 
-def make_metric(name: str, aspect: float | None = None) -> Metric:
-    """Build one of the six metrics; ``aspect`` (β) is used by the axial ones only."""
-    if name not in METRIC_NAMES:
-        raise InputError(f"unknown metric {name!r}; choose one of {', '.join(METRIC_NAMES)}")
-    if aspect is None:
-        aspect = DEFAULT_ASPECT if name in AXIAL_METRICS else 1.0
-    try:
-        beta = float(aspect)
-    except (TypeError, ValueError):
-        raise InputError(f"aspect must be a number, got {aspect!r}") from None
-    if not math.isfinite(beta) or beta <= 0:
-        raise InputError(f"aspect must be a finite number > 0, got {aspect!r}")
+def make_metric(name: str, aspect: float | None = None, *, option: str = "aspect") -> Metric:
+    """Build one of the six metrics; ``aspect`` (β, in :data:`ASPECT_RANGE`) is used by
+    the axial ones only; ``option`` names it in messages (``--aspect`` on the command line)."""
+    one_of(name, "metric", METRIC_NAMES)
+    beta = 1.0 if aspect is None else real_number(aspect, option, *ASPECT_RANGE)
+    if aspect is None and name in AXIAL_METRICS:
+        beta = DEFAULT_ASPECT
     if name not in AXIAL_METRICS:
         beta = 1.0
     if name == "l2":

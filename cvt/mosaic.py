@@ -41,6 +41,7 @@ from .distribution import Distribution
 from .errors import InputError
 from .evaluate import colour_error, evaluate, pixels_under, straddling_tiles
 from .image_fields import (
+    CONTRAST_RANGE,
     DEFAULT_CONTRAST,
     DEFAULT_EDGE_THRESHOLD,
     PictureFields,
@@ -52,9 +53,10 @@ from .metrics import ELEMENT_METRIC, METRIC_NAMES, NATURAL_ELEMENT, make_metric
 from .moments import moments_from_labels
 from .placement import parse_gap
 from .problem import Grid, Problem, parse_size, pixel_index
-from .render import draw_elements, ellipse_parameters, parse_colour, svg_document
+from .render import draw_elements, ellipse_parameters, parse_colour, svg_lines
+from .resources import mosaic_estimate
 from .shapes import ELEMENT_SHAPES, check_shape, element_ball, unit_outline
-from .validate import one_of, real_number, whole_number
+from .validate import live_backend, one_of, real_number, whole_number
 
 # The method that places the tiles when none is named (a name in cvt.methods.METHODS).
 # "ours-compact" (compaction: tiles share their walls, the grout is the gap asked for)
@@ -72,18 +74,17 @@ EDGE_MIN_LENGTH = 2.0
 
 # --------------------------------------------------------------------------- picture
 
-def picture_array(image) -> tuple[np.ndarray, str]:
-    """(H, W, 3) float64 RGB in 0..1 and a short description of where it came from."""
-    if isinstance(image, (str, os.PathLike)):
-        from PIL import Image
+def picture_array(image, at_least: tuple[int, int] | None = None, memory_limit=None,
+                  name: str = "image") -> tuple[np.ndarray, str]:
+    """(H, W, 3) float64 RGB in 0..1 and a short description of where it came from.
 
+    A file is read by :func:`cvt.images.read_picture` (EXIF orientation applied, bombs
+    refused, decoded at a reduced size no smaller than ``at_least`` when that is smaller
+    than the picture, its decoding checked against ``memory_limit``)."""
+    if isinstance(image, (str, os.PathLike)):
         from .images import load_rgb
 
-        try:
-            rgb = load_rgb(image)
-        except Image.DecompressionBombError as exc:
-            raise InputError(f"image {os.fspath(image)} is too large to decode safely: {exc}") from None
-        return rgb, os.fspath(image)
+        return load_rgb(image, at_least, name=name, memory_limit=memory_limit), os.fspath(image)
     arr = np.asarray(image)
     if arr.ndim not in (2, 3) or (arr.ndim == 3 and arr.shape[2] not in (1, 3, 4)):
         raise InputError(f"picture array must be (H, W), (H, W, 3) or (H, W, 4), got shape {arr.shape}")
@@ -114,7 +115,7 @@ def picture_array(image) -> tuple[np.ndarray, str]:
     return np.ascontiguousarray(arr), f"array {arr.shape[1]}x{arr.shape[0]}"
 
 
-def raster_size(width: int, height: int, size=None) -> tuple[int, int]:
+def raster_size(width: int, height: int, size=None, name: str = "size") -> tuple[int, int]:
     """The mosaic's raster for a ``width`` x ``height`` picture.
 
     ``None``: the picture's own size, shrunk (aspect kept) so that the long side is at
@@ -125,12 +126,12 @@ def raster_size(width: int, height: int, size=None) -> tuple[int, int]:
         long_side = min(max(width, height), MAX_DEFAULT_SIDE)
     elif isinstance(size, (tuple, list)):
         if len(size) != 2:
-            raise InputError(f"size must be (W, H), got {size!r}")
-        return parse_size(f"{size[0]}x{size[1]}")
+            raise InputError(f"{name} must be (W, H), got {size!r}")
+        return parse_size(f"{size[0]}x{size[1]}", name)
     elif "x" in str(size).lower():
-        return parse_size(size)
+        return parse_size(size, name)
     else:
-        long_side = parse_size(size)[0]
+        long_side = parse_size(size, name)[0]
     k = long_side / max(width, height)
     return max(1, round(width * k)), max(1, round(height * k))
 
@@ -330,14 +331,18 @@ class MosaicResult:
         """The mosaic as SVG text: a grout-coloured background and one filled tile per
         placed site, in pixel units (viewBox = the raster).  Polygonal tiles are paths
         with their exact corners; circles and ellipses are rotated ``<ellipse>``s."""
-        grout = self.grout if grout is None else parse_colour(grout)
-        return svg_document(self.polygons, self.width, self.height, self.colours, background=grout,
-                            region_colour=None, stroke=None, digits=precision,
-                            ellipses=ellipse_rows(self.polygons, self.element, self.aspect))
+        return "".join(self.svg_lines(grout, precision))
+
+    def svg_lines(self, grout=None, precision: int = 2):
+        """:meth:`svg` line by line (to write a large mosaic without holding its text)."""
+        grout = self.grout if grout is None else parse_colour(grout, "grout")
+        return svg_lines(self.polygons, self.width, self.height, self.colours, background=grout,
+                         region_colour=None, stroke=None, digits=precision,
+                         ellipses=ellipse_rows(self.polygons, self.element, self.aspect))
 
     def render(self, scale: float = 1.0, grout=None, supersample: int = 3):
         """The mosaic as a PIL RGB image ``scale`` times the raster size (antialiased)."""
-        grout = self.grout if grout is None else parse_colour(grout)
+        grout = self.grout if grout is None else parse_colour(grout, "grout")
         return draw_elements(self.polygons, self.width, self.height, self.colours, background=grout,
                              scale=scale, supersample=supersample)
 
@@ -364,7 +369,7 @@ def make_mosaic(image, backend, *, n_elements: int = DEFAULT_ELEMENTS, metric: s
                 seed: int = 0, aspect: float | None = None, contrast: float = DEFAULT_CONTRAST,
                 grout=DEFAULT_GROUT, method=DEFAULT_METHOD, edges: bool = True,
                 edge_threshold: float = DEFAULT_EDGE_THRESHOLD, method_options: dict | None = None,
-                progress=None) -> MosaicResult:
+                progress=None, memory_limit=None) -> MosaicResult:
     """Turn ``image`` (a file path or a numpy array) into a mosaic of ``n_elements``.
 
     ``metric``/``element``: the Lloyd distance and the tile shape; give either (the
@@ -383,16 +388,17 @@ def make_mosaic(image, backend, *, n_elements: int = DEFAULT_ELEMENTS, metric: s
     are walls: their pixels leave the region, so cells, tiles and the method's region
     border stop at them.  ``method_options``: more keywords for the method (e.g.
     ``{"alternate": True}`` for ours-compact's triangles).  ``progress(k, iterations,
-    energy)`` is called after each Lloyd step."""
+    energy)`` is called after each Lloyd step.  ``memory_limit`` (bytes or a size such as
+    ``"8G"``; default what the machine has available) refuses, before any work, a mosaic
+    estimated to need more (:mod:`cvt.resources`)."""
     t_start = time.perf_counter()
-    if not callable(getattr(backend, "moments", None)):
-        raise InputError(f"backend must be a live Backend (backends.create_backend), got {backend!r}")
+    live_backend(backend)
     n_elements = whole_number(n_elements, "n_elements", minimum=1)
     iterations = whole_number(iterations, "iterations", minimum=0)
     seed = whole_number(seed, "seed", minimum=0)
-    contrast = real_number(contrast, "contrast", minimum=1.0)
+    contrast = real_number(contrast, "contrast", *CONTRAST_RANGE)
     edge_threshold = real_number(edge_threshold, "edge_threshold", above=0.0)
-    grout = parse_colour(grout)
+    grout = parse_colour(grout, "grout")
     run_method, method_name = resolve_method(method)
     method_options = dict(method_options or {})
     if run_method is METHODS["ours-compact"]:
@@ -402,13 +408,26 @@ def make_mosaic(image, backend, *, n_elements: int = DEFAULT_ELEMENTS, metric: s
     metric_name, element = resolve_shapes(metric, element)
     metric_obj = make_metric(metric_name, aspect)
 
-    rgb, source = picture_array(image)
-    w, h = raster_size(rgb.shape[1], rgb.shape[0], size)
+    if isinstance(image, (str, os.PathLike)):
+        from .images import open_picture, upright_size
+
+        with open_picture(image, "image") as header:
+            pw, ph = upright_size(header)
+        rgb = None
+    else:
+        rgb, source = picture_array(image)
+        ph, pw = rgb.shape[:2]
+    w, h = raster_size(pw, ph, size)
     if n_elements > w * h:
         raise InputError(f"{n_elements} elements do not fit in a {w}x{h} raster "
-                         f"(from a {rgb.shape[1]}x{rgb.shape[0]} picture); "
+                         f"(from a {pw}x{ph} picture); "
                          f"use fewer elements or a larger size (--size)")
+    mosaic_estimate(w, h, n_elements, type(backend), element=element).check(
+        memory_limit, lower="use a smaller size or fewer elements", name="memory_limit")
+    if rgb is None:
+        rgb, source = picture_array(image, at_least=(w, h), memory_limit=memory_limit)
     picture = resample(rgb, w, h)
+    del rgb
     lab = srgb_to_lab(picture)
     spacing = math.sqrt(w * h / n_elements)
     gap = AUTO_GAP * spacing if gap is None else parse_gap(gap)

@@ -68,14 +68,14 @@ import numpy as np
 
 from .errors import InputError
 from .metrics import Metric, compile_sites
-from .problem import Grid, in_own_cell, pixel_index
+from .problem import MAX_SIDE, Grid, in_own_cell, pixel_index
 from .shapes import check_shape, element_ball, element_polygons
 from .validate import one_of, real_number
 
 
 def parse_gap(value, name: str = "gap") -> float:
-    """The grout gap in pixels: a finite number >= 0."""
-    return real_number(value, name, minimum=0.0)
+    """The grout gap in pixels: a finite number from 0 to the largest raster side."""
+    return real_number(value, name, minimum=0.0, maximum=float(MAX_SIDE))
 
 
 def element_for(metric: Metric, element: str | None = None) -> tuple[str, float]:

@@ -19,9 +19,10 @@ if TYPE_CHECKING:
     from .fields import DensityMap, DirectionField
 
 MAX_SIDE = 32768
+MAX_SEED = 2**63 - 1  # seeds are stored as int64 in reports
 
 
-def parse_size(text) -> tuple[int, int]:
+def parse_size(text, name: str = "size") -> tuple[int, int]:
     """'W' or 'WxH' -> (W, H), each in 1..32768."""
     raw = str(text).strip().lower()
     parts = raw.split("x")
@@ -33,10 +34,10 @@ def parse_size(text) -> tuple[int, int]:
         else:
             raise ValueError
     except ValueError:
-        raise InputError(f"size must be W or WxH with whole numbers, got {text!r}") from None
+        raise InputError(f"{name} must be W or WxH with whole numbers, got {text!r}") from None
     for side in (w, h):
         if side < 1 or side > MAX_SIDE:
-            raise InputError(f"size {text!r}: each side must be between 1 and {MAX_SIDE} pixels")
+            raise InputError(f"{name} {text!r}: each side must be between 1 and {MAX_SIDE} pixels")
     return w, h
 
 
@@ -49,6 +50,8 @@ class Grid:
     mask: np.ndarray | None = None  # (H, W) bool, None means the whole raster
 
     def __post_init__(self):
+        object.__setattr__(self, "width", whole_number(self.width, "width", minimum=1, maximum=MAX_SIDE))
+        object.__setattr__(self, "height", whole_number(self.height, "height", minimum=1, maximum=MAX_SIDE))
         if self.mask is not None:
             m = np.ascontiguousarray(self.mask, dtype=bool)
             if m.shape != (self.height, self.width):
@@ -91,6 +94,16 @@ class Problem:
     walls: np.ndarray | None = None
 
     def __post_init__(self):
+        from .fields import DensityMap, DirectionField
+
+        if not isinstance(self.grid, Grid):
+            raise InputError(f"grid must be a Grid, got {self.grid!r}")
+        if not isinstance(self.metric, Metric):
+            raise InputError(f"metric must be a Metric (cvt.metrics.make_metric), got {self.metric!r}")
+        for name, value, kind in (("density", self.density, DensityMap), ("field", self.field, DirectionField)):
+            if value is not None and not isinstance(value, kind):
+                raise InputError(f"{name} must be a {kind.__name__} or None, got {value!r}")
+        self.seed = whole_number(self.seed, "seed", minimum=0, maximum=MAX_SEED)
         if self.walls is not None:
             walls = np.ascontiguousarray(self.walls, dtype=bool)
             if walls.shape != self.grid.shape:
@@ -110,8 +123,8 @@ class Problem:
             if bad.any():
                 k = int(np.argmax(bad))
                 raise InputError(
-                    f"initial site {k} at ({pts[k, 0]:g}, {pts[k, 1]:g}) is outside the "
-                    f"{w}x{h} raster"
+                    f"initial site {k} at ({float(pts[k, 0])!r}, {float(pts[k, 1])!r}) is outside the "
+                    f"{w}x{h} raster (0 <= x <= {w}, 0 <= y <= {h})"
                 )
             self.init_sites = pts
             self.n_sites = len(pts)

@@ -30,19 +30,22 @@ OUTLINE = "#303030"
 
 
 # ------------------------------------------------------------------ colours
-def parse_colour(value) -> tuple[float, float, float]:
+def parse_colour(value, name: str = "colour") -> tuple[float, float, float]:
     """A colour as a CSS name, ``#rrggbb`` or an (r, g, b) sequence in 0..1 -> floats 0..1."""
     if isinstance(value, (tuple, list, np.ndarray)):
-        vals = np.asarray(value, dtype=np.float64)
-        if vals.shape != (3,) or not np.isfinite(vals).all() or vals.min() < 0 or vals.max() > 1:
-            raise InputError(f"colour must be three numbers in 0..1, got {value!r}")
+        try:
+            vals = np.asarray(value, dtype=np.float64)
+        except (TypeError, ValueError):
+            vals = None
+        if vals is None or vals.shape != (3,) or not np.isfinite(vals).all() or vals.min() < 0 or vals.max() > 1:
+            raise InputError(f"{name} must be three numbers in 0..1, got {value!r}")
         return tuple(float(v) for v in vals)
     from PIL import ImageColor
 
     try:
         rgb = ImageColor.getrgb(str(value))
     except ValueError:
-        raise InputError(f"unknown colour {value!r}; use a name like grey or #rrggbb") from None
+        raise InputError(f"unknown {name} {value!r}; use a name like grey or #rrggbb") from None
     return tuple(v / 255.0 for v in rgb[:3])
 
 
@@ -152,10 +155,17 @@ def _path_data(geom, digits: int = 3) -> str:
     return "".join(parts)
 
 
-def svg_document(elements, width: int, height: int, fills=None, *, background=DARK,
-                 region_colour=PAPER, region=None, stroke=OUTLINE, stroke_width: float = 0.25,
-                 ellipses=None, digits: int = 3) -> str:
-    """The SVG document (text) of ``elements`` (shapely polygons, None entries skipped).
+def svg_document(elements, width: int, height: int, fills=None, **options) -> str:
+    """The SVG document (text) of ``elements`` (shapely polygons, None entries skipped);
+    the options are those of :func:`svg_lines`."""
+    return "".join(svg_lines(elements, width, height, fills, **options))
+
+
+def svg_lines(elements, width: int, height: int, fills=None, *, background=DARK,
+              region_colour=PAPER, region=None, stroke=OUTLINE, stroke_width: float = 0.25,
+              ellipses=None, digits: int = 3):
+    """The SVG document of ``elements`` line by line (each ending in a newline), so that
+    a large one can be written without being held whole.
 
     ``region``: a shapely geometry painted ``region_colour`` (default: the whole raster;
     ``region_colour=None`` paints nothing over the background).  ``ellipses``: an (N, 5)
@@ -176,6 +186,7 @@ def svg_document(elements, width: int, height: int, fills=None, *, background=DA
             out.append(f'<path d="{_path_data(region)}" fill="{hex_colour(region_colour)}" fill-rule="evenodd"/>')
     stroke_attr = ' stroke="none"' if stroke is None else f' stroke="{stroke}" stroke-width="{stroke_width:g}"'
     out.append(f'<g id="elements"{stroke_attr} stroke-linejoin="round">')
+    yield from (line + "\n" for line in out)
     fmt = f"{{:.{digits}f}}"
     for k, geom in enumerate(elements):
         if geom is None or geom.is_empty:
@@ -183,12 +194,11 @@ def svg_document(elements, width: int, height: int, fills=None, *, background=DA
         fill = quoteattr(hex_colour(fills[k]))
         if ellipses is not None and np.isfinite(ellipses[k]).all():
             cx, cy, rx, ry, deg = (fmt.format(v) for v in ellipses[k])
-            out.append(f'<ellipse id="e{k}" cx="{cx}" cy="{cy}" rx="{rx}" ry="{ry}" '
-                       f'transform="rotate({deg} {cx} {cy})" fill={fill}/>')
+            yield (f'<ellipse id="e{k}" cx="{cx}" cy="{cy}" rx="{rx}" ry="{ry}" '
+                   f'transform="rotate({deg} {cx} {cy})" fill={fill}/>\n')
         else:
-            out.append(f'<path id="e{k}" d="{_path_data(geom, digits)}" fill={fill}/>')
-    out += ["</g>", "</svg>"]
-    return "\n".join(out) + "\n"
+            yield f'<path id="e{k}" d="{_path_data(geom, digits)}" fill={fill}/>\n'
+    yield "</g>\n</svg>\n"
 
 
 def ellipse_parameters(centres, angles, sizes, semi_axes) -> np.ndarray:
@@ -214,4 +224,4 @@ def element_coordinates(elements, digits: int = 3) -> list:
 
 
 __all__ = ["parse_colour", "rgb8", "hex_colour", "label_colours", "cells_image", "draw_elements",
-           "svg_document", "ellipse_parameters", "element_coordinates"]
+           "svg_document", "svg_lines", "ellipse_parameters", "element_coordinates"]

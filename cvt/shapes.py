@@ -50,6 +50,18 @@ def transform(outline: np.ndarray, centers, angles, sizes) -> np.ndarray:
     return np.stack([x, y], axis=-1)
 
 
+CHUNK = 4096  # elements whose vertices are computed at once: bounds the temporaries
+
+
 def element_polygons(shape: str, aspect: float, centers, angles, sizes) -> np.ndarray:
     """Shapely polygons (object array) of N elements."""
-    return shapely.polygons(transform(unit_outline(shape, aspect), centers, angles, sizes))
+    outline = unit_outline(shape, aspect)
+    centers = np.asarray(centers, dtype=np.float64).reshape(-1, 2)
+    n = len(centers)
+    angles = np.broadcast_to(np.asarray(angles, dtype=np.float64), (n,))
+    sizes = np.broadcast_to(np.asarray(sizes, dtype=np.float64), (n,))
+    out = np.empty(n, dtype=object)
+    for a in range(0, n, CHUNK):
+        b = min(n, a + CHUNK)
+        out[a:b] = shapely.polygons(transform(outline, centers[a:b], angles[a:b], sizes[a:b]))
+    return out

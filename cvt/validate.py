@@ -9,8 +9,11 @@ with one line that names the option and the bad value.
 
 from __future__ import annotations
 
+import json
 import math
 import numbers
+import os
+import re
 
 from .errors import InputError
 
@@ -83,11 +86,69 @@ def name_list(text, name: str, choices=None) -> list[str] | None:
     return items
 
 
+def live_backend(value, name: str = "backend"):
+    """``value`` if it can compute a CVT iteration (``label`` and ``moments``), as a
+    started backend from ``backends.create_backend`` can."""
+    if not (callable(getattr(value, "moments", None)) and callable(getattr(value, "label", None))):
+        raise InputError(f"{name} must be a live backend (backends.create_backend(name)), got {value!r}")
+    return value
+
+
+_UNITS = {"": 1, "k": 2**10, "m": 2**20, "g": 2**30, "t": 2**40}
+
+
+def byte_size(value, name: str) -> int:
+    """A memory size > 0 in bytes: a number of bytes, or a number with a unit K, M, G or
+    T (powers of 1024; ``8G``, ``512MiB``, ``1.5 GB`` and ``2e9`` all work)."""
+    bad = InputError(f"{name} must be a memory size such as 8G, 512M or 2e9 (bytes), got {value!r}")
+    if isinstance(value, bool):
+        raise bad
+    if isinstance(value, numbers.Real):
+        number, unit = float(value), ""
+    else:
+        match = re.fullmatch(r"\s*([0-9.eE+]+)\s*([kKmMgGtT]?)(?:i?[bB])?\s*", str(value))
+        if not match:
+            raise bad
+        try:
+            number, unit = float(match.group(1)), match.group(2).lower()
+        except ValueError:
+            raise bad from None
+    size = number * _UNITS[unit]
+    if not (math.isfinite(size) and 1 <= size < 2**63):
+        raise bad
+    return int(size)
+
+
+def json_object(path, what: str) -> dict:
+    """The JSON object stored in the file ``path`` (``what`` names it in messages):
+    a missing file, a folder, invalid JSON and valid JSON that is not an object are
+    each refused with one line."""
+    path = os.fspath(path)
+    if os.path.isdir(path):
+        raise InputError(f"{what} {path} is a folder, not a json file")
+    try:
+        with open(path, encoding="utf-8-sig") as fh:
+            data = json.load(fh)
+    except FileNotFoundError:
+        raise InputError(f"{what} {path} does not exist") from None
+    except (OSError, UnicodeDecodeError) as exc:
+        raise InputError(f"cannot read {what} {path}: {exc}") from None
+    except ValueError as exc:
+        raise InputError(f"{what} {path} is not valid json: {exc}") from None
+    if not isinstance(data, dict):
+        raise InputError(f"{what} {path} holds a json {type(data).__name__}, not an object")
+    return data
+
+
+def _number_text(x) -> str:
+    return str(x) if isinstance(x, numbers.Integral) else f"{x:g}"
+
+
 def _range_text(minimum, maximum) -> str:
     if minimum is not None and maximum is not None:
-        return f" between {minimum:g} and {maximum:g}"
+        return f" between {_number_text(minimum)} and {_number_text(maximum)}"
     if minimum is not None:
-        return f" >= {minimum:g}"
+        return f" >= {_number_text(minimum)}"
     if maximum is not None:
-        return f" <= {maximum:g}"
+        return f" <= {_number_text(maximum)}"
     return ""

@@ -85,18 +85,18 @@ def test_density_region_and_image_field(tmp_path, images, capsys):
 
 
 BAD = [
-    (["--metric", "l3"], "unknown metric 'l3'"),
+    (["--metric", "l3"], "unknown --metric 'l3'"),
     (["--backend", "vulkan"], "unknown backend 'vulkan'"),
-    (["--sites", "0"], "--sites must be a whole number >= 1"),
+    (["--sites", "0"], "--sites must be a whole number between 1 and 4096"),
     (["--sites", "many"], "--sites must be a whole number"),
-    (["--sites", "5000", "--size", "64"], "5000 sites do not fit"),
+    (["--sites", "5000", "--size", "64"], "between 1 and 4096, got '5000'"),
     (["--size", "0"], "size '0'"),
     (["--size", "40000"], "size '40000'"),
     (["--size", "10x"], "size must be W or WxH"),
-    (["--iterations", "-1"], "--iterations must be a whole number >= 0"),
-    (["--aspect", "0", "--metric", "l2-axial"], "aspect must be a finite number > 0"),
-    (["--aspect", "-2", "--metric", "linf-axial"], "aspect must be a finite number > 0"),
-    (["--field", "spiral"], "unknown field 'spiral'"),
+    (["--iterations", "-1"], "--iterations must be a whole number between 0 and 100000"),
+    (["--aspect", "0", "--metric", "l2-axial"], "--aspect must be a finite number between 0.01 and 100"),
+    (["--aspect", "-2", "--metric", "linf-axial"], "--aspect must be a finite number between 0.01 and 100"),
+    (["--field", "spiral"], "--field 'spiral' is neither a field nor an image file"),
     (["--field", "constant:abc"], "constant needs an angle"),
     (["--method", "magic"], "unknown method 'magic'"),
 ]
@@ -162,4 +162,4 @@ def test_console_script_end_to_end(tmp_path):
     assert ok.returncode == 0, ok.stderr
     assert (tmp_path / "o" / "result.json").exists()
     bad = subprocess.run(exe + ["run", "--metric", "nope"], capture_output=True, text=True)
-    assert bad.returncode == 2 and "Traceback" not in bad.stderr and "unknown metric" in bad.stderr
+    assert bad.returncode == 2 and "Traceback" not in bad.stderr and "unknown --metric" in bad.stderr
