@@ -59,7 +59,11 @@ class TileShape:
     def gauge(self, vx, vy, theta) -> np.ndarray:
         """Gauge of world offsets (vx, vy) in the frame of a tile turned by ``theta``:
         a point is inside the tile of size s iff gauge <= s."""
-        c, s = np.cos(theta), np.sin(theta)
+        return self.gauge_turned(vx, vy, np.cos(theta), np.sin(theta))
+
+    def gauge_turned(self, vx, vy, c, s) -> np.ndarray:
+        """``gauge`` with the turn given by its cosine ``c`` and sine ``s``, for callers
+        that test many points per tile and gather one cosine per tile."""
         ux = c * vx + s * vy  # R(-θ) v
         uy = c * vy - s * vx
         if self.ball.kind == "ellipse":
@@ -132,21 +136,40 @@ def rasterize_tiles(shape: TileShape, centers, angles, sizes, grid: Grid,
             stop = min(len(order), start + count)
             r = int(reach[stop - 1])  # windows grow with the chunk's largest tile
             ids = order[start:stop]
-            offs = np.arange(-r, r + 1)
-            ci = np.floor(centers[ids, 1]).astype(np.int64)
-            cj = np.floor(centers[ids, 0]).astype(np.int64)
-            ii = ci[:, None, None] + offs[None, :, None]
-            jj = cj[:, None, None] + offs[None, None, :]
-            vx = jj + 0.5 - centers[ids, 0][:, None, None]
-            vy = ii + 0.5 - centers[ids, 1][:, None, None]
-            g = shape.gauge(vx, vy, angles[ids][:, None, None])
-            hit = (g <= sizes[ids][:, None, None]) & (ii >= 0) & (ii < h) & (jj >= 0) & (jj < w)
-            flat = (ii * w + jj)[hit]
-            who = np.broadcast_to(ids[:, None, None], hit.shape)[hit]
-            np.minimum.at(best, flat, who)
+            flat, who = _window_hits(shape, centers[ids], angles[ids], sizes[ids], r, h, w)
+            np.minimum.at(best, flat, ids[who])
             start = stop
     best[best == n] = -1
     return best.reshape(h, w).astype(np.int32)
+
+
+def tile_pixels(shape: TileShape, center, angle: float, size: float, grid: Grid):
+    """(rows, columns) of the pixels whose centres one tile's outline contains: the
+    pixels ``rasterize_tiles`` gives that tile when it is alone."""
+    if not (math.isfinite(size) and size > 0):
+        return np.empty(0, np.int64), np.empty(0, np.int64)
+    r = int(math.ceil(size * shape.ball.circumradius + 1.0))
+    flat, _ = _window_hits(shape, np.asarray(center, np.float64).reshape(1, 2),
+                           np.array([angle], np.float64), np.array([size], np.float64),
+                           r, *grid.shape)
+    return np.divmod(flat, grid.shape[1])
+
+
+def _window_hits(shape: TileShape, centers, angles, sizes, r: int, h: int, w: int):
+    """Flat raster indices of the pixel centres inside each tile, within the (2r+1)²
+    window around it, and the tile's position in the arguments for each index."""
+    offs = np.arange(-r, r + 1)
+    ci = np.floor(centers[:, 1]).astype(np.int64)
+    cj = np.floor(centers[:, 0]).astype(np.int64)
+    ii = ci[:, None, None] + offs[None, :, None]
+    jj = cj[:, None, None] + offs[None, None, :]
+    vx = jj + 0.5 - centers[:, 0][:, None, None]
+    vy = ii + 0.5 - centers[:, 1][:, None, None]
+    g = shape.gauge(vx, vy, angles[:, None, None])
+    hit = (g <= sizes[:, None, None]) & (ii >= 0) & (ii < h) & (jj >= 0) & (jj < w)
+    flat = (ii * w + jj)[hit]
+    who = np.broadcast_to(np.arange(len(centers))[:, None, None], hit.shape)[hit]
+    return flat, who
 
 
 def tile_voronoi(tile_labels: np.ndarray, inside: np.ndarray) -> tuple[np.ndarray, np.ndarray]:

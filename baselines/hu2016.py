@@ -62,7 +62,7 @@ from compact_distributions.cvt.lloyd import iterate
 from compact_distributions.cvt.placement import parse_gap
 from compact_distributions.cvt.problem import Grid, Problem
 from compact_distributions.cvt.seeding import initial_sites
-from compact_distributions.cvt.shapes import transform, unit_outline
+from compact_distributions.cvt.shapes import element_polygons, transform, unit_outline
 
 from .common import (
     BUDGET_DELTA,
@@ -71,6 +71,7 @@ from .common import (
     cell_moments,
     make_elements,
     rasterize_tiles,
+    tile_pixels,
     tile_shape,
     tile_voronoi,
 )
@@ -179,13 +180,10 @@ def combinatorial_step(shape, centers, angles, sizes, grid: Grid, moves: int | N
     blocked = np.ones((h + 2 * pad, w + 2 * pad), dtype=bool)
     blocked[pad:pad + h, pad:pad + w] = ~free
 
-    def geometry(k):
-        if not (sizes[k] > 0):
-            return None
-        poly = shapely.polygons(_outline(shape, centers[k], angles[k], sizes[k]))
-        return shapely.intersection(poly, region)
-
-    geoms = np.array([geometry(k) for k in range(n)], dtype=object)
+    geoms = np.full(n, None, dtype=object)
+    live = np.flatnonzero(sizes > 0)
+    geoms[live] = shapely.intersection(
+        element_polygons(shape.name, shape.aspect, centers[live], angles[live], sizes[live]), region)
     present = np.array([g is not None and not g.is_empty for g in geoms])
     tree_ids = np.flatnonzero(present)
     tree = shapely.STRtree(geoms[tree_ids])
@@ -219,8 +217,7 @@ def combinatorial_step(shape, centers, angles, sizes, grid: Grid, moves: int | N
         sizes[k] = size
         geoms[k] = new_poly
         present[k] = True
-        placed = rasterize_tiles(shape, centers[k:k + 1], angles[k:k + 1], sizes[k:k + 1], grid)
-        ii, jj = np.nonzero(placed >= 0)
+        ii, jj = tile_pixels(shape, centers[k], angles[k], sizes[k], grid)
         blocked[ii + pad, jj + pad] = True  # later moves must fit around the new tile
         tree_ids = np.flatnonzero(present)
         tree = shapely.STRtree(geoms[tree_ids])

@@ -50,24 +50,30 @@ COARSE_STEP = math.radians(6.0)
 FINE_STEPS = (math.radians(3.0), math.radians(1.5))
 
 
-def fit_counts(shape, labels_pad: np.ndarray, pad: int, centers, sizes, angles) -> np.ndarray:
+def fit_counts(shape, labels: np.ndarray, centers, sizes, angles) -> np.ndarray:
     """(N, A) number of pixels of each tile's own region covered by the tile centred at
     ``centers`` and turned by each of ``angles`` (N, A)."""
     n = len(centers)
-    r = int(np.ceil(np.max(sizes, initial=0.0) * shape.ball.circumradius + 1.0))
-    r = min(r, pad - 1)
-    offs = np.arange(-r, r + 1)
-    ci = np.floor(centers[:, 1]).astype(np.int64)
-    cj = np.floor(centers[:, 0]).astype(np.int64)
-    ii = ci[:, None, None] + offs[None, :, None]
-    jj = cj[:, None, None] + offs[None, None, :]
-    own = labels_pad[ii + pad, jj + pad] == np.arange(n)[:, None, None]
-    vx = (jj + 0.5 - centers[:, 0][:, None, None])
-    vy = (ii + 0.5 - centers[:, 1][:, None, None])
+    w = labels.shape[1]
+    flat = labels.ravel()
+    pixels = np.flatnonzero(flat >= 0)
+    own = flat[pixels]  # each region pixel is tested against its own tile only
+    vx = (pixels % w + 0.5) - centers[own, 0]
+    vy = (pixels // w + 0.5) - centers[own, 1]
+    limit = sizes[own]
+    # a pixel nearer than the tile's inradius is inside at every angle, one beyond its
+    # circumradius outside at every angle (with a margin far above rounding): only the
+    # ring between them is tested per angle
+    dist = np.hypot(vx, vy)
+    always = dist < limit * shape.ball.inradius * (1.0 - 1e-9)
+    ring = ~always & (dist <= limit * shape.ball.circumradius * (1.0 + 1e-9))
+    base = np.bincount(own[always], minlength=n)
+    own, vx, vy, limit = own[ring], vx[ring], vy[ring], limit[ring]
     counts = np.empty(angles.shape)
     for a in range(angles.shape[1]):
-        inside = shape.gauge(vx, vy, angles[:, a][:, None, None]) <= sizes[:, None, None]
-        counts[:, a] = (inside & own).sum(axis=(1, 2))
+        c, s = np.cos(angles[:, a]), np.sin(angles[:, a])
+        inside = shape.gauge_turned(vx, vy, c[own], s[own]) <= limit
+        counts[:, a] = base + np.bincount(own[inside], minlength=n)
     return counts
 
 
@@ -76,10 +82,7 @@ def best_fit_turn(shape):
 
     def turn(mom, labels, centers, angles, sizes):
         h, w = labels.shape
-        pad = int(np.ceil(np.max(sizes, initial=0.0) * shape.ball.circumradius + 3.0))
-        lp = np.full((h + 2 * pad, w + 2 * pad), -1, dtype=np.int32)
-        lp[pad:pad + h, pad:pad + w] = labels
-        cl = np.clip(centers, [0.0, 0.0], [w - 1e-9, h - 1e-9])  # window centre on the raster
+        cl = np.clip(centers, [0.0, 0.0], [w - 1e-9, h - 1e-9])  # a centre off the raster is measured from its edge
         period = shape.symmetry
         if period >= 2 * math.pi - 1e-9 and shape.name == "circle":
             return angles  # a circle has no orientation
@@ -89,7 +92,7 @@ def best_fit_turn(shape):
         best = angles.copy()
         for step_offsets in [offsets] + [np.array([-s, 0.0, s]) for s in FINE_STEPS]:
             cand = best[:, None] + step_offsets[None, :]
-            counts = fit_counts(shape, lp, pad, cl, sizes, cand)
+            counts = fit_counts(shape, labels, cl, sizes, cand)
             # prefer the smaller turn among equal counts
             score = counts - 1e-6 * np.abs(cand - angles[:, None])
             best = cand[np.arange(len(best)), np.argmax(score, axis=1)]

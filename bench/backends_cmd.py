@@ -40,7 +40,7 @@ from compact_distributions.cvt.validate import json_object, name_list, whole_num
 from . import options
 
 FULL = {"sites": [1000, 4000, 16000], "sizes": [512, 1024, 2048], "metrics": list(METRIC_NAMES),
-        "warmup": 1, "repeats": 5}
+        "warmup": 1, "repeats": 3}
 QUICK = {"sites": [1000, 4000], "sizes": [256, 512, 1024], "metrics": ["l2", "linf", "triangle"], "warmup": 1,
          "repeats": 3}
 

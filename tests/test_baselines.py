@@ -21,6 +21,7 @@ from compact_distributions.baselines.common import (
     angle_residual,
     budget_size,
     rasterize_tiles,
+    tile_pixels,
     tile_shape,
     tile_voronoi,
 )
@@ -29,6 +30,7 @@ from compact_distributions.cvt.evaluate import evaluate, region_polygon
 from compact_distributions.cvt.fields import DirectionField
 from compact_distributions.cvt.metrics import make_metric
 from compact_distributions.cvt.problem import Grid, Problem
+from compact_distributions.cvt.shapes import element_polygons
 
 NAMES = ("hausner2001", "fritzsche2005", "smith2005", "hu2016")
 SIZE, N = 128, 48
@@ -176,6 +178,49 @@ def test_tile_voronoi_is_distance_to_the_tile_not_its_centre():
     assert abs(62.5 - 30) > abs(62.5 - 80)  # while the square's centre is nearer
     assert dist[20, 62] == pytest.approx(62 - 49, abs=0.01)
     assert labels[20, 70] == 1
+
+
+def _pixel_centres_inside(poly, height, width):
+    """(rows, columns) of the pixel centres a shapely polygon contains: the truth the
+    raster tests are held to."""
+    jj, ii = np.meshgrid(np.arange(width) + 0.5, np.arange(height) + 0.5)
+    inside = shapely.contains_xy(poly, jj.ravel(), ii.ravel()).reshape(height, width)
+    return inside
+
+
+@pytest.mark.parametrize("element,metric", [("square", "linf"), ("triangle", "triangle"),
+                                            ("ellipse", "l2-axial"), ("rectangle", "linf-axial")])
+def test_tile_pixels_are_the_pixel_centres_inside_the_outline(element, metric):
+    grid = Grid(60, 50)
+    shape = tile_shape(square_problem(metric=metric), element)
+    rng = np.random.default_rng(3)
+    for _ in range(6):
+        center = rng.uniform(-5, 65, 2)  # some tiles hang over the raster's edge
+        angle, size = rng.uniform(0, math.pi), rng.uniform(2, 12)
+        poly = element_polygons(element, shape.aspect, center, angle, size)[0]
+        truth = _pixel_centres_inside(poly, 50, 60)
+        got = np.zeros((50, 60), bool)
+        got[tile_pixels(shape, center, angle, size, grid)] = True
+        # curved outlines are 128-gons: a pixel centre within a hair of the curve may differ
+        assert (got != truth).sum() <= (2 if element == "ellipse" else 0)
+    assert len(tile_pixels(shape, (30.0, 20.0), 0.0, 0.0, grid)[0]) == 0
+
+
+@pytest.mark.parametrize("element,metric", [("square", "linf"), ("triangle", "triangle")])
+def test_smith_fit_counts_match_a_pixel_count_by_point_in_polygon(element, metric):
+    # labels: a hand-made partition of a 40x30 raster into three vertical bands
+    labels = np.full((30, 40), -1, np.int32)
+    labels[:, 2:14], labels[:, 14:27], labels[:, 27:39] = 0, 1, 2
+    shape = tile_shape(square_problem(metric=metric), element)
+    centers = np.array([[8.3, 14.2], [20.1, 15.7], [33.0, 9.4]])
+    sizes = np.array([7.0, 9.5, 6.0])
+    angles = np.array([[0.0, 0.3, 0.7], [0.1, 0.5, 1.2], [-0.4, 0.25, 2.0]])
+    counts = smith2005.fit_counts(shape, labels, centers, sizes, angles)
+    for i in range(3):
+        for a in range(3):
+            poly = element_polygons(element, shape.aspect, centers[i], angles[i, a], sizes[i])[0]
+            truth = (_pixel_centres_inside(poly, 30, 40) & (labels == i)).sum()
+            assert counts[i, a] == truth, (i, a)
 
 
 def _random_state(seed, n=30, size=96):
