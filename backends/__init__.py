@@ -12,6 +12,7 @@ from __future__ import annotations
 import importlib
 
 from compact_distributions.cvt.errors import BackendUnavailable, InputError
+from compact_distributions.cvt.validate import one_of
 
 from .base import Backend
 
@@ -41,12 +42,11 @@ def variant_names() -> list[str]:
 
 def resolve(name: str, **options) -> tuple[str, dict]:
     """(registry name, options) of a backend or variant name plus explicit options."""
+    one_of(name, "backend", [*REGISTRY, *VARIANTS])
     if name in VARIANTS:
         base, preset = VARIANTS[name]
         return base, {**preset, **options}
-    if name in REGISTRY:
-        return name, options
-    raise InputError(f"unknown backend {name!r}; choose one of {', '.join(dict.fromkeys([*REGISTRY, *VARIANTS]))}")
+    return name, options
 
 
 def backend_class(name: str) -> type[Backend]:

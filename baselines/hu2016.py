@@ -62,7 +62,7 @@ from compact_distributions.cvt.lloyd import iterate
 from compact_distributions.cvt.placement import parse_gap
 from compact_distributions.cvt.problem import Grid, Problem
 from compact_distributions.cvt.seeding import initial_sites
-from compact_distributions.cvt.shapes import element_polygons, transform, unit_outline
+from compact_distributions.cvt.shapes import element_polygons
 
 from .common import (
     BUDGET_DELTA,
@@ -184,7 +184,7 @@ def combinatorial_step(shape, centers, angles, sizes, grid: Grid, moves: int | N
     live = np.flatnonzero(sizes > 0)
     geoms[live] = shapely.intersection(
         element_polygons(shape.name, shape.aspect, centers[live], angles[live], sizes[live]), region)
-    present = np.array([g is not None and not g.is_empty for g in geoms])
+    present = ~shapely.is_missing(geoms) & ~shapely.is_empty(geoms)
     tree_ids = np.flatnonzero(present)
     tree = shapely.STRtree(geoms[tree_ids])
 
@@ -208,7 +208,7 @@ def combinatorial_step(shape, centers, angles, sizes, grid: Grid, moves: int | N
         if size <= sizes[k] or size <= 0:
             continue
         new_poly = shapely.intersection(
-            shapely.polygons(_outline(shape, np.array([x, y]), ang, size)), region)
+            element_polygons(shape.name, shape.aspect, (x, y), ang, size)[0], region)
         delta = exclusive(new_poly, k) - exclusive(geoms[k] if present[k] else None, k)
         if delta <= 1e-9:
             continue
@@ -224,10 +224,6 @@ def combinatorial_step(shape, centers, angles, sizes, grid: Grid, moves: int | N
         info["accepted"] += 1
         info["gain"] += delta / area
     return centers, angles, sizes, info
-
-
-def _outline(shape, center, angle, size) -> np.ndarray:
-    return transform(unit_outline(shape.name, shape.aspect), center, angle, size)[0]
 
 
 def run(problem: Problem, backend=None, *, iterations: int = 20, progress=None,

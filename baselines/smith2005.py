@@ -50,9 +50,11 @@ COARSE_STEP = math.radians(6.0)
 FINE_STEPS = (math.radians(3.0), math.radians(1.5))
 
 
-def fit_counts(shape, labels: np.ndarray, centers, sizes, angles) -> np.ndarray:
-    """(N, A) number of pixels of each tile's own region covered by the tile centred at
-    ``centers`` and turned by each of ``angles`` (N, A)."""
+def region_ring(shape, labels: np.ndarray, centers, sizes):
+    """The region pixels whose inclusion in their own tile depends on its angle, and the
+    count of those inside at every angle: a pixel nearer than the tile's inradius is
+    inside at every angle, one beyond its circumradius outside at every angle (with a
+    margin far above rounding).  Returns (own, vx, vy, limit, base) for ``ring_counts``."""
     n = len(centers)
     w = labels.shape[1]
     flat = labels.ravel()
@@ -61,20 +63,29 @@ def fit_counts(shape, labels: np.ndarray, centers, sizes, angles) -> np.ndarray:
     vx = (pixels % w + 0.5) - centers[own, 0]
     vy = (pixels // w + 0.5) - centers[own, 1]
     limit = sizes[own]
-    # a pixel nearer than the tile's inradius is inside at every angle, one beyond its
-    # circumradius outside at every angle (with a margin far above rounding): only the
-    # ring between them is tested per angle
     dist = np.hypot(vx, vy)
     always = dist < limit * shape.ball.inradius * (1.0 - 1e-9)
     ring = ~always & (dist <= limit * shape.ball.circumradius * (1.0 + 1e-9))
     base = np.bincount(own[always], minlength=n)
-    own, vx, vy, limit = own[ring], vx[ring], vy[ring], limit[ring]
+    return own[ring], vx[ring], vy[ring], limit[ring], base
+
+
+def ring_counts(shape, ring, angles) -> np.ndarray:
+    """(N, A) pixels of each tile's own region covered by the tile turned by each of
+    ``angles`` (N, A), from its ``region_ring``."""
+    own, vx, vy, limit, base = ring
     counts = np.empty(angles.shape)
     for a in range(angles.shape[1]):
         c, s = np.cos(angles[:, a]), np.sin(angles[:, a])
         inside = shape.gauge_turned(vx, vy, c[own], s[own]) <= limit
-        counts[:, a] = base + np.bincount(own[inside], minlength=n)
+        counts[:, a] = base + np.bincount(own[inside], minlength=len(base))
     return counts
+
+
+def fit_counts(shape, labels: np.ndarray, centers, sizes, angles) -> np.ndarray:
+    """(N, A) number of pixels of each tile's own region covered by the tile centred at
+    ``centers`` and turned by each of ``angles`` (N, A)."""
+    return ring_counts(shape, region_ring(shape, labels, centers, sizes), angles)
 
 
 def best_fit_turn(shape):
@@ -90,9 +101,10 @@ def best_fit_turn(shape):
         k = int(np.floor(half / COARSE_STEP))
         offsets = np.arange(-k, k + 1) * COARSE_STEP
         best = angles.copy()
+        ring = region_ring(shape, labels, cl, sizes)  # the same pixels for every pass
         for step_offsets in [offsets] + [np.array([-s, 0.0, s]) for s in FINE_STEPS]:
             cand = best[:, None] + step_offsets[None, :]
-            counts = fit_counts(shape, labels, cl, sizes, cand)
+            counts = ring_counts(shape, ring, cand)
             # prefer the smaller turn among equal counts
             score = counts - 1e-6 * np.abs(cand - angles[:, None])
             best = cand[np.arange(len(best)), np.argmax(score, axis=1)]

@@ -10,7 +10,7 @@ backend (scipy's cKDTree + np.bincount, the common CPU tool; l2, l1 and linf onl
 an extra reference row.
 
 Full sweep: every backend variant (numpy, opencl, gl-cone, gl-exact, ckdtree) x N in
-{1000, 4000, 16000} x raster {512, 1024, 2048} x the six metrics, 1 warm-up + 5 timed
+{1000, 4000, 16000} x raster {512, 1024, 2048} x the six metrics, 1 warm-up + 3 timed
 iterations.  Quick: N in {1000, 4000} x raster {256, 512, 1024} x l2, linf and
 triangle, 1 + 3.
 
@@ -24,7 +24,6 @@ builds the same report from a pytest-benchmark ``--benchmark-json`` file instead
 from __future__ import annotations
 
 import argparse
-import os
 import sys
 import time
 from dataclasses import asdict, dataclass
@@ -285,13 +284,11 @@ def prepare(args) -> dict:
     too, before anything runs (``cvtbench reproduce`` checks all its parts this way)."""
     from compact_distributions.cvt.problem import MAX_SIDE
 
-    from .outputs import folder_problem
+    from .outputs import check_folder
     from .sweep import check_memory
 
-    out = Path(args.out) if args.out else (Path("reports/quick") if args.quick else Path("reports"))
-    _, problem = folder_problem(Path(os.path.realpath(out)), "--out", out)
-    if problem:
-        raise InputError(problem)
+    out = options.report_out(args)
+    check_folder(out)
     cfg = dict(QUICK if args.quick else FULL)
     cfg["metrics"] = name_list(args.metrics, "--metrics", METRIC_NAMES) or cfg["metrics"]
     cfg["sizes"] = _int_list(args.sizes, "--sizes", MAX_SIDE) or cfg["sizes"]

@@ -20,7 +20,6 @@ from __future__ import annotations
 import argparse
 import io
 import math
-import os
 import sys
 import time
 from dataclasses import dataclass
@@ -28,7 +27,6 @@ from pathlib import Path
 
 import numpy as np
 
-from compact_distributions.cvt.errors import InputError
 from compact_distributions.cvt.fields import DensityMap, DirectionField
 from compact_distributions.cvt.metrics import make_metric
 from compact_distributions.cvt.problem import Grid, Problem
@@ -222,12 +220,10 @@ FIGURES = {
 
 def prepare(args) -> dict:
     """The options and the output folder checked before anything is drawn."""
-    from .outputs import folder_problem
+    from .outputs import check_folder
 
     out = Path(args.out)
-    _, problem = folder_problem(Path(os.path.realpath(out)), "--out", out)
-    if problem:
-        raise InputError(problem)
+    check_folder(out)
     options.backend_choice(args)
     return {"out": out, "settings": QUICK if args.quick else FULL}
 

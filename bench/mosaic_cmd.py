@@ -319,20 +319,20 @@ def write_paper_figures(out_dir, backend, samples_dir=None, iterations: int = 20
     for a quick smoke test)."""
     from compact_distributions.cvt.mosaic import DEFAULT_ELEMENTS, make_mosaic, picture_array
 
-    from .outputs import atomic_path
+    from .figures_cmd import png_bytes
+    from .outputs import atomic_path, atomic_write
 
     samples_dir = Path(samples_dir or SAMPLES_DIR)
     out_dir = Path(out_dir)
     written = []
 
     def save(image, name, note, palette=False):
-        from PIL import Image
-
-        if palette:  # a noisy photograph beside its mosaics: 256 colours keep it < 300 KB
-            image = image.quantize(256, method=Image.Quantize.MEDIANCUT, dither=Image.Dither.NONE)
         path = out_dir / name
-        with atomic_path(path) as tmp:
-            image.save(tmp, format="PNG", optimize=True)
+        if palette:  # a noisy photograph beside its mosaics: 256 colours keep it < 300 KB
+            atomic_write(path, png_bytes(image, 256))
+        else:
+            with atomic_path(path) as tmp:
+                image.save(tmp, format="PNG", optimize=True)
         if not quiet:
             print(f"wrote {path}: {note}", file=sys.stderr)
         written.append(path)

@@ -9,6 +9,7 @@ from __future__ import annotations
 
 import sys
 import time
+from pathlib import Path
 
 from compact_distributions.backends import REGISTRY, VARIANTS, create_backend, resolve
 from compact_distributions.cvt.errors import InputError
@@ -111,6 +112,11 @@ def progress_printer(quiet: bool):
 
 
 # ------------------------------------------------------------------ sweeps
+def report_out(args) -> Path:
+    """A sweep's report folder: ``--out``, else reports (reports/quick with --quick)."""
+    return Path(args.out) if args.out else (Path("reports/quick") if args.quick else Path("reports"))
+
+
 def add_sweep_options(p, quick_help: str) -> None:
     p.add_argument("--quick", action="store_true", help=quick_help)
     p.add_argument("--force", action="store_true", help="re-run runs whose raw json exists")

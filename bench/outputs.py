@@ -190,6 +190,14 @@ def _why(exc: OSError) -> str:
     return exc.strerror or str(exc)
 
 
+def check_folder(path, option: str = "--out", shown=None) -> None:
+    """InputError naming ``option`` unless ``path`` can be used as an output folder (or
+    made: the nearest existing folder above it is writable)."""
+    _, problem = folder_problem(Path(os.path.realpath(path)), option, path if shown is None else shown)
+    if problem:
+        raise InputError(problem)
+
+
 def folder_problem(path: Path, option: str, shown) -> tuple[Path | None, str | None]:
     """(the nearest folder that exists at or above ``path``, None) or (None, why the
     folder ``path`` can be neither used nor made)."""
@@ -399,9 +407,7 @@ def report_folder(path, option: str = "--out", command: str | None = None):
         finally:
             _HELD[folder] -= 1
         return
-    _, problem = folder_problem(folder, option, shown)
-    if problem:
-        raise InputError(problem)
+    check_folder(folder, option, shown)
     lock = folder / LOCK_NAME
     try:
         folder.mkdir(parents=True, exist_ok=True)

@@ -76,7 +76,7 @@ def markdown_table(columns: list[str], rows: list[list]) -> str:
     return "\n".join(out) + "\n"
 
 
-def write_csv(path, frame, prov: dict | None = None) -> None:
+def write_csv(path, frame) -> None:
     """The frame as csv; provenance goes to the markdown and json, not into the csv, so
     the csv stays loadable by any reader."""
     atomic_write(path, frame.to_csv(index=False, float_format="%.6g"))

@@ -60,7 +60,7 @@ def run(args) -> int:
     from .outputs import command_line, report_folder
 
     chosen(args)  # bad cluster options fail before anything starts
-    out = Path(args.out) if args.out else (Path("reports/quick") if args.quick else Path("reports"))
+    out = options.report_out(args)
     # every part's options, its output folder and the memory of its runs are checked
     # before the first one starts
     options.seeds_value(args.seeds, 1)

@@ -34,10 +34,10 @@ DEFAULT_SIZE = "512"
 DEFAULT_SITES = 1000
 
 
-def add_problem_arguments(p: argparse.ArgumentParser, sites_default=DEFAULT_SITES) -> None:
+def add_problem_arguments(p: argparse.ArgumentParser) -> None:
     """The options that define a Problem."""
     options.add_shape_options(p)
-    p.add_argument("--sites", default=None, help=f"number of sites N (default {sites_default})")
+    p.add_argument("--sites", default=None, help=f"number of sites N (default {DEFAULT_SITES})")
     p.add_argument("--size", default=DEFAULT_SIZE, help=f"{options.SIZE_HELP} (default {DEFAULT_SIZE})")
     p.add_argument("--init", metavar="SITES.CSV", help="start from these sites (columns x,y in pixels)")
     p.add_argument("--density", metavar="IMAGE",
@@ -103,7 +103,7 @@ class ProblemOptions:
     field_name: str | None  # a named field's spec
 
 
-def parse_problem_options(args, sites_default=DEFAULT_SITES) -> ProblemOptions:
+def parse_problem_options(args) -> ProblemOptions:
     """Every problem option checked (the init CSV read, images not yet): InputError
     with a one-line message naming the option."""
     from compact_distributions.cvt.fields import FIELD_HELP, parse_field_spec
@@ -130,7 +130,7 @@ def parse_problem_options(args, sites_default=DEFAULT_SITES) -> ProblemOptions:
     init = read_sites_csv(args.init, max_sites=w * h) if args.init else None
     if init is not None and n is not None and len(init) != n:
         raise InputError(f"--sites {n} but init file {args.init} holds {len(init)} sites")
-    n = len(init) if init is not None else (sites_default if n is None else n)
+    n = len(init) if init is not None else (DEFAULT_SITES if n is None else n)
     return ProblemOptions(w, h, n, metric, seed, init, args.density, args.region, field_file, field_name)
 
 
@@ -149,11 +149,6 @@ def build_problem(opts: ProblemOptions) -> Problem:
     elif opts.field_name:
         field = DirectionField.named(opts.field_name, w, h, name="--field")
     return Problem(Grid(w, h, mask), opts.n_sites, opts.metric, density, field, opts.seed, opts.init)
-
-
-def problem_from_args(args, sites_default=DEFAULT_SITES) -> Problem:
-    """Build and validate the Problem; raises InputError with a one-line message."""
-    return build_problem(parse_problem_options(args, sites_default))
 
 
 def add_parser(sub):

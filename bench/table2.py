@@ -25,7 +25,6 @@ per method: seed 0, the top-left corner of the region with about 250 elements) a
 from __future__ import annotations
 
 import argparse
-import os
 import sys
 import time
 from pathlib import Path
@@ -36,7 +35,6 @@ from compact_distributions.backends import REFERENCE as REFERENCE_BACKEND
 from compact_distributions.backends import variant_metrics, variant_names, variant_status
 from compact_distributions.baselines import FIXED_SIZE as FIXED_SIZE_BASELINES
 from compact_distributions.baselines import method_names
-from compact_distributions.cvt.errors import InputError
 from compact_distributions.cvt.shapes import ELEMENT_SHAPES
 from compact_distributions.cvt.validate import name_list
 
@@ -388,10 +386,6 @@ def add_parser(sub):
     p.set_defaults(func=run)
 
 
-def default_out(args) -> Path:
-    return Path(args.out) if args.out else (Path("reports/quick") if args.quick else Path("reports"))
-
-
 def sweep_backends(text) -> tuple[list[str], dict[str, str]]:
     """The variants ``--backends`` names (default: every variant that computes every
     metric) and the reasons of those that cannot run here."""
@@ -410,13 +404,11 @@ def variant_backend(unavailable: dict) -> str:
 def prepare(args) -> dict:
     """Every option checked, the report folder and the memory of each run too, before
     anything runs (``cvtbench reproduce`` checks all its parts this way)."""
-    from .outputs import folder_problem
+    from .outputs import check_folder
     from .sweep import check_memory
 
-    out = default_out(args)
-    _, problem = folder_problem(Path(os.path.realpath(out)), "--out", out)
-    if problem:
-        raise InputError(problem)
+    out = options.report_out(args)
+    check_folder(out)
     cfg = QUICK if args.quick else FULL
     seeds = options.seeds_value(args.seeds, cfg["seeds"])
     all_methods = method_names()

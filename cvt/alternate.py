@@ -13,7 +13,7 @@ The choice needs cells that leave it open.  Cells of the triangle metric are sha
 the triangle at the site's own angle, so the per-cell choice alone flips almost nothing
 there (1.9 % of 4000 cells at 1024²; coverage after compaction 0.646 against 0.634).
 :func:`alternating_turns` gives half of the sites, at random, a turn of 180° for the
-whole Lloyd loop (``cvt.lloyd.lloyd(..., turns=)``): the cells then take the shape of
+whole Lloyd loop (through ``LloydSetup.of(problem, angles_at=...)``): the cells then take the shape of
 up and down triangles, and the per-cell choice and compaction follow them (measured at
 1024², N = 4000, seed 1: placement 0.618, after compaction 0.847).  Cells of a centrally
 symmetric metric (l2) leave the choice open by themselves (about half flip; 0.824).

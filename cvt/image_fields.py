@@ -72,6 +72,7 @@ from scipy import ndimage
 
 from .errors import InputError
 from .fields import DensityMap, DirectionField
+from .shapes import check_shape
 from .validate import real_number
 
 # rotation (radians) after which an element again has a side along the same line
@@ -170,8 +171,7 @@ def picture_fields(picture: np.ndarray, spacing: float, element: str = "square",
     pack tighter: measured +1.7 points of compacted coverage on a portrait against half a
     spacing, while the tiles still turn with every edge longer than their rows).  ``element`` picks the
     symmetry the field is smoothed in (:data:`SIDE_PERIOD`)."""
-    if element not in SIDE_PERIOD:
-        raise InputError(f"unknown element {element!r}; choose one of {', '.join(SIDE_PERIOD)}")
+    check_shape(element)
     contrast = real_number(contrast, "contrast", *CONTRAST_RANGE)
     chans = as_channels(picture)
     if not np.isfinite(chans).all():

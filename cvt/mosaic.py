@@ -153,8 +153,8 @@ def resolve_shapes(metric: str | None, element: str | None) -> tuple[str, str]:
     """(metric, element): either one implies the other; neither means square tiles."""
     if element is not None:
         check_shape(element)
-    if metric is not None and metric not in METRIC_NAMES:
-        raise InputError(f"unknown metric {metric!r}; choose one of {', '.join(METRIC_NAMES)}")
+    if metric is not None:
+        one_of(metric, "metric", METRIC_NAMES)
     if metric is None and element is None:
         element = "square"
     if metric is None:

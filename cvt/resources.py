@@ -158,11 +158,6 @@ def canvas_bytes(width: int, height: int, scale: float = 1.0, supersample: int =
     return 4.0 * big + 12.0 * small
 
 
-def picture_bytes(width: int, height: int, bands: int = 4) -> float:
-    """Decoding a picture of ``bands`` bytes per pixel, and one converted copy."""
-    return 2.0 * width * height * bands
-
-
 def run_estimate(width: int, height: int, n_sites: int, backend_class, *, element: str | None = None,
                  density: bool = False, field: bool = False, region: bool = False, placement: bool = True,
                  pictures: bool = True, what: str = "this run") -> Estimate:
@@ -205,4 +200,4 @@ def mosaic_estimate(width: int, height: int, n_elements: int, backend_class, *, 
 
 
 __all__ = ["mosaic_estimate", "Estimate", "ResourceError", "available_memory", "memory_limit", "run_estimate",
-           "placement_bytes", "canvas_bytes", "picture_bytes", "format_bytes", "PROGRAM"]
+           "placement_bytes", "canvas_bytes", "format_bytes", "PROGRAM"]

@@ -13,8 +13,8 @@ from __future__ import annotations
 import numpy as np
 import shapely
 
-from .errors import InputError
 from .metrics import ELEMENT_METRIC, Metric, make_metric
+from .validate import one_of
 
 ELEMENT_SHAPES = tuple(ELEMENT_METRIC)
 CURVE_SEGMENTS = 128  # inscribed 128-gon: area within 0.04 % of the ellipse
@@ -27,9 +27,7 @@ def unit_outline(shape: str, aspect: float = 0.5) -> np.ndarray:
 
 def check_shape(shape) -> str:
     """``shape`` if it names an element shape, else InputError naming it."""
-    if shape not in ELEMENT_SHAPES:
-        raise InputError(f"unknown element {shape!r}; choose one of {', '.join(ELEMENT_SHAPES)}")
-    return shape
+    return one_of(shape, "element", ELEMENT_SHAPES)
 
 
 def element_ball(shape: str, aspect: float | None = 0.5) -> Metric:

@@ -15,23 +15,14 @@ from PIL import Image
 
 from compact_distributions.backends import create_backend
 from compact_distributions.baselines import get_method
-from compact_distributions.bench.cli import main
 from compact_distributions.cvt.errors import InputError
 from compact_distributions.cvt.fields import DensityMap, DirectionField
 from compact_distributions.cvt.metrics import make_metric
 from compact_distributions.cvt.mosaic import make_mosaic
 from compact_distributions.cvt.problem import Grid, Problem
 
+from .cli_errors import one_error
 from .hostile import CLI
-
-
-def one_error(argv, capsys) -> str:
-    code = main([str(a) for a in argv])
-    err = capsys.readouterr().err
-    lines = err.strip().splitlines()
-    assert code == 2 and len(lines) == 1 and "Traceback" not in err, (code, err)
-    return lines[0]
-
 
 RUN_BAD = [
     (["--field", "constant:nan"], "--field 'constant:nan'"),
