@@ -66,6 +66,8 @@ def add_parser(sub):
     p.add_argument("--no-density", action="store_true", help="one element size everywhere (no density map)")
     p.add_argument("--no-edges", action="store_true",
                    help="strong edges are not walls (tiles may cross them)")
+    p.add_argument("--no-cut", action="store_true",
+                   help="keep every tile whole (by default the ours-compact tiles beside a wall are cut to fit it)")
     p.add_argument("--edge-threshold", default=None,
                    help=f"contrast of a strong edge in ΔE*ab (CIELAB; default {DEFAULT_EDGE_THRESHOLD:g}): "
                    "strong edges are walls, and the straddling measure counts tiles across them")
@@ -107,6 +109,7 @@ def mosaic_options(args) -> dict:
         method=get_method(args.method),
         method_options=options.method_options(args),
         edges=not args.no_edges,
+        cut=False if args.no_cut else None,
         edge_threshold=(DEFAULT_EDGE_THRESHOLD if args.edge_threshold is None
                         else real_number(args.edge_threshold, "--edge-threshold", above=0)),
         n_elements=whole_number(args.elements, "--elements", minimum=1),

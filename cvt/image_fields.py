@@ -89,12 +89,14 @@ FIELD_SMOOTHING = 1.5  # the field's Gaussian, in element spacings
 CONTRAST_RANGE = (1.0, 100.0)  # densest / sparsest cell area
 EDGE_FRACTION = 0.25  # edge pixels: tensor strength >= this share of its 99th percentile
 EDGE_FLOOR = 0.02  # ... and >= this many intensity units (0..1) per pixel: not just noise
-# A strong edge (a wall for the tiles): contrast >= this ΔE*ab.  A tile centred on a
-# step of this contrast takes the mean of both sides and differs from each by half of
-# it, 20 ΔE*ab: nearly ten times the just noticeable difference (2.3), a muddy tile
-# that stands out.  Lower thresholds wall in more of a picture (hair, folds): each
-# wall is grout, so coverage drops (measured in the README).
-DEFAULT_EDGE_THRESHOLD = 40.0
+# A strong edge (a wall for the tiles): contrast >= this ΔE*ab, about five times the
+# just noticeable difference (2.3).  A tile across a step of this contrast takes the
+# mean of both sides and differs from each by half of it.  Walls cost little coverage
+# since the tiles beside them are cut to fit (cvt.cutting), and more walls keep more
+# tiles off the picture's contours: on six photographs (2000 squares) the colour error
+# fell 5-13 % from a threshold of 40 to 11, while coverage stayed >= 0.82 (0.83-0.86
+# at 40, 0.827-0.858 at 11); at 10 the astronaut portrait fell to 0.820.
+DEFAULT_EDGE_THRESHOLD = 11.0
 EDGE_HYSTERESIS = 0.5  # an edge continues while its contrast >= this share of the threshold
 
 

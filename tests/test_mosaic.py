@@ -195,7 +195,11 @@ def test_cli_writes_svg_png_and_result(picture_file, tmp_path, capsys, element, 
     root = ET.parse(out / "mosaic.svg").getroot()
     elements = root.findall(f".//{SVG}{tag}")
     res = json.loads((out / "result.json").read_text())
-    assert len(elements) == res["placed"] == 150 - res["skipped"]
+    # whole ellipses are <ellipse>s; those cut to fit a wall are paths
+    cut = res["extra"].get("cut_tiles", 0)
+    assert len(elements) == res["placed"] - (cut if tag == "ellipse" else 0) == 150 - res["skipped"] - (
+        cut if tag == "ellipse" else 0)
+    assert len(root.findall(f".//{SVG}path")) + len(root.findall(f".//{SVG}ellipse")) == res["placed"]
     assert res["skipped"] <= 3
     assert root.find(f"{SVG}rect").get("fill") == "#101010"
     for key in ("backend", "device", "metric", "aspect", "size", "sites", "angles", "scales",

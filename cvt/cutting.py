@@ -1,0 +1,199 @@
+"""Tiles cut to fit along walls, as a mosaicist nips a tile to meet a contour.
+
+Compaction keeps every tile whole: a square facing a curved or slanted wall touches it
+at a corner and leaves a wedge of grout beside it.  Here each tile near a wall is grown
+about its centre (by ``enlarge``) and trimmed back to what is free: at least G/2 from the
+walls' centre lines and the picture's border, at least G from every other tile.  The
+trimmed tile always holds the whole tile it came from, so cutting only adds area, and it
+never moves another tile.
+
+Tiles that could reach one another once grown are cut in turns (a greedy colouring of
+the graph of grown tiles less than G apart): within one turn no two candidates can
+meet, so each turn is one vectorised pass of shapely over its tiles, and later turns see
+the earlier turns' cuts.  "At least G from" is kept by taking away the neighbours grown
+by G with mitred corners (never closer than G anywhere) plus a margin of ``_MARGIN`` for
+the rounding of shapely's overlay.
+
+A cut that would let a tile straddle a strong edge (its hull reaching round the end of
+a wall, :func:`cvt.evaluate.straddling_tiles`) is undone, and so is one where shapely
+gives up on the geometry: that tile stays whole.
+
+Measured on six photographs (2000 squares, default gap and edge threshold, OpenCL):
+cutting the tiles within one spacing of a wall, each within 1.8 times its size, raised
+coverage by 2-10 points (a portrait with many contours from 0.72 to 0.83) and took up
+to 1.8 s.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+import shapely
+
+from .compaction import wall_segments
+from .evaluate import straddling_tiles
+
+CUT_ENLARGE = 1.8  # a cut tile lies within its tile grown by this factor about its centre
+CUT_REACH = 1.0  # tiles this many element spacings or closer to a wall are cut to fit
+_MARGIN = 1e-3  # px kept beyond the gap
+
+
+def wall_lines(walls: np.ndarray):
+    """The centre lines of thin walls as shapely geometries: merged lines, plus a point
+    for each wall pixel that touches no other."""
+    segs = wall_segments(walls)
+    if len(segs) == 0:
+        return np.zeros(0, dtype=object)
+    # a wall that meets the picture's border is carried on to it: a cut tile, unlike a
+    # whole one, could otherwise bend round the wall's end in the half pixel left there
+    h, w = walls.shape
+    ends = []
+    for row, to_y in ((0, 0.0), (h - 1, float(h))):
+        x = np.flatnonzero(walls[row]) + 0.5
+        ends.append(np.stack([x, np.full_like(x, row + 0.5), x, np.full_like(x, to_y)], axis=1))
+    for col, to_x in ((0, 0.0), (w - 1, float(w))):
+        y = np.flatnonzero(walls[:, col]) + 0.5
+        ends.append(np.stack([np.full_like(y, col + 0.5), y, np.full_like(y, to_x), y], axis=1))
+    segs = np.concatenate([segs, *ends])
+    long = segs[:, 0] != segs[:, 2]
+    long |= segs[:, 1] != segs[:, 3]
+    parts = []
+    if long.any():
+        pieces = shapely.linestrings(segs[long].reshape(-1, 2, 2))
+        merged = shapely.line_merge(shapely.union_all(pieces))
+        parts.append(shapely.get_parts(merged))
+    if (~long).any():
+        parts.append(shapely.points(segs[~long, :2]))
+    return np.concatenate(parts)
+
+
+def _grown(polygons: np.ndarray, factor: float) -> np.ndarray:
+    """Each polygon scaled by ``factor`` about its centroid (vectorised)."""
+    centres = shapely.get_coordinates(shapely.centroid(polygons))
+    coords, index = shapely.get_coordinates(polygons, return_index=True)
+    out = shapely.set_coordinates(polygons.copy(), centres[index] + factor * (coords - centres[index]))
+    return out
+
+
+def _turns(pairs: np.ndarray, n: int) -> np.ndarray:
+    """A turn per node such that no pair shares one (greedy colouring, largest degree first)."""
+    turn = np.full(n, -1, dtype=np.int64)
+    if n == 0:
+        return turn
+    adjacency = [[] for _ in range(n)]
+    for a, b in pairs:
+        adjacency[a].append(b)
+        adjacency[b].append(a)
+    for v in sorted(range(n), key=lambda v: -len(adjacency[v])):
+        used = {turn[u] for u in adjacency[v]}
+        t = 0
+        while t in used:
+            t += 1
+        turn[v] = t
+    return turn
+
+
+def cut_to_walls(polygons, walls: np.ndarray, gap: float, spacing: float,
+                 enlarge: float = CUT_ENLARGE, reach: float = CUT_REACH) -> tuple[list, int]:
+    """``polygons`` (shapely, None where there is no tile; pairwise at least ``gap`` apart
+    and at least gap/2 from the walls' centre lines and the raster's border) with the
+    tiles within ``reach`` spacings of a wall cut to fit (module docstring).  ``walls``:
+    (H, W) bool thin walls.  Returns the new list and how many tiles grew."""
+    out = list(polygons)
+    h, w = walls.shape
+    lines = wall_lines(walls)
+    present = np.array([k for k, p in enumerate(out) if p is not None and not p.is_empty], dtype=np.int64)
+    if len(lines) == 0 or len(present) == 0:
+        return out, 0
+    geoms = np.array([out[k] for k in present], dtype=object)
+    line_tree = shapely.STRtree(lines)
+    near = np.unique(line_tree.query(geoms, predicate="dwithin", distance=reach * spacing)[0])
+    if len(near) == 0:
+        return out, 0
+    grown = _grown(geoms[near], enlarge)
+    # the margin also keeps a hair's width between tiles when the gap is 0 (shapely's
+    # overlay was measured up to 6e-5 px off without it)
+    full = gap + _MARGIN
+    half = 0.5 * gap + _MARGIN
+    # cut in turns: two tiles whose grown outlines come within the gap never share one
+    grown_tree = shapely.STRtree(grown)
+    a, b = grown_tree.query(grown, predicate="dwithin", distance=full)
+    turn = _turns(np.stack([a[a < b], b[a < b]], axis=1), len(near))
+    frame = shapely.box(0.5 * gap, 0.5 * gap, w - 0.5 * gap, h - 0.5 * gap)
+    geoms_all = np.array([p if p is not None else shapely.Polygon() for p in out], dtype=object)
+    padded = shapely.buffer(geoms_all, full, join_style="mitre")  # each tile's G-wide margin
+    tile_tree = shapely.STRtree(padded)
+    grew = 0
+    for t in range(turn.max() + 1):
+        members = np.flatnonzero(turn == t)
+        tiles = present[near[members]]
+        whole = np.array([out[k] for k in tiles], dtype=object)
+        cand = shapely.intersection(grown[members], frame)
+        # less the walls near each tile (their lines clipped to its box, grown by G/2)
+        li_t, li = line_tree.query(cand, predicate="dwithin", distance=half)
+        box = shapely.box(*(shapely.bounds(cand[li_t]) + np.array([-1, -1, 1, 1]) * 2 * half).T)
+        cand = _robust(shapely.difference, cand, _grouped_buffer(
+            shapely.intersection(lines[li], box), li_t, len(members), half))
+        # less each other tile near it grown by G: one vectorised difference per neighbour rank
+        ci, oi = tile_tree.query(cand, predicate="intersects")
+        other = oi != tiles[ci]
+        order = np.argsort(ci[other], kind="stable")
+        ci, oi = ci[other][order], oi[other][order]
+        rank = np.arange(len(ci)) - np.searchsorted(ci, ci)
+        for r in range(rank.max() + 1 if len(ci) else 0):
+            at = rank == r
+            cand[ci[at]] = _robust(shapely.difference, cand[ci[at]], padded[oi[at]])
+        cut = _robust(shapely.union, _piece_holding(cand, whole), whole)
+        bigger = shapely.area(cut) > shapely.area(whole) * (1 + 1e-9)
+        bigger &= shapely.get_type_id(cut) == 3  # one polygon (a failed step gives none)
+        keep = np.flatnonzero(bigger)
+        keep = keep[~straddling_tiles(list(cut[keep]), walls)]
+        for k, g in zip(tiles[keep], cut[keep], strict=True):
+            out[k] = g
+        if len(keep):  # a cut tile's margin grows with it
+            padded[tiles[keep]] = shapely.buffer(cut[keep], full, join_style="mitre")
+            tile_tree = shapely.STRtree(padded)
+        grew += len(keep)
+    return out, grew
+
+
+def _robust(operation, a: np.ndarray, b: np.ndarray) -> np.ndarray:
+    """``operation(a, b)`` element by element; where GEOS gives up on a pair (a topology
+    exception from nearly coincident edges) the result is an empty geometry, so that
+    tile stays whole."""
+    try:
+        return operation(a, b)
+    except shapely.errors.GEOSException:
+        out = np.empty(len(a), dtype=object)
+        for k in range(len(a)):
+            try:
+                out[k] = operation(a[k], b[k])
+            except shapely.errors.GEOSException:
+                out[k] = shapely.Polygon()
+        return out
+
+
+def _grouped_buffer(geoms: np.ndarray, group: np.ndarray, n: int, distance: float) -> np.ndarray:
+    """One geometry per group 0..n-1: the union of ``geoms`` of that group grown by
+    ``distance`` (mitred joins and square caps: never less than ``distance`` anywhere;
+    empty where a group has none)."""
+    out = np.array([shapely.Polygon()] * n, dtype=object)
+    if len(geoms) == 0:
+        return out
+    have, compact_group = np.unique(group, return_inverse=True)
+    order = np.argsort(compact_group, kind="stable")
+    collections = shapely.geometrycollections(geoms[order], indices=compact_group[order])
+    out[have] = shapely.buffer(collections, distance, join_style="mitre", cap_style="square")
+    return out
+
+
+def _piece_holding(cand: np.ndarray, whole: np.ndarray) -> np.ndarray:
+    """Of each candidate, the piece that shares most area with the whole tile."""
+    parts, index = shapely.get_parts(cand, return_index=True)
+    out = np.array([shapely.Polygon()] * len(cand), dtype=object)
+    if len(parts) == 0:
+        return out
+    shared = shapely.area(shapely.intersection(parts, whole[index]))
+    order = np.lexsort((shared, index))
+    last = np.append(index[order][1:] != index[order][:-1], True)
+    out[index[order[last]]] = parts[order[last]]
+    return out

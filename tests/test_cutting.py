@@ -1,0 +1,126 @@
+"""Tiles cut to fit along walls (cvt.cutting), checked with exact shapely geometry built
+here from the wall pixels, and the geometric-median fill against a numerical optimum."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+import shapely
+from scipy.optimize import minimize
+
+from compact_distributions.cvt.cutting import cut_to_walls
+from compact_distributions.cvt.mosaic import geometric_median
+
+W, H = 64, 48
+
+
+def staircase(slope=0.55, start=6.0):
+    """(H, W) bool: a 4-connected wall of pixels along y = start + slope·x, and its centre
+    line through the pixel centres in walking order (a shapely line)."""
+    walls = np.zeros((H, W), dtype=bool)
+    path = []
+    i = int(start)
+    for j in range(W):
+        target = int(start + slope * (j + 0.5))
+        while True:
+            if 0 <= i < H:
+                walls[i, j] = True
+                path.append((j + 0.5, i + 0.5))
+            if i >= min(target, H - 1):
+                break
+            i += 1
+    return walls, shapely.LineString(path)
+
+
+def lattice_beside(line, side, gap, turn=0.0):
+    """Squares of side ``side`` on a lattice, turned by ``turn`` radians, each kept whole
+    only where it is at least G/2 from ``line`` and the raster's border."""
+    frame = shapely.box(gap / 2, gap / 2, W - gap / 2, H - gap / 2)
+    c, s = np.cos(turn), np.sin(turn)
+    pitch = side * (abs(c) + abs(s)) + gap  # turned squares' boxes stay G apart
+    out = []
+    for y in np.arange(pitch / 2, H, pitch):
+        for x in np.arange(pitch / 2, W, pitch):
+            corners = np.array([[-1, -1], [1, -1], [1, 1], [-1, 1]]) * side / 2
+            xy = corners @ np.array([[c, s], [-s, c]]) + [x, y]
+            sq = shapely.Polygon(xy)
+            if frame.contains(sq) and sq.distance(line) >= max(gap / 2, 1e-6):
+                out.append(sq)
+    return out
+
+
+@pytest.mark.parametrize("gap,turn", [(0.6, 0.0), (0.6, 0.3), (0.0, 0.0)])
+def test_cut_tiles_keep_the_gap_the_walls_and_their_tiles(gap, turn):
+    walls, line = staircase()
+    tiles = lattice_beside(line, 5.0, gap, turn)
+    tiles.append(None)  # a site without a tile stays without one
+    out, grew = cut_to_walls(tiles, walls, gap, spacing=5.0 + gap)
+    assert out[-1] is None
+    assert grew > 0
+    assert len(out) == len(tiles)
+    cut = [p for p in out if p is not None]
+    for before, after in zip(tiles[:-1], cut, strict=True):
+        assert after.is_valid and after.geom_type == "Polygon"
+        assert after.buffer(1e-9).covers(before)  # cutting only adds
+    # every pair at least G apart (all pairs, brute force), none overlapping
+    for a in range(len(cut)):
+        for b in range(a + 1, len(cut)):
+            assert cut[a].distance(cut[b]) >= gap - 1e-9
+            assert cut[a].intersection(cut[b]).area == 0.0
+    # at least G/2 from the wall's centre line and the border, and no wall pixel centre
+    # inside a tile eroded by a pixel (no straddling)
+    frame = shapely.box(gap / 2, gap / 2, W - gap / 2, H - gap / 2)
+    i, j = np.nonzero(walls)
+    centres = shapely.points(j + 0.5, i + 0.5)
+    for p in cut:
+        assert p.distance(line) >= gap / 2 - 1e-9
+        assert frame.buffer(1e-9).covers(p)
+        assert not shapely.contains(p.convex_hull.buffer(-1.0, join_style="mitre"), centres).any()
+    # the wedges of grout along the slanted wall are filled: area gained on the tiles
+    # that touch the wall's neighbourhood
+    gained = sum(p.area for p in cut) - sum(p.area for p in tiles[:-1])
+    assert gained > 0.1 * line.length
+
+
+def test_far_tiles_and_no_walls_are_left_alone():
+    walls, line = staircase()
+    tiles = lattice_beside(line, 5.0, 0.6)
+    out, grew = cut_to_walls(tiles, np.zeros_like(walls), 0.6, spacing=5.6)
+    assert grew == 0 and all(a is b for a, b in zip(out, tiles, strict=True))
+    # reach 0: only tiles within 0 px of a wall's centre line would be cut: none are
+    out, grew = cut_to_walls(tiles, walls, 0.6, spacing=5.6, reach=0.0)
+    assert grew == 0
+
+
+def test_a_wall_that_meets_the_border_is_not_rounded():
+    """A vertical wall from the top border to the bottom one, tiles on both sides: no cut
+    tile reaches the other side round the wall's end, half a pixel from the border."""
+    walls = np.zeros((H, W), dtype=bool)
+    walls[:, 30] = True
+    line = shapely.LineString([(30.5, 0.0), (30.5, H)])
+    gap = 0.1  # the wall's pixel centres stop 0.5 px from the border: a strip of 0.4 px
+    tiles = lattice_beside(line, 4.0, gap, turn=0.2)
+    out, grew = cut_to_walls(tiles, walls, gap, spacing=4.4)
+    assert grew > 0
+    for before, after in zip(tiles, out, strict=True):
+        left = before.centroid.x < 30.5
+        xs = np.asarray(after.exterior.coords)[:, 0]
+        assert (xs <= 30.5 - gap / 2 + 1e-9).all() if left else (xs >= 30.5 + gap / 2 - 1e-9).all()
+
+
+def test_geometric_median_minimises_the_mean_distance():
+    rng = np.random.default_rng(4)
+    groups = np.repeat(np.arange(5), [1, 2, 7, 30, 200])
+    points = rng.normal(size=(len(groups), 3)) * [20, 5, 5] + rng.normal(size=(5, 3))[groups] * 30
+    means = np.stack([points[groups == g].mean(axis=0) for g in range(5)])
+    got = geometric_median(points, groups, means)
+    for g in range(5):
+        pts = points[groups == g]
+
+        def cost(m, pts=pts):
+            return np.sqrt(((pts - m) ** 2).sum(axis=1)).mean()
+
+        best = minimize(cost, means[g], method="Nelder-Mead",
+                        options={"xatol": 1e-8, "fatol": 1e-10, "maxiter": 20000}).fun
+        assert cost(got[g]) <= best + 1e-3
+        assert cost(got[g]) <= cost(means[g]) + 1e-12  # never worse than the mean
