@@ -131,7 +131,7 @@ def with_ratios(rows: list[dict]):
     for c in COLUMNS:
         if c not in df:
             df[c] = np.nan
-    df["host"] = df["host"].fillna("")
+    df["host"] = df["host"].astype(object).fillna("")  # an all-missing column comes as float
     ref = df[(df["backend"] == REFERENCE) & (df["status"] == "ok")]
     ref = ref.set_index(["metric", "n_sites", "size", "host"])["ms_median"]
     idx = list(zip(df["metric"], df["n_sites"], df["size"], df["host"], strict=True))
