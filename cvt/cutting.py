@@ -101,10 +101,11 @@ def cut_to_walls(polygons, walls: np.ndarray, gap: float, spacing: float,
     out = list(polygons)
     h, w = walls.shape
     lines = wall_lines(walls)
-    present = np.array([k for k, p in enumerate(out) if p is not None and not p.is_empty], dtype=np.int64)
+    geoms_all = np.array([shapely.Polygon() if p is None else p for p in out], dtype=object)
+    present = np.flatnonzero(~shapely.is_empty(geoms_all))
     if len(lines) == 0 or len(present) == 0:
         return out, 0
-    geoms = np.array([out[k] for k in present], dtype=object)
+    geoms = geoms_all[present]
     line_tree = shapely.STRtree(lines)
     near = np.unique(line_tree.query(geoms, predicate="dwithin", distance=reach * spacing)[0])
     if len(near) == 0:
@@ -119,7 +120,6 @@ def cut_to_walls(polygons, walls: np.ndarray, gap: float, spacing: float,
     a, b = grown_tree.query(grown, predicate="dwithin", distance=full)
     turn = _turns(np.stack([a[a < b], b[a < b]], axis=1), len(near))
     frame = shapely.box(0.5 * gap, 0.5 * gap, w - 0.5 * gap, h - 0.5 * gap)
-    geoms_all = np.array([p if p is not None else shapely.Polygon() for p in out], dtype=object)
     padded = shapely.buffer(geoms_all, full, join_style="mitre")  # each tile's G-wide margin
     tile_tree = shapely.STRtree(padded)
     grew = 0
