@@ -5,13 +5,21 @@ runtime (no OpenCL platform, no EGL) only matters to the user who asks for that 
 A *variant* is a backend with options under one name (``gl-cone``, ``gl-exact``): the
 vocabulary of ``--backend`` and of the reports.  A registry name alone is a variant with
 the backend's default options (``gl`` is ``gl-cone``).
+
+Other distributions add backends through the entry point group
+``compact_distributions.backends``: each entry point names a :class:`~.base.Backend`
+subclass and is treated exactly like the built-in ones (listed by ``cvtbench info``,
+offered by ``--backend``, run by the sweeps and the conformance tests); one that fails to
+load is listed as unavailable with its reason.
 """
 
 from __future__ import annotations
 
 import importlib
+from functools import lru_cache
 
 from compact_distributions.cvt.errors import BackendUnavailable, InputError
+from compact_distributions.cvt.registry import group_entry_points
 from compact_distributions.cvt.validate import one_of
 
 from .base import Backend
@@ -30,6 +38,22 @@ VARIANTS = {
     "gl-exact": ("gl", {"mode": "exact"}),
 }
 REFERENCE = "numpy"  # the oracle every other backend is tested against
+BACKEND_GROUP = "compact_distributions.backends"  # entry points of other distributions' backends
+BUILT_IN = tuple(REGISTRY)
+
+
+@lru_cache(maxsize=1)
+def _plugins() -> dict:
+    """Entry points of other distributions' backends, by name (built-in names win)."""
+    return {ep.name: ep for ep in group_entry_points(BACKEND_GROUP) if ep.name not in BUILT_IN}
+
+
+def _register_plugins() -> None:
+    for name, ep in _plugins().items():
+        REGISTRY.setdefault(name, ep.value)
+
+
+_register_plugins()
 
 
 def variant_names() -> list[str]:
@@ -51,6 +75,14 @@ def resolve(name: str, **options) -> tuple[str, dict]:
 
 def backend_class(name: str) -> type[Backend]:
     base, _ = resolve(name)
+    if base in _plugins():
+        try:
+            cls = _plugins()[base].load()
+        except Exception as exc:  # a broken plug-in is unavailable with its reason, never a crash
+            raise BackendUnavailable(f"backend {base!r} could not be loaded: {type(exc).__name__}: {exc}") from None
+        if not (isinstance(cls, type) and issubclass(cls, Backend)):
+            raise BackendUnavailable(f"backend {base!r}: its entry point names {cls!r}, not a Backend subclass")
+        return cls
     module, _, cls = REGISTRY[base].partition(":")
     try:
         mod = importlib.import_module(module)
@@ -99,5 +131,5 @@ def variant_status() -> dict[str, tuple[bool, str]]:
     return {v: probed[resolve(v)[0]] for v in variant_names()}
 
 
-__all__ = ["Backend", "BackendUnavailable", "REGISTRY", "VARIANTS", "REFERENCE", "create_backend",
+__all__ = ["Backend", "BackendUnavailable", "REGISTRY", "VARIANTS", "REFERENCE", "BUILT_IN", "create_backend",
            "probe_all", "variant_status", "variant_metrics", "variant_names", "backend_class", "resolve"]

@@ -49,7 +49,7 @@ import numpy as np
 from compact_distributions.cvt.distribution import Distribution
 from compact_distributions.cvt.problem import Problem
 
-from .common import BUDGET_DELTA, nearest_equivalent, run_fixed_tiles
+from .common import BUDGET_DELTA, baseline, nearest_equivalent, run_fixed_tiles
 
 
 def principal_axis_turn(problem: Problem, shape):
@@ -73,7 +73,10 @@ def run(problem: Problem, backend=None, *, iterations: int = 20, progress=None,
     turn = "field" if problem.field is not None else "principal axis of the region"
     return run_fixed_tiles("fritzsche2005", problem, iterations, progress, element, gap, delta,
                            principal_axis_turn, {
-                               "paper": "Fritzsche, Hellwig, Hiller, Deussen, Interactive design of "
-                                        "authentic looking mosaics using Voronoi structures, ISVD 2005",
+                               "paper": METHOD.paper,
                                "turn": turn})
 
+
+METHOD = baseline("fritzsche2005", run, paper="Fritzsche, Hellwig, Hiller, Deussen, Interactive design of authentic looking mosaics using Voronoi structures, ISVD 2005",
+                  year=2005, paper_table2=(0.648, '1 min'), fixed_size=True,
+                  summary="Lloyd's method extended from points to tiles (ISVD 2005)")

@@ -54,10 +54,11 @@ from scipy import ndimage
 from compact_distributions.cvt.distribution import Distribution
 from compact_distributions.cvt.lloyd import LloydSetup, final_labels, lloyd
 from compact_distributions.cvt.metrics import make_metric
+from compact_distributions.cvt.pixels import pixel_index
 from compact_distributions.cvt.placement import parse_gap
-from compact_distributions.cvt.problem import Grid, Problem, pixel_index
+from compact_distributions.cvt.problem import Grid, Problem
 
-from .common import BUDGET_DELTA, budget_size, make_elements, tile_shape
+from .common import BUDGET_DELTA, baseline, budget_size, make_elements, tile_shape
 
 # The L1 ball is a diamond, and Lloyd under L1 drives the cells towards copies of it: a
 # lattice of squares turned 45° from the metric's axes.  Turning the metric by the field
@@ -122,7 +123,7 @@ def run(problem: Problem, backend, *, iterations: int = 20, progress=None,
         energy=res.energy, seconds=res.seconds, setup_seconds=setup, total_seconds=total,
         empty=res.empty, empty_sites=res.empty_sites, labels=labels,
         extra={
-            "paper": "Hausner, Simulating decorative mosaics, SIGGRAPH 2001",
+            "paper": METHOD.paper,
             "element": shape.name,
             "delta": delta,
             "tile_size": size,
@@ -140,3 +141,7 @@ def _gap_factor(shape) -> float:
     """Size units per pixel of offset along an edge normal (1/inradius of the unit ball)."""
     return 1.0 / shape.ball.inradius
 
+
+METHOD = baseline("hausner2001", run, paper="Hausner, Simulating decorative mosaics, SIGGRAPH 2001",
+                  year=2001, paper_table2=None, fixed_size=True,
+                  summary="Lloyd under a turned Manhattan metric, equal squares centred at the sites (SIGGRAPH 2001)")

@@ -67,6 +67,7 @@ from compact_distributions.cvt.shapes import element_polygons
 from .common import (
     BUDGET_DELTA,
     Contours,
+    baseline,
     budget_size,
     cell_moments,
     make_elements,
@@ -270,8 +271,7 @@ def run(problem: Problem, backend=None, *, iterations: int = 20, progress=None,
         elements=elements, energy=log.energy, seconds=log.seconds, setup_seconds=setup,
         total_seconds=total, empty=log.empty, empty_sites=log.empty_sites, labels=labels,
         extra={
-            "paper": "Hu, Chen, Pan, Yu, Grinspun, Wang, Surface mosaic synthesis with "
-                     "irregular tiles, IEEE TVCG 22(3) 2016",
+            "paper": METHOD.paper,
             "element": shape.name,
             "delta": delta,
             "budget_tile_size": base,
@@ -285,3 +285,7 @@ def run(problem: Problem, backend=None, *, iterations: int = 20, progress=None,
         },
     )
 
+
+METHOD = baseline("hu2016", run, paper="Hu, Chen, Pan, Yu, Grinspun, Wang, Surface mosaic synthesis with irregular tiles, IEEE TVCG 22(3) 2016",
+                  year=2016, paper_table2=(0.843, '10 min'), fixed_size=False,
+                  summary="tiles grown and moved into the gaps (IEEE TVCG 2016)")

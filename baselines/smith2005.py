@@ -44,7 +44,7 @@ import numpy as np
 from compact_distributions.cvt.distribution import Distribution
 from compact_distributions.cvt.problem import Problem
 
-from .common import BUDGET_DELTA, run_fixed_tiles
+from .common import BUDGET_DELTA, baseline, run_fixed_tiles
 
 COARSE_STEP = math.radians(6.0)
 FINE_STEPS = (math.radians(3.0), math.radians(1.5))
@@ -119,6 +119,10 @@ def run(problem: Problem, backend=None, *, iterations: int = 20, progress=None,
     tiles' areas, which no point-metric backend computes)."""
     return run_fixed_tiles("smith2005", problem, iterations, progress, element, gap, delta,
                            lambda problem, shape: best_fit_turn(shape), {
-                               "paper": "Smith, Liu, Klein, Animosaics, SCA 2005",
+                               "paper": METHOD.paper,
                                "turn": "best fit: angle covering most of the tile's own region"})
 
+
+METHOD = baseline("smith2005", run, paper="Smith, Liu, Klein, Animosaics, SCA 2005",
+                  year=2005, paper_table2=(0.681, '1 min'), fixed_size=True,
+                  summary="tiles moved and turned to cover their own regions best (SCA 2005)")

@@ -18,7 +18,6 @@ reproducible.  Files are written atomically (temporary file, then a rename).
 from __future__ import annotations
 
 import argparse
-import io
 import math
 import sys
 import time
@@ -32,6 +31,7 @@ from compact_distributions.cvt.metrics import make_metric
 from compact_distributions.cvt.problem import Grid, Problem
 
 from . import options
+from .panels import panel_grid, png_bytes
 
 DEFAULT_OUT = "reports/figures"
 
@@ -92,55 +92,6 @@ def panel_problem(st: Settings, metric: str, *, density=None, field=None, mask=N
     return Problem(grid, n, make_metric(metric), density, fld, seed)
 
 
-# ------------------------------------------------------------------ drawing
-def _font(size: int):
-    """DejaVu Sans (shipped with matplotlib: it has β and ∞), else PIL's default."""
-    from PIL import ImageFont
-
-    try:
-        from matplotlib import font_manager
-
-        return ImageFont.truetype(font_manager.findfont("DejaVu Sans"), size)
-    except (ImportError, OSError, ValueError):
-        try:
-            return ImageFont.load_default(size=size)
-        except TypeError:  # Pillow < 10.1: a fixed bitmap font
-            return ImageFont.load_default()
-
-
-def grid_image(panels, captions, columns: int, title: str):
-    """Panels (PIL images of one size) in a grid, a caption under each, a title on top."""
-    from PIL import Image, ImageDraw
-
-    pw, ph = panels[0].size
-    pad, cap_h, title_h = 10, 24, 30
-    rows = math.ceil(len(panels) / columns)
-    w = columns * pw + (columns + 1) * pad
-    h = title_h + rows * (ph + cap_h + pad) + pad
-    img = Image.new("RGB", (w, h), (255, 255, 255))
-    draw = ImageDraw.Draw(img)
-    draw.text((pad, 7), title, fill=(0, 0, 0), font=_font(16))
-    font = _font(13)
-    for k, (panel, cap) in enumerate(zip(panels, captions, strict=True)):
-        r, c = divmod(k, columns)
-        x = pad + c * (pw + pad)
-        y = title_h + r * (ph + cap_h + pad)
-        img.paste(panel, (x, y))
-        draw.text((x, y + ph + 4), cap, fill=(0, 0, 0), font=font)
-    return img
-
-
-def png_bytes(img, colours: int = 128) -> bytes:
-    """PNG with an adaptive palette: the pictures are flat colours, so a palette keeps
-    them small (well under 300 KB) with no visible loss."""
-    from PIL import Image
-
-    buf = io.BytesIO()
-    img.quantize(colors=colours, method=Image.Quantize.MEDIANCUT, dither=Image.Dither.NONE).save(
-        buf, format="PNG", optimize=True)
-    return buf.getvalue()
-
-
 # ------------------------------------------------------------------ figures
 def _elements_panel(problem: Problem, backend, st: Settings, element=None):
     """Run ours, place the elements, return (picture, coverage, the distribution)."""
@@ -174,7 +125,7 @@ def figure_metrics(backend, st: Settings):
         caps.append(cap)
     title = (f"Figure 3: CVTs under the six metrics ({st.sites} sites, {st.iterations} "
              "Lloyd iterations, cells coloured, sites dark)")
-    return grid_image(panels, caps, 3, title)
+    return panel_grid(panels, caps, 3, title)
 
 
 def figure_elements(backend, st: Settings):
@@ -192,7 +143,7 @@ def figure_elements(backend, st: Settings):
         panels.append(img)
         caps.append(f"{cap}: coverage {ev.coverage:.1%}")
     title = f"Figure 14: compact distributions of elements ({st.sites} sites, {st.iterations} iterations)"
-    return grid_image(panels, caps, 3, title)
+    return panel_grid(panels, caps, 3, title)
 
 
 def figure_regions(backend, st: Settings):
@@ -208,7 +159,7 @@ def figure_regions(backend, st: Settings):
         img, ev, _ = _elements_panel(problem, backend, st)
         panels.append(img)
         caps.append(f"{cap}: {ev.coverage:.1%}")
-    return grid_image(panels, caps, 3, "Figure 15: elements in regions that are not rectangles")
+    return panel_grid(panels, caps, 3, "Figure 15: elements in regions that are not rectangles")
 
 
 FIGURES = {

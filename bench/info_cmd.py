@@ -1,4 +1,5 @@
-"""`cvtbench info`: the backends (available or not, and why), the methods and the versions."""
+"""`cvtbench info`: the backends (available or not, and why), the methods (with their
+options, and the plug-ins that could not be loaded, with why) and the versions."""
 
 from __future__ import annotations
 
@@ -10,7 +11,7 @@ def add_parser(sub):
 
 def run(args) -> int:
     from compact_distributions.backends import probe_all
-    from compact_distributions.baselines import method_names
+    from compact_distributions.cvt.registry import methods, unavailable_methods
 
     from .outputs import versions
 
@@ -18,7 +19,13 @@ def run(args) -> int:
     for name, ok, text in probe_all():
         state = "available  " if ok else "unavailable"
         print(f"  {name:<7} {state} {text}")
-    print("methods:", ", ".join(method_names()))
+    records = methods()
+    print("methods:", ", ".join(records))
+    for m in records.values():
+        opts = "".join(f" {o.flag}" for o in m.options)
+        print(f"  {m.name:<14} {m.role:<10} {m.summary}" + (f" (options:{opts})" if opts else ""))
+    for name, reason in unavailable_methods().items():
+        print(f"  {name:<14} unavailable {reason}")
     print("versions:")
     for k, v in versions().items():
         print(f"  {k}: {v}")

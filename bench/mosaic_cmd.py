@@ -34,6 +34,7 @@ from compact_distributions.cvt.errors import InputError
 from compact_distributions.cvt.validate import real_number, whole_number
 
 from . import options
+from .panels import panel_grid
 
 DEFAULT_OUT = "out/mosaic"
 
@@ -41,7 +42,6 @@ DEFAULT_OUT = "out/mosaic"
 # --compare WHAT: the make_mosaic option that the panels switch off and on
 COMPARE = {"field": "use_field", "density": "use_density", "edges": "edges", "method": "method"}
 COMPARE_METHODS = ("ours", "ours-compact", "hausner2001")
-COMPARE_FALLBACK = "ours-fit"  # stands in for a method of COMPARE_METHODS not registered here
 
 
 def add_parser(sub):
@@ -53,7 +53,7 @@ def add_parser(sub):
     p.add_argument("image", metavar="IMAGE", help="the picture: PNG, JPEG, ... (grey, RGB, RGBA, palette, 16-bit)")
     p.add_argument("--elements", default=str(DEFAULT_ELEMENTS),
                    help=f"number of elements N (default {DEFAULT_ELEMENTS})")
-    options.add_shape_options(p, metric_default=None)
+    options.add_shape_options(p)
     p.add_argument("--size", default=None,
                    help=f"{options.SIZE_HELP}; default the picture's size with the long side capped at 1024")
     options.add_backend_options(p)
@@ -107,7 +107,7 @@ def mosaic_options(args) -> dict:
 
     return dict(
         method=get_method(args.method),
-        method_options=options.method_options(args),
+        method_options=options.method_options(args, args.method),
         edges=not args.no_edges,
         cut=False if args.no_cut else None,
         edge_threshold=(DEFAULT_EDGE_THRESHOLD if args.edge_threshold is None
@@ -143,7 +143,8 @@ def mosaic_result_json(args, m, backend) -> dict:
                "field": "picture" if m.problem.field is not None else None,
                "region": "picture less its strong edges" if m.walls else None}
     return build_result("mosaic", m.problem, m.to_distribution(), ev, backend, element=m.element, gap=m.gap,
-                        command=command_line(getattr(args, "argv", None)), sources=sources, image=m.source,
+                        command=command_line(getattr(args, "argv", None)), sources=sources,
+                        method_options=m.method_options, image=m.source,
                         colours=[hex_colour(c) for c in m.colours], grout=hex_colour(m.grout),
                         contrast=m.contrast,
                         colour_error=m.colour_error if np.isfinite(m.colour_error) else None, straddling=m.straddling,
@@ -213,29 +214,6 @@ def run(args) -> int:
 
 # ----------------------------------------------------------------- figures 18-19
 
-def side_by_side(panels, captions, scale: float = 1.0):
-    """PIL images side by side, each under its caption (one or two lines)."""
-    from PIL import Image, ImageDraw, ImageFont
-
-    if scale != 1.0:
-        panels = [p.resize((round(p.width * scale), round(p.height * scale)), Image.Resampling.LANCZOS)
-                  for p in panels]
-    pad, line = 8, 20
-    caption = line * max(len(c.splitlines()) for c in captions) + 6
-    w, h = panels[0].width, panels[0].height
-    canvas = Image.new("RGB", (len(panels) * (w + pad) + pad, h + caption + 2 * pad), "white")
-    draw = ImageDraw.Draw(canvas)
-    try:
-        font = ImageFont.load_default(size=16)
-    except TypeError:  # Pillow < 10.1: fixed-size bitmap font
-        font = ImageFont.load_default()
-    for k, (panel, text) in enumerate(zip(panels, captions, strict=True)):
-        x = pad + k * (w + pad)
-        canvas.paste(panel, (x, pad + caption))
-        draw.multiline_text((x, pad), text, fill=(20, 20, 20), font=font, spacing=4)
-    return canvas
-
-
 def measures_line(m) -> str:
     # plain ASCII: the default bitmap font has no Δ
     return (f"coverage {m.coverage:.3f}, colour error {m.colour_error:.1f} dE,\n"
@@ -251,26 +229,20 @@ def comparison_figure(picture: np.ndarray, without, with_, what: str, scale: flo
              "edges": ("edges not walls (--no-edges)", "strong edges as walls")}[what]
     panels = [Image.fromarray(np.round(picture * 255).astype(np.uint8), "RGB"), without.render(), with_.render()]
     captions = ["original\n", f"{names[0]}\n{measures_line(without)}", f"{names[1]}\n{measures_line(with_)}"]
-    return side_by_side(panels, captions, scale)
+    return panel_grid(panels, captions, scale=scale)
 
 
 def compare_methods(picture, backend, opts: dict, done=None):
-    """Mosaics of ``picture`` by each method of COMPARE_METHODS (one not registered is
-    replaced by COMPARE_FALLBACK, and its caption says so): a list of (caption, mosaic)."""
-    from compact_distributions.baselines import get_method, method_names
+    """Mosaics of ``picture`` by each method of COMPARE_METHODS: a list of (caption, mosaic)."""
     from compact_distributions.cvt.mosaic import make_mosaic
 
     out = []
     for name in COMPARE_METHODS:
-        caption = name
-        if name not in method_names():
-            caption = f"{name} not built yet: {COMPARE_FALLBACK}"
-            name = COMPARE_FALLBACK
         if done is not None and done.method == name:
             m = done
-        else:
-            m = make_mosaic(picture, backend, **dict(opts, method=get_method(name)))
-        out.append((caption, m))
+        else:  # the options given on the command line belong to the method they were given for
+            m = make_mosaic(picture, backend, **dict(opts, method=name, method_options=None))
+        out.append((name, m))
     return out
 
 
@@ -288,7 +260,7 @@ def compare_figure(picture, backend, opts: dict, what: str, done=None):
         panels = [Image.fromarray(np.round(first.picture * 255).astype(np.uint8), "RGB")]
         panels += [m.render() for _, m in runs]
         captions = ["original\n"] + [f"{c}\n{measures_line(m)}" for c, m in runs]
-        return side_by_side(panels, captions)
+        return panel_grid(panels, captions)
     key = COMPARE[what]
     on = bool(opts.get(key, True))
     with_ = done if done is not None and on else make_mosaic(picture, backend, **dict(opts, **{key: True}))
@@ -322,8 +294,8 @@ def write_paper_figures(out_dir, backend, samples_dir=None, iterations: int = 20
     for a quick smoke test)."""
     from compact_distributions.cvt.mosaic import DEFAULT_ELEMENTS, make_mosaic, picture_array
 
-    from .figures_cmd import png_bytes
     from .outputs import atomic_path, atomic_write
+    from .panels import png_bytes
 
     samples_dir = Path(samples_dir or SAMPLES_DIR)
     out_dir = Path(out_dir)

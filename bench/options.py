@@ -13,7 +13,7 @@ from pathlib import Path
 
 from compact_distributions.backends import REGISTRY, VARIANTS, create_backend, resolve
 from compact_distributions.cvt.errors import InputError
-from compact_distributions.cvt.metrics import METRIC_NAMES
+from compact_distributions.cvt.metrics import ELEMENT_METRIC, METRIC_NAMES
 from compact_distributions.cvt.shapes import ELEMENT_SHAPES
 from compact_distributions.cvt.validate import whole_number
 
@@ -56,31 +56,61 @@ def open_backend(args):
     return create_backend(name, **options)
 
 
-def add_shape_options(p, metric_default: str | None = "l2") -> None:
-    default = metric_default or "the element's own; neither given: squares"
-    p.add_argument("--metric", default=metric_default,
-                   help=f"Lloyd distance: {', '.join(METRIC_NAMES)} (default {default})")
+def add_shape_options(p, default_element: str = "square") -> None:
+    """``--metric``, ``--element`` (either implies the other; neither: ``default_element``)
+    and ``--aspect``."""
+    p.add_argument("--metric", default=None,
+                   help=f"Lloyd distance: {', '.join(METRIC_NAMES)} (default: the element's own; neither "
+                   f"given: {ELEMENT_METRIC[default_element]})")
     p.add_argument("--element", metavar="SHAPE", default=None,
-                   help=f"element placed in each cell: {', '.join(ELEMENT_SHAPES)} (default: the metric's own)")
+                   help=f"element placed in each cell: {', '.join(ELEMENT_SHAPES)} (default: the metric's own; "
+                   f"neither given: {default_element}s)")
     p.add_argument("--aspect", default=None, help="β of rectangles and ellipses and of the axial metrics "
                    "(default 0.5); > 0")
 
 
-def add_method_option(p, default: str = "ours") -> None:
-    p.add_argument("--method", default=default, help=f"ours, ours-fit, ours-compact, or a baseline: "
-                   f"hausner2001, fritzsche2005, smith2005, hu2016 (cvtbench info lists them; default {default})")
-    p.add_argument("--alternate", action="store_true",
-                   help="with --method ours-compact and triangles: each triangle points either way (its "
-                   "angle or the angle + 180°), whichever fits larger in its cell")
+def add_method_option(p, default: str = "ours", several: bool = False) -> None:
+    """``--method`` (or, with ``several``, nothing: the sweeps have ``--methods``) and one
+    option per distinct option that a registered method declares, with its help; which
+    method takes it is checked by :func:`method_options`."""
+    from compact_distributions.cvt.registry import methods
+
+    records = methods()
+    if not several:
+        p.add_argument("--method", default=default, help="; ".join(
+            f"{m.name}: {m.summary}" if m.summary else m.name for m in records.values())
+            + f" (cvtbench info lists them; default {default})")
+    seen = {}
+    for m in records.values():
+        for opt in m.options:
+            if opt.name in seen:
+                seen[opt.name].append(m.name)
+                continue
+            seen[opt.name] = [m.name]
+            dest = f"method_option_{opt.name}"
+            if opt.kind is bool:
+                p.add_argument(opt.flag, dest=dest, action="store_true", default=None, help=opt.help)
+            else:
+                p.add_argument(opt.flag, dest=dest, default=None, metavar=opt.name.upper(), help=opt.help)
+    for action in p._actions:  # say which methods take each option
+        name = (action.dest or "").removeprefix("method_option_")
+        if action.dest.startswith("method_option_") and name in seen:
+            action.help = f"{action.help} [--method {' / '.join(seen[name])}]"
 
 
-def method_options(args) -> dict:
-    """The method's own keywords from the command line (checked against --method)."""
-    if not args.alternate:
-        return {}
-    if args.method != "ours-compact":
-        raise InputError(f"--alternate is an option of --method ours-compact, not of {args.method!r}")
-    return {"alternate": True}
+def given_method_options(args) -> dict:
+    """The method options set on the command line, by option name (unset ones left out)."""
+    return {k.removeprefix("method_option_"): v for k, v in vars(args).items()
+            if k.startswith("method_option_") and v is not None}
+
+
+def method_options(args, method=None) -> dict:
+    """The method's own keywords from the command line, checked against ``method`` (the
+    record, default ``--method``'s): an option it does not declare is refused."""
+    from compact_distributions.cvt.registry import get_method
+
+    method = get_method(args.method if method is None else method)
+    return method.parse_options(given_method_options(args), flags=True)
 
 
 def add_run_options(p, iterations: int = 20, seed_help: str = "random seed (default 0)") -> None:

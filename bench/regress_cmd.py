@@ -116,12 +116,16 @@ def merge(baseline: dict, current: dict) -> dict:
 
 
 def coverage_specs(cfg: dict, methods: list[str], backends: list[str]):
+    """The coverage runs: a method swept over every backend (its record says so) on every
+    backend and element of the set, each other method on squares on the reference."""
+    from compact_distributions.cvt.registry import get_method
+
     from .runs import RunSpec
 
     specs = []
     for element in cfg["elements"]:
         for method in methods:
-            if method == "ours":
+            if get_method(method).sweep_backends == "every":
                 for b in backends:
                     specs += [RunSpec("regress", method, b, element, cfg["size"], cfg["size"], cfg["n_sites"],
                                       cfg["iterations"], s) for s in cfg["seeds"]]

@@ -23,10 +23,12 @@ def schema() -> dict:
 
 
 def build_result(kind: str, problem, dist, evaluation, backend, *, element: str, gap: float,
-                 command: str, sources: dict | None = None, **fields) -> dict:
+                 command: str, sources: dict | None = None, method_options: dict | None = None,
+                 **fields) -> dict:
     """The result.json record of one run: the problem, the method's Distribution, the
     evaluation (coverage, overlap, ...) of its elements, the backend that ran it, plus
-    the command's own ``fields`` (a mosaic's image, colours, ...)."""
+    the command's own ``fields`` (a mosaic's image, colours, ...); ``method_options`` are
+    the method's own options as the user set them."""
     from .outputs import machine, versions
 
     g = problem.grid
@@ -34,6 +36,7 @@ def build_result(kind: str, problem, dist, evaluation, backend, *, element: str,
     record = {
         "kind": kind,
         "method": dist.method,
+        "method_options": dict(method_options or {}),
         "backend": backend.variant,
         "device": backend.device(),
         "metric": problem.metric.name,

@@ -24,19 +24,21 @@ import numpy as np
 
 from compact_distributions.cvt.errors import InputError
 from compact_distributions.cvt.fields import DensityMap, DirectionField, angles_from_grey
-from compact_distributions.cvt.metrics import METRIC_NAMES, Metric, make_metric
+from compact_distributions.cvt.metrics import Metric, make_metric
 from compact_distributions.cvt.problem import Grid, Problem, parse_size
-from compact_distributions.cvt.validate import one_of, whole_number
+from compact_distributions.cvt.shapes import resolve_shapes
+from compact_distributions.cvt.validate import whole_number
 
 from . import options
 
 DEFAULT_SIZE = "512"
 DEFAULT_SITES = 1000
+DEFAULT_ELEMENT = "circle"  # with the l2 metric: the paper's plain Voronoi cells
 
 
 def add_problem_arguments(p: argparse.ArgumentParser) -> None:
     """The options that define a Problem."""
-    options.add_shape_options(p)
+    options.add_shape_options(p, default_element=DEFAULT_ELEMENT)
     p.add_argument("--sites", default=None, help=f"number of sites N (default {DEFAULT_SITES})")
     p.add_argument("--size", default=DEFAULT_SIZE, help=f"{options.SIZE_HELP} (default {DEFAULT_SIZE})")
     p.add_argument("--init", metavar="SITES.CSV", help="start from these sites (columns x,y in pixels)")
@@ -95,6 +97,7 @@ class ProblemOptions:
     height: int
     n_sites: int
     metric: Metric
+    element: str
     seed: int
     init: np.ndarray | None
     density: str | None  # image paths
@@ -111,7 +114,8 @@ def parse_problem_options(args) -> ProblemOptions:
     from compact_distributions.cvt.problem import MAX_SEED
 
     w, h = parse_size(args.size, "--size")
-    metric = make_metric(one_of(args.metric, "--metric", METRIC_NAMES), args.aspect, option="--aspect")
+    metric_name, element = resolve_shapes(args.metric, args.element, DEFAULT_ELEMENT, ("--metric", "--element"))
+    metric = make_metric(metric_name, args.aspect, option="--aspect")
     n = None if args.sites is None else whole_number(args.sites, "--sites", minimum=1, maximum=w * h)
     seed = whole_number(args.seed, "--seed", minimum=0, maximum=MAX_SEED)
     field_file = field_name = None
@@ -131,7 +135,7 @@ def parse_problem_options(args) -> ProblemOptions:
     if init is not None and n is not None and len(init) != n:
         raise InputError(f"--sites {n} but init file {args.init} holds {len(init)} sites")
     n = len(init) if init is not None else (DEFAULT_SITES if n is None else n)
-    return ProblemOptions(w, h, n, metric, seed, init, args.density, args.region, field_file, field_name)
+    return ProblemOptions(w, h, n, metric, element, seed, init, args.density, args.region, field_file, field_name)
 
 
 def build_problem(opts: ProblemOptions) -> Problem:
@@ -173,18 +177,17 @@ def run(args) -> int:
     from compact_distributions.cvt.placement import parse_gap
     from compact_distributions.cvt.render import PAPER, cells_image, draw_elements, svg_lines
     from compact_distributions.cvt.resources import run_estimate
-    from compact_distributions.cvt.shapes import check_shape
 
     from .outputs import COMMAND_OUTPUTS, OutputFolder, command_line, write_json, write_lines, write_sites_csv
     from .results import build_result
 
     # every option is checked, and the memory it asks for, before anything is computed
     iterations = whole_number(args.iterations, "--iterations", minimum=0, maximum=MAX_ITERATIONS)
-    element = None if args.element is None else check_shape(args.element)
     gap = parse_gap(args.gap, "--gap")
     method = get_method(args.method)
-    extra = options.method_options(args)
+    extra = options.method_options(args, method)
     opts = parse_problem_options(args)
+    element = opts.element
     backend_name, _ = options.backend_choice(args)
     run_estimate(opts.width, opts.height, opts.n_sites, backend_class(backend_name), element=element,
                  density=bool(opts.density), field=bool(opts.field_file), region=bool(opts.region)).check(
@@ -198,7 +201,7 @@ def run(args) -> int:
             ev = evaluate(dist.elements, problem.grid, region=region, labels=dist.labels)
             sources = {k: getattr(args, k) for k in ("init", "density", "field", "region")}
             result = build_result("run", problem, dist, ev, backend, element=dist.extra["element"], gap=gap,
-                                  command=command_line(args.argv), sources=sources)
+                                  command=command_line(args.argv), sources=sources, method_options=extra)
         g = problem.grid
         write_json(tmp / "result.json", result)
         write_sites_csv(tmp / "sites.csv", dist.sites, dist.angles, dist.scales)

@@ -34,28 +34,38 @@ class RunSpec:
     aspect: float = DEFAULT_ASPECT
     gap: float = 0.0
     picture: bool = False  # also keep an effect picture beside the raw json
-    delta: float | None = None  # tile budget δ of a fixed-size baseline (None: its default)
-    alternate: bool = False  # ours-compact: triangles that point either way
+    # the method's own options, as (name, value) pairs in any order (those of its record;
+    # a mapping is accepted and frozen)
+    options: tuple = ()
     curve: bool = False  # also measure the coverage-overlap curve (elements scaled)
+
+    def __post_init__(self):
+        opts = self.options.items() if isinstance(self.options, dict) else self.options
+        object.__setattr__(self, "options", tuple(sorted((str(k), v) for k, v in opts)))
 
     @property
     def metric(self) -> str:
         return ELEMENT_METRIC[self.element]
 
     @property
+    def method_record(self):
+        from compact_distributions.cvt.registry import get_method
+
+        return get_method(self.method)
+
+    @property
     def key(self) -> str:
+        """The name of the run's raw json: the problem, then the options its method's
+        record names (in the record's order)."""
         gap = f"__gap{self.gap:g}" if self.gap else ""
-        delta = f"__d{self.delta:g}" if self.delta is not None else ""
-        alternate = "__alt" if self.alternate else ""
         return (f"{self.method}__{self.backend}__{self.element}__{self.width}x{self.height}"
-                f"__n{self.n_sites}__it{self.iterations}__s{self.seed}{gap}{delta}{alternate}")
+                f"__n{self.n_sites}__it{self.iterations}__s{self.seed}{gap}"
+                f"{self.method_record.key(dict(self.options))}")
 
     @property
     def label(self) -> str:
-        """The method as reports name it: with its tile budget or its option where set."""
-        if self.delta is not None:
-            return f"{self.method} δ={self.delta:g}"
-        return f"{self.method} alternate" if self.alternate else self.method
+        """The method as reports name it: with its options where set (its record's labels)."""
+        return self.method_record.label(dict(self.options))
 
     def describe(self) -> str:
         return (f"{self.method}/{self.backend} {self.element} {self.width}x{self.height} "
@@ -65,7 +75,7 @@ class RunSpec:
         d = asdict(self)
         d.pop("picture")
         d.pop("curve")
-        return {**d, "metric": self.metric, "label": self.label}
+        return {**d, "options": dict(self.options), "metric": self.metric, "label": self.label}
 
     def memory_estimate(self):
         from compact_distributions.cvt.resources import run_estimate
@@ -87,16 +97,13 @@ class RunSpec:
         """Run the spec on ``backend``; the record keeps the final sites for seed 0 only
         (a json of 4000 sites is ~60 kB, and the digest already tells whether two runs
         agree)."""
-        from compact_distributions.baselines import get_method
         from compact_distributions.cvt.evaluate import coverage_at_overlap, coverage_overlap_curve, evaluate
 
         from .outputs import machine, versions
 
         problem = self.problem()
-        method = get_method(self.method)
-        options = {} if self.delta is None else {"delta": self.delta}
-        if self.alternate:
-            options["alternate"] = True
+        method = self.method_record
+        options = method.parse_options(dict(self.options))
         t0 = time.perf_counter()
         dist = method(problem, backend, iterations=self.iterations, element=self.element, gap=self.gap, **options)
         wall = time.perf_counter() - t0

@@ -33,29 +33,15 @@ import numpy as np
 
 from compact_distributions.backends import REFERENCE as REFERENCE_BACKEND
 from compact_distributions.backends import variant_metrics, variant_names, variant_status
-from compact_distributions.baselines import FIXED_SIZE as FIXED_SIZE_BASELINES
-from compact_distributions.baselines import method_names
+from compact_distributions.cvt.errors import InputError
+from compact_distributions.cvt.registry import get_method, method_names
 from compact_distributions.cvt.shapes import ELEMENT_SHAPES
 from compact_distributions.cvt.validate import name_list
 
 from . import options
 from .runs import RunSpec
 
-# the paper's Table 2 (coverage, time), by our method names
-PAPER = {
-    "fritzsche2005": (0.648, "1 min"),
-    "smith2005": (0.681, "1 min"),
-    "hu2016": (0.843, "10 min"),
-    "ours": (0.856, "19 s"),
-    "ours-fit": (0.856, "19 s"),  # ours with the element moved inside its cell (paper §3.4)
-    "ours-compact": (0.856, "19 s"),  # ours, fitted, then compacted (beyond the paper)
-}
 ELEMENTS = list(ELEMENT_SHAPES)
-
-# Fixed-size tile baselines also run with smaller tile budgets: their coverage at the
-# default δ = 0.95 is bought with overlap, and the paper states neither its tile sizes
-# nor how it counts overlap, so the report shows where they stand when tiles barely overlap.
-SMALLER_BUDGETS = (0.85, 0.80)
 
 FULL = {"size": 1024, "n_sites": 4000, "iterations": 20, "seeds": 5}
 QUICK = {"size": 256, "n_sites": 250, "iterations": 20, "seeds": 2}
@@ -67,42 +53,45 @@ COLUMNS = ["method", "backend", "element", "metric", "width", "height", "n_sites
 
 
 def problem_set(quick: bool, seeds: int | None, methods: list[str], backends: list[str],
-                elements: list[str] | None = None, variant_backend: str = REFERENCE_BACKEND) -> list[RunSpec]:
-    """The runs of Table 2 (see the module docstring); ``backends`` are the variants
-    to run ours on (available or not: unavailable ones become skipped rows), and
-    ``variant_backend`` the one the variants of ours run on.  Seed 0 of every method's
-    first row group also measures the coverage-overlap curve (each point is a full
-    evaluation of 4000 elements: all seeds would double the sweep's time)."""
+                elements: list[str] | None = None, variant_backend: str = REFERENCE_BACKEND,
+                method_options: dict | None = None) -> list[RunSpec]:
+    """The runs of Table 2 (see the module docstring), as each method's record asks:
+    on the shapes it is compared on, on every variant of ``backends`` (available or not:
+    unavailable ones become skipped rows), on ``variant_backend`` (the fastest) or on the
+    reference, and again with each of its sweep variants.  ``method_options`` (name ->
+    value, as given on the command line) go to every method that declares them.  Seed 0
+    of each row group also measures the coverage-overlap curve."""
     cfg = QUICK if quick else FULL
     k = cfg["seeds"] if seeds is None else seeds
     suite = "table2-quick" if quick else "table2"
     elements = elements or ELEMENTS
     specs = []
 
-    def add(method, backend, element, picture_first, delta=None, alternate=False, curve=True):
+    def add(method, backend, element, picture_first, options, curve=True):
         for s in range(k):
             specs.append(RunSpec(suite, method, backend, element, cfg["size"], cfg["size"],
                                  cfg["n_sites"], cfg["iterations"], s, picture=picture_first and s == 0,
-                                 delta=delta, alternate=alternate, curve=curve and s == 0))
+                                 options=options, curve=curve and s == 0))
 
+    records = [get_method(m) for m in methods]
     for element in elements:
-        for method in methods:
-            if method == "ours":
+        for rec in records:
+            if (rec.compared_on is not None and element not in rec.compared_on) or \
+                    (rec.elements is not None and element not in rec.elements):
+                continue
+            given = rec.parse_options({k: v for k, v in (method_options or {}).items() if rec.option(k)},
+                                      flags=True)
+            if rec.sweep_backends == "every":
                 for b in backends:
                     first = b == backends[0]
-                    add(method, b, element, picture_first=first, curve=first)
-            elif method.startswith("ours"):
-                # variants of ours (another placement of the same cells) get every element
-                add(method, variant_backend, element, picture_first=True)
-                if method == "ours-compact" and element == "triangle":
-                    add(method, variant_backend, element, picture_first=True, alternate=True)
-            elif element == "square":  # baselines: the paper's comparison is on squares
-                add(method, REFERENCE_BACKEND, element, picture_first=True)
-    if "square" in elements:
-        for method in methods:
-            if method in FIXED_SIZE_BASELINES:
-                for delta in SMALLER_BUDGETS:
-                    add(method, REFERENCE_BACKEND, "square", picture_first=False, delta=delta)
+                    add(rec.name, b, element, picture_first=first, options=given, curve=first)
+                continue
+            backend = variant_backend if rec.sweep_backends == "fastest" else REFERENCE_BACKEND
+            add(rec.name, backend, element, picture_first=True, options=given)
+            for variant in rec.sweep_variants:
+                if variant.elements is None or element in variant.elements:
+                    add(rec.name, backend, element, picture_first=variant.pictured,
+                        options={**given, **variant.options})
     return specs
 
 
@@ -118,13 +107,15 @@ def aggregate(rows: list[dict]):
     from .report import host_slots_of, hosts_of
 
     df = pd.DataFrame(rows)
+    df["base"] = df["method"]
     if "label" in df:  # a run with another tile budget or option is a line of its own
         df["method"] = df["label"].fillna(df["method"])
     out = []
     for (method, backend, element), g in df.groupby(["method", "backend", "element"], sort=False):
         ok = g[g["status"] == "ok"]
         first = g.iloc[0]
-        paper = PAPER.get(method) if element == "square" else None
+        # the paper's figures stand on the square rows of a method run with its defaults
+        paper = get_method(first["base"]).paper_table2 if element == "square" and method == first["base"] else None
         rec = {
             "method": method, "backend": backend, "element": element, "metric": first["metric"],
             "width": first["width"], "height": first["height"], "n_sites": first["n_sites"],
@@ -154,15 +145,28 @@ def aggregate(rows: list[dict]):
     return table[COLUMNS]
 
 
+def _record(label: str):
+    """The method record of a report row (its label is the name, then its options)."""
+    return get_method(str(label).split(" ")[0])
+
+
+def _every_backend(label: str) -> bool:
+    return _record(label).sweep_backends == "every"
+
+
 def discussion(table) -> str:
     """How the measured ordering compares with the paper's, and how the methods rank at
-    equal overlap: every sentence is computed from the rows at hand."""
+    equal overlap: every sentence is computed from the rows at hand and the methods'
+    records (which is the paper's method, which the baselines, what the paper measured)."""
     from .report import fmt_pct, fmt_seconds
 
     sq = table[(table["element"] == "square") & table["status"].isin(["ok", "partial"])]
-    cov = {r["method"]: r for _, r in sq.iterrows() if r["method"] != "ours" or r["backend"] == REFERENCE_BACKEND}
-    ours = {r["backend"]: r for _, r in sq[sq["method"] == "ours"].iterrows()}
-    if "ours" not in cov:
+    # one row per method: those swept over every backend by their reference backend's row
+    cov = {r["method"]: r for _, r in sq.iterrows()
+           if not _every_backend(r["method"]) or r["backend"] == REFERENCE_BACKEND}
+    role = {m: _record(m).role for m in cov}
+    paper_method = next((m for m in cov if role[m] == "paper" and m == _record(m).name), None)
+    if paper_method is None:
         return ""
 
     def c(name):
@@ -170,35 +174,39 @@ def discussion(table) -> str:
         return f"{fmt_pct(r['coverage_mean'])} (overlap {fmt_pct(r['overlap_mean'], digits=2)})" \
             if r is not None else "not run"
 
+    plain = [m for m in cov if m == _record(m).name]  # each method with its default options
     lines = ["", "## How this compares with the paper", ""]
-    paper_order = ["fritzsche2005", "smith2005", "hu2016", "ours"]
-    measured = [m for m in sorted(paper_order, key=lambda m: cov[m]["coverage_mean"]) if m in cov] \
-        if all(m in cov for m in paper_order) else []
-    same = measured == paper_order
+    in_paper = sorted((m for m in plain if role[m] in ("paper", "baseline") and _record(m).paper_table2),
+                      key=lambda m: _record(m).paper_table2[0])
+    measured = sorted(in_paper, key=lambda m: cov[m]["coverage_mean"])
+    same = measured == in_paper
+    extensions = [m for m in plain if role[m] == "extension"]
+    baselines = [m for m in plain if role[m] not in ("paper", "extension")]
     lines.append(
-        "- The paper's order (Fritzsche 64.8 % < Smith 68.1 % < Hu 84.3 % < ours 85.6 %) is "
-        + ("reproduced" if same else "**not** reproduced") + f" by the paper's own placement: ours covers "
-        f"{c('ours')}, ours-fit {c('ours-fit')}; Hu {c('hu2016')}; the fixed-size baselines Fritzsche "
-        f"{c('fritzsche2005')}, Smith {c('smith2005')}, Hausner {c('hausner2001')}.")
-    if "ours-compact" in cov:
-        rc = cov["ours-compact"]
-        others = [m for m in cov if not m.startswith("ours")]
-        beaten = [m for m in others if rc["coverage_mean"] > cov[m]["coverage_mean"]]
+        "- The paper's order (" + " < ".join(f"{m} {fmt_pct(_record(m).paper_table2[0])}" for m in in_paper)
+        + ") is " + ("reproduced" if same else "**not** reproduced") + f" by the paper's own placement: "
+        f"{paper_method} covers {c(paper_method)}"
+        + "".join(f"; {m} {c(m)}" for m in extensions) + "; the baselines: "
+        + ", ".join(f"{m} {c(m)}" for m in baselines) + ".")
+    baseline_rows = [m for m in cov if role[m] not in ("paper", "extension")]
+    for m in extensions:
+        rc = cov[m]
+        beaten = [b for b in baseline_rows if rc["coverage_mean"] > cov[b]["coverage_mean"]]
+        if len(beaten) < len(baseline_rows) or rc["overlap_mean"] >= 1e-4:
+            continue  # said only of an extension that beats every baseline row at no overlap
         lines.append(
-            f"- With compaction (ours-compact: the same cells, each element fitted in its cell, then "
-            f"neighbours share their walls) ours covers {c('ours-compact')}, "
-            + ("more than every baseline" if len(beaten) == len(others) else
-               f"more than {len(beaten)} of the {len(others)} baseline rows")
-            + (", and none of its elements overlap" if rc["overlap_mean"] < 1e-4 else "")
-            + "; the paper's 85.6 % " + ("is passed" if rc["coverage_mean"] > 0.856 else "is not reached") + ".")
-    smaller = [f"{name} {c(name)}" for name in cov if "δ=" in name]
+            f"- {m} ({_record(m).summary}) covers {c(m)}, more than every baseline row, and none of its "
+            "elements overlap; the paper's " + fmt_pct(_record(paper_method).paper_table2[0]) + " "
+            + ("is passed" if rc["coverage_mean"] > _record(paper_method).paper_table2[0] else "is not reached")
+            + ".")
+    smaller = [f"{name} {c(name)}" for name in cov if name != _record(name).name and _record(name).fixed_size]
     if smaller:
         lines.append(
-            "- The fixed-size baselines' coverage at the default δ = 0.95 is bought with overlap, which "
+            "- The fixed-size baselines' coverage at their default tile budget is bought with overlap, which "
             "they allow and we count; with smaller tiles: " + "; ".join(smaller) + ". The paper gives "
             "neither its tile sizes nor how it treats overlap.")
     fair = sq[sq["coverage_at_1pct_overlap"].notna()] if "coverage_at_1pct_overlap" in sq else sq.iloc[0:0]
-    fair = fair[(fair["method"] != "ours") | (fair["backend"] == REFERENCE_BACKEND)]
+    fair = fair[[not _every_backend(m) or b == REFERENCE_BACKEND for m, b in zip(fair["method"], fair["backend"], strict=True)]]
     if len(fair):
         ranked = fair.sort_values("coverage_at_1pct_overlap", ascending=False)
         lines.append(
@@ -206,28 +214,45 @@ def discussion(table) -> str:
             "is 1 %, `coverage_overlap.csv`, `coverage_overlap.png`) the squares rank: "
             + ", ".join(f"{r['method']} {fmt_pct(r['coverage_at_1pct_overlap'])}" for _, r in ranked.iterrows())
             + ".")
-    fast = [f"{b} {fmt_seconds(r['time_mean_s'])}" for b, r in ours.items() if r["status"] == "ok"]
+    per_backend = sq[sq["method"] == paper_method]
+    fast = [f"{r['backend']} {fmt_seconds(r['time_mean_s'])}" for _, r in per_backend.iterrows() if r["status"] == "ok"]
     if fast:
-        lines.append("- Time for the 20 iterations of ours (mean over seeds): " + ", ".join(fast)
-                     + "; the paper reports 19 s on a GPU (N not stated).")
+        lines.append(f"- Time for the 20 iterations of {paper_method} (mean over seeds): " + ", ".join(fast)
+                     + f"; the paper reports {_record(paper_method).paper_table2[1]} on a GPU (N not stated).")
     return "\n".join(lines) + "\n"
 
 
+def _problem_notes(methods: list[str]) -> list[str]:
+    """What the problem set runs, said from the methods' records."""
+    records = [get_method(m) for m in methods]
+    where = {"every": "every available backend", "fastest": "the OpenCL backend where it is available "
+             "(else NumPy)", "reference": "the NumPy reference backend"}
+    notes = []
+    for key, text in where.items():
+        names = [r.name for r in records if r.sweep_backends == key]
+        if names:
+            notes.append(f"{', '.join(names)}: on {text}")
+    for r in records:
+        shapes = "every element shape" if r.compared_on is None else ", ".join(r.compared_on)
+        extra = "; also " + "; ".join(
+            r.label(dict(v.options)) + (f" on {', '.join(v.elements)}" if v.elements else "")
+            for v in r.sweep_variants) if r.sweep_variants else ""
+        notes.append(f"{r.name}: {shapes}{extra}" + (f" ({r.paper})" if r.paper else ""))
+    return notes
+
+
 def render_markdown(table, prov: dict, command: str, quick: bool, cfg: dict, seeds: int,
-                    elapsed: float, cached: int, total: int, pictured: bool = True) -> str:
+                    elapsed: float, cached: int, total: int, pictured: bool = True,
+                    methods: list[str] | None = None) -> str:
     from .report import fmt_pct, fmt_seconds, header_markdown, markdown_table, several_hosts
 
     title = "Table 2, regenerated" + (" (QUICK: small raster, 2 seeds; not the paper's scale)" if quick else "")
     notes = [
         f"problem set: square region, whole {cfg['size']}x{cfg['size']} px raster, N = {cfg['n_sites']} "
         f"sites, {cfg['iterations']} Lloyd iterations, seeds 0..{seeds - 1}, no density, no direction "
-        "field; squares for every method, every other element shape for ours, ours-fit and "
-        "ours-compact (triangles also alternating); rectangle and ellipse β = 0.5",
-        "fixed-size baselines (hausner2001, fritzsche2005, smith2005): tiles of the area of a square "
-        "of side δ·sqrt(area/N), δ = 0.95 by default, and again with δ = "
-        + " and ".join(f"{d:g}" for d in SMALLER_BUDGETS) + " (rows 'δ=...')",
-        "ours runs on every available backend; ours-fit and ours-compact on the OpenCL backend where "
-        "it is available (else NumPy); the baselines on the NumPy reference backend",
+        "field; rectangle and ellipse β = 0.5",
+        *_problem_notes(methods or list(dict.fromkeys(str(m).split(" ")[0] for m in table["method"]))),
+        "baselines with a tile budget δ: tiles of the area of a square of side δ·sqrt(area/N)",
         "coverage at ≤ 1 % overlap (seed 0): every element scaled about its centre by 0.80 ... 1.20, "
         "evaluated alike, the largest coverage whose overlap is at most 1 % (interpolated)",
         "coverage and overlap: cvt.evaluate (area of the union of the elements inside the region / "
@@ -313,9 +338,10 @@ def render_coverage_overlap(curves, path: Path) -> bool:
     colours = plt.get_cmap("tab20").colors
     for k, ((method, _backend), g) in enumerate(sq.groupby(["method", "backend"], sort=False)):
         g = g.sort_values("factor")
-        ours = method.startswith("ours")
+        record = _record(method)
+        ours = record.role in ("paper", "extension")
         ax.plot(100 * g["overlap"], 100 * g["coverage"], "os^vD<>"[k % 7] + ("-" if ours else "--"),
-                ms=3.5, lw=2.2 if method == "ours-compact" else 1.1, color=colours[k % len(colours)], label=method)
+                ms=3.5, lw=2.2 if record.tight else 1.1, color=colours[k % len(colours)], label=method)
         one = g[np.isclose(g["factor"], 1.0)]
         ax.plot(100 * one["overlap"], 100 * one["coverage"], "k.", ms=8)
     ax.axvline(1.0, color="grey", lw=0.8, ls=":")
@@ -364,7 +390,7 @@ def render_picture(table, out: Path, suite_specs: list[RunSpec], path: Path) -> 
             with Image.open(p) as im:
                 ax.imshow(np.asarray(im.convert("RGB")))
             c = cov.get((spec.label, spec.backend, spec.element), np.nan)
-            name = spec.label if spec.method != "ours" else f"ours ({spec.backend})"
+            name = f"{spec.label} ({spec.backend})" if _every_backend(spec.method) else spec.label
             ax.set_title(f"{name}\n{spec.element}: {100 * c:.1f} %", fontsize=9)
     spec0 = panels[0][0]
     crop = picture_crop(spec0.n_sites)
@@ -381,6 +407,7 @@ def add_parser(sub):
     options.add_sweep_options(p, "small version (256² px, N=250, 2 seeds): < 2 min")
     options.add_seeds_option(p)
     options.add_list_options(p, "methods", "backends", "shapes")
+    options.add_method_option(p, several=True)
     options.add_cluster_options(p, exclusive=True)
     options.add_memory_option(p)
     p.set_defaults(func=run)
@@ -413,11 +440,14 @@ def prepare(args) -> dict:
     seeds = options.seeds_value(args.seeds, cfg["seeds"])
     all_methods = method_names()
     methods = name_list(args.methods, "--methods", all_methods) or all_methods
-    if "ours" in methods:  # ours first, then the baselines in the paper's order
-        methods = ["ours"] + [m for m in methods if m != "ours"]
+    methods = [m for m in all_methods if m in methods]  # the registry's order
     backends, unavailable = sweep_backends(args.backends)
     shapes = name_list(args.shapes, "--shapes", ELEMENTS)
-    specs = problem_set(args.quick, seeds, methods, backends, shapes, variant_backend(unavailable))
+    given = options.given_method_options(args)
+    for name in given:  # an option is for the methods that declare it: one of them must run
+        if not any(get_method(m).option(name) for m in methods):
+            raise InputError(f"--{name.replace('_', '-')} is an option of none of --methods {','.join(methods)}")
+    specs = problem_set(args.quick, seeds, methods, backends, shapes, variant_backend(unavailable), given)
     check_memory(specs, args.memory_limit, lower="run the --quick set, or fewer --methods or --shapes")
     return {"out": out, "cfg": cfg, "seeds": seeds, "specs": specs, "unavailable": unavailable}
 
@@ -440,7 +470,8 @@ def run(args) -> int:
         elapsed = time.perf_counter() - t0
         cached = sum(1 for r in rows if r.get("cached"))
         pictured = render_picture(table, out, specs, out / "table2.png")
-        md = render_markdown(table, provenance(), cmd, args.quick, cfg, seeds, elapsed, cached, len(rows), pictured)
+        md = render_markdown(table, provenance(), cmd, args.quick, cfg, seeds, elapsed, cached, len(rows), pictured,
+                             methods=list(dict.fromkeys(spec.method for spec in specs)))
         curves = coverage_overlap_table(rows)
         if len(curves):
             write_csv(out / "coverage_overlap.csv", curves)
@@ -469,4 +500,4 @@ def _print_summary(table, out: Path, written: list[str]) -> None:
     print(f"wrote {out}/{', '.join(written)}", file=sys.stderr)
 
 
-__all__ = ["problem_set", "aggregate", "PAPER", "run"]
+__all__ = ["problem_set", "aggregate", "run", "prepare", "discussion"]

@@ -486,6 +486,8 @@ def _solve_lp(rows: _Rows, act, c, r, gap, delta, lo_dr, hi_dr, weight, tile, op
     tiles HiGHS did not solve to optimality (those keep Δ = 0)."""
     import highspy
 
+    from .quiet import quiet_highs
+
     n = len(r)
     # active elements ordered by tile: each tile's columns are one contiguous block
     t_act = tile[act]
@@ -550,8 +552,7 @@ def _solve_lp(rows: _Rows, act, c, r, gap, delta, lo_dr, hi_dr, weight, tile, op
     lo[k - 1::k], hi[k - 1::k] = lo_dr[elems], hi_dr[elems]
     x = np.empty(ncol)
 
-    h = highspy.Highs()
-    h.setOptionValue("output_flag", False)
+    h = quiet_highs()
     for key, value in options.items():
         h.setOptionValue(key, value)
     iters = failed = 0

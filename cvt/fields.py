@@ -25,7 +25,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from .errors import InputError
-from .problem import pixel_index
+from .pixels import pixel_index
 from .validate import real_number
 
 DENSITY_FLOOR = 0.01

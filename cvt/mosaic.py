@@ -34,7 +34,6 @@ import math
 import os
 import time
 from dataclasses import dataclass, field
-from typing import Callable
 
 import numpy as np
 
@@ -51,21 +50,21 @@ from .image_fields import (
     picture_fields,
     strong_edges,
 )
-from .methods import METHODS
-from .metrics import ELEMENT_METRIC, METRIC_NAMES, NATURAL_ELEMENT, make_metric
+from .methods import Method
+from .metrics import make_metric
 from .moments import moments_from_labels
+from .pixels import pixel_index
 from .placement import parse_gap
-from .problem import Grid, Problem, parse_size, pixel_index
+from .problem import Grid, Problem, parse_size
+from .registry import get_method
 from .render import draw_elements, ellipse_parameters, parse_colour, svg_lines
 from .resources import mosaic_estimate
-from .shapes import ELEMENT_SHAPES, check_shape, element_ball, unit_outline
-from .validate import live_backend, one_of, real_number, whole_number
+from .shapes import ELEMENT_SHAPES, element_ball, resolve_shapes, unit_outline
+from .validate import live_backend, real_number, whole_number
 
-# The method that places the tiles when none is named (a name in cvt.methods.METHODS).
-# "ours-compact" (compaction: tiles share their walls, the grout is the gap asked for)
-# becomes the default once it is registered there.
+# The method that places the tiles when none is named: compaction, whose tiles share their
+# walls with the grout asked for.
 DEFAULT_METHOD = "ours-compact"
-MOSAIC_COMPACTION_ROUNDS = 6
 DEFAULT_ELEMENTS = 2000
 MAX_DEFAULT_SIDE = 1024  # the picture's own size, capped at this on the long side
 AUTO_GAP = 0.05  # default grout: this share of the mean element spacing
@@ -150,21 +149,6 @@ def resample(rgb: np.ndarray, width: int, height: int) -> np.ndarray:
         img = Image.fromarray(np.ascontiguousarray(rgb[..., c], dtype=np.float32), mode="F")
         out[..., c] = np.asarray(img.resize((width, height), Image.Resampling.LANCZOS))
     return np.clip(out, 0.0, 1.0)
-
-
-def resolve_shapes(metric: str | None, element: str | None) -> tuple[str, str]:
-    """(metric, element): either one implies the other; neither means square tiles."""
-    if element is not None:
-        check_shape(element)
-    if metric is not None:
-        one_of(metric, "metric", METRIC_NAMES)
-    if metric is None and element is None:
-        element = "square"
-    if metric is None:
-        metric = ELEMENT_METRIC[element]
-    if element is None:
-        element = NATURAL_ELEMENT[metric]
-    return metric, element
 
 
 # --------------------------------------------------------------------------- walls
@@ -326,6 +310,7 @@ class MosaicResult:
     aspect: float
     gap: float
     method: str = DEFAULT_METHOD
+    method_options: dict = field(default_factory=dict)  # the method's own options as given
     contrast: float = DEFAULT_CONTRAST
     grout: tuple = DEFAULT_GROUT
     edge_threshold: float = DEFAULT_EDGE_THRESHOLD
@@ -376,14 +361,15 @@ class MosaicResult:
 
 # --------------------------------------------------------------------------- the API
 
-def resolve_method(method) -> tuple[Callable, str]:
-    """(callable, name) from a method callable or the name of one of the paper's
-    variants (``cvt.methods.METHODS``; baselines come as callables, e.g. from
-    ``compact_distributions.baselines.get_method``)."""
+def resolve_method(method) -> Method:
+    """The method record of ``method``: a registered name (:mod:`cvt.registry`: ours, its
+    variants, the baselines, plug-ins), a record, or a plain callable with the method
+    signature (then a record named after it, with no options)."""
+    if isinstance(method, str) or isinstance(method, Method):
+        return get_method(method)
     if callable(method):
-        return method, getattr(method, "method_name", getattr(method, "__name__", "method"))
-    one_of(method, "method", list(METHODS))
-    return METHODS[method], method
+        return Method(getattr(method, "__name__", "method"), method)
+    raise InputError(f"method must be a method name, a method record or a callable, got {method!r}")
 
 
 def make_mosaic(image, backend, *, n_elements: int = DEFAULT_ELEMENTS, metric: str | None = None,
@@ -405,15 +391,15 @@ def make_mosaic(image, backend, *, n_elements: int = DEFAULT_ELEMENTS, metric: s
     1 px for 2000 elements on 1024x768).  ``use_field``: align tile sides with the
     picture's edges; ``use_density``: smaller tiles where the picture has detail
     (``contrast`` = densest / sparsest cell area).  ``method``: what places the tiles, a
-    name from ``cvt.methods.METHODS`` or any method callable (the method interface of
+    registered name (:mod:`cvt.registry`), a method record, or any method callable (the method interface of
     :mod:`cvt.methods`; default :data:`DEFAULT_METHOD`).  ``edges``: the picture's strong
     edges (contrast >= ``edge_threshold`` ΔE*ab, :func:`cvt.image_fields.strong_edges`)
     are walls: their pixels leave the region, so cells, tiles and the method's region
     border stop at them.  ``cut``: tiles within a spacing of a wall are then cut to fit
-    (:mod:`cvt.cutting`); default ``None`` cuts the tiles of ``ours-compact`` only, whose
-    tiles are tight, so that cutting fills what is left along the walls.
-    ``method_options``: more keywords for the method (e.g.
-    ``{"alternate": True}`` for ours-compact's triangles).  ``progress(k, iterations,
+    (:mod:`cvt.cutting`); default ``None`` cuts the tiles of a method whose record says its
+    tiles are tight (``ours-compact``), so that cutting fills what is left along the walls.
+    ``method_options``: the method's own declared options (e.g.
+    ``{"alternate": True}`` for ours-compact's triangles), checked against its record.  ``progress(k, iterations,
     energy)`` is called after each Lloyd step.  ``memory_limit`` (bytes or a size such as
     ``"8G"``; default what the machine has available) refuses, before any work, a mosaic
     estimated to need more (:mod:`cvt.resources`)."""
@@ -425,12 +411,11 @@ def make_mosaic(image, backend, *, n_elements: int = DEFAULT_ELEMENTS, metric: s
     contrast = real_number(contrast, "contrast", *CONTRAST_RANGE)
     edge_threshold = real_number(edge_threshold, "edge_threshold", above=0.0)
     grout = parse_colour(grout, "grout")
-    run_method, method_name = resolve_method(method)
-    method_options = dict(method_options or {})
-    if run_method is METHODS["ours-compact"]:
-        # tiles turned by a field and stopped by walls settle slower than a plain
-        # lattice: two more rounds measured +1 point of coverage for +1 s at 2000 tiles
-        method_options.setdefault("rounds", MOSAIC_COMPACTION_ROUNDS)
+    record = resolve_method(method)
+    if method_options is not None and not isinstance(method_options, dict):
+        raise InputError(f"method_options must be a dict of the method's options, got {method_options!r}")
+    given_options = record.parse_options(method_options or {})
+    method_options = {**record.mosaic_options, **given_options}
     metric_name, element = resolve_shapes(metric, element)
     metric_obj = make_metric(metric_name, aspect)
 
@@ -466,10 +451,10 @@ def make_mosaic(image, backend, *, n_elements: int = DEFAULT_ELEMENTS, metric: s
                       field=fields.field if use_field else None, seed=seed,
                       walls=edge_map if walls else None)
 
-    dist = run_method(problem, WalledBackend(backend) if walls else backend, iterations=iterations,
+    dist = record(problem, WalledBackend(backend) if walls else backend, iterations=iterations,
                       progress=progress, element=element, gap=gap, **method_options)
     polygons = [None if p is None or p.is_empty else p for p in dist.elements]
-    cut = run_method is METHODS["ours-compact"] if cut is None else bool(cut)
+    cut = record.tight if cut is None else bool(cut)
     cut_count = 0
     if walls and cut:
         polygons, cut_count = cut_to_walls(polygons, edge_map, gap, spacing)
@@ -484,7 +469,7 @@ def make_mosaic(image, backend, *, n_elements: int = DEFAULT_ELEMENTS, metric: s
         coverage=ev.coverage, overlap=ev.overlap, colour_error=colour_error(lab, fills_lab, tiles, pixels),
         straddling=float(straddles.sum() / placed) if placed else 0.0,
         width=w, height=h, metric=metric_name, element=element, aspect=metric_obj.aspect, gap=gap,
-        method=dist.method or method_name, contrast=contrast, grout=grout, edge_threshold=edge_threshold,
+        method=dist.method or record.name, method_options=given_options, contrast=contrast, grout=grout, edge_threshold=edge_threshold,
         walls=walls, cut_tiles=cut_count, picture=picture, edges=edge_map, straddles=straddles, fields=fields, problem=problem,
         distribution=dist, backend=backend.variant, device=backend.device(), source=source,
         total_seconds=time.perf_counter() - t_start,

@@ -68,7 +68,8 @@ import numpy as np
 
 from .errors import InputError
 from .metrics import Metric, compile_sites
-from .problem import MAX_SIDE, Grid, in_own_cell, pixel_index
+from .pixels import pixel_index
+from .problem import MAX_SIDE, Grid, in_own_cell
 from .shapes import check_shape, element_ball, element_polygons
 from .validate import one_of, real_number
 

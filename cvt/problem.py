@@ -7,16 +7,14 @@ right, y grows down; every coordinate is in pixel units.
 from __future__ import annotations
 
 from dataclasses import dataclass, field
-from typing import TYPE_CHECKING
 
 import numpy as np
 
 from .errors import InputError
+from .fields import DensityMap, DirectionField
 from .metrics import Metric, make_metric
+from .pixels import pixel_index
 from .validate import whole_number
-
-if TYPE_CHECKING:
-    from .fields import DensityMap, DirectionField
 
 MAX_SIDE = 32768
 MAX_SEED = 2**63 - 1  # seeds are stored as int64 in reports
@@ -94,8 +92,6 @@ class Problem:
     walls: np.ndarray | None = None
 
     def __post_init__(self):
-        from .fields import DensityMap, DirectionField
-
         if not isinstance(self.grid, Grid):
             raise InputError(f"grid must be a Grid, got {self.grid!r}")
         if not isinstance(self.metric, Metric):
@@ -146,15 +142,6 @@ class Problem:
         if self.density is None:
             return np.ones(len(sites))
         return self.density.scales_at(sites)
-
-
-def pixel_index(points, width: int, height: int) -> tuple[np.ndarray, np.ndarray]:
-    """Row and column of the pixel that contains each point (x, y), clamped to the raster:
-    the one pixel lookup of the suite (fields, placement, colours and pictures use it)."""
-    points = np.asarray(points, dtype=np.float64).reshape(-1, 2)
-    j = np.clip(np.floor(points[:, 0]).astype(np.int64), 0, width - 1)
-    i = np.clip(np.floor(points[:, 1]).astype(np.int64), 0, height - 1)
-    return i, j
 
 
 def in_own_cell(labels: np.ndarray, points) -> np.ndarray:

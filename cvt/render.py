@@ -22,7 +22,7 @@ import numpy as np
 import shapely
 
 from .errors import InputError
-from .problem import pixel_index
+from .pixels import pixel_index
 
 DARK = "#202020"  # outside the region, and joints between elements
 PAPER = "#f4f1ea"  # inside the region, where no element is

@@ -13,7 +13,7 @@ from __future__ import annotations
 import numpy as np
 import shapely
 
-from .metrics import ELEMENT_METRIC, Metric, make_metric
+from .metrics import ELEMENT_METRIC, METRIC_NAMES, NATURAL_ELEMENT, Metric, make_metric
 from .validate import one_of
 
 ELEMENT_SHAPES = tuple(ELEMENT_METRIC)
@@ -28,6 +28,24 @@ def unit_outline(shape: str, aspect: float = 0.5) -> np.ndarray:
 def check_shape(shape) -> str:
     """``shape`` if it names an element shape, else InputError naming it."""
     return one_of(shape, "element", ELEMENT_SHAPES)
+
+
+def resolve_shapes(metric: str | None, element: str | None, default: str = "square",
+                   names: tuple[str, str] = ("metric", "element")) -> tuple[str, str]:
+    """(metric, element): either one implies the other (an element's metric is the one
+    whose unit ball it is; a metric's element is its own ball); neither means the element
+    ``default``.  ``names`` name the two in messages (``--metric``, ``--element``)."""
+    if element is not None:
+        one_of(element, names[1], ELEMENT_SHAPES)
+    if metric is not None:
+        one_of(metric, names[0], METRIC_NAMES)
+    if metric is None and element is None:
+        element = default
+    if metric is None:
+        metric = ELEMENT_METRIC[element]
+    if element is None:
+        element = NATURAL_ELEMENT[metric]
+    return metric, element
 
 
 def element_ball(shape: str, aspect: float | None = 0.5) -> Metric:

@@ -1,8 +1,11 @@
-"""The layout rules: dependencies flow one way, cvt <- backends <- baselines <- bench.
+"""The layout rules: dependencies flow one way, cvt <- backends <- baselines <- bench,
+and no module depends on itself through others.
 
 Every import of the four packages (absolute, relative, and module paths written as
 strings for lazy registries) is parsed with ``ast``; a module may import from its own
-package or from one to its left, never from one to its right.
+package or from one to its left, never from one to its right; and the graph of imports
+between the suite's modules (at any depth: a function's lazy import counts too) has no
+cycle.
 """
 
 from __future__ import annotations
@@ -97,10 +100,100 @@ def test_the_check_allows_imports_to_the_left(layer, snippet):
 
 
 def test_each_baseline_is_registered_and_cites_its_paper():
-    from compact_distributions.baselines import REGISTRY
+    from compact_distributions.baselines import METHODS
+    from compact_distributions.cvt.registry import method_names
 
     files = {p.stem for p in (ROOT / "baselines").glob("*.py")} - {"__init__", "common"}
-    assert files == set(REGISTRY)
-    for name in REGISTRY:
-        doc = ast.get_docstring(ast.parse((ROOT / "baselines" / f"{name}.py").read_text()))
-        assert doc and name[-4:] in doc and "depart" in doc.lower(), name
+    assert files == {m.name for m in METHODS}
+    assert files <= set(method_names())  # found by the registry through the entry point
+    for record in METHODS:
+        doc = ast.get_docstring(ast.parse((ROOT / "baselines" / f"{record.name}.py").read_text()))
+        assert doc and record.name[-4:] in doc and "depart" in doc.lower(), record.name
+        assert record.paper and str(record.year) in record.paper, record.name
+
+
+# ---------------------------------------------------------------------------- cycles
+def module_name(layer: str, module_path: list[str]) -> str:
+    return ".".join([PACKAGE, layer, *module_path]).removesuffix(".__init__")
+
+
+def import_graph(sources: dict[str, tuple[str, bool]]) -> dict[str, set[str]]:
+    """module -> the suite's modules it imports, from ``{module: (source, is_package)}``
+    (an import of a name inside a module counts as an import of that module)."""
+    graph = {}
+    for name, (source, is_package) in sources.items():
+        found = set()
+        for node in ast.walk(ast.parse(source)):
+            if isinstance(node, ast.Import):
+                candidates = [a.name for a in node.names]
+            elif isinstance(node, ast.ImportFrom):
+                module = node.module or ""
+                if node.level:
+                    base = name.split(".")[: None if is_package else -1]
+                    base = base[: len(base) - (node.level - 1)]
+                    module = ".".join(base + ([node.module] if node.module else []))
+                candidates = [module] + [f"{module}.{a.name}" for a in node.names]
+            else:
+                continue
+            for c in candidates:
+                while c and c not in sources:
+                    c = c.rpartition(".")[0]
+                if c and c != name:
+                    found.add(c)
+        graph[name] = found
+    return graph
+
+
+def cycles(graph: dict[str, set[str]]) -> list[list[str]]:
+    """The strongly connected components of more than one module (Tarjan, iterative)."""
+    index, low, on_stack, stack, out, counter = {}, {}, set(), [], [], [0]
+    for root in graph:
+        if root in index:
+            continue
+        work = [(root, iter(sorted(graph[root])))]
+        index[root] = low[root] = counter[0]
+        counter[0] += 1
+        stack.append(root)
+        on_stack.add(root)
+        while work:
+            v, children = work[-1]
+            for w in children:
+                if w not in index:
+                    index[w] = low[w] = counter[0]
+                    counter[0] += 1
+                    stack.append(w)
+                    on_stack.add(w)
+                    work.append((w, iter(sorted(graph[w]))))
+                    break
+                if w in on_stack:
+                    low[v] = min(low[v], index[w])
+            else:
+                work.pop()
+                if work:
+                    low[work[-1][0]] = min(low[work[-1][0]], low[v])
+                if low[v] == index[v]:
+                    component = []
+                    while True:
+                        w = stack.pop()
+                        on_stack.discard(w)
+                        component.append(w)
+                        if w == v:
+                            break
+                    if len(component) > 1:
+                        out.append(sorted(component))
+    return out
+
+
+def test_no_import_cycle():
+    sources = {module_name(layer, rel): (path.read_text(), path.name == "__init__.py")
+               for layer, rel, path in modules()}
+    assert cycles(import_graph(sources)) == []
+
+
+def test_the_check_catches_a_cycle():
+    pkg = f"{PACKAGE}.cvt"
+    sources = {f"{pkg}.a": ("from .b import x\n", False), f"{pkg}.b": ("def f():\n    from .c import y\n", False),
+               f"{pkg}.c": (f"import {pkg}.a\n", False), f"{pkg}.d": ("from .a import z\n", False)}
+    assert cycles(import_graph(sources)) == [[f"{pkg}.a", f"{pkg}.b", f"{pkg}.c"]]
+    sources[f"{pkg}.c"] = ("import numpy\n", False)
+    assert cycles(import_graph(sources)) == []

@@ -188,15 +188,25 @@ def test_same_seed_same_mosaic_with_walls():
     assert a.colour_error == b.colour_error and a.coverage == b.coverage
 
 
-def test_method_is_a_callable_or_a_core_name():
-    from compact_distributions.baselines import get_method
+def test_method_is_any_registered_name_a_record_or_a_callable():
+    from compact_distributions.cvt.methods import run_ours
+    from compact_distributions.cvt.registry import get_method
 
     pic = line_picture()
     m = make_mosaic(pic, NUMPY, n_elements=100, iterations=3, method=get_method("hausner2001"))
     assert m.method == "hausner2001" and m.placed > 90
+    # a baseline by name: the one registry serves the API as it serves the command line
+    by_name = make_mosaic(pic, NUMPY, n_elements=100, iterations=3, method="hausner2001",
+                          method_options={"delta": 0.8})
+    assert by_name.method == "hausner2001" and by_name.method_options == {"delta": 0.8}
+    assert by_name.distribution.extra["delta"] == 0.8
     assert make_mosaic(pic, NUMPY, n_elements=100, iterations=3, method="ours-fit").method == "ours-fit"
+    assert make_mosaic(pic, NUMPY, n_elements=100, iterations=3, method=run_ours).method == "ours"
     with pytest.raises(InputError, match="method"):
-        make_mosaic(pic, NUMPY, n_elements=100, iterations=3, method="hausner2001")  # not a core name
+        make_mosaic(pic, NUMPY, n_elements=100, iterations=3, method="hausner2002")
+    with pytest.raises(InputError, match="has no option 'alternate'"):
+        make_mosaic(pic, NUMPY, n_elements=100, iterations=3, method="hausner2001",
+                    method_options={"alternate": True})
     with pytest.raises(InputError, match="edge_threshold"):
         make_mosaic(pic, NUMPY, n_elements=100, iterations=3, edge_threshold=0)
 

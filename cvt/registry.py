@@ -1,0 +1,95 @@
+"""The one registry of methods: the paper's variants, then every method that an installed
+distribution declares through the entry point group ``compact_distributions.methods``.
+
+The suite's own baselines come in through that group too (this distribution declares
+them in its ``pyproject.toml``), so a third party's method is found and treated exactly
+like them.  An entry point names a :class:`~.methods.Method` record, a sequence of
+records (a package of methods), or a plain callable with the method signature, which
+then takes the entry point's name and has no options.  An entry point that fails to load
+is listed by :func:`unavailable_methods` with its reason; it never stops the others.
+"""
+
+from __future__ import annotations
+
+from functools import lru_cache
+from importlib.metadata import entry_points
+
+from .errors import InputError
+from .methods import METHODS, Method
+from .validate import one_of
+
+METHOD_GROUP = "compact_distributions.methods"
+_ROLE_ORDER = {"paper": 0, "extension": 1, "baseline": 2, "plugin": 3}
+
+
+def group_entry_points(group: str) -> list:
+    """The installed entry points of ``group`` (one per name: the first one found)."""
+    found = {}
+    for ep in entry_points(group=group):
+        found.setdefault(ep.name, ep)
+    return list(found.values())
+
+
+def records_of(obj, name: str) -> list[Method]:
+    """The method records an entry point's object declares (InputError if none)."""
+    if isinstance(obj, Method):
+        return [obj]
+    if isinstance(obj, (list, tuple)) and obj and all(isinstance(m, Method) for m in obj):
+        return list(obj)
+    if callable(obj):
+        return [Method(name, obj, summary=(getattr(obj, "__doc__", None) or "").strip().split("\n")[0])]
+    raise InputError(f"entry point {name!r} is neither a method record, a list of them nor a callable: {obj!r}")
+
+
+@lru_cache(maxsize=1)
+def _load() -> tuple[dict[str, Method], dict[str, str]]:
+    found: dict[str, Method] = dict(METHODS)
+    failed: dict[str, str] = {}
+    loaded = []
+    for ep in group_entry_points(METHOD_GROUP):
+        try:
+            loaded += records_of(ep.load(), ep.name)
+        except Exception as exc:  # a broken plug-in is listed with its reason, never a crash
+            failed[ep.name] = f"{type(exc).__name__}: {exc}"
+    for record in sorted(loaded, key=lambda m: (_ROLE_ORDER[m.role], m.year or 9999, m.name)):
+        if record.name in found:
+            failed.setdefault(record.name, f"the name {record.name!r} is taken by another method")
+            continue
+        found[record.name] = record
+    return found, failed
+
+
+def methods() -> dict[str, Method]:
+    """Every method record by name: the paper's variants, then the baselines (by year),
+    then other distributions' methods."""
+    return dict(_load()[0])
+
+
+def method_names() -> list[str]:
+    """The names of :func:`methods`, in their order."""
+    return list(_load()[0])
+
+
+def unavailable_methods() -> dict[str, str]:
+    """Entry points that could not be loaded: name -> reason."""
+    return dict(_load()[1])
+
+
+def get_method(name) -> Method:
+    """The method record named ``name`` (a record is passed through); InputError for an
+    unknown name, which lists the known ones (and why a plug-in of that name failed)."""
+    if isinstance(name, Method):
+        return name
+    found, failed = _load()
+    if isinstance(name, str) and name in failed and name not in found:
+        raise InputError(f"method {name!r} is installed but could not be loaded: {failed[name]}")
+    return found[one_of(name, "method", list(found))]
+
+
+def reload() -> None:
+    """Forget what was found (after installing a distribution in a running process)."""
+    _load.cache_clear()
+
+
+__all__ = ["METHOD_GROUP", "methods", "method_names", "get_method", "unavailable_methods",
+           "group_entry_points", "records_of", "reload"]
