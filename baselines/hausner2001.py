@@ -96,7 +96,7 @@ def run(problem: Problem, backend, *, iterations: int = 20, progress=None,
     gap = parse_gap(gap)
     shape = tile_shape(problem, element, default="square")
     grid = problem.grid
-    n = problem.n_sites
+    n = problem.n_elements
     size = budget_size(shape, grid, n, delta)
     tile_side = math.sqrt(shape.unit_area) * size  # side of the square of the same area
     dist = border_distance(grid)
@@ -120,7 +120,7 @@ def run(problem: Problem, backend, *, iterations: int = 20, progress=None,
     total = time.perf_counter() - t0
     return Distribution(
         method="hausner2001", sites=sites, angles=angles, scales=scales, elements=elements,
-        energy=res.energy, seconds=res.seconds, setup_seconds=setup, total_seconds=total,
+        energy=res.energy, seconds=res.seconds, setup_seconds=setup, lloyd_seconds=total,
         empty=res.empty, empty_sites=res.empty_sites, labels=labels,
         extra={
             "paper": METHOD.paper,

@@ -13,6 +13,7 @@ import os
 import sys
 
 from compact_distributions.cvt.errors import BackendUnavailable, InputError
+from compact_distributions.cvt.quiet import configure as configure_output
 
 # subcommand modules, in the order `cvtbench --help` lists them
 SUBCOMMANDS = ["compact_distributions.bench.run_cmd", "compact_distributions.bench.info_cmd", "compact_distributions.bench.figures_cmd", "compact_distributions.bench.table2", "compact_distributions.bench.mosaic_cmd", "compact_distributions.bench.backends_cmd", "compact_distributions.bench.regress_cmd", "compact_distributions.bench.reproduce_cmd"]
@@ -25,16 +26,31 @@ class Parser(argparse.ArgumentParser):
         self.exit(2, f"{self.prog}: error: {message} (see {self.prog} --help)\n")
 
 
+def _version() -> str:
+    from importlib.metadata import PackageNotFoundError, version
+
+    try:
+        return version("compact-distributions")
+    except PackageNotFoundError:
+        return "0+unknown"
+
+
 def build_parser() -> argparse.ArgumentParser:
     parser = Parser(
         prog="cvtbench",
         description="Compact distributions of discrete elements (Chen, Yang & Yang 2019): "
         "CVTs under shape metrics on NumPy, OpenCL and GL backends, with baselines and reports.",
     )
+    parser.add_argument("--version", action="version", version=f"%(prog)s {_version()}")
     sub = parser.add_subparsers(dest="command", metavar="COMMAND")
     sub.required = True
     for name in SUBCOMMANDS:
         importlib.import_module(name).add_parser(sub)
+    for p in sub.choices.values():  # every command: the same pair, third-party output off by default
+        p.add_argument("--verbose", action="store_true",
+                       help="also show the warnings and log records of the libraries the suite uses")
+        if "--quiet" not in p._option_string_actions:
+            p.add_argument("--quiet", action="store_true", help="no progress output")
     return parser
 
 
@@ -65,6 +81,7 @@ def main(argv=None) -> int:
         parser = build_parser()
         args = parser.parse_args(argv)
         args.argv = argv
+        configure_output(verbose=args.verbose)
         code = int(args.func(args) or 0)
         sys.stdout.flush()  # a broken pipe shows here, not in the interpreter's last flush
         return code

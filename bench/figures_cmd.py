@@ -21,7 +21,7 @@ import argparse
 import math
 import sys
 import time
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from pathlib import Path
 
 import numpy as np
@@ -169,30 +169,58 @@ FIGURES = {
 }
 
 
-def prepare(args) -> dict:
+@dataclass(frozen=True)
+class FiguresRequest:
+    """``cvtbench figures``, typed: the folder, the quick form, progress, the backend
+    (registry name and its constructor options) and the command line the folder records."""
+
+    out: Path
+    quick: bool = False
+    quiet: bool = False
+    backend: str = "numpy"
+    backend_options: dict = field(default_factory=dict)
+    command: str | None = None
+
+    @classmethod
+    def from_args(cls, args) -> FiguresRequest:
+        name, backend_options = options.backend_choice(args)
+        return cls(Path(args.out), bool(args.quick), bool(args.quiet), name, backend_options,
+                   options.command_text(getattr(args, "argv", None)))
+
+
+def prepare(req: FiguresRequest) -> dict:
     """The options and the output folder checked before anything is drawn."""
+    from compact_distributions.backends import resolve
+
     from .outputs import check_folder
 
-    out = Path(args.out)
-    check_folder(out)
-    options.backend_choice(args)
-    return {"out": out, "settings": QUICK if args.quick else FULL}
+    check_folder(req.out)
+    resolve(req.backend, **req.backend_options)
+    return {"out": req.out, "settings": QUICK if req.quick else FULL}
 
 
 def run(args) -> int:
-    from .mosaic_cmd import write_paper_figures
-    from .outputs import atomic_write, command_line, report_folder
+    return figures(FiguresRequest.from_args(args))
 
-    plan = prepare(args)
+
+def figures(req: FiguresRequest) -> int:
+    """Draw every figure into ``req.out`` (what ``cvtbench figures`` does)."""
+    from compact_distributions.backends import create_backend
+
+    from .mosaic_cmd import write_paper_figures
+    from .outputs import atomic_write, report_folder
+
+    plan = prepare(req)
     out, st = plan["out"], plan["settings"]
-    with report_folder(out, command=command_line(getattr(args, "argv", None))), options.open_backend(args) as backend:
+    with report_folder(out, command=req.command or "cvtbench figures" + (" --quick" if req.quick else "")), \
+            create_backend(req.backend, **req.backend_options) as backend:
         for name, make in FIGURES.items():
             t0 = time.perf_counter()
             data = png_bytes(make(backend, st))
             atomic_write(out / name, data)
-            if not args.quiet:
+            if not req.quiet:
                 print(f"wrote {out / name} ({len(data) // 1024} KB, {time.perf_counter() - t0:.1f} s)",
                       file=sys.stderr)
         write_paper_figures(out, backend, iterations=st.iterations, fewer=st.fewer_mosaic_elements,
-                            quiet=args.quiet)
+                            quiet=req.quiet)
     return 0

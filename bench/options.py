@@ -9,6 +9,7 @@ from __future__ import annotations
 
 import sys
 import time
+from dataclasses import dataclass
 from pathlib import Path
 
 from compact_distributions.backends import REGISTRY, VARIANTS, create_backend, resolve
@@ -145,6 +146,49 @@ def progress_printer(quiet: bool):
 def report_out(args) -> Path:
     """A sweep's report folder: ``--out``, else reports (reports/quick with --quick)."""
     return Path(args.out) if args.out else (Path("reports/quick") if args.quick else Path("reports"))
+
+
+@dataclass(frozen=True)
+class SweepRequest:
+    """What every sweep command is asked, typed: the report folder, the quick form, redo
+    stored runs, progress, where the runs go (a Dask ``scheduler`` address, or a local
+    cluster of ``workers`` processes, or neither: in-process; ``exclusive``: one run per
+    host at a time), the memory limit, and the command line the reports record.  Each
+    sweep command's work is a function of its request (a subclass), which
+    ``cvtbench reproduce`` and the tests call directly; the argparse layer only builds it."""
+
+    out: Path
+    quick: bool = False
+    force: bool = False
+    quiet: bool = False
+    scheduler: str | None = None
+    workers: int | None = None
+    exclusive: bool = False
+    memory_limit: str | int | None = None
+    command: str | None = None
+
+    @staticmethod
+    def common(args) -> dict:
+        """The shared fields from a parsed command line."""
+        workers = getattr(args, "workers", None)
+        return dict(out=report_out(args), quick=bool(args.quick), force=bool(getattr(args, "force", False)),
+                    quiet=bool(args.quiet), scheduler=getattr(args, "scheduler", None),
+                    workers=None if workers is None else whole_number(workers, "--workers", minimum=1),
+                    exclusive=bool(getattr(args, "exclusive", False)),
+                    memory_limit=getattr(args, "memory_limit", None),
+                    command=command_text(getattr(args, "argv", None)))
+
+
+def as_tuple(items) -> tuple | None:
+    """A parsed list option as a request field (None stays None: the default)."""
+    return None if items is None else tuple(items)
+
+
+def command_text(argv) -> str | None:
+    """The command line a report records (None: the request's own)."""
+    from .outputs import command_line
+
+    return command_line(argv) if argv else None
 
 
 def add_sweep_options(p, quick_help: str) -> None:

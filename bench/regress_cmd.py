@@ -50,12 +50,12 @@ COVERAGE_DROP_PP = 0.5  # percentage points
 SLOWDOWN = 2.0  # ratio against the reference measured in the same run
 
 SETS = {
-    "quick": {"size": 256, "n_sites": 250, "iterations": 20, "seeds": [0, 1],
+    "quick": {"size": 256, "n_elements": 250, "iterations": 20, "seeds": [0, 1],
               "elements": ["square", "circle", "triangle"], "baseline_seeds": [0],
-              "speed": {"size": 512, "n_sites": 2000, "metrics": ["l2", "linf"], "warmup": 1, "repeats": 7}},
-    "full": {"size": 512, "n_sites": 1000, "iterations": 20, "seeds": [0, 1, 2],
+              "speed": {"size": 512, "n_elements": 2000, "metrics": ["l2", "linf"], "warmup": 1, "repeats": 7}},
+    "full": {"size": 512, "n_elements": 1000, "iterations": 20, "seeds": [0, 1, 2],
              "elements": ["square", "rectangle", "ellipse", "triangle", "circle"], "baseline_seeds": [0, 1, 2],
-             "speed": {"size": 1024, "n_sites": 4000,
+             "speed": {"size": 1024, "n_elements": 4000,
                        "metrics": ["l2", "l1", "linf", "linf-axial", "l2-axial", "triangle"],
                        "warmup": 1, "repeats": 7}},
 }
@@ -127,11 +127,11 @@ def coverage_specs(cfg: dict, methods: list[str], backends: list[str]):
         for method in methods:
             if get_method(method).sweep_backends == "every":
                 for b in backends:
-                    specs += [RunSpec("regress", method, b, element, cfg["size"], cfg["size"], cfg["n_sites"],
+                    specs += [RunSpec("regress", method, b, element, cfg["size"], cfg["size"], cfg["n_elements"],
                                       cfg["iterations"], s) for s in cfg["seeds"]]
             elif element == "square" and REFERENCE_BACKEND in backends:
                 specs += [RunSpec("regress", method, REFERENCE_BACKEND, element, cfg["size"], cfg["size"],
-                                  cfg["n_sites"], cfg["iterations"], s) for s in cfg["baseline_seeds"]]
+                                  cfg["n_elements"], cfg["iterations"], s) for s in cfg["baseline_seeds"]]
     return specs
 
 
@@ -166,40 +166,20 @@ def measure_coverage(cfg, methods, backends, unavailable, quiet) -> tuple[dict, 
     return cov, skipped, failed
 
 
-def lloyd_stepper(variant: str, metric: str, n: int, size: int, cache):
-    """A function that runs one Lloyd iteration of ``variant`` (from its own evolving
-    sites) and returns its seconds."""
-    from compact_distributions.cvt.seeding import initial_sites
-
-    from .backends_cmd import timing_problem
-
-    problem = timing_problem(metric, n, size, 0)
-    state = {"sites": initial_sites(problem)}
-    backend = cache.get(variant)
-
-    def step() -> float:
-        t0 = time.perf_counter()
-        sites = state["sites"]
-        mom = backend.moments(sites, angles=problem.angles_at(sites), scales=problem.scales_at(sites),
-                              metric=problem.metric, grid=problem.grid)
-        state["sites"] = mom.centroids(sites)
-        return time.perf_counter() - t0
-    return step
-
-
 def measure_speed_pair(backend: str, reference: str, metric: str, n: int, size: int, sp: dict,
                        cache) -> dict:
     """Ratio of ``backend``'s time to ``reference``'s on the same problem, their Lloyd
     iterations interleaved (ref, backend, ref, backend, ...) so that a neighbour's load
     hits both alike, each the fastest of its timed iterations (the least disturbed one)."""
     from .sweep import BackendCache
+    from .timing import LloydStepper
 
     # the reference's backend instance is made first and kept only while it is timed:
     # BackendCache holds one backend at a time, so the pair gets two caches
     ref_cache = BackendCache()
     try:
-        ref_step = lloyd_stepper(reference, metric, n, size, ref_cache)
-        b_step = lloyd_stepper(backend, metric, n, size, cache)
+        ref_step = LloydStepper(ref_cache.get(reference), metric, n, size)
+        b_step = LloydStepper(cache.get(backend), metric, n, size)
         for _ in range(sp["warmup"]):
             ref_step(), b_step()
         ref_s, b_s = [], []
@@ -234,7 +214,7 @@ def measure_speed(cfg, backends, unavailable, baseline_speed: dict, quiet) -> tu
     from .sweep import BackendCache
 
     sp = cfg["speed"]
-    n, size = sp["n_sites"], sp["size"]
+    n, size = sp["n_elements"], sp["size"]
     out, skipped, failed = {}, {}, []
     cache = BackendCache()
     pairs = speed_pairs(cfg, backends)

@@ -10,7 +10,6 @@ Like its parts it resumes: runs whose raw json exists are read back unless --for
 from __future__ import annotations
 
 import argparse
-import importlib
 import sys
 import time
 from pathlib import Path
@@ -28,78 +27,57 @@ def add_parser(sub):
     p.set_defaults(func=run)
 
 
-def _sub_args(module_name: str, argv: list[str]):
-    """Parse ``argv`` with the subcommand's own parser, so its defaults apply; options
-    the subcommand does not have are dropped (with their values)."""
-    mod = importlib.import_module(module_name)
-    parser = argparse.ArgumentParser(prog="cvtbench")
-    sub = parser.add_subparsers(dest="command")
-    mod.add_parser(sub)
-    p = sub.choices[next(iter(sub.choices))]
-    known = set(p._option_string_actions)
-    kept, i = [argv[0]], 1
-    while i < len(argv):
-        opt = argv[i]
-        action = p._option_string_actions.get(opt)
-        if action is not None:
-            takes_value = action.nargs != 0
-        else:
-            takes_value = i + 1 < len(argv) and not argv[i + 1].startswith("--")
-        if opt in known:
-            kept.append(opt)
-            if takes_value:
-                kept.append(argv[i + 1])
-        i += 2 if takes_value else 1
-    args = parser.parse_args(kept)
-    args.argv = kept
-    return args
+def requests(args, out: Path, scheduler: str | None) -> list[tuple[str, object, object]]:
+    """(name, work function, typed request) of each part, from reproduce's own options."""
+    from .backends_cmd import BackendsRequest, backends
+    from .figures_cmd import FiguresRequest, figures
+    from .table2 import FULL, QUICK, Table2Request, table2
+
+    common = dict(quick=bool(args.quick), force=bool(args.force), quiet=bool(args.quiet), scheduler=scheduler,
+                  memory_limit=args.memory_limit)
+    seeds = options.seeds_value(args.seeds, (QUICK if args.quick else FULL)["seeds"])
+    quick = " --quick" if args.quick else ""
+    return [
+        ("table2", table2, Table2Request(out=out, **common, exclusive=bool(args.exclusive), seeds=seeds,
+                                         command=f"cvtbench table2{quick} --out {out}")),
+        ("backends", backends, BackendsRequest(out=out, **common, command=f"cvtbench backends{quick} --out {out}")),
+        ("figures", figures, FiguresRequest(out=out / "figures", quick=bool(args.quick), quiet=bool(args.quiet),
+                                            command=f"cvtbench figures{quick} --out {out / 'figures'}")),
+    ]
 
 
 def run(args) -> int:
+    from .backends_cmd import prepare as prepare_backends
     from .cluster import chosen, scheduler_address
+    from .figures_cmd import prepare as prepare_figures
     from .outputs import command_line, report_folder
+    from .table2 import prepare as prepare_table2
 
     chosen(args)  # bad cluster options fail before anything starts
     out = options.report_out(args)
     # every part's options, its output folder and the memory of its runs are checked
     # before the first one starts
-    options.seeds_value(args.seeds, 1)
-    for _, module, argv in _parts(args, out, None):
-        importlib.import_module(module).prepare(_sub_args(module, argv))
+    checks = {"table2": prepare_table2, "backends": prepare_backends, "figures": prepare_figures}
+    for name, _, request in requests(args, out, None):
+        checks[name](request)
     cmd = command_line(getattr(args, "argv", None) or ["reproduce"] + (["--quick"] if args.quick else []))
     # with --workers one local cluster serves every part
     with report_folder(out, command=cmd), scheduler_address(args) as address:
-        parsed = [(name, _sub_args(module, argv)) for name, module, argv in _parts(args, out, address)]
-        return _run_parts(parsed, out, cmd, args.quick)
+        return _run_parts(requests(args, out, address), out, cmd, args.quick)
 
 
-def _parts(args, out: Path, address: str | None) -> list:
-    """(name, module, argv) of each part."""
-    common = (["--quick"] if args.quick else []) + (["--force"] if args.force else []) + \
-        (["--quiet"] if args.quiet else []) + (["--scheduler", address] if address else []) + \
-        (["--memory-limit", args.memory_limit] if args.memory_limit is not None else [])
-    return [
-        ("table2", "compact_distributions.bench.table2", ["table2", "--out", str(out)] + common
-         + (["--seeds", str(args.seeds)] if args.seeds else []) + (["--exclusive"] if args.exclusive else [])),
-        ("backends", "compact_distributions.bench.backends_cmd", ["backends", "--out", str(out)] + common),
-        ("figures", "compact_distributions.bench.figures_cmd",
-         ["figures", "--out", str(out / "figures")] + [a for a in common if a != "--force"]),
-    ]
-
-
-def _run_parts(parsed, out: Path, cmd: str, quick: bool) -> int:
-    from .outputs import command_line
+def _run_parts(parts, out: Path, cmd: str, quick: bool) -> int:
     from .report import header_markdown, markdown_table, provenance, write_markdown
 
     results = []
     t_all = time.perf_counter()
     status = 0
-    for name, sub_args in parsed:
+    for name, work, request in parts:
         print(f"reproduce: {name} ...", file=sys.stderr)
         t0 = time.perf_counter()
         try:
-            rc = int(sub_args.func(sub_args) or 0)
-            note = f"exit status {rc}" if rc else "`" + command_line(sub_args.argv) + "`"
+            rc = int(work(request) or 0)
+            note = f"exit status {rc}" if rc else f"`{request.command}`"
         except KeyboardInterrupt:
             raise
         except Exception as exc:  # one broken part must not hide the others' results

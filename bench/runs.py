@@ -28,7 +28,7 @@ class RunSpec:
     element: str
     width: int
     height: int
-    n_sites: int
+    n_elements: int
     iterations: int
     seed: int
     aspect: float = DEFAULT_ASPECT
@@ -59,7 +59,7 @@ class RunSpec:
         record names (in the record's order)."""
         gap = f"__gap{self.gap:g}" if self.gap else ""
         return (f"{self.method}__{self.backend}__{self.element}__{self.width}x{self.height}"
-                f"__n{self.n_sites}__it{self.iterations}__s{self.seed}{gap}"
+                f"__n{self.n_elements}__it{self.iterations}__s{self.seed}{gap}"
                 f"{self.method_record.key(dict(self.options))}")
 
     @property
@@ -69,7 +69,7 @@ class RunSpec:
 
     def describe(self) -> str:
         return (f"{self.method}/{self.backend} {self.element} {self.width}x{self.height} "
-                f"N={self.n_sites} seed {self.seed}")
+                f"N={self.n_elements} seed {self.seed}")
 
     def params(self) -> dict:
         d = asdict(self)
@@ -82,7 +82,7 @@ class RunSpec:
 
         from .sweep import memory_class
 
-        return run_estimate(self.width, self.height, self.n_sites, memory_class(self.backend), element=self.element,
+        return run_estimate(self.width, self.height, self.n_elements, memory_class(self.backend), element=self.element,
                             pictures=self.picture, what=f"the run {self.describe()}")
 
     def problem(self):
@@ -90,7 +90,7 @@ class RunSpec:
         from compact_distributions.cvt.problem import Grid, Problem
 
         aspect = self.aspect if self.metric.endswith("-axial") else None
-        return Problem(Grid(self.width, self.height), self.n_sites, make_metric(self.metric, aspect),
+        return Problem(Grid(self.width, self.height), self.n_elements, make_metric(self.metric, aspect),
                        seed=self.seed)
 
     def execute(self, backend) -> dict:
@@ -113,8 +113,8 @@ class RunSpec:
             "key": self.key, **self.params(), "status": "ok", "reason": "", "device": backend.device(),
             "coverage": ev.coverage, "overlap": ev.overlap, "placed": ev.elements, "skipped": ev.skipped,
             "empty_cells": int(dist.empty[-1]) if dist.empty else 0,
-            "total_seconds": float(dist.total_seconds), "setup_seconds": float(dist.setup_seconds),
-            "wall_seconds": wall, "placement_seconds": float(dist.extra.get("placement_seconds", 0.0)),
+            "method_seconds": wall, "lloyd_seconds": float(dist.lloyd_seconds),
+            "setup_seconds": float(dist.setup_seconds), "placement_seconds": float(dist.extra.get("placement_seconds", 0.0)),
             "ms_per_iteration": float(np.median(secs) * 1000) if secs else None,
             "final_energy": float(dist.energy[-1]) if dist.energy else None,
         }
@@ -123,7 +123,7 @@ class RunSpec:
             row["coverage_at_1pct_overlap"] = coverage_at_overlap(curve, 0.01)
             row["coverage_overlap"] = curve  # [[factor, coverage, overlap], ...]
         record = {"row": row, "sites_sha1": sites_digest(dist.sites), "energy": dist.energy,
-                  "seconds": secs, "empty_per_iteration": list(dist.empty), "extra": dist.extra,
+                  "seconds": secs, "empty_cells_per_iteration": list(dist.empty), "extra": dist.extra,
                   "machine": machine(), "versions": versions()}
         if self.seed == 0:
             # 0.01 px is far below a pixel; angles/scales only where they vary (a field, a density)
@@ -148,10 +148,10 @@ PICTURE_PALETTE = np.array([(230, 159, 0), (86, 180, 233), (0, 158, 115), (240, 
                             (204, 121, 167), (0, 114, 178)], dtype=np.uint8)  # colour-blind safe
 
 
-def picture_crop(n_sites: int) -> float:
+def picture_crop(n_elements: int) -> float:
     """Side fraction of the region shown in an effect picture: about PICTURE_ELEMENTS
     elements (the whole region for small problems)."""
-    return float(min(1.0, np.sqrt(PICTURE_ELEMENTS / max(1, n_sites))))
+    return float(min(1.0, np.sqrt(PICTURE_ELEMENTS / max(1, n_elements))))
 
 
 def effect_picture(elements, grid, side: int = 512, crop: float | None = None):

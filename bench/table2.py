@@ -13,9 +13,10 @@ The problem set (also written into the report):
   ball is that shape; variants of ours (``ours-fit``: the same cells, each element moved
   inside its cell to grow it) on every shape on the reference backend.
 
-Coverage and overlap are those of :func:`compact_distributions.cvt.evaluate.evaluate`; time is the method's
-own wall time (``Distribution.total_seconds``: the 20 iterations, setup and element
-placement excluded, as the paper's "average time" of its synthesis).  The paper's
+Coverage and overlap are those of :func:`compact_distributions.cvt.evaluate.evaluate`; time is the
+whole method's wall time (``Distribution.method_seconds``: problem to placed elements,
+as the paper's "average time" of its synthesis), with the Lloyd iterations' part
+(``lloyd_seconds``) and the median ms per iteration beside it.  The paper's
 figures stand beside ours on the square rows; the paper gives neither N nor its raster.
 
 Writes ``OUT/table2.md``, ``OUT/table2.csv``, ``OUT/table2.png`` (one effect picture
@@ -27,6 +28,7 @@ from __future__ import annotations
 import argparse
 import sys
 import time
+from dataclasses import dataclass, field
 from pathlib import Path
 
 import numpy as np
@@ -36,19 +38,19 @@ from compact_distributions.backends import variant_metrics, variant_names, varia
 from compact_distributions.cvt.errors import InputError
 from compact_distributions.cvt.registry import get_method, method_names
 from compact_distributions.cvt.shapes import ELEMENT_SHAPES
-from compact_distributions.cvt.validate import name_list
+from compact_distributions.cvt.validate import name_list, one_of
 
 from . import options
 from .runs import RunSpec
 
 ELEMENTS = list(ELEMENT_SHAPES)
 
-FULL = {"size": 1024, "n_sites": 4000, "iterations": 20, "seeds": 5}
-QUICK = {"size": 256, "n_sites": 250, "iterations": 20, "seeds": 2}
+FULL = {"size": 1024, "n_elements": 4000, "iterations": 20, "seeds": 5}
+QUICK = {"size": 256, "n_elements": 250, "iterations": 20, "seeds": 2}
 
-COLUMNS = ["method", "backend", "element", "metric", "width", "height", "n_sites", "iterations",
+COLUMNS = ["method", "backend", "element", "metric", "width", "height", "n_elements", "iterations",
            "seeds", "runs", "coverage_mean", "coverage_sd", "overlap_mean", "overlap_sd",
-           "time_mean_s", "time_sd_s", "ms_per_iteration", "placed_mean", "empty_cells_mean",
+           "method_seconds_mean", "method_seconds_sd", "lloyd_seconds_mean", "ms_per_iteration", "placed_mean", "empty_cells_mean",
            "coverage_at_1pct_overlap", "paper_coverage", "paper_time", "status", "reason", "device", "hosts", "host_slots"]
 
 
@@ -70,7 +72,7 @@ def problem_set(quick: bool, seeds: int | None, methods: list[str], backends: li
     def add(method, backend, element, picture_first, options, curve=True):
         for s in range(k):
             specs.append(RunSpec(suite, method, backend, element, cfg["size"], cfg["size"],
-                                 cfg["n_sites"], cfg["iterations"], s, picture=picture_first and s == 0,
+                                 cfg["n_elements"], cfg["iterations"], s, picture=picture_first and s == 0,
                                  options=options, curve=curve and s == 0))
 
     records = [get_method(m) for m in methods]
@@ -118,7 +120,7 @@ def aggregate(rows: list[dict]):
         paper = get_method(first["base"]).paper_table2 if element == "square" and method == first["base"] else None
         rec = {
             "method": method, "backend": backend, "element": element, "metric": first["metric"],
-            "width": first["width"], "height": first["height"], "n_sites": first["n_sites"],
+            "width": first["width"], "height": first["height"], "n_elements": first["n_elements"],
             "iterations": first["iterations"], "seeds": len(g), "runs": len(ok),
             "paper_coverage": paper[0] if paper else np.nan, "paper_time": paper[1] if paper else "",
         }
@@ -126,7 +128,8 @@ def aggregate(rows: list[dict]):
             rec.update(
                 coverage_mean=float(ok["coverage"].mean()), coverage_sd=_sd(ok, "coverage"),
                 overlap_mean=float(ok["overlap"].mean()), overlap_sd=_sd(ok, "overlap"),
-                time_mean_s=float(ok["total_seconds"].mean()), time_sd_s=_sd(ok, "total_seconds"),
+                method_seconds_mean=float(ok["method_seconds"].mean()), method_seconds_sd=_sd(ok, "method_seconds"),
+                lloyd_seconds_mean=float(ok["lloyd_seconds"].mean()),
                 ms_per_iteration=float(ok["ms_per_iteration"].median()),
                 placed_mean=float(ok["placed"].mean()), empty_cells_mean=float(ok["empty_cells"].mean()),
                 coverage_at_1pct_overlap=(float(ok["coverage_at_1pct_overlap"].mean())
@@ -215,7 +218,8 @@ def discussion(table) -> str:
             + ", ".join(f"{r['method']} {fmt_pct(r['coverage_at_1pct_overlap'])}" for _, r in ranked.iterrows())
             + ".")
     per_backend = sq[sq["method"] == paper_method]
-    fast = [f"{r['backend']} {fmt_seconds(r['time_mean_s'])}" for _, r in per_backend.iterrows() if r["status"] == "ok"]
+    fast = [f"{r['backend']} {fmt_seconds(r['lloyd_seconds_mean'])}" for _, r in per_backend.iterrows()
+            if r["status"] == "ok"]
     if fast:
         lines.append(f"- Time for the 20 iterations of {paper_method} (mean over seeds): " + ", ".join(fast)
                      + f"; the paper reports {_record(paper_method).paper_table2[1]} on a GPU (N not stated).")
@@ -248,7 +252,7 @@ def render_markdown(table, prov: dict, command: str, quick: bool, cfg: dict, see
 
     title = "Table 2, regenerated" + (" (QUICK: small raster, 2 seeds; not the paper's scale)" if quick else "")
     notes = [
-        f"problem set: square region, whole {cfg['size']}x{cfg['size']} px raster, N = {cfg['n_sites']} "
+        f"problem set: square region, whole {cfg['size']}x{cfg['size']} px raster, N = {cfg['n_elements']} "
         f"sites, {cfg['iterations']} Lloyd iterations, seeds 0..{seeds - 1}, no density, no direction "
         "field; rectangle and ellipse β = 0.5",
         *_problem_notes(methods or list(dict.fromkeys(str(m).split(" ")[0] for m in table["method"]))),
@@ -257,8 +261,9 @@ def render_markdown(table, prov: dict, command: str, quick: bool, cfg: dict, see
         "evaluated alike, the largest coverage whose overlap is at most 1 % (interpolated)",
         "coverage and overlap: cvt.evaluate (area of the union of the elements inside the region / "
         "area of the region; overlap: summed element area minus union area, / region area)",
-        "time: the method's wall time for its iterations (setup and element placement excluded), "
-        "mean over seeds; ms/it: median per iteration",
+        "time: the whole method's wall time, problem to placed elements (Lloyd, final labels, fit, "
+        "compaction; everything a baseline does), mean over seeds; Lloyd: the Lloyd iterations' part of it; "
+        "ms/it: median per Lloyd iteration",
         "paper: Table 2 of Chen, Yang & Yang 2019 (C++/OpenGL on a GPU; N and raster not stated); "
         "shown on the square rows",
         f"this command took {fmt_seconds(elapsed)}; {cached} of {total} runs were read back from "
@@ -268,7 +273,7 @@ def render_markdown(table, prov: dict, command: str, quick: bool, cfg: dict, see
     if quick:
         text += f"\n**{title}**\n"
     cols = ["method", "backend", "element", "coverage", "overlap", "coverage at ≤ 1 % overlap", "time",
-            "ms/it", "runs", "paper coverage", "paper time"]
+            "Lloyd", "ms/it", "runs", "paper coverage", "paper time"]
     by_host = several_hosts(table["hosts"])  # rows from several machines say which
     shared = table["host_slots"].fillna(1) > 1  # times taken beside other runs of the sweep
     body = []
@@ -279,7 +284,8 @@ def render_markdown(table, prov: dict, command: str, quick: bool, cfg: dict, see
             r["method"], r["backend"], r["element"],
             fmt_pct(r["coverage_mean"], r["coverage_sd"]), fmt_pct(r["overlap_mean"], r["overlap_sd"], digits=2),
             fmt_pct(r["coverage_at_1pct_overlap"]),
-            fmt_seconds(r["time_mean_s"]) + (" ‡" if shared[k] else ""), f"{r['ms_per_iteration']:.3g}",
+            fmt_seconds(r["method_seconds_mean"]) + (" ‡" if shared[k] else ""),
+            fmt_seconds(r["lloyd_seconds_mean"]), f"{r['ms_per_iteration']:.3g}",
             f"{r['runs']}/{r['seeds']}",
             fmt_pct(r["paper_coverage"]) if r["paper_time"] else "", r["paper_time"] or "",
         ] + ([r["hosts"]] if by_host else []))
@@ -393,9 +399,9 @@ def render_picture(table, out: Path, suite_specs: list[RunSpec], path: Path) -> 
             name = f"{spec.label} ({spec.backend})" if _every_backend(spec.method) else spec.label
             ax.set_title(f"{name}\n{spec.element}: {100 * c:.1f} %", fontsize=9)
     spec0 = panels[0][0]
-    crop = picture_crop(spec0.n_sites)
+    crop = picture_crop(spec0.n_elements)
     part = "the whole region" if crop >= 1 else f"top-left {crop * spec0.width:.0f}² px of {spec0.width}² px"
-    fig.suptitle(f"Effect pictures (seed 0, {part}, N = {spec0.n_sites})", fontsize=10)
+    fig.suptitle(f"Effect pictures (seed 0, {part}, N = {spec0.n_elements})", fontsize=10)
     save_figure(fig, path)
     plt.close(fig)
     return True
@@ -413,12 +419,14 @@ def add_parser(sub):
     p.set_defaults(func=run)
 
 
-def sweep_backends(text) -> tuple[list[str], dict[str, str]]:
-    """The variants ``--backends`` names (default: every variant that computes every
-    metric) and the reasons of those that cannot run here."""
+def sweep_backends(names) -> tuple[list[str], dict[str, str]]:
+    """The variants ``names`` gives (a list, or ``--backends``' comma text; default: every
+    variant that computes every metric) and the reasons of those that cannot run here."""
     status = variant_status()
     default = [v for v in variant_names() if variant_metrics(v) is None]
-    backends = name_list(text, "--backends", variant_names()) or default
+    if isinstance(names, str):
+        names = name_list(names, "--backends", variant_names())
+    backends = [one_of(b, "--backends", variant_names()) for b in names] if names else default
     return backends, {v: text for v, (ok, text) in status.items() if not ok}
 
 
@@ -428,49 +436,75 @@ def variant_backend(unavailable: dict) -> str:
     return "opencl" if "opencl" not in unavailable else REFERENCE_BACKEND
 
 
-def prepare(args) -> dict:
+@dataclass(frozen=True)
+class Table2Request(options.SweepRequest):
+    """``cvtbench table2``, typed: seeds (None: the set's default), the methods, backend
+    variants and shapes to run (None: all), and method options (name -> value, for every
+    method that declares them)."""
+
+    seeds: int | None = None
+    methods: tuple[str, ...] | None = None
+    backends: tuple[str, ...] | None = None
+    shapes: tuple[str, ...] | None = None
+    method_options: dict = field(default_factory=dict)
+
+    @classmethod
+    def from_args(cls, args) -> Table2Request:
+        cfg = QUICK if args.quick else FULL
+        listed = {name: name_list(getattr(args, name), f"--{name}", choices)
+                  for name, choices in (("methods", method_names()), ("backends", variant_names()),
+                                        ("shapes", ELEMENTS))}
+        return cls(**cls.common(args), seeds=options.seeds_value(args.seeds, cfg["seeds"]),
+                   **{k: options.as_tuple(v) for k, v in listed.items()},
+                   method_options=options.given_method_options(args))
+
+
+def prepare(req: Table2Request) -> dict:
     """Every option checked, the report folder and the memory of each run too, before
     anything runs (``cvtbench reproduce`` checks all its parts this way)."""
     from .outputs import check_folder
     from .sweep import check_memory
 
-    out = options.report_out(args)
-    check_folder(out)
-    cfg = QUICK if args.quick else FULL
-    seeds = options.seeds_value(args.seeds, cfg["seeds"])
+    check_folder(req.out)
+    cfg = QUICK if req.quick else FULL
+    seeds = cfg["seeds"] if req.seeds is None else options.seeds_value(req.seeds, cfg["seeds"])
     all_methods = method_names()
-    methods = name_list(args.methods, "--methods", all_methods) or all_methods
-    methods = [m for m in all_methods if m in methods]  # the registry's order
-    backends, unavailable = sweep_backends(args.backends)
-    shapes = name_list(args.shapes, "--shapes", ELEMENTS)
-    given = options.given_method_options(args)
-    for name in given:  # an option is for the methods that declare it: one of them must run
+    chosen = [one_of(m, "--methods", all_methods) for m in req.methods or all_methods]
+    methods = [m for m in all_methods if m in chosen]  # the registry's order
+    backends, unavailable = sweep_backends(req.backends)
+    shapes = [one_of(s, "--shapes", ELEMENTS) for s in req.shapes] if req.shapes else None
+    for name in req.method_options:  # an option is for the methods that declare it: one of them must run
         if not any(get_method(m).option(name) for m in methods):
             raise InputError(f"--{name.replace('_', '-')} is an option of none of --methods {','.join(methods)}")
-    specs = problem_set(args.quick, seeds, methods, backends, shapes, variant_backend(unavailable), given)
-    check_memory(specs, args.memory_limit, lower="run the --quick set, or fewer --methods or --shapes")
-    return {"out": out, "cfg": cfg, "seeds": seeds, "specs": specs, "unavailable": unavailable}
+    specs = problem_set(req.quick, seeds, methods, backends, shapes, variant_backend(unavailable), req.method_options)
+    check_memory(specs, req.memory_limit, lower="run the --quick set, or fewer --methods or --shapes")
+    return {"out": req.out, "cfg": cfg, "seeds": seeds, "specs": specs, "unavailable": unavailable}
 
 
 def run(args) -> int:
+    return table2(Table2Request.from_args(args))
+
+
+def table2(req: Table2Request) -> int:
+    """Run Table 2's sweep and write its report (what ``cvtbench table2`` does)."""
     from .cluster import executor_for
-    from .outputs import command_line, report_folder
+    from .outputs import report_folder
     from .report import provenance, write_csv, write_markdown, written_files
     from .sweep import run_sweep
 
     t0 = time.perf_counter()
-    plan = prepare(args)
+    plan = prepare(req)
     out, cfg, seeds, specs = plan["out"], plan["cfg"], plan["seeds"], plan["specs"]
-    cmd = command_line(getattr(args, "argv", None) or ["table2"] + (["--quick"] if args.quick else []))
+    cmd = req.command or "cvtbench table2" + (" --quick" if req.quick else "")
     with report_folder(out, command=cmd):
-        with executor_for(args, exclusive=args.exclusive) as executor:
-            rows = run_sweep(specs, out, force=args.force, quiet=args.quiet, unavailable=plan["unavailable"],
+        with executor_for(req, exclusive=req.exclusive) as executor:
+            rows = run_sweep(specs, out, force=req.force, quiet=req.quiet, unavailable=plan["unavailable"],
                              executor=executor)
         table = aggregate(rows)
         elapsed = time.perf_counter() - t0
         cached = sum(1 for r in rows if r.get("cached"))
         pictured = render_picture(table, out, specs, out / "table2.png")
-        md = render_markdown(table, provenance(), cmd, args.quick, cfg, seeds, elapsed, cached, len(rows), pictured,
+        md = render_markdown(table, provenance(), cmd, req.quick, cfg, seeds, elapsed, cached, len(rows), pictured,
                              methods=list(dict.fromkeys(spec.method for spec in specs)))
         curves = coverage_overlap_table(rows)
         if len(curves):
@@ -492,7 +526,7 @@ def _print_summary(table, out: Path, written: list[str]) -> None:
     for _, r in table.iterrows():
         if r["status"] in ("ok", "partial"):
             print(f"{r['method']:<14} {r['backend']:<9} {r['element']:<9} "
-                  f"{fmt_pct(r['coverage_mean'], r['coverage_sd']):>16}  {fmt_seconds(r['time_mean_s'])}",
+                  f"{fmt_pct(r['coverage_mean'], r['coverage_sd']):>16}  {fmt_seconds(r['method_seconds_mean'])}",
                   file=sys.stderr)
         else:
             print(f"{r['method']:<14} {r['backend']:<9} {r['element']:<9} {r['status']}: {r['reason']}",
@@ -500,4 +534,4 @@ def _print_summary(table, out: Path, written: list[str]) -> None:
     print(f"wrote {out}/{', '.join(written)}", file=sys.stderr)
 
 
-__all__ = ["problem_set", "aggregate", "run", "prepare", "discussion"]
+__all__ = ["Table2Request", "table2", "problem_set", "aggregate", "run", "prepare", "discussion"]

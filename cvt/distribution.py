@@ -17,8 +17,9 @@ class Distribution:
     elements: list | None = None  # shapely polygons, one per site (None where skipped)
     energy: list[float] = field(default_factory=list)  # per iteration
     seconds: list[float] = field(default_factory=list)  # wall time per iteration
-    setup_seconds: float = 0.0  # excluded from total_seconds, reported apart
-    total_seconds: float = 0.0  # wall time of the whole method (setup excluded)
+    setup_seconds: float = 0.0  # excluded from lloyd_seconds, reported apart
+    lloyd_seconds: float = 0.0  # wall time of the Lloyd iterations (the paper's "time")
+    method_seconds: float = 0.0  # wall time of the whole method, problem to placed elements
     empty: list[int] = field(default_factory=list)  # empty cells per iteration
     empty_sites: list[int] = field(default_factory=list)
     labels: np.ndarray | None = None  # final label raster, where the method has one

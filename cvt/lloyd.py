@@ -90,6 +90,19 @@ class LloydSetup:
         return self.angles_at(sites) + self.turn if self.turn else self.angles_at(sites)
 
 
+def lloyd_step(backend, setup: LloydSetup) -> Callable:
+    """One Lloyd iteration of ``setup`` on ``backend``: ``step(sites) -> (next sites,
+    energy, empty mask)``.  The one step of the suite: :func:`lloyd` iterates it and the
+    speed reports time it."""
+
+    def step(current):
+        mom = backend.moments(current, angles=setup.cell_angles(current),
+                              scales=setup.scales_at(current), metric=setup.metric, grid=setup.grid)
+        return mom.centroids(current), mom.energy(current), mom.empty
+
+    return step
+
+
 def lloyd(problem: Problem, backend, iterations: int = 20, progress=None,
           sites: np.ndarray | None = None, setup: LloydSetup | None = None) -> LloydResult:
     """Run ``iterations`` Lloyd steps of ``problem`` on ``backend``.
@@ -100,12 +113,7 @@ def lloyd(problem: Problem, backend, iterations: int = 20, progress=None,
     iterations = whole_number(iterations, "iterations", minimum=0, maximum=MAX_ITERATIONS)
     setup = LloydSetup.of(problem) if setup is None else setup
     start = initial_sites(problem) if sites is None else np.array(sites, dtype=np.float64)
-
-    def step(current):
-        mom = backend.moments(current, angles=setup.cell_angles(current),
-                              scales=setup.scales_at(current), metric=setup.metric, grid=setup.grid)
-        return mom.centroids(current), mom.energy(current), mom.empty
-
+    step = lloyd_step(backend, setup)
     result = LloydResult(initial_sites=start)
     final, _ = iterate(start.copy(), step, iterations, progress, log=result)
     result.sites = final

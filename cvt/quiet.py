@@ -8,8 +8,33 @@ the one place that makes a solver does it with file descriptor 1 pointed at /dev
 from __future__ import annotations
 
 import contextlib
+import logging
 import os
 import sys
+import warnings
+
+# the loggers of the libraries the suite drives: their records are for their developers
+THIRD_PARTY_LOGGERS = ("distributed", "dask", "tornado", "asyncio", "matplotlib", "PIL", "pyopencl", "pytools",
+                       "moderngl", "numexpr", "fsspec", "bokeh")
+
+
+def configure(verbose: bool = False) -> None:
+    """How much of the third-party libraries' output a command shows: by default only
+    their errors (warnings and log records are theirs, not the suite's result); with
+    ``verbose`` their warnings and info records too, on standard error."""
+    level = logging.INFO if verbose else logging.ERROR
+    for name in THIRD_PARTY_LOGGERS:
+        logging.getLogger(name).setLevel(level)
+    if verbose:
+        logging.basicConfig(level=logging.INFO, format="%(name)s: %(message)s", stream=sys.stderr)
+        warnings.simplefilter("default")
+    else:
+        for module in ("numpy", "scipy", "shapely", "matplotlib", "PIL", "pyopencl", "pytools", "moderngl",
+                       "pandas", "distributed", "dask", "highspy"):
+            warnings.filterwarnings("ignore", module=module)
+        warnings.filterwarnings("ignore", category=RuntimeWarning)
+        warnings.filterwarnings("ignore", category=FutureWarning)
+        os.environ.setdefault("PYOPENCL_COMPILER_OUTPUT", "0")
 
 
 @contextlib.contextmanager
@@ -40,4 +65,4 @@ def quiet_highs():
     return h
 
 
-__all__ = ["c_stdout_silenced", "quiet_highs"]
+__all__ = ["configure", "c_stdout_silenced", "quiet_highs"]

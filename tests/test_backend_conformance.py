@@ -28,12 +28,6 @@ SLACK = {"gl-cone": 0.12}
 W, H, N = 96, 80, 60
 
 
-@pytest.fixture(scope="module")
-def reference():
-    with create_backend(REFERENCE) as b:
-        yield b
-
-
 @pytest.fixture(scope="module", params=OTHERS)
 def backend(request):
     ok, text = STATUS[request.param]

@@ -119,13 +119,14 @@ def test_table2_aggregates_seeds_by_hand(tmp_path):
     from compact_distributions.bench.table2 import aggregate
 
     rows = [{**tiny(seed).params(), "key": tiny(seed).key, "status": "ok", "reason": "", "device": "cpu",
-             "coverage": c, "overlap": o, "total_seconds": t, "ms_per_iteration": 1.0, "placed": 20,
+             "coverage": c, "overlap": o, "method_seconds": t, "lloyd_seconds": t / 2, "ms_per_iteration": 1.0, "placed": 20,
              "empty_cells": 0} for seed, (c, o, t) in enumerate([(0.70, 0.0, 1.0), (0.80, 0.02, 3.0)])]
     rows.append({**tiny(2).params(), "key": tiny(2).key, "status": "failed", "reason": "boom"})
     (line,) = aggregate(rows).to_dict("records")
     assert line["coverage_mean"] == pytest.approx(0.75) and line["overlap_mean"] == pytest.approx(0.01)
     assert line["coverage_sd"] == pytest.approx(np.sqrt(0.005))  # sample sd of 0.70, 0.80
-    assert line["time_mean_s"] == pytest.approx(2.0)
+    assert line["method_seconds_mean"] == pytest.approx(2.0)
+    assert line["lloyd_seconds_mean"] == pytest.approx(1.0)
     assert line["runs"] == 2 and line["seeds"] == 3 and line["status"] == "partial" and "boom" in line["reason"]
 
 
@@ -155,15 +156,15 @@ def test_committed_table2_covers_every_method_and_backend():
 
 
 def test_backends_quick_rerun_matches_committed_columns(tmp_path):
-    code = main(["backends", "--quick", "--backends", "numpy,ckdtree", "--metrics", "l2", "--sites", "300",
+    code = main(["backends", "--quick", "--backends", "numpy,ckdtree", "--metrics", "l2", "--elements", "300",
                  "--sizes", "96", "--repeats", "1", "--out", str(tmp_path), "--quiet"])
     assert code == 0
     new = pd.read_csv(tmp_path / "backends.csv")
     assert list(new.columns) == list(_committed("quick/backends.csv").columns)
-    assert set(new.backend) == {"numpy", "ckdtree"} and (new.ms_median > 0).all()
+    assert set(new.backend) == {"numpy", "ckdtree"} and (new.ms_per_iteration > 0).all()
     assert new.loc[new.backend == "numpy", "x_numpy"].iloc[0] == pytest.approx(1.0)
     full = _committed("backends.csv")
-    assert {1000, 4000, 16000} <= set(full.n_sites) and {512, 1024, 2048} <= set(full["size"])
+    assert {1000, 4000, 16000} <= set(full.n_elements) and {512, 1024, 2048} <= set(full["size"])
     assert set(full.metric) == {"l2", "l1", "linf", "linf-axial", "l2-axial", "triangle"}
 
 
@@ -275,11 +276,39 @@ def test_bad_bench_options_are_one_line_errors(argv, text, capsys, tmp_path):
     assert err.count("\n") == 0 and text in err
 
 
-def test_reproduce_passes_only_options_a_part_knows():
-    from compact_distributions.bench.reproduce_cmd import _sub_args
+def test_reproduce_hands_each_part_a_typed_request(tmp_path):
+    import argparse
 
-    args = _sub_args("compact_distributions.bench.backends_cmd", ["backends", "--out", "x", "--seeds", "3", "--quick"])
-    assert args.out == "x" and args.quick and args.argv == ["backends", "--out", "x", "--quick"]
+    from compact_distributions.bench.backends_cmd import BackendsRequest, backends
+    from compact_distributions.bench.figures_cmd import FiguresRequest
+    from compact_distributions.bench.reproduce_cmd import requests
+    from compact_distributions.bench.table2 import Table2Request, table2
+
+    args = argparse.Namespace(quick=True, force=False, quiet=True, memory_limit="2G", seeds="3", exclusive=True)
+    parts = requests(args, tmp_path, "tcp://127.0.0.1:1")
+    assert [(name, type(req)) for name, _, req in parts] == [
+        ("table2", Table2Request), ("backends", BackendsRequest), ("figures", FiguresRequest)]
+    t2, bk, fig = (req for _, _, req in parts)
+    assert parts[0][1] is table2 and parts[1][1] is backends
+    assert (t2.out, t2.seeds, t2.exclusive, t2.scheduler, t2.memory_limit) == (tmp_path, 3, True, "tcp://127.0.0.1:1", "2G")
+    assert (bk.out, bk.quick, bk.exclusive, bk.scheduler) == (tmp_path, True, False, "tcp://127.0.0.1:1")
+    assert fig.out == tmp_path / "figures" and fig.quick
+    assert t2.command == f"cvtbench table2 --quick --out {tmp_path}"
+
+
+def test_a_typed_request_is_checked_like_the_command_line(tmp_path):
+    from compact_distributions.bench.table2 import Table2Request, prepare
+    from compact_distributions.cvt.errors import InputError
+
+    with pytest.raises(InputError, match="--methods"):
+        prepare(Table2Request(out=tmp_path, quick=True, methods=("nosuch",)))
+    with pytest.raises(InputError, match="--delta is an option of none of --methods ours"):
+        prepare(Table2Request(out=tmp_path, quick=True, methods=("ours",), method_options={"delta": 0.9}))
+    plan = prepare(Table2Request(out=tmp_path, quick=True, seeds=1, methods=("ours", "hausner2001"),
+                                 backends=("numpy",), shapes=("square",)))
+    assert [(s.label, s.backend, s.element) for s in plan["specs"]] == [
+        ("ours", "numpy", "square"), ("hausner2001", "numpy", "square"),
+        ("hausner2001 δ=0.85", "numpy", "square"), ("hausner2001 δ=0.8", "numpy", "square")]
 
 
 def test_effect_picture_draws_elements():

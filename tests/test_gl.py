@@ -7,7 +7,6 @@ import numpy as np
 import pytest
 
 from compact_distributions.backends import create_backend
-from compact_distributions.backends.numpy_backend import NumpyBackend
 from compact_distributions.cvt.errors import BackendUnavailable, InputError
 from compact_distributions.cvt.fields import DensityMap, DirectionField
 from compact_distributions.cvt.lloyd import final_labels, lloyd
@@ -37,11 +36,6 @@ def exact():
     b = _backend("exact")
     yield b
     b.close()
-
-
-@pytest.fixture(scope="module")
-def reference():
-    return NumpyBackend()
 
 
 def disc_mask(w, h):

@@ -14,7 +14,6 @@ import math
 import numpy as np
 import pytest
 
-from compact_distributions.backends.numpy_backend import NumpyBackend
 from compact_distributions.cvt.errors import BackendUnavailable, InputError
 from compact_distributions.cvt.fields import DensityMap, DirectionField
 from compact_distributions.cvt.lloyd import lloyd
@@ -39,11 +38,6 @@ def backends():
     yield made
     for b in made.values():
         b.close()
-
-
-@pytest.fixture(scope="module")
-def reference():
-    return NumpyBackend()
 
 
 def notched_ellipse(w, h):
@@ -302,7 +296,7 @@ def test_cli_run_and_info(tmp_path, capsys):
     from compact_distributions.bench.cli import main
 
     out = tmp_path / "run"
-    code = main(["run", "--backend", "opencl", "--device", "0:0", "--sites", "150", "--size", "96",
+    code = main(["run", "--backend", "opencl", "--device", "0:0", "--elements", "150", "--size", "96",
                  "--iterations", "3", "--out", str(out), "--quiet"])
     assert code == 0
     result = json.loads((out / "result.json").read_text())

@@ -127,7 +127,7 @@ def test_info_lists_the_plugins_and_the_broken_one(plugin_env):
 
 
 def test_run_records_the_option_and_the_option_acts(plugin_env, tmp_path):
-    common = ["run", "--method", "shrunk", "--element", "square", "--sites", "64", "--size", "96",
+    common = ["run", "--method", "shrunk", "--element", "square", "--elements", "64", "--size", "96",
               "--iterations", "5", "--backend", "brute", "--quiet"]
     whole = cvtbench(plugin_env, *common, "--out", str(tmp_path / "a"))
     half = cvtbench(plugin_env, *common, "--shrink", "0.5", "--out", str(tmp_path / "b"))

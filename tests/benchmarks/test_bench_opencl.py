@@ -24,13 +24,6 @@ except BackendUnavailable as exc:
     pytest.skip(f"OpenCL backend unavailable: {exc}", allow_module_level=True)
 
 
-@pytest.fixture(scope="module")
-def ocl():
-    backend = OpenCLBackend()
-    yield backend
-    backend.close()
-
-
 def uniform_sites(n, w, h, seed=0):
     return np.random.default_rng(seed).random((n, 2)) * [w, h]
 

@@ -1,0 +1,72 @@
+"""compact_distributions: compact distributions of discrete elements (Chen, Yang & Yang 2019).
+
+The declared public API::
+
+    import compact_distributions as cd
+
+    problem = cd.problem(n_elements=1000, size=512, element="square", seed=1)
+    result = cd.run(problem, "ours-compact", backend="opencl")
+    print(result.coverage, result.overlap, result.method_seconds)
+
+    mosaic = cd.mosaic("picture.jpg", n_elements=2000, backend="opencl")
+    mosaic.render().save("mosaic.png")
+
+``run`` and ``mosaic`` take a backend by name (started and closed for the call) or a live
+backend (left open); ``get_method`` / ``method_names`` read the one registry of method
+records (plug-ins included), ``create_backend`` / ``backend_names`` the backends.  Bad
+input raises :class:`InputError` naming the argument; a backend that cannot start raises
+:class:`BackendUnavailable`.  Everything else lives in the subpackages ``cvt`` (the
+core), ``backends``, ``baselines`` and ``bench`` (the command line, ``cvtbench``).
+
+The names are loaded on first use, so that importing one of the subpackages does not
+import the others.
+"""
+
+from __future__ import annotations
+
+import importlib
+from importlib.metadata import PackageNotFoundError, version
+
+try:
+    __version__ = version("compact-distributions")
+except PackageNotFoundError:  # a source tree that was not installed
+    __version__ = "0+unknown"
+
+# public name -> "module:attribute" (module relative to this package)
+_NAMES = {
+    "run": "bench.api:run",
+    "mosaic": "bench.api:mosaic",
+    "problem": "bench.api:problem",
+    "RunResult": "bench.api:RunResult",
+    "get_method": "cvt.registry:get_method",
+    "method_names": "cvt.registry:method_names",
+    "Method": "cvt.methods:Method",
+    "MethodOption": "cvt.methods:MethodOption",
+    "create_backend": "backends:create_backend",
+    "backend_names": "backends:variant_names",
+    "Backend": "backends.base:Backend",
+    "Problem": "cvt.problem:Problem",
+    "Grid": "cvt.problem:Grid",
+    "make_metric": "cvt.metrics:make_metric",
+    "evaluate": "cvt.evaluate:evaluate",
+    "Distribution": "cvt.distribution:Distribution",
+    "MosaicResult": "cvt.mosaic:MosaicResult",
+    "InputError": "cvt.errors:InputError",
+    "BackendUnavailable": "cvt.errors:BackendUnavailable",
+}
+
+__all__ = ["__version__", *_NAMES]
+
+
+def __getattr__(name: str):
+    target = _NAMES.get(name)
+    if target is None:
+        raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
+    module, _, attr = target.partition(":")
+    value = getattr(importlib.import_module(f"{__name__}.{module}"), attr)
+    globals()[name] = value
+    return value
+
+
+def __dir__():
+    return sorted(__all__)
