@@ -128,7 +128,7 @@ def mosaic_options(args) -> dict:
     )
 
 
-def mosaic_result_json(args, m, backend) -> dict:
+def mosaic_result_json(args, m, backend, stage_seconds: dict | None = None) -> dict:
     """result.json of a mosaic (the schema of bench/results.py)."""
     from compact_distributions.cvt.evaluate import evaluate
     from compact_distributions.cvt.problem import Grid
@@ -144,7 +144,7 @@ def mosaic_result_json(args, m, backend) -> dict:
                "region": "picture less its strong edges" if m.walls else None}
     return build_result("mosaic", m.problem, m.to_distribution(), ev, backend, element=m.element, gap=m.gap,
                         command=command_line(getattr(args, "argv", None)), sources=sources,
-                        method_options=m.method_options, image=m.source,
+                        method_options=m.method_options, stage_seconds=stage_seconds, image=m.source,
                         colours=[hex_colour(c) for c in m.colours], grout=hex_colour(m.grout),
                         contrast=m.contrast,
                         colour_error=m.colour_error if np.isfinite(m.colour_error) else None, straddling=m.straddling,
@@ -198,13 +198,15 @@ def run(args) -> int:
             if args.compare:
                 _say(args.quiet, f"comparison runs for --compare {args.compare}")
                 comparison = compare_figure(picture, backend, dict(opts, progress=None), args.compare, m)
-            result = mosaic_result_json(args, m, backend)
-        _say(args.quiet, f"{m.method}: placed {m.placed} of {len(m.sites)} tiles, coverage {m.coverage:.3f}, "
-             f"colour error {m.colour_error:.2f} ΔE*ab, straddling {100 * m.straddling:.1f} %; writing {args.out}")
-        write_lines(tmp / "mosaic.svg", m.svg_lines())
-        m.render(scale=png_scale).save(tmp / "mosaic.png")
-        write_json(tmp / "result.json", result)
-        write_sites_csv(tmp / "sites.csv", m.sites, m.angles, m.scales)
+            _say(args.quiet, f"{m.method}: placed {m.placed} of {len(m.sites)} tiles, coverage {m.coverage:.3f}, "
+                 f"colour error {m.colour_error:.2f} ΔE*ab, straddling {100 * m.straddling:.1f} %; writing {args.out}")
+            # the other files first, so that result.json (written last) holds their writing time
+            t_write = time.perf_counter()
+            write_lines(tmp / "mosaic.svg", m.svg_lines())
+            m.render(scale=png_scale).save(tmp / "mosaic.png")
+            write_sites_csv(tmp / "sites.csv", m.sites, m.angles, m.scales)
+            result = mosaic_result_json(args, m, backend, {"writing": time.perf_counter() - t_write})
+            write_json(tmp / "result.json", result)
         if comparison is not None:
             comparison.save(tmp / f"compare_{args.compare}.png")
     _say(args.quiet, f"wrote {args.out}/mosaic.svg, mosaic.png, result.json, sites.csv "

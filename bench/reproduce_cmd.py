@@ -1,6 +1,6 @@
 """`cvtbench reproduce`: every table and figure of the suite, in one command.
 
-Runs, in order, `cvtbench table2`, `cvtbench backends` and `cvtbench figures` (which
+Runs, in order, `cvtbench table2`, `cvtbench backends`, `cvtbench pipeline` and `cvtbench figures` (which
 includes the mosaic Figures 18-19), each into the same report folder, then writes ``OUT/reproduce.md``: what ran, how long each part took, and
 the machine, devices, versions and commit.  ``--quick`` runs the quick form of each
 (under 5 minutes on 2 cores) into ``reports/quick``; the full form writes ``reports``.
@@ -18,7 +18,7 @@ from . import options
 
 
 def add_parser(sub):
-    p = sub.add_parser("reproduce", help="table2 + backends + figures into reports/",
+    p = sub.add_parser("reproduce", help="table2 + backends + pipeline + figures into reports/",
                        description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     options.add_sweep_options(p, "the quick form of every part (< 5 min on 2 cores)")
     options.add_seeds_option(p, "table2's: default 5; quick 2")
@@ -31,6 +31,7 @@ def requests(args, out: Path, scheduler: str | None) -> list[tuple[str, object, 
     """(name, work function, typed request) of each part, from reproduce's own options."""
     from .backends_cmd import BackendsRequest, backends
     from .figures_cmd import FiguresRequest, figures
+    from .pipeline_cmd import PipelineRequest, pipeline
     from .table2 import FULL, QUICK, Table2Request, table2
 
     common = dict(quick=bool(args.quick), force=bool(args.force), quiet=bool(args.quiet), scheduler=scheduler,
@@ -41,6 +42,7 @@ def requests(args, out: Path, scheduler: str | None) -> list[tuple[str, object, 
         ("table2", table2, Table2Request(out=out, **common, exclusive=bool(args.exclusive), seeds=seeds,
                                          command=f"cvtbench table2{quick} --out {out}")),
         ("backends", backends, BackendsRequest(out=out, **common, command=f"cvtbench backends{quick} --out {out}")),
+        ("pipeline", pipeline, PipelineRequest(out=out, **common, command=f"cvtbench pipeline{quick} --out {out}")),
         ("figures", figures, FiguresRequest(out=out / "figures", quick=bool(args.quick), quiet=bool(args.quiet),
                                             command=f"cvtbench figures{quick} --out {out / 'figures'}")),
     ]
@@ -51,13 +53,15 @@ def run(args) -> int:
     from .cluster import chosen, scheduler_address
     from .figures_cmd import prepare as prepare_figures
     from .outputs import command_line, report_folder
+    from .pipeline_cmd import prepare as prepare_pipeline
     from .table2 import prepare as prepare_table2
 
     chosen(args)  # bad cluster options fail before anything starts
     out = options.report_out(args)
     # every part's options, its output folder and the memory of its runs are checked
     # before the first one starts
-    checks = {"table2": prepare_table2, "backends": prepare_backends, "figures": prepare_figures}
+    checks = {"table2": prepare_table2, "backends": prepare_backends, "pipeline": prepare_pipeline,
+              "figures": prepare_figures}
     for name, _, request in requests(args, out, None):
         checks[name](request)
     cmd = command_line(getattr(args, "argv", None) or ["reproduce"] + (["--quick"] if args.quick else []))

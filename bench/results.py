@@ -22,13 +22,25 @@ def schema() -> dict:
     return json.loads(SCHEMA_FILE.read_text())
 
 
+def stages_of(dist) -> dict:
+    """The wall time of each stage of a method's run: Lloyd, then every ``NAME_seconds``
+    the method timed in its ``extra`` (final labels, fit, placement, compaction, cutting,
+    ...), by NAME."""
+    stages = {"lloyd": float(dist.lloyd_seconds)}
+    for key, value in dist.extra.items():
+        if key.endswith("_seconds") and isinstance(value, (int, float)):
+            stages[key.removesuffix("_seconds")] = float(value)
+    return stages
+
+
 def build_result(kind: str, problem, dist, evaluation, backend, *, element: str, gap: float,
                  command: str, sources: dict | None = None, method_options: dict | None = None,
-                 **fields) -> dict:
+                 stage_seconds: dict | None = None, **fields) -> dict:
     """The result.json record of one run: the problem, the method's Distribution, the
     evaluation (coverage, overlap, ...) of its elements, the backend that ran it, plus
     the command's own ``fields`` (a mosaic's image, colours, ...); ``method_options`` are
-    the method's own options as the user set them."""
+    the method's own options as the user set them; ``stage_seconds`` the command's own
+    stages (evaluation, writing, ...), added to the method's (:func:`stages_of`)."""
     from .outputs import machine, versions
 
     g = problem.grid
@@ -58,6 +70,7 @@ def build_result(kind: str, problem, dist, evaluation, backend, *, element: str,
         "method_seconds": dist.method_seconds,
         "lloyd_seconds": dist.lloyd_seconds,
         "setup_seconds": dist.setup_seconds,
+        "stage_seconds": {**stages_of(dist), **(stage_seconds or {})},
         "ms_per_iteration": (float(np.median(dist.seconds)) * 1000 if dist.seconds else None),
         "empty_cells_per_iteration": dist.empty,
         "empty_sites": dist.empty_sites,

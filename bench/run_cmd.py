@@ -18,6 +18,7 @@ import argparse
 import csv
 import os
 import sys
+import time
 from dataclasses import dataclass
 
 import numpy as np
@@ -197,13 +198,14 @@ def run(args) -> int:
         with options.open_backend(args) as backend:
             dist = method(problem, backend, iterations=iterations,
                           progress=options.progress_printer(args.quiet), element=element, gap=gap, **extra)
+            t0 = time.perf_counter()
             region = region_polygon(problem.grid)
             ev = evaluate(dist.elements, problem.grid, region=region, labels=dist.labels)
+            evaluation_seconds = time.perf_counter() - t0
             sources = {k: getattr(args, k) for k in ("init", "density", "field", "region")}
-            result = build_result("run", problem, dist, ev, backend, element=dist.extra["element"], gap=gap,
-                                  command=command_line(args.argv), sources=sources, method_options=extra)
         g = problem.grid
-        write_json(tmp / "result.json", result)
+        # the other files first, so that result.json (written last) holds their writing time
+        t0 = time.perf_counter()
         write_sites_csv(tmp / "sites.csv", dist.sites, dist.angles, dist.scales)
         if dist.labels is not None:
             cells_image(dist.labels, len(dist.sites), dist.sites).save(tmp / "cells.png")
@@ -211,6 +213,11 @@ def run(args) -> int:
                                                     region=None if g.mask is None else region))
         draw_elements(dist.elements, g.width, g.height, region_colour=PAPER,
                       region_mask=g.mask).save(tmp / "elements.png")
+        stages = {"evaluation": evaluation_seconds, "writing": time.perf_counter() - t0}
+        result = build_result("run", problem, dist, ev, backend, element=dist.extra["element"], gap=gap,
+                              command=command_line(args.argv), sources=sources, method_options=extra,
+                              stage_seconds=stages)
+        write_json(tmp / "result.json", result)
     if not args.quiet:
         mean = np.median(dist.seconds) * 1000 if dist.seconds else float("nan")
         print(f"wrote {args.out}/result.json, sites.csv, cells.png, elements.svg, elements.png  "

@@ -452,21 +452,29 @@ def make_mosaic(image, backend, *, n_elements: int = DEFAULT_ELEMENTS, metric: s
                       walls=edge_map if walls else None)
 
     dist = record(problem, WalledBackend(backend) if walls else backend, iterations=iterations,
-                      progress=progress, element=element, gap=gap, **method_options)
+                  progress=progress, element=element, gap=gap, **method_options)
     polygons = [None if p is None or p.is_empty else p for p in dist.elements]
     cut = record.tight if cut is None else bool(cut)
     cut_count = 0
+    # the stages after the method are timed too (result.json's stage_seconds)
+    t0 = time.perf_counter()
     if walls and cut:
         polygons, cut_count = cut_to_walls(polygons, edge_map, gap, spacing)
-        dist = dataclasses.replace(dist, elements=polygons, extra={**dist.extra, "cut_tiles": cut_count})
+    t1 = time.perf_counter()
     tiles, pixels = pixels_under(polygons, w, h)
     colours, fills_lab = tile_colours(lab, polygons, dist.sites, tiles, pixels)
+    t2 = time.perf_counter()
     ev = evaluate(polygons, Grid(w, h))  # the whole picture: walls are grout
     straddles = straddling_tiles(polygons, edge_map)
+    error = colour_error(lab, fills_lab, tiles, pixels)
+    t3 = time.perf_counter()
+    stages = {"cutting_seconds": t1 - t0, "fills_seconds": t2 - t1, "evaluation_seconds": t3 - t2}
+    dist = dataclasses.replace(dist, elements=polygons,
+                               extra={**dist.extra, **({"cut_tiles": cut_count} if walls and cut else {}), **stages})
     placed = sum(p is not None for p in polygons)
     return MosaicResult(
         sites=dist.sites, angles=dist.angles, scales=dist.scales, polygons=polygons, colours=colours,
-        coverage=ev.coverage, overlap=ev.overlap, colour_error=colour_error(lab, fills_lab, tiles, pixels),
+        coverage=ev.coverage, overlap=ev.overlap, colour_error=error,
         straddling=float(straddles.sum() / placed) if placed else 0.0,
         width=w, height=h, metric=metric_name, element=element, aspect=metric_obj.aspect, gap=gap,
         method=dist.method or record.name, method_options=given_options, contrast=contrast, grout=grout, edge_threshold=edge_threshold,

@@ -197,3 +197,43 @@ def test_the_check_catches_a_cycle():
     assert cycles(import_graph(sources)) == [[f"{pkg}.a", f"{pkg}.b", f"{pkg}.c"]]
     sources[f"{pkg}.c"] = ("import numpy\n", False)
     assert cycles(import_graph(sources)) == []
+
+
+# ------------------------------------------------------------------ method names in bench
+def method_name_comparisons(source: str, names: set[str]) -> list[int]:
+    """Lines where ``source`` compares something with a method's name written out (``==``,
+    ``!=``, ``in``, ``.startswith``): bench/ reads methods' records instead."""
+    found = []
+    for node in ast.walk(ast.parse(source)):
+        texts = []
+        if isinstance(node, ast.Compare):
+            for side in [node.left, *node.comparators]:
+                if isinstance(side, ast.Constant):
+                    texts.append(side.value)
+                elif isinstance(side, (ast.Tuple, ast.List, ast.Set)):
+                    texts += [e.value for e in side.elts if isinstance(e, ast.Constant)]
+        elif isinstance(node, ast.Call) and isinstance(node.func, ast.Attribute) and \
+                node.func.attr in ("startswith", "endswith") and node.args and isinstance(node.args[0], ast.Constant):
+            texts.append(node.args[0].value)
+            if node.func.attr == "startswith":
+                texts += [n for n in names if isinstance(node.args[0].value, str) and n.startswith(node.args[0].value)]
+        if any(isinstance(t, str) and t in names for t in texts):
+            found.append(node.lineno)
+    return found
+
+
+def test_bench_never_compares_a_method_name():
+    from compact_distributions.cvt.registry import method_names
+
+    names = set(method_names())
+    bad = {str(p.relative_to(ROOT)): lines for p in sorted((ROOT / "bench").rglob("*.py"))
+           if (lines := method_name_comparisons(p.read_text(), names))}
+    assert bad == {}
+
+
+def test_the_name_check_catches_a_comparison():
+    names = {"ours", "ours-compact", "hu2016"}
+    assert method_name_comparisons("if m == 'ours':\n    pass\n", names) == [1]
+    assert method_name_comparisons("x = m in ('hu2016', 'a')\n", names) == [1]
+    assert method_name_comparisons("y = m.startswith('ours')\n", names) == [1]
+    assert method_name_comparisons("z = record.role == 'paper'\nw = m == other\n", names) == []
