@@ -23,11 +23,20 @@ def schema() -> dict:
 
 
 def build_result(kind: str, problem, dist, evaluation, backend, *, element: str, gap: float,
-                 command: str, sources: dict | None = None, **fields) -> dict:
+                 command: str, sources: dict | None = None, placed=None, grid=None, **fields) -> dict:
     """The result.json record of one run: the problem, the method's Distribution, the
     evaluation (coverage, overlap, ...) of its elements, the backend that ran it, plus
-    the command's own ``fields`` (a mosaic's image, colours, ...)."""
+    the command's own ``fields`` (a mosaic's image, colours, ...).  The fidelity measures
+    (``cvt.evaluate.MEASURES``) are taken of ``placed`` (default the Distribution's
+    elements) on ``grid`` (default the problem's, as ``evaluation``)."""
+    from compact_distributions.cvt.evaluate import coverage_at_overlap, coverage_overlap_curve, fidelity
+
     from .outputs import machine, versions
+
+    placed = dist.elements if placed is None else placed
+    curve = coverage_overlap_curve(placed, problem.grid if grid is None else grid)
+    measured = {"coverage_at_1pct_overlap": _finite(coverage_at_overlap(curve, 0.01)),
+                **{k: _finite(v) for k, v in fidelity(placed, problem, element).items()}}
 
     g = problem.grid
     sources = sources or {}
@@ -60,6 +69,7 @@ def build_result(kind: str, problem, dist, evaluation, backend, *, element: str,
         "element": element,
         "gap": gap,
         **evaluation.as_dict(),
+        **measured,
         "elements": dist.elements,  # outlines, converted one by one as the json is written
         "extra": dist.extra,
         **fields,
@@ -68,3 +78,8 @@ def build_result(kind: str, problem, dist, evaluation, backend, *, element: str,
         "command": command,
     }
     return record
+
+
+def _finite(value: float) -> float | None:
+    """JSON has no NaN: a measure that does not apply (circles' direction) is null."""
+    return float(value) if np.isfinite(value) else None
