@@ -37,6 +37,8 @@ class RunSpec:
     delta: float | None = None  # tile budget δ of a fixed-size baseline (None: its default)
     alternate: bool = False  # ours-compact: triangles that point either way
     curve: bool = False  # also measure the coverage-overlap curve (elements scaled)
+    scene: str | None = None  # a standard problem of bench/scenes.py (None: the whole square)
+    measures: bool = False  # also the fidelity measures (cvt.evaluate.fidelity)
 
     @property
     def metric(self) -> str:
@@ -47,7 +49,8 @@ class RunSpec:
         gap = f"__gap{self.gap:g}" if self.gap else ""
         delta = f"__d{self.delta:g}" if self.delta is not None else ""
         alternate = "__alt" if self.alternate else ""
-        return (f"{self.method}__{self.backend}__{self.element}__{self.width}x{self.height}"
+        scene = f"{self.scene}__" if self.scene else ""
+        return (f"{scene}{self.method}__{self.backend}__{self.element}__{self.width}x{self.height}"
                 f"__n{self.n_sites}__it{self.iterations}__s{self.seed}{gap}{delta}{alternate}")
 
     @property
@@ -65,6 +68,7 @@ class RunSpec:
         d = asdict(self)
         d.pop("picture")
         d.pop("curve")
+        d.pop("measures")
         return {**d, "metric": self.metric, "label": self.label}
 
     def memory_estimate(self):
@@ -80,6 +84,10 @@ class RunSpec:
         from compact_distributions.cvt.problem import Grid, Problem
 
         aspect = self.aspect if self.metric.endswith("-axial") else None
+        if self.scene is not None:
+            from .scenes import scene_problem
+
+            return scene_problem(self.scene, self.width, self.n_sites, make_metric(self.metric, aspect), self.seed)
         return Problem(Grid(self.width, self.height), self.n_sites, make_metric(self.metric, aspect),
                        seed=self.seed)
 
@@ -88,7 +96,13 @@ class RunSpec:
         (a json of 4000 sites is ~60 kB, and the digest already tells whether two runs
         agree)."""
         from compact_distributions.baselines import get_method
-        from compact_distributions.cvt.evaluate import coverage_at_overlap, coverage_overlap_curve, evaluate
+        from compact_distributions.cvt.evaluate import (
+            coverage_at_overlap,
+            coverage_overlap_curve,
+            evaluate,
+            fidelity,
+            region_polygon,
+        )
 
         from .outputs import machine, versions
 
@@ -100,7 +114,8 @@ class RunSpec:
         t0 = time.perf_counter()
         dist = method(problem, backend, iterations=self.iterations, element=self.element, gap=self.gap, **options)
         wall = time.perf_counter() - t0
-        ev = evaluate(dist.elements, problem.grid)
+        region = region_polygon(problem.grid)
+        ev = evaluate(dist.elements, problem.grid, region=region)
         secs = list(map(float, dist.seconds))
         row = {
             "key": self.key, **self.params(), "status": "ok", "reason": "", "device": backend.device(),
@@ -112,9 +127,12 @@ class RunSpec:
             "final_energy": float(dist.energy[-1]) if dist.energy else None,
         }
         if self.curve:
-            curve = coverage_overlap_curve(dist.elements, problem.grid)
+            curve = coverage_overlap_curve(dist.elements, problem.grid, region=region)
             row["coverage_at_1pct_overlap"] = coverage_at_overlap(curve, 0.01)
             row["coverage_overlap"] = curve  # [[factor, coverage, overlap], ...]
+        if self.measures:
+            row.update(fidelity(dist.elements, problem, self.element, problem.metric.aspect))
+            row["n_elements"] = problem.n_sites
         record = {"row": row, "sites_sha1": sites_digest(dist.sites), "energy": dist.energy,
                   "seconds": secs, "empty_per_iteration": list(dist.empty), "extra": dist.extra,
                   "machine": machine(), "versions": versions()}

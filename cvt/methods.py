@@ -67,9 +67,30 @@ def run_ours_fit(problem: Problem, backend, **options) -> Distribution:
     return run_ours(problem, backend, fit="centre", **options)
 
 
+# ours-compact under a density: each size capped at (1 + slack) × the size that follows the
+# density exactly (see density_caps); without caps compaction grows elements by the room
+# around them, not by the density, and the sizes' spread about the density grows
+DENSITY_CAP_SLACK = 0.02
+
+
+def density_caps(problem: Problem, centres, sizes, shape: str, aspect: float, slack: float) -> np.ndarray:
+    """(N,) size caps that follow the density: κ·s_i·(1 + ``slack``), s_i the density's
+    size factor at element i's centre and κ the size at which elements of size κ·s_i (the
+    placed ones, ``sizes`` > 0) would together have the region's area."""
+    import shapely
+
+    from .shapes import unit_outline
+
+    s = problem.scales_at(centres)
+    unit_area = float(shapely.area(shapely.Polygon(unit_outline(shape, aspect))))
+    weight = float(np.sum(s[np.asarray(sizes) > 0] ** 2)) * unit_area
+    kappa = math.sqrt(problem.grid.pixel_count / weight) if weight > 0 else 1.0
+    return kappa * s * (1.0 + slack)
+
+
 def run_ours_compact(problem: Problem, backend, *, iterations: int = 20, progress=None,
                      element: str | None = None, gap: float = 0.0, alternate: bool = False,
-                     rounds: int = 4) -> Distribution:
+                     rounds: int = 4, density_slack: float | None = DENSITY_CAP_SLACK) -> Distribution:
     """Ours, then compaction: Lloyd as ``ours``, each element fitted in its cell from
     several starts (``cvt.placement.fit_centres``), then rounds of a linear program in
     which neighbouring elements share their walls (``cvt.compaction.compact``): every pair
@@ -80,6 +101,10 @@ def run_ours_compact(problem: Problem, backend, *, iterations: int = 20, progres
     are turned by 180° during Lloyd, so that cells take both shapes, and each cell keeps
     the orientation whose triangle fits larger (``cvt.alternate``).  ``rounds``: at most
     this many compaction rounds.  The compaction's time and rounds are in ``extra``.
+
+    Under a density, each element starts at and grows to at most its cap of
+    :func:`density_caps` (``density_slack`` above the size that follows the density;
+    None: no caps), so that compaction keeps the sizes the density asks for.
 
     Where the problem has thin walls (``Problem.walls``), elements come up to the walls'
     centre lines (G/2 off them) instead of stopping at their pixels."""
@@ -107,8 +132,12 @@ def run_ours_compact(problem: Problem, backend, *, iterations: int = 20, progres
     else:
         centres, sizes = fit_centres(labels, res.sites, angles, shape, aspect, gap)
     t3 = time.perf_counter()
+    caps = None
+    if problem.density is not None and density_slack is not None:
+        caps = density_caps(problem, centres, sizes, shape, aspect, density_slack)
+        sizes = np.minimum(sizes, caps)
     packed = compact(centres, angles, sizes, shape, aspect, problem.grid, gap=gap, walls=problem.walls,
-                     rounds=rounds)
+                     rounds=rounds, max_sizes=caps)
     placed = np.flatnonzero(packed.sizes > 0)
     elements = np.full(len(res.sites), None, dtype=object)
     if len(placed):
