@@ -95,7 +95,9 @@ def run_ours_compact(problem: Problem, backend, *, iterations: int = 20, progres
     several starts (``cvt.placement.fit_centres``), then rounds of a linear program in
     which neighbouring elements share their walls (``cvt.compaction.compact``): every pair
     keeps ``gap`` px, the region's border ``gap``/2, angles stay the field's and sizes
-    keep the density's contrast.
+    keep the density's contrast; after the last round each element is turned to the
+    field at its own centre (compaction moves it off its site) and shrunk where that
+    turn made it overlap.
 
     ``alternate`` (triangles only) lets each triangle point either way: half the sites
     are turned by 180° during Lloyd, so that cells take both shapes, and each cell keeps
@@ -138,6 +140,14 @@ def run_ours_compact(problem: Problem, backend, *, iterations: int = 20, progres
         sizes = np.minimum(sizes, caps)
     packed = compact(centres, angles, sizes, shape, aspect, problem.grid, gap=gap, walls=problem.walls,
                      rounds=rounds, max_sizes=caps)
+    if problem.field is not None:
+        # compaction moved the elements off their sites: turn each by the field's change
+        # between its site and its centre, then shrink whatever that turn made overlap
+        angles = angles + problem.angles_at(packed.centres) - problem.angles_at(res.sites)
+        turned = compact(packed.centres, angles, packed.sizes, shape, aspect, problem.grid, gap=gap,
+                         walls=problem.walls, rounds=1, max_sizes=caps)
+        packed.centres, packed.sizes = turned.centres, turned.sizes
+        packed.dropped += turned.dropped
     placed = np.flatnonzero(packed.sizes > 0)
     elements = np.full(len(res.sites), None, dtype=object)
     if len(placed):

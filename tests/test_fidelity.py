@@ -52,7 +52,8 @@ def test_elements_sized_by_the_density_score_zero_and_doubled_half_scores_half()
     d = density.values[centres[:, 1].astype(int), centres[:, 0].astype(int)]
     sides = 6.0 / np.sqrt(d)
     assert np.ptp(sides) > 1.0  # the density really varies
-    exact = [shapely.box(x - s / 2, y - s / 2, x + s / 2, y + s / 2) for (x, y), s in zip(centres, sides)]
+    x, y = centres.T
+    exact = list(shapely.box(x - sides / 2, y - sides / 2, x + sides / 2, y + sides / 2))
     assert fidelity(exact, problem, "square")["size_fidelity"] == pytest.approx(0.0, abs=1e-9)
     # every other element twice the area: log2 ratio 0 or 1 in equal numbers, RMS 0.5
     k = math.sqrt(2)
