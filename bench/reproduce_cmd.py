@@ -1,6 +1,6 @@
 """`cvtbench reproduce`: every table and figure of the suite, in one command.
 
-Runs, in order, `cvtbench table2`, `cvtbench backends` and `cvtbench figures` (which
+Runs, in order, `cvtbench table2`, `cvtbench table3`, `cvtbench backends` and `cvtbench figures` (which
 includes the mosaic Figures 18-19), each into the same report folder, then writes ``OUT/reproduce.md``: what ran, how long each part took, and
 the machine, devices, versions and commit.  ``--quick`` runs the quick form of each
 (under 5 minutes on 2 cores) into ``reports/quick``; the full form writes ``reports``.
@@ -19,10 +19,10 @@ from . import options
 
 
 def add_parser(sub):
-    p = sub.add_parser("reproduce", help="table2 + backends + figures into reports/",
+    p = sub.add_parser("reproduce", help="table2 + table3 + backends + figures into reports/",
                        description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     options.add_sweep_options(p, "the quick form of every part (< 5 min on 2 cores)")
-    options.add_seeds_option(p, "table2's: default 5; quick 2")
+    options.add_seeds_option(p, "table2's and table3's: default 5; quick 2")
     options.add_cluster_options(p, exclusive=True)
     options.add_memory_option(p)
     p.set_defaults(func=run)
@@ -81,6 +81,8 @@ def _parts(args, out: Path, address: str | None) -> list:
     return [
         ("table2", "compact_distributions.bench.table2", ["table2", "--out", str(out)] + common
          + (["--seeds", str(args.seeds)] if args.seeds else []) + (["--exclusive"] if args.exclusive else [])),
+        ("table3", "compact_distributions.bench.table3", ["table3", "--out", str(out)] + common
+         + (["--seeds", str(args.seeds)] if args.seeds else [])),
         ("backends", "compact_distributions.bench.backends_cmd", ["backends", "--out", str(out)] + common),
         ("figures", "compact_distributions.bench.figures_cmd",
          ["figures", "--out", str(out / "figures")] + [a for a in common if a != "--force"]),
