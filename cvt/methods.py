@@ -27,7 +27,7 @@ from .errors import InputError
 from .lloyd import LloydSetup, final_labels, lloyd
 from .placement import element_for, fit_centres, parse_gap, place_elements
 from .problem import Problem
-from .shapes import element_polygons
+from .shapes import PACKING_DENSITY, element_polygons
 
 
 def run_ours(problem: Problem, backend, *, iterations: int = 20, progress=None,
@@ -73,10 +73,13 @@ def run_ours_fit(problem: Problem, backend, **options) -> Distribution:
 DENSITY_CAP_SLACK = 0.02
 
 
-def density_caps(problem: Problem, centres, sizes, shape: str, aspect: float, slack: float) -> np.ndarray:
+def density_caps(problem: Problem, centres, sizes, shape: str, aspect: float, slack: float,
+                 packing: float = 1.0) -> np.ndarray:
     """(N,) size caps that follow the density: κ·s_i·(1 + ``slack``), s_i the density's
     size factor at element i's centre and κ the size at which elements of size κ·s_i (the
-    placed ones, ``sizes`` > 0) would together have the region's area."""
+    placed ones, ``sizes`` > 0) would together have ``packing`` × the region's area (the
+    shape's densest packing, ``cvt.shapes.PACKING_DENSITY``: caps no element can reach
+    would not bind)."""
     import shapely
 
     from .shapes import unit_outline
@@ -84,13 +87,14 @@ def density_caps(problem: Problem, centres, sizes, shape: str, aspect: float, sl
     s = problem.scales_at(centres)
     unit_area = float(shapely.area(shapely.Polygon(unit_outline(shape, aspect))))
     weight = float(np.sum(s[np.asarray(sizes) > 0] ** 2)) * unit_area
-    kappa = math.sqrt(problem.grid.pixel_count / weight) if weight > 0 else 1.0
+    kappa = math.sqrt(packing * problem.grid.pixel_count / weight) if weight > 0 else 1.0
     return kappa * s * (1.0 + slack)
 
 
 def run_ours_compact(problem: Problem, backend, *, iterations: int = 20, progress=None,
                      element: str | None = None, gap: float = 0.0, alternate: bool = False,
-                     rounds: int = 4, density_slack: float | None = DENSITY_CAP_SLACK) -> Distribution:
+                     rounds: int = 4, density_slack: float | None = DENSITY_CAP_SLACK,
+                     turn_to_field: bool = True) -> Distribution:
     """Ours, then compaction: Lloyd as ``ours``, each element fitted in its cell from
     several starts (``cvt.placement.fit_centres``), then rounds of a linear program in
     which neighbouring elements share their walls (``cvt.compaction.compact``): every pair
@@ -107,6 +111,8 @@ def run_ours_compact(problem: Problem, backend, *, iterations: int = 20, progres
     Under a density, each element starts at and grows to at most its cap of
     :func:`density_caps` (``density_slack`` above the size that follows the density;
     None: no caps), so that compaction keeps the sizes the density asks for.
+    ``turn_to_field``: under a field, turn each element to the field at its final centre
+    and run one more round (False: elements keep their sites' angles).
 
     Where the problem has thin walls (``Problem.walls``), elements come up to the walls'
     centre lines (G/2 off them) instead of stopping at their pixels."""
@@ -136,11 +142,13 @@ def run_ours_compact(problem: Problem, backend, *, iterations: int = 20, progres
     t3 = time.perf_counter()
     caps = None
     if problem.density is not None and density_slack is not None:
-        caps = density_caps(problem, centres, sizes, shape, aspect, density_slack)
+        # triangles that point either way tile the plane; one way, they pack at 2/3
+        packing = 1.0 if alternate else PACKING_DENSITY[shape]
+        caps = density_caps(problem, centres, sizes, shape, aspect, density_slack, packing)
         sizes = np.minimum(sizes, caps)
     packed = compact(centres, angles, sizes, shape, aspect, problem.grid, gap=gap, walls=problem.walls,
                      rounds=rounds, max_sizes=caps)
-    if problem.field is not None:
+    if turn_to_field and problem.field is not None:
         # compaction moved the elements off their sites: turn each by the field's change
         # between its site and its centre, then shrink whatever that turn made overlap
         angles = angles + problem.angles_at(packed.centres) - problem.angles_at(res.sites)

@@ -431,9 +431,10 @@ def make_mosaic(image, backend, *, n_elements: int = DEFAULT_ELEMENTS, metric: s
         # tiles turned by a field and stopped by walls settle slower than a plain
         # lattice: two more rounds measured +1 point of coverage for +1 s at 2000 tiles
         method_options.setdefault("rounds", MOSAIC_COMPACTION_ROUNDS)
-        # mosaics keep compaction without density caps: their measured coverage, figures
-        # and tests predate the caps (cvt.methods.density_caps)
+        # mosaics keep compaction without density caps and field turn: their measured
+        # coverage, figures and tests predate them (cvt.methods.run_ours_compact)
         method_options.setdefault("density_slack", None)
+        method_options.setdefault("turn_to_field", False)
     metric_name, element = resolve_shapes(metric, element)
     metric_obj = make_metric(metric_name, aspect)
 

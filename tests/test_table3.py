@@ -10,7 +10,6 @@ import pandas as pd
 import pytest
 
 from compact_distributions.baselines import method_names
-from compact_distributions.bench.cli import main
 from compact_distributions.bench.scenes import SCENES, radial_gradient, scene_problem
 from compact_distributions.bench.table3 import (
     COLUMNS,
