@@ -233,7 +233,8 @@ def render_tradeoff(rows: list[dict], path: Path) -> bool:
         return False
     fig, axes = plt.subplots(1, 2, figsize=(11, 4.6), dpi=110, layout="constrained")
     colours = plt.get_cmap("tab10").colors
-    methods = list(dict.fromkeys(df["method"]))
+    methods = [m for m in method_names() if m in set(df["method"])]  # the registry's order
+    labelled = set()
     for ax, (measure, scene, label) in zip(axes, panels, strict=True):
         for k, method in enumerate(methods):
             for sc, filled in ((scene, True), ("combined", False)):
@@ -242,11 +243,12 @@ def render_tradeoff(rows: list[dict], path: Path) -> bool:
                     continue
                 ax.scatter(g[measure], 100 * g["coverage"], s=28, marker="os^vD<>P"[k % 8],
                            facecolors=colours[k % 10] if filled else "none", edgecolors=colours[k % 10],
-                           label=method if filled else None)
+                           label=None if method in labelled else method)
+                labelled.add(method)
         ax.set(xlabel=label, ylabel="coverage (% of the region)",
                title=f"{scene} scene (filled) and combined scene (hollow)")
         ax.grid(True, alpha=0.3)
-    axes[0].legend(fontsize=7, loc="lower right")
+    fig.legend(fontsize=7, loc="outside right center")
     fig.suptitle("Coverage against fidelity, squares, one point per seed (better: up and left)", fontsize=10)
     save_figure(fig, path)
     plt.close(fig)

@@ -127,3 +127,14 @@ def test_the_typed_function_checks_its_arguments(tmp_path):
     with pytest.raises(InputError, match="hexagon"):
         run_table3(tmp_path / "t", quick=True, shapes=["hexagon"])
     assert not (tmp_path / "t").exists()
+
+
+def test_a_dask_sweep_gives_the_same_table(tmp_path):
+    pytest.importorskip("distributed")
+    subset = {"quick": True, "seeds": 1, "methods": ["ours", "hausner2001"], "shapes": ["square"],
+              "scenes": ["combined"], "quiet": True}
+    here = run_table3(tmp_path / "here", **subset)
+    there = run_table3(tmp_path / "there", workers=1, **subset)
+    cols = [f"{m}_mean" for m in MEASURES]
+    pd.testing.assert_frame_equal(here[cols], there[cols])
+    assert (tmp_path / "there" / "table3.md").exists()
