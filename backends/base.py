@@ -40,10 +40,10 @@ class Backend(ABC):
     bytes_per_site: float = 1_000
 
     @classmethod
-    def memory_estimate(cls, width: int, height: int, n_sites: int) -> float:
-        """Bytes this backend needs for a CVT iteration of ``n_sites`` on ``width`` x
+    def memory_estimate(cls, width: int, height: int, n_elements: int) -> float:
+        """Bytes this backend needs for a CVT iteration of ``n_elements`` on ``width`` x
         ``height`` (cvt.resources adds them to the rest of a run's estimate)."""
-        return cls.bytes_per_pixel * width * height + cls.bytes_per_site * n_sites
+        return cls.bytes_per_pixel * width * height + cls.bytes_per_site * n_elements
 
     @classmethod
     def probe(cls) -> str:

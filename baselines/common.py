@@ -114,17 +114,17 @@ def budget_size(shape: TileShape, grid: Grid, n: int, delta: float = BUDGET_DELT
 
 
 # ------------------------------------------------------------------ tiles on the raster
-def rasterize_tiles(shape: TileShape, centers, angles, sizes, grid: Grid,
+def rasterize_tiles(shape: TileShape, centres, angles, sizes, grid: Grid,
                     budget_entries: int = 2_000_000) -> np.ndarray:
     """(H, W) int32: the tile whose outline contains each pixel centre, -1 for none.
     Where tiles overlap the lower index keeps the pixel.  Tiles of size <= 0 are absent."""
     h, w = grid.shape
-    centers = np.asarray(centers, dtype=np.float64).reshape(-1, 2)
-    n = len(centers)
+    centres = np.asarray(centres, dtype=np.float64).reshape(-1, 2)
+    n = len(centres)
     angles = np.broadcast_to(np.asarray(angles, dtype=np.float64), (n,))
     sizes = np.broadcast_to(np.asarray(sizes, dtype=np.float64), (n,))
     best = np.full(h * w, n, dtype=np.int64)
-    ok = np.flatnonzero(np.isfinite(sizes) & (sizes > 0) & np.isfinite(centers).all(axis=1))
+    ok = np.flatnonzero(np.isfinite(sizes) & (sizes > 0) & np.isfinite(centres).all(axis=1))
     if len(ok):
         reach = np.ceil(sizes[ok] * shape.ball.circumradius + 1.0).astype(np.int64)
         order = ok[np.argsort(reach, kind="stable")]
@@ -136,39 +136,39 @@ def rasterize_tiles(shape: TileShape, centers, angles, sizes, grid: Grid,
             stop = min(len(order), start + count)
             r = int(reach[stop - 1])  # windows grow with the chunk's largest tile
             ids = order[start:stop]
-            flat, who = _window_hits(shape, centers[ids], angles[ids], sizes[ids], r, h, w)
+            flat, who = _window_hits(shape, centres[ids], angles[ids], sizes[ids], r, h, w)
             np.minimum.at(best, flat, ids[who])
             start = stop
     best[best == n] = -1
     return best.reshape(h, w).astype(np.int32)
 
 
-def tile_pixels(shape: TileShape, center, angle: float, size: float, grid: Grid):
+def tile_pixels(shape: TileShape, centre, angle: float, size: float, grid: Grid):
     """(rows, columns) of the pixels whose centres one tile's outline contains: the
     pixels ``rasterize_tiles`` gives that tile when it is alone."""
     if not (math.isfinite(size) and size > 0):
         return np.empty(0, np.int64), np.empty(0, np.int64)
     r = int(math.ceil(size * shape.ball.circumradius + 1.0))
-    flat, _ = _window_hits(shape, np.asarray(center, np.float64).reshape(1, 2),
+    flat, _ = _window_hits(shape, np.asarray(centre, np.float64).reshape(1, 2),
                            np.array([angle], np.float64), np.array([size], np.float64),
                            r, *grid.shape)
     return np.divmod(flat, grid.shape[1])
 
 
-def _window_hits(shape: TileShape, centers, angles, sizes, r: int, h: int, w: int):
+def _window_hits(shape: TileShape, centres, angles, sizes, r: int, h: int, w: int):
     """Flat raster indices of the pixel centres inside each tile, within the (2r+1)²
     window around it, and the tile's position in the arguments for each index."""
     offs = np.arange(-r, r + 1)
-    ci = np.floor(centers[:, 1]).astype(np.int64)
-    cj = np.floor(centers[:, 0]).astype(np.int64)
+    ci = np.floor(centres[:, 1]).astype(np.int64)
+    cj = np.floor(centres[:, 0]).astype(np.int64)
     ii = ci[:, None, None] + offs[None, :, None]
     jj = cj[:, None, None] + offs[None, None, :]
-    vx = jj + 0.5 - centers[:, 0][:, None, None]
-    vy = ii + 0.5 - centers[:, 1][:, None, None]
+    vx = jj + 0.5 - centres[:, 0][:, None, None]
+    vy = ii + 0.5 - centres[:, 1][:, None, None]
     g = shape.gauge(vx, vy, angles[:, None, None])
     hit = (g <= sizes[:, None, None]) & (ii >= 0) & (ii < h) & (jj >= 0) & (jj < w)
     flat = (ii * w + jj)[hit]
-    who = np.broadcast_to(np.arange(len(centers))[:, None, None], hit.shape)[hit]
+    who = np.broadcast_to(np.arange(len(centres))[:, None, None], hit.shape)[hit]
     return flat, who
 
 
@@ -255,24 +255,24 @@ class Contours:
         owner, x, y = contour_samples(labels)
         return cls(owner, x, y, labels)
 
-    def fit(self, shape: TileShape, centers, angles, gap: float = 0.0) -> np.ndarray:
+    def fit(self, shape: TileShape, centres, angles, gap: float = 0.0) -> np.ndarray:
         """Largest size of each tile, at the given centre and angle, that stays inside
         its own cell; 0 where the centre's pixel is not in the cell."""
-        n = len(centers)
+        n = len(centres)
         o = self.owner
-        r = shape.reach(self.x - centers[o, 0], self.y - centers[o, 1], angles[o], gap)
+        r = shape.reach(self.x - centres[o, 0], self.y - centres[o, 1], angles[o], gap)
         sizes = np.full(n, np.inf)
         np.minimum.at(sizes, o, r)
-        own = in_own_cell(self.labels, centers)
+        own = in_own_cell(self.labels, centres)
         return np.where(own & np.isfinite(sizes) & (sizes > 0), sizes, 0.0)
 
 
 # ------------------------------------------------------------------ output
-def make_elements(shape: TileShape, centers, angles, sizes, grid: Grid, region=None):
+def make_elements(shape: TileShape, centres, angles, sizes, grid: Grid, region=None):
     """Shapely polygons of the tiles, clipped to the region (None for absent tiles), and
     the area cut off by the clipping as a fraction of the region's area."""
-    centers = np.asarray(centers, dtype=np.float64).reshape(-1, 2)
-    n = len(centers)
+    centres = np.asarray(centres, dtype=np.float64).reshape(-1, 2)
+    n = len(centres)
     sizes = np.broadcast_to(np.asarray(sizes, dtype=np.float64), (n,))
     angles = np.broadcast_to(np.asarray(angles, dtype=np.float64), (n,))
     region = region_polygon(grid) if region is None else region
@@ -280,7 +280,7 @@ def make_elements(shape: TileShape, centers, angles, sizes, grid: Grid, region=N
     placed = np.flatnonzero(np.isfinite(sizes) & (sizes > 0))
     if len(placed) == 0:
         return out, 0.0
-    polys = element_polygons(shape.name, shape.aspect, centers[placed], angles[placed], sizes[placed])
+    polys = element_polygons(shape.name, shape.aspect, centres[placed], angles[placed], sizes[placed])
     shapely.prepare(region)
     inside = shapely.contains(region, polys)
     clipped_area = 0.0
@@ -297,10 +297,10 @@ def make_elements(shape: TileShape, centers, angles, sizes, grid: Grid, region=N
 
 
 # ------------------------------------------------------------------ Lloyd over tiles
-def fixed_sizes(problem: Problem, shape: TileShape, base: float, centers, gap: float) -> np.ndarray:
+def fixed_sizes(problem: Problem, shape: TileShape, base: float, centres, gap: float) -> np.ndarray:
     """Fixed tile sizes: the budget size times the density's size factor at the tile,
     less the grout (gap/2 along each edge normal)."""
-    sizes = base * problem.scales_at(centers)
+    sizes = base * problem.scales_at(centres)
     if gap > 0:
         sizes = np.maximum(sizes - 0.5 * gap / shape.ball.inradius, 0.0)
     return sizes
@@ -315,27 +315,27 @@ def tile_lloyd(problem: Problem, shape: TileShape, base_size: float, iterations:
     ``turn(moments, labels, new_centers, old_angles, sizes) -> angles``.  A tile whose
     region is empty (covered entirely by lower-index tiles) stays where it is.
 
-    Returns (centers, angles, sizes, labels, log) where the log's energy is the mean
+    Returns (centres, angles, sizes, labels, log) where the log's energy is the mean
     squared distance of the region's pixels to their tile."""
     grid = problem.grid
     inside = grid.inside()
-    centers = initial_sites(problem)
-    n = len(centers)
+    centres = initial_sites(problem)
+    n = len(centres)
 
     def step(state):
-        centers, angles = state
-        sizes = fixed_sizes(problem, shape, base_size, centers, gap)
-        tiles = rasterize_tiles(shape, centers, angles, sizes, grid)
+        centres, angles = state
+        sizes = fixed_sizes(problem, shape, base_size, centres, gap)
+        tiles = rasterize_tiles(shape, centres, angles, sizes, grid)
         labels, dist = tile_voronoi(tiles, inside)
-        mom = cell_moments(labels, n, centers)
+        mom = cell_moments(labels, n, centres)
         angles = turn(mom, labels, mom.centroids, angles, sizes)
         return (mom.centroids, angles), float(np.mean(dist[inside] ** 2)), mom.empty
 
-    (centers, angles), log = iterate((centers, problem.angles_at(centers)), step, iterations, progress)
-    sizes = fixed_sizes(problem, shape, base_size, centers, gap)
-    tiles = rasterize_tiles(shape, centers, angles, sizes, grid)
+    (centres, angles), log = iterate((centres, problem.angles_at(centres)), step, iterations, progress)
+    sizes = fixed_sizes(problem, shape, base_size, centres, gap)
+    tiles = rasterize_tiles(shape, centres, angles, sizes, grid)
     labels, _ = tile_voronoi(tiles, inside)
-    return centers, angles, sizes, labels, log
+    return centres, angles, sizes, labels, log
 
 
 def run_fixed_tiles(method: str, problem: Problem, iterations: int, progress, element, gap,
@@ -346,16 +346,16 @@ def run_fixed_tiles(method: str, problem: Problem, iterations: int, progress, el
     t_setup = time.perf_counter()
     gap = parse_gap(gap)
     shape = tile_shape(problem, element)
-    base = budget_size(shape, problem.grid, problem.n_sites, delta)
+    base = budget_size(shape, problem.grid, problem.n_elements, delta)
     setup = time.perf_counter() - t_setup
 
     t0 = time.perf_counter()
-    centers, angles, sizes, labels, log = tile_lloyd(
+    centres, angles, sizes, labels, log = tile_lloyd(
         problem, shape, base, iterations, make_turn(problem, shape), progress, gap)
-    elements, clipped = make_elements(shape, centers, angles, sizes, problem.grid)
+    elements, clipped = make_elements(shape, centres, angles, sizes, problem.grid)
     total = time.perf_counter() - t0
     return Distribution(
-        method=method, sites=centers, angles=angles, scales=sizes / base,
+        method=method, sites=centres, angles=angles, scales=sizes / base,
         elements=elements, energy=log.energy, seconds=log.seconds, setup_seconds=setup,
         total_seconds=total, empty=log.empty, empty_sites=log.empty_sites, labels=labels,
         extra={

@@ -55,9 +55,9 @@ from .common import BUDGET_DELTA, nearest_equivalent, run_fixed_tiles
 def principal_axis_turn(problem: Problem, shape):
     """The turning rule: principal axis of the region (or the problem's field)."""
 
-    def turn(mom, labels, centers, angles, sizes):
+    def turn(mom, labels, centres, angles, sizes):
         if problem.field is not None:
-            target = problem.angles_at(centers)
+            target = problem.angles_at(centres)
         else:
             target = mom.principal_angles()
         new = nearest_equivalent(target, angles, shape.symmetry)

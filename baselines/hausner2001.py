@@ -95,7 +95,7 @@ def run(problem: Problem, backend, *, iterations: int = 20, progress=None,
     gap = parse_gap(gap)
     shape = tile_shape(problem, element, default="square")
     grid = problem.grid
-    n = problem.n_sites
+    n = problem.n_elements
     size = budget_size(shape, grid, n, delta)
     tile_side = math.sqrt(shape.unit_area) * size  # side of the square of the same area
     dist = border_distance(grid)

@@ -81,13 +81,13 @@ SEARCH_SCHEDULE = ((2.0, 4.0), (2.0, 4.0), (1.0, 2.0), (1.0, 2.0),
                    (0.5, 1.0), (0.5, 1.0), (0.25, 0.5), (0.25, 0.5))  # (px, degrees)
 
 
-def continuous_step(shape, contours: Contours, centers, angles, centroids, gap: float = 0.0):
-    """Tightest fit of every tile in its region: returns (centers, angles, sizes)."""
-    n = len(centers)
-    s_cur = contours.fit(shape, centers, angles, gap)
+def continuous_step(shape, contours: Contours, centres, angles, centroids, gap: float = 0.0):
+    """Tightest fit of every tile in its region: returns (centres, angles, sizes)."""
+    n = len(centres)
+    s_cur = contours.fit(shape, centres, angles, gap)
     s_cen = contours.fit(shape, centroids, angles, gap)
     use_centroid = s_cen > s_cur
-    pos = np.where(use_centroid[:, None], centroids, centers)
+    pos = np.where(use_centroid[:, None], centroids, centres)
     ang = angles.copy()
     best = np.maximum(s_cur, s_cen)
     rows = np.arange(n)
@@ -145,35 +145,35 @@ def _fit_in_hole(shape, blocked_pad: np.ndarray, pad: int, x: float, y: float, r
     return max(float(reach[k]), 0.0), float(angles[k])
 
 
-def combinatorial_step(shape, centers, angles, sizes, grid: Grid, moves: int | None = None,
+def combinatorial_step(shape, centres, angles, sizes, grid: Grid, moves: int | None = None,
                        gap: float = 0.0, region=None):
     """Replace the smallest tiles by tiles fitted into the largest holes, one at a time,
     accepting a replacement only if the coverage (area of the union of the tiles within
     the region, exactly as cvt.evaluate measures it) strictly grows.
 
-    Returns (centers, angles, sizes, info) as new arrays; info counts tried and accepted
+    Returns (centres, angles, sizes, info) as new arrays; info counts tried and accepted
     moves and the coverage gained (fraction of the region)."""
-    centers = np.array(centers, dtype=np.float64, copy=True)
+    centres = np.array(centres, dtype=np.float64, copy=True)
     angles = np.array(angles, dtype=np.float64, copy=True)
     sizes = np.array(sizes, dtype=np.float64, copy=True)
-    n = len(centers)
+    n = len(centres)
     moves = max(1, n // 50) if moves is None else int(moves)
     info = {"tried": 0, "accepted": 0, "gain": 0.0}
     if moves <= 0 or n == 0:
-        return centers, angles, sizes, info
+        return centres, angles, sizes, info
     region = region_polygon(grid) if region is None else region
     area = float(shapely.area(region))
     inside = grid.inside()
     # the tiles offered for replacement are the smallest (absent ones first); their own
     # pixels count as free, so that the hole a tiny tile sits in is found whole
     order = np.lexsort((np.arange(n), sizes))[:moves]
-    owner = rasterize_tiles(shape, centers, angles, sizes, grid)
+    owner = rasterize_tiles(shape, centres, angles, sizes, grid)
     offered = np.zeros(n + 1, dtype=bool)
     offered[order] = True
     free = inside & ((owner < 0) | offered[owner])  # owner -1 reads offered[n], False
     holes = _hole_candidates(free, moves)
     if not holes:
-        return centers, angles, sizes, info
+        return centres, angles, sizes, info
     pad = int(math.ceil(max(r for _, _, r in holes) * shape.ball.circumradius
                         / shape.ball.inradius)) + 4
     h, w = free.shape
@@ -183,7 +183,7 @@ def combinatorial_step(shape, centers, angles, sizes, grid: Grid, moves: int | N
     geoms = np.full(n, None, dtype=object)
     live = np.flatnonzero(sizes > 0)
     geoms[live] = shapely.intersection(
-        element_polygons(shape.name, shape.aspect, centers[live], angles[live], sizes[live]), region)
+        element_polygons(shape.name, shape.aspect, centres[live], angles[live], sizes[live]), region)
     present = ~shapely.is_missing(geoms) & ~shapely.is_empty(geoms)
     tree_ids = np.flatnonzero(present)
     tree = shapely.STRtree(geoms[tree_ids])
@@ -212,18 +212,18 @@ def combinatorial_step(shape, centers, angles, sizes, grid: Grid, moves: int | N
         delta = exclusive(new_poly, k) - exclusive(geoms[k] if present[k] else None, k)
         if delta <= 1e-9:
             continue
-        centers[k] = (x, y)
+        centres[k] = (x, y)
         angles[k] = ang
         sizes[k] = size
         geoms[k] = new_poly
         present[k] = True
-        ii, jj = tile_pixels(shape, centers[k], angles[k], sizes[k], grid)
+        ii, jj = tile_pixels(shape, centres[k], angles[k], sizes[k], grid)
         blocked[ii + pad, jj + pad] = True  # later moves must fit around the new tile
         tree_ids = np.flatnonzero(present)
         tree = shapely.STRtree(geoms[tree_ids])
         info["accepted"] += 1
         info["gain"] += delta / area
-    return centers, angles, sizes, info
+    return centres, angles, sizes, info
 
 
 def run(problem: Problem, backend=None, *, iterations: int = 20, progress=None,
@@ -234,12 +234,12 @@ def run(problem: Problem, backend=None, *, iterations: int = 20, progress=None,
     gap = parse_gap(gap)
     shape = tile_shape(problem, element)
     grid = problem.grid
-    n = problem.n_sites
+    n = problem.n_elements
     base = budget_size(shape, grid, n, delta)
     inside = grid.inside()
     region = region_polygon(grid)
-    centers = initial_sites(problem)
-    angles = problem.angles_at(centers)
+    centres = initial_sites(problem)
+    angles = problem.angles_at(centres)
     sizes = np.full(n, INITIAL_FRACTION * base)
     setup = time.perf_counter() - t_setup
 
@@ -247,26 +247,26 @@ def run(problem: Problem, backend=None, *, iterations: int = 20, progress=None,
     raster_cov, accepted, gained = [], [], []
 
     def step(state):
-        centers, angles, sizes = state
-        tiles = rasterize_tiles(shape, centers, angles, sizes, grid)
+        centres, angles, sizes = state
+        tiles = rasterize_tiles(shape, centres, angles, sizes, grid)
         labels, dist = tile_voronoi(tiles, inside)
-        mom = cell_moments(labels, n, centers)
-        centers, angles, sizes = continuous_step(shape, Contours.of(labels), centers, angles,
+        mom = cell_moments(labels, n, centres)
+        centres, angles, sizes = continuous_step(shape, Contours.of(labels), centres, angles,
                                                  mom.centroids, gap)
-        centers, angles, sizes, info = combinatorial_step(shape, centers, angles, sizes, grid,
+        centres, angles, sizes, info = combinatorial_step(shape, centres, angles, sizes, grid,
                                                           gap=gap, region=region)
         accepted.append(info["accepted"])
         gained.append(info["gain"])
         raster_cov.append(float((tiles[inside] >= 0).mean()))
-        return (centers, angles, sizes), float(np.mean(dist[inside] ** 2)), mom.empty
+        return (centres, angles, sizes), float(np.mean(dist[inside] ** 2)), mom.empty
 
-    (centers, angles, sizes), log = iterate((centers, angles, sizes), step, iterations, progress)
-    tiles = rasterize_tiles(shape, centers, angles, sizes, grid)
+    (centres, angles, sizes), log = iterate((centres, angles, sizes), step, iterations, progress)
+    tiles = rasterize_tiles(shape, centres, angles, sizes, grid)
     labels, _ = tile_voronoi(tiles, inside)
-    elements, clipped = make_elements(shape, centers, angles, sizes, grid, region)
+    elements, clipped = make_elements(shape, centres, angles, sizes, grid, region)
     total = time.perf_counter() - t0
     return Distribution(
-        method="hu2016", sites=centers, angles=angles, scales=sizes / base,
+        method="hu2016", sites=centres, angles=angles, scales=sizes / base,
         elements=elements, energy=log.energy, seconds=log.seconds, setup_seconds=setup,
         total_seconds=total, empty=log.empty, empty_sites=log.empty_sites, labels=labels,
         extra={

@@ -50,18 +50,18 @@ COARSE_STEP = math.radians(6.0)
 FINE_STEPS = (math.radians(3.0), math.radians(1.5))
 
 
-def region_ring(shape, labels: np.ndarray, centers, sizes):
+def region_ring(shape, labels: np.ndarray, centres, sizes):
     """The region pixels whose inclusion in their own tile depends on its angle, and the
     count of those inside at every angle: a pixel nearer than the tile's inradius is
     inside at every angle, one beyond its circumradius outside at every angle (with a
     margin far above rounding).  Returns (own, vx, vy, limit, base) for ``ring_counts``."""
-    n = len(centers)
+    n = len(centres)
     w = labels.shape[1]
     flat = labels.ravel()
     pixels = np.flatnonzero(flat >= 0)
     own = flat[pixels]  # each region pixel is tested against its own tile only
-    vx = (pixels % w + 0.5) - centers[own, 0]
-    vy = (pixels // w + 0.5) - centers[own, 1]
+    vx = (pixels % w + 0.5) - centres[own, 0]
+    vy = (pixels // w + 0.5) - centres[own, 1]
     limit = sizes[own]
     dist = np.hypot(vx, vy)
     always = dist < limit * shape.ball.inradius * (1.0 - 1e-9)
@@ -82,18 +82,18 @@ def ring_counts(shape, ring, angles) -> np.ndarray:
     return counts
 
 
-def fit_counts(shape, labels: np.ndarray, centers, sizes, angles) -> np.ndarray:
+def fit_counts(shape, labels: np.ndarray, centres, sizes, angles) -> np.ndarray:
     """(N, A) number of pixels of each tile's own region covered by the tile centred at
-    ``centers`` and turned by each of ``angles`` (N, A)."""
-    return ring_counts(shape, region_ring(shape, labels, centers, sizes), angles)
+    ``centres`` and turned by each of ``angles`` (N, A)."""
+    return ring_counts(shape, region_ring(shape, labels, centres, sizes), angles)
 
 
 def best_fit_turn(shape):
     """The turning rule: the angle at which the tile covers most of its region."""
 
-    def turn(mom, labels, centers, angles, sizes):
+    def turn(mom, labels, centres, angles, sizes):
         h, w = labels.shape
-        cl = np.clip(centers, [0.0, 0.0], [w - 1e-9, h - 1e-9])  # a centre off the raster is measured from its edge
+        cl = np.clip(centres, [0.0, 0.0], [w - 1e-9, h - 1e-9])  # a centre off the raster is measured from its edge
         period = shape.symmetry
         if period >= 2 * math.pi - 1e-9 and shape.name == "circle":
             return angles  # a circle has no orientation

@@ -45,7 +45,7 @@ QUICK = {"sites": [1000, 4000], "sizes": [256, 512, 1024], "metrics": ["l2", "li
 
 MAX_REPEATS = 1000
 
-COLUMNS = ["backend", "metric", "n_sites", "size", "pixels", "ms_median", "ms_min", "ms_max", "repeats",
+COLUMNS = ["backend", "metric", "n_elements", "size", "pixels", "ms_per_iteration", "ms_min", "ms_max", "repeats",
            "warmup", "x_numpy", "status", "reason", "device", "host"]
 
 
@@ -56,55 +56,55 @@ class TimingSpec:
     suite: str
     backend: str  # a backend variant
     metric: str
-    n_sites: int
+    n_elements: int
     size: int
     warmup: int
     repeats: int
 
     @property
     def key(self) -> str:
-        return f"{self.backend}__{self.metric}__{self.size}__n{self.n_sites}__w{self.warmup}r{self.repeats}"
+        return f"{self.backend}__{self.metric}__{self.size}__n{self.n_elements}__w{self.warmup}r{self.repeats}"
 
     def describe(self) -> str:
-        return f"{self.backend} {self.metric} N={self.n_sites} {self.size}²"
+        return f"{self.backend} {self.metric} N={self.n_elements} {self.size}²"
 
     def params(self) -> dict:
-        return {"backend": self.backend, "metric": self.metric, "n_sites": self.n_sites, "size": self.size,
+        return {"backend": self.backend, "metric": self.metric, "n_elements": self.n_elements, "size": self.size,
                 "pixels": self.size * self.size, "warmup": self.warmup, "repeats": self.repeats,
-                "ms_median": np.nan, "ms_min": np.nan, "ms_max": np.nan, "device": ""}
+                "ms_per_iteration": np.nan, "ms_min": np.nan, "ms_max": np.nan, "device": ""}
 
     def memory_estimate(self):
         from compact_distributions.cvt.resources import run_estimate
 
         from .sweep import memory_class
 
-        return run_estimate(self.size, self.size, self.n_sites, memory_class(self.backend), placement=False,
+        return run_estimate(self.size, self.size, self.n_elements, memory_class(self.backend), placement=False,
                             pictures=False, what=f"timing {self.describe()}")
 
     def execute(self, backend) -> dict:
         from .outputs import machine, versions
 
-        secs = time_lloyd(backend, self.metric, self.n_sites, self.size, self.warmup, self.repeats)
+        secs = time_lloyd(backend, self.metric, self.n_elements, self.size, self.warmup, self.repeats)
         ms = np.asarray(secs) * 1000
-        row = {"key": self.key, **self.params(), "status": "ok", "reason": "", "ms_median": float(np.median(ms)),
+        row = {"key": self.key, **self.params(), "status": "ok", "reason": "", "ms_per_iteration": float(np.median(ms)),
                "ms_min": float(ms.min()), "ms_max": float(ms.max()), "device": backend.device()}
         return {"row": row, "seconds": secs, "spec": asdict(self), "machine": machine(), "versions": versions()}
 
 
-def timing_problem(metric_name: str, n_sites: int, size: int, seed: int = 0):
+def timing_problem(metric_name: str, n_elements: int, size: int, seed: int = 0):
     """Uniform random sites of ``seed`` on the whole ``size``² raster."""
     from compact_distributions.cvt.metrics import make_metric
     from compact_distributions.cvt.problem import Grid, Problem
 
-    return Problem(Grid(size, size), n_sites, make_metric(metric_name), seed=seed)
+    return Problem(Grid(size, size), n_elements, make_metric(metric_name), seed=seed)
 
 
-def time_lloyd(backend, metric_name: str, n_sites: int, size: int, warmup: int, repeats: int,
+def time_lloyd(backend, metric_name: str, n_elements: int, size: int, warmup: int, repeats: int,
                seed: int = 0) -> list[float]:
     """Seconds of each timed Lloyd iteration (after ``warmup`` untimed ones)."""
     from compact_distributions.cvt.lloyd import lloyd
 
-    res = lloyd(timing_problem(metric_name, n_sites, size, seed), backend, warmup + repeats)
+    res = lloyd(timing_problem(metric_name, n_elements, size, seed), backend, warmup + repeats)
     return [float(s) for s in res.seconds[warmup:]]
 
 
@@ -133,10 +133,10 @@ def with_ratios(rows: list[dict]):
             df[c] = np.nan
     df["host"] = df["host"].astype(object).fillna("")  # an all-missing column comes as float
     ref = df[(df["backend"] == REFERENCE) & (df["status"] == "ok")]
-    ref = ref.set_index(["metric", "n_sites", "size", "host"])["ms_median"]
-    idx = list(zip(df["metric"], df["n_sites"], df["size"], df["host"], strict=True))
+    ref = ref.set_index(["metric", "n_elements", "size", "host"])["ms_per_iteration"]
+    idx = list(zip(df["metric"], df["n_elements"], df["size"], df["host"], strict=True))
     df["x_numpy"] = [float(ref.get(k, np.nan)) / m if m and m == m else np.nan
-                     for k, m in zip(idx, df["ms_median"], strict=True)]
+                     for k, m in zip(idx, df["ms_per_iteration"], strict=True)]
     return df[COLUMNS]
 
 
@@ -165,7 +165,7 @@ def render_markdown(df, prov: dict, command: str, quick: bool, cfg: dict, elapse
         text += ("\nThese timings come from several hosts (each configuration ran alone on its host); "
                  "x numpy compares with NumPy on the same host only.\n")
     body = []
-    for (metric, n, size), g in ok.groupby(["metric", "n_sites", "size"], sort=False):
+    for (metric, n, size), g in ok.groupby(["metric", "n_elements", "size"], sort=False):
         cells = []
         by = {r["backend"]: r for _, r in g.iterrows()}
         for b in order:
@@ -173,10 +173,10 @@ def render_markdown(df, prov: dict, command: str, quick: bool, cfg: dict, elapse
             if r is None:
                 cells.append("")
             elif b == "numpy":
-                cells.append(f"{r['ms_median']:.3g}")
+                cells.append(f"{r['ms_per_iteration']:.3g}")
             else:
-                cells.append(f"{r['ms_median']:.3g} ({r['x_numpy']:.2g}x)" if r["x_numpy"] == r["x_numpy"]
-                             else f"{r['ms_median']:.3g}")
+                cells.append(f"{r['ms_per_iteration']:.3g} ({r['x_numpy']:.2g}x)" if r["x_numpy"] == r["x_numpy"]
+                             else f"{r['ms_per_iteration']:.3g}")
         body.append([metric, n, f"{size}²"] + cells
                     + ([", ".join(sorted({str(r["host"]) for r in by.values()}))] if by_host else []))
     text += "\n" + markdown_table(cols, body)
@@ -206,18 +206,18 @@ def render_plot(df, path: Path) -> bool:
     if ok.empty:
         path.unlink(missing_ok=True)  # a plot of another sweep must not pass for this one's
         return False
-    sizes, ns = sorted(ok["size"].unique()), sorted(ok["n_sites"].unique())
+    sizes, ns = sorted(ok["size"].unique()), sorted(ok["n_elements"].unique())
     size_mid, n_mid = sizes[len(sizes) // 2], ns[len(ns) // 2]
     fig, axes = plt.subplots(1, 2, figsize=(13, 4.3), dpi=110, layout="constrained")
     colours = plt.rcParams["axes.prop_cycle"].by_key()["color"]
     for k, (b, g) in enumerate(ok.groupby("backend", sort=False)):
         c = colours[k % len(colours)]
-        for ax, fixed, var, fixed_val in ((axes[0], "size", "n_sites", size_mid), (axes[1], "n_sites", "pixels", n_mid)):
+        for ax, fixed, var, fixed_val in ((axes[0], "size", "n_elements", size_mid), (axes[1], "n_elements", "pixels", n_mid)):
             sub = g[g[fixed] == fixed_val]
             l2 = sub[sub["metric"] == "l2"].sort_values(var)
             if len(l2):
-                ax.plot(l2[var], l2["ms_median"], "o-", color=c, label=f"{b} (l2)")
-            other = sub[sub["metric"] != "l2"].groupby(var)["ms_median"].median()
+                ax.plot(l2[var], l2["ms_per_iteration"], "o-", color=c, label=f"{b} (l2)")
+            other = sub[sub["metric"] != "l2"].groupby(var)["ms_per_iteration"].median()
             if len(other):
                 ax.plot(other.index, other.values, "s--", color=c, alpha=0.7, label=f"{b} (other metrics, median)")
     axes[0].set(xscale="log", yscale="log", xlabel="N (sites)", ylabel="ms per Lloyd iteration",
@@ -245,8 +245,8 @@ def rows_from_benchmark_json(path) -> list[dict]:
             if info.get("kind") != "lloyd-step":
                 continue
             st = b["stats"]
-            rows.append({"backend": info["backend"], "metric": info["metric"], "n_sites": info["n_sites"],
-                         "size": info["size"], "pixels": info["size"] ** 2, "ms_median": st["median"] * 1000,
+            rows.append({"backend": info["backend"], "metric": info["metric"], "n_elements": info["n_elements"],
+                         "size": info["size"], "pixels": info["size"] ** 2, "ms_per_iteration": st["median"] * 1000,
                          "ms_min": st["min"] * 1000, "ms_max": st["max"] * 1000, "repeats": st["rounds"],
                          "warmup": 0, "status": "ok", "reason": "", "device": info.get("device", "")})
     except (AttributeError, KeyError, TypeError) as exc:
@@ -264,7 +264,7 @@ def add_parser(sub):
     options.add_sweep_options(p, "small subset (N 1000/4000, 256²-1024², l2, linf, triangle)")
     options.add_list_options(p, "backends", "metrics")
     options.add_cluster_options(p)
-    p.add_argument("--sites", default=None, help="comma list of N (at most the pixels of the smallest raster)")
+    p.add_argument("--elements", default=None, help="comma list of N (at most the pixels of the smallest raster)")
     p.add_argument("--sizes", default=None, help="comma list of square raster sides (1 to 32768)")
     p.add_argument("--repeats", default=None, help="timed iterations per configuration (1 to 1000)")
     p.add_argument("--no-ckdtree", action="store_true", help="leave out the cKDTree reference row")
@@ -292,7 +292,7 @@ def prepare(args) -> dict:
     cfg = dict(QUICK if args.quick else FULL)
     cfg["metrics"] = name_list(args.metrics, "--metrics", METRIC_NAMES) or cfg["metrics"]
     cfg["sizes"] = _int_list(args.sizes, "--sizes", MAX_SIDE) or cfg["sizes"]
-    cfg["sites"] = _int_list(args.sites, "--sites", min(cfg["sizes"]) ** 2) or cfg["sites"]
+    cfg["sites"] = _int_list(args.elements, "--elements", min(cfg["sizes"]) ** 2) or cfg["sites"]
     if args.repeats is not None:
         cfg["repeats"] = whole_number(args.repeats, "--repeats", minimum=1, maximum=MAX_REPEATS)
     plan = {"out": out, "cfg": cfg, "specs": None}
@@ -303,7 +303,7 @@ def prepare(args) -> dict:
     if args.no_ckdtree:
         chosen = [b for b in chosen if b != "ckdtree"]
     plan["specs"] = sweep_specs(cfg, chosen, "backends-quick" if args.quick else "backends")
-    check_memory(plan["specs"], args.memory_limit, lower="leave it out (smaller --sizes or fewer --sites)")
+    check_memory(plan["specs"], args.memory_limit, lower="leave it out (smaller --sizes or fewer --elements)")
     return plan
 
 

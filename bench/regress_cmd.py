@@ -50,12 +50,12 @@ COVERAGE_DROP_PP = 0.5  # percentage points
 SLOWDOWN = 2.0  # ratio against the reference measured in the same run
 
 SETS = {
-    "quick": {"size": 256, "n_sites": 250, "iterations": 20, "seeds": [0, 1],
+    "quick": {"size": 256, "n_elements": 250, "iterations": 20, "seeds": [0, 1],
               "elements": ["square", "circle", "triangle"], "baseline_seeds": [0],
-              "speed": {"size": 512, "n_sites": 2000, "metrics": ["l2", "linf"], "warmup": 1, "repeats": 7}},
-    "full": {"size": 512, "n_sites": 1000, "iterations": 20, "seeds": [0, 1, 2],
+              "speed": {"size": 512, "n_elements": 2000, "metrics": ["l2", "linf"], "warmup": 1, "repeats": 7}},
+    "full": {"size": 512, "n_elements": 1000, "iterations": 20, "seeds": [0, 1, 2],
              "elements": ["square", "rectangle", "ellipse", "triangle", "circle"], "baseline_seeds": [0, 1, 2],
-             "speed": {"size": 1024, "n_sites": 4000,
+             "speed": {"size": 1024, "n_elements": 4000,
                        "metrics": ["l2", "l1", "linf", "linf-axial", "l2-axial", "triangle"],
                        "warmup": 1, "repeats": 7}},
 }
@@ -123,11 +123,11 @@ def coverage_specs(cfg: dict, methods: list[str], backends: list[str]):
         for method in methods:
             if method == "ours":
                 for b in backends:
-                    specs += [RunSpec("regress", method, b, element, cfg["size"], cfg["size"], cfg["n_sites"],
+                    specs += [RunSpec("regress", method, b, element, cfg["size"], cfg["size"], cfg["n_elements"],
                                       cfg["iterations"], s) for s in cfg["seeds"]]
             elif element == "square" and REFERENCE_BACKEND in backends:
                 specs += [RunSpec("regress", method, REFERENCE_BACKEND, element, cfg["size"], cfg["size"],
-                                  cfg["n_sites"], cfg["iterations"], s) for s in cfg["baseline_seeds"]]
+                                  cfg["n_elements"], cfg["iterations"], s) for s in cfg["baseline_seeds"]]
     return specs
 
 
@@ -230,7 +230,7 @@ def measure_speed(cfg, backends, unavailable, baseline_speed: dict, quiet) -> tu
     from .sweep import BackendCache
 
     sp = cfg["speed"]
-    n, size = sp["n_sites"], sp["size"]
+    n, size = sp["n_elements"], sp["size"]
     out, skipped, failed = {}, {}, []
     cache = BackendCache()
     pairs = speed_pairs(cfg, backends)

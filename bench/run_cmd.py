@@ -8,7 +8,7 @@ DIR/elements.svg one closed path per placed element (viewBox in pixel units)
 DIR/elements.png the same elements as a picture
 
 result.json also holds the placement: ``element``, ``gap``, ``coverage``, ``overlap``
-(cvt/evaluate.py), ``placed``, ``skipped``, ``empty_cell_count``, the smallest and
+(cvt/evaluate.py), ``placed``, ``skipped``, ``empty_cells``, the smallest and
 largest element area, and ``elements`` (per site its outline as [[x, y], ...], or null).
 """
 
@@ -31,13 +31,13 @@ from compact_distributions.cvt.validate import one_of, whole_number
 from . import options
 
 DEFAULT_SIZE = "512"
-DEFAULT_SITES = 1000
+DEFAULT_ELEMENTS = 1000
 
 
 def add_problem_arguments(p: argparse.ArgumentParser) -> None:
     """The options that define a Problem."""
     options.add_shape_options(p)
-    p.add_argument("--sites", default=None, help=f"number of sites N (default {DEFAULT_SITES})")
+    p.add_argument("--elements", default=None, help=f"number of sites N (default {DEFAULT_ELEMENTS})")
     p.add_argument("--size", default=DEFAULT_SIZE, help=f"{options.SIZE_HELP} (default {DEFAULT_SIZE})")
     p.add_argument("--init", metavar="SITES.CSV", help="start from these sites (columns x,y in pixels)")
     p.add_argument("--density", metavar="IMAGE",
@@ -93,7 +93,7 @@ class ProblemOptions:
 
     width: int
     height: int
-    n_sites: int
+    n_elements: int
     metric: Metric
     seed: int
     init: np.ndarray | None
@@ -112,7 +112,7 @@ def parse_problem_options(args) -> ProblemOptions:
 
     w, h = parse_size(args.size, "--size")
     metric = make_metric(one_of(args.metric, "--metric", METRIC_NAMES), args.aspect, option="--aspect")
-    n = None if args.sites is None else whole_number(args.sites, "--sites", minimum=1, maximum=w * h)
+    n = None if args.elements is None else whole_number(args.elements, "--elements", minimum=1, maximum=w * h)
     seed = whole_number(args.seed, "--seed", minimum=0, maximum=MAX_SEED)
     field_file = field_name = None
     if args.field is not None:
@@ -129,8 +129,8 @@ def parse_problem_options(args) -> ProblemOptions:
                 pass
     init = read_sites_csv(args.init, max_sites=w * h) if args.init else None
     if init is not None and n is not None and len(init) != n:
-        raise InputError(f"--sites {n} but init file {args.init} holds {len(init)} sites")
-    n = len(init) if init is not None else (DEFAULT_SITES if n is None else n)
+        raise InputError(f"--elements {n} but init file {args.init} holds {len(init)} sites")
+    n = len(init) if init is not None else (DEFAULT_ELEMENTS if n is None else n)
     return ProblemOptions(w, h, n, metric, seed, init, args.density, args.region, field_file, field_name)
 
 
@@ -148,7 +148,7 @@ def build_problem(opts: ProblemOptions) -> Problem:
                                            spec=opts.field_file)
     elif opts.field_name:
         field = DirectionField.named(opts.field_name, w, h, name="--field")
-    return Problem(Grid(w, h, mask), opts.n_sites, opts.metric, density, field, opts.seed, opts.init)
+    return Problem(Grid(w, h, mask), opts.n_elements, opts.metric, density, field, opts.seed, opts.init)
 
 
 def add_parser(sub):
@@ -186,9 +186,9 @@ def run(args) -> int:
     extra = options.method_options(args)
     opts = parse_problem_options(args)
     backend_name, _ = options.backend_choice(args)
-    run_estimate(opts.width, opts.height, opts.n_sites, backend_class(backend_name), element=element,
+    run_estimate(opts.width, opts.height, opts.n_elements, backend_class(backend_name), element=element,
                  density=bool(opts.density), field=bool(opts.field_file), region=bool(opts.region)).check(
-        args.memory_limit, lower="use a smaller --size or fewer --sites")
+        args.memory_limit, lower="use a smaller --size or fewer --elements")
     with OutputFolder(args.out, "--out", COMMAND_OUTPUTS) as tmp:
         problem = build_problem(opts)
         with options.open_backend(args) as backend:

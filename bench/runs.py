@@ -28,7 +28,7 @@ class RunSpec:
     element: str
     width: int
     height: int
-    n_sites: int
+    n_elements: int
     iterations: int
     seed: int
     aspect: float = DEFAULT_ASPECT
@@ -51,7 +51,7 @@ class RunSpec:
         alternate = "__alt" if self.alternate else ""
         scene = f"{self.scene}__" if self.scene else ""
         return (f"{scene}{self.method}__{self.backend}__{self.element}__{self.width}x{self.height}"
-                f"__n{self.n_sites}__it{self.iterations}__s{self.seed}{gap}{delta}{alternate}")
+                f"__n{self.n_elements}__it{self.iterations}__s{self.seed}{gap}{delta}{alternate}")
 
     @property
     def label(self) -> str:
@@ -62,7 +62,7 @@ class RunSpec:
 
     def describe(self) -> str:
         return (f"{self.method}/{self.backend} {self.element} {self.width}x{self.height} "
-                f"N={self.n_sites} seed {self.seed}")
+                f"N={self.n_elements} seed {self.seed}")
 
     def params(self) -> dict:
         d = asdict(self)
@@ -76,7 +76,7 @@ class RunSpec:
 
         from .sweep import memory_class
 
-        return run_estimate(self.width, self.height, self.n_sites, memory_class(self.backend), element=self.element,
+        return run_estimate(self.width, self.height, self.n_elements, memory_class(self.backend), element=self.element,
                             pictures=self.picture, what=f"the run {self.describe()}")
 
     def problem(self):
@@ -87,8 +87,8 @@ class RunSpec:
         if self.scene is not None:
             from .scenes import scene_problem
 
-            return scene_problem(self.scene, self.width, self.n_sites, make_metric(self.metric, aspect), self.seed)
-        return Problem(Grid(self.width, self.height), self.n_sites, make_metric(self.metric, aspect),
+            return scene_problem(self.scene, self.width, self.n_elements, make_metric(self.metric, aspect), self.seed)
+        return Problem(Grid(self.width, self.height), self.n_elements, make_metric(self.metric, aspect),
                        seed=self.seed)
 
     def execute(self, backend) -> dict:
@@ -132,7 +132,7 @@ class RunSpec:
             row["coverage_overlap"] = curve  # [[factor, coverage, overlap], ...]
         if self.measures:
             row.update(fidelity(dist.elements, problem, self.element, problem.metric.aspect))
-            row["n_elements"] = problem.n_sites
+            row["n_elements"] = problem.n_elements
         record = {"row": row, "sites_sha1": sites_digest(dist.sites), "energy": dist.energy,
                   "seconds": secs, "empty_per_iteration": list(dist.empty), "extra": dist.extra,
                   "machine": machine(), "versions": versions()}
@@ -159,10 +159,10 @@ PICTURE_PALETTE = np.array([(230, 159, 0), (86, 180, 233), (0, 158, 115), (240, 
                             (204, 121, 167), (0, 114, 178)], dtype=np.uint8)  # colour-blind safe
 
 
-def picture_crop(n_sites: int) -> float:
+def picture_crop(n_elements: int) -> float:
     """Side fraction of the region shown in an effect picture: about PICTURE_ELEMENTS
     elements (the whole region for small problems)."""
-    return float(min(1.0, np.sqrt(PICTURE_ELEMENTS / max(1, n_sites))))
+    return float(min(1.0, np.sqrt(PICTURE_ELEMENTS / max(1, n_elements))))
 
 
 def effect_picture(elements, grid, side: int = 512, crop: float | None = None):

@@ -57,10 +57,10 @@ ELEMENTS = list(ELEMENT_SHAPES)
 # nor how it counts overlap, so the report shows where they stand when tiles barely overlap.
 SMALLER_BUDGETS = (0.85, 0.80)
 
-FULL = {"size": 1024, "n_sites": 4000, "iterations": 20, "seeds": 5}
-QUICK = {"size": 256, "n_sites": 250, "iterations": 20, "seeds": 2}
+FULL = {"size": 1024, "n_elements": 4000, "iterations": 20, "seeds": 5}
+QUICK = {"size": 256, "n_elements": 250, "iterations": 20, "seeds": 2}
 
-COLUMNS = ["method", "backend", "element", "metric", "width", "height", "n_sites", "iterations",
+COLUMNS = ["method", "backend", "element", "metric", "width", "height", "n_elements", "iterations",
            "seeds", "runs", "coverage_mean", "coverage_sd", "overlap_mean", "overlap_sd",
            "time_mean_s", "time_sd_s", "ms_per_iteration", "placed_mean", "empty_cells_mean",
            "coverage_at_1pct_overlap", "paper_coverage", "paper_time", "status", "reason", "device", "hosts", "host_slots"]
@@ -82,7 +82,7 @@ def problem_set(quick: bool, seeds: int | None, methods: list[str], backends: li
     def add(method, backend, element, picture_first, delta=None, alternate=False, curve=True):
         for s in range(k):
             specs.append(RunSpec(suite, method, backend, element, cfg["size"], cfg["size"],
-                                 cfg["n_sites"], cfg["iterations"], s, picture=picture_first and s == 0,
+                                 cfg["n_elements"], cfg["iterations"], s, picture=picture_first and s == 0,
                                  delta=delta, alternate=alternate, curve=curve and s == 0))
 
     for element in elements:
@@ -127,7 +127,7 @@ def aggregate(rows: list[dict]):
         paper = PAPER.get(method) if element == "square" else None
         rec = {
             "method": method, "backend": backend, "element": element, "metric": first["metric"],
-            "width": first["width"], "height": first["height"], "n_sites": first["n_sites"],
+            "width": first["width"], "height": first["height"], "n_elements": first["n_elements"],
             "iterations": first["iterations"], "seeds": len(g), "runs": len(ok),
             "paper_coverage": paper[0] if paper else np.nan, "paper_time": paper[1] if paper else "",
         }
@@ -219,7 +219,7 @@ def render_markdown(table, prov: dict, command: str, quick: bool, cfg: dict, see
 
     title = "Table 2, regenerated" + (" (QUICK: small raster, 2 seeds; not the paper's scale)" if quick else "")
     notes = [
-        f"problem set: square region, whole {cfg['size']}x{cfg['size']} px raster, N = {cfg['n_sites']} "
+        f"problem set: square region, whole {cfg['size']}x{cfg['size']} px raster, N = {cfg['n_elements']} "
         f"sites, {cfg['iterations']} Lloyd iterations, seeds 0..{seeds - 1}, no density, no direction "
         "field; squares for every method, every other element shape for ours, ours-fit and "
         "ours-compact (triangles also alternating); rectangle and ellipse β = 0.5",
@@ -367,9 +367,9 @@ def render_picture(table, out: Path, suite_specs: list[RunSpec], path: Path) -> 
             name = spec.label if spec.method != "ours" else f"ours ({spec.backend})"
             ax.set_title(f"{name}\n{spec.element}: {100 * c:.1f} %", fontsize=9)
     spec0 = panels[0][0]
-    crop = picture_crop(spec0.n_sites)
+    crop = picture_crop(spec0.n_elements)
     part = "the whole region" if crop >= 1 else f"top-left {crop * spec0.width:.0f}² px of {spec0.width}² px"
-    fig.suptitle(f"Effect pictures (seed 0, {part}, N = {spec0.n_sites})", fontsize=10)
+    fig.suptitle(f"Effect pictures (seed 0, {part}, N = {spec0.n_elements})", fontsize=10)
     save_figure(fig, path)
     plt.close(fig)
     return True

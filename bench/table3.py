@@ -50,8 +50,8 @@ from .scenes import SCENE_TEXT, SCENES
 EVERY_SHAPE = ("ours", "ours-compact")
 ON_VARIANT_BACKEND = ("ours", "ours-fit", "ours-compact")
 
-FULL = {"size": 512, "n_sites": 1000, "iterations": 20, "seeds": 5}
-QUICK = {"size": 192, "n_sites": 150, "iterations": 20, "seeds": 2}
+FULL = {"size": 512, "n_elements": 1000, "iterations": 20, "seeds": 5}
+QUICK = {"size": 192, "n_elements": 150, "iterations": 20, "seeds": 2}
 SUITE = {False: "table3", True: "table3-quick"}
 
 MEASURE_COLUMNS = [c for m in MEASURES for c in (f"{m}_mean", f"{m}_sd")]
@@ -70,7 +70,7 @@ def problem_set(quick: bool, seeds: int, methods: list[str], shapes: list[str], 
                 if element != "square" and method not in EVERY_SHAPE:
                     continue
                 backend = variant_backend if method in ON_VARIANT_BACKEND else REFERENCE_BACKEND
-                specs += [RunSpec(SUITE[quick], method, backend, element, cfg["size"], cfg["size"], cfg["n_sites"],
+                specs += [RunSpec(SUITE[quick], method, backend, element, cfg["size"], cfg["size"], cfg["n_elements"],
                                   cfg["iterations"], s, curve=True, scene=scene, measures=True)
                           for s in range(seeds)]
     return specs
@@ -181,7 +181,7 @@ def render_markdown(table, prov: dict, command: str, quick: bool, cfg: dict, see
     title = "Table 3: density, direction and region" + (" (QUICK: small raster, 2 seeds)" if quick else "")
     notes = [f"scene `{s}`: {SCENE_TEXT[s]}" for s in dict.fromkeys(table["scene"])]
     notes += [
-        f"{cfg['size']}x{cfg['size']} px, N = {cfg['n_sites']} elements on the whole raster (a region holds "
+        f"{cfg['size']}x{cfg['size']} px, N = {cfg['n_elements']} elements on the whole raster (a region holds "
         f"its share), {cfg['iterations']} Lloyd iterations, seeds 0..{seeds - 1}; every method on squares, "
         f"{' and '.join(EVERY_SHAPE)} on every shape (rectangle and ellipse β = 0.5)",
         f"{', '.join(ON_VARIANT_BACKEND)} on the OpenCL backend where it is available (else NumPy); the "
@@ -248,7 +248,7 @@ def render_tradeoff(rows: list[dict], path: Path) -> bool:
         ax.set(xlabel=label, ylabel="coverage (% of the region)",
                title=f"{scene} scene (filled) and combined scene (hollow)")
         ax.grid(True, alpha=0.3)
-    fig.legend(fontsize=7, loc="outside right center")
+    fig.legend(fontsize=7, loc="outside right centre")
     fig.suptitle("Coverage against fidelity, squares, one point per seed (better: up and left)", fontsize=10)
     save_figure(fig, path)
     plt.close(fig)

@@ -44,7 +44,7 @@ class Evaluation:
             "skipped": self.skipped,
             "min_element_area": self.min_area,
             "max_element_area": self.max_area,
-            "empty_cell_count": self.empty_cells,
+            "empty_cells": self.empty_cells,
             "overlapping_pairs": self.overlapping_pairs,
         }
 
@@ -66,10 +66,10 @@ def region_polygon(grid: Grid):
     return shapely.union_all(boxes)
 
 
-def empty_cell_count(labels: np.ndarray, n_sites: int) -> int:
+def empty_cells(labels: np.ndarray, n_elements: int) -> int:
     """Sites whose cell holds no pixel of the label raster."""
     lab = np.asarray(labels).ravel()
-    counts = np.bincount(lab[lab >= 0], minlength=n_sites)[:n_sites]
+    counts = np.bincount(lab[lab >= 0], minlength=n_elements)[:n_elements]
     return int((counts == 0).sum())
 
 
@@ -113,7 +113,7 @@ def evaluate(elements, grid: Grid, region=None, labels=None) -> Evaluation:
 
     ``labels`` (the final label raster, optional) adds the number of empty cells."""
     region = region_polygon(grid) if region is None else region
-    empty = None if labels is None else empty_cell_count(labels, len(elements))
+    empty = None if labels is None else empty_cells(labels, len(elements))
     geoms = np.array([e for e in elements if e is not None and not e.is_empty], dtype=object)
     skipped = len(elements) - len(geoms)
     area = shapely.area(region)

@@ -119,13 +119,13 @@ def run_ours_compact(problem: Problem, backend, *, iterations: int = 20, progres
     shape, turn = element_for(problem.metric, element)
     check_alternate(shape, alternate)
     gap = parse_gap(gap)
-    spacing = float(np.sqrt(problem.grid.pixel_count / problem.n_sites))
+    spacing = float(np.sqrt(problem.grid.pixel_count / problem.n_elements))
     if gap >= spacing:
-        raise InputError(f"gap {gap:g} px is not smaller than the elements: {problem.n_sites} elements in "
+        raise InputError(f"gap {gap:g} px is not smaller than the elements: {problem.n_elements} elements in "
                          f"{problem.grid.pixel_count} px are about {spacing:.3g} px apart")
     setup = LloydSetup.of(problem)
     if alternate:
-        turns = alternating_turns(problem.n_sites, problem.seed)
+        turns = alternating_turns(problem.n_elements, problem.seed)
         setup = LloydSetup.of(problem, angles_at=lambda sites: problem.angles_at(sites) + turns)
     aspect = problem.metric.aspect
     t0 = time.perf_counter()

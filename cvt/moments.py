@@ -56,7 +56,7 @@ def _pixel_indices(h: int, w: int) -> tuple[np.ndarray, np.ndarray]:
     return cols, rows
 
 
-def moments_from_labels(labels: np.ndarray, n_sites: int, weights: np.ndarray | None = None) -> Moments:
+def moments_from_labels(labels: np.ndarray, n_elements: int, weights: np.ndarray | None = None) -> Moments:
     """Moments of a (H, W) int label raster (-1 = outside) with np.bincount.
 
     float64 bincount sums of integers are exact below 2**53 (any raster up to 8192²)."""
@@ -71,6 +71,6 @@ def moments_from_labels(labels: np.ndarray, n_sites: int, weights: np.ndarray | 
     def total(values):
         if wts is not None:
             values = wts if values is None else values * wts
-        return np.rint(np.bincount(flat, weights=values, minlength=n_sites)).astype(np.int64)
+        return np.rint(np.bincount(flat, weights=values, minlength=n_elements)).astype(np.int64)
 
     return Moments(total(None), total(cols), total(rows), total(cols * cols), total(rows * rows))

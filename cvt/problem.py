@@ -82,7 +82,7 @@ class Problem:
     """Everything that defines one CVT run, independent of the backend."""
 
     grid: Grid
-    n_sites: int
+    n_elements: int
     metric: Metric = field(default_factory=lambda: make_metric("l2"))
     density: DensityMap | None = None
     field: DirectionField | None = None
@@ -127,11 +127,11 @@ class Problem:
                     f"{w}x{h} raster (0 <= x <= {w}, 0 <= y <= {h})"
                 )
             self.init_sites = pts
-            self.n_sites = len(pts)
-        self.n_sites = whole_number(self.n_sites, "number of sites", minimum=1)
-        if self.n_sites > self.grid.pixel_count:
+            self.n_elements = len(pts)
+        self.n_elements = whole_number(self.n_elements, "number of sites", minimum=1)
+        if self.n_elements > self.grid.pixel_count:
             raise InputError(
-                f"{self.n_sites} sites do not fit in a region of {self.grid.pixel_count} pixels"
+                f"{self.n_elements} sites do not fit in a region of {self.grid.pixel_count} pixels"
             )
         for name, img in (("density", self.density), ("field", self.field)):
             if img is not None and img.shape is not None and img.shape != self.grid.shape:

@@ -80,11 +80,11 @@ def label_colours(n: int, seed: int = 12345) -> np.ndarray:
 
 
 # ------------------------------------------------------------------ rasters
-def cells_image(labels: np.ndarray, n_sites: int, sites=None):
+def cells_image(labels: np.ndarray, n_elements: int, sites=None):
     """The cells in distinct colours (PIL image); sites drawn as dark dots if given."""
     from PIL import Image
 
-    rgb = label_colours(n_sites)[np.where(labels >= 0, labels, n_sites)]
+    rgb = label_colours(n_elements)[np.where(labels >= 0, labels, n_elements)]
     if sites is not None:
         h, w = labels.shape
         rgb[pixel_index(sites, w, h)] = (20, 20, 20)

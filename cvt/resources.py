@@ -144,10 +144,10 @@ class Estimate:
         return self
 
 
-def placement_bytes(pixels: int, n_sites: int, element: str | None) -> float:
+def placement_bytes(pixels: int, n_elements: int, element: str | None) -> float:
     """Placing one element per cell, evaluating them and keeping their outlines."""
     per_site = PER_SITE["curved" if element in CURVED else "polygon"]
-    return PER_PIXEL["placement"] * pixels + per_site * n_sites
+    return PER_PIXEL["placement"] * pixels + per_site * n_elements
 
 
 def canvas_bytes(width: int, height: int, scale: float = 1.0, supersample: int = SUPERSAMPLE) -> float:
@@ -158,7 +158,7 @@ def canvas_bytes(width: int, height: int, scale: float = 1.0, supersample: int =
     return 4.0 * big + 12.0 * small
 
 
-def run_estimate(width: int, height: int, n_sites: int, backend_class, *, element: str | None = None,
+def run_estimate(width: int, height: int, n_elements: int, backend_class, *, element: str | None = None,
                  density: bool = False, field: bool = False, region: bool = False, placement: bool = True,
                  pictures: bool = True, what: str = "this run") -> Estimate:
     """The peak memory of one run of a method on ``backend_class``: the problem's
@@ -168,14 +168,14 @@ def run_estimate(width: int, height: int, n_sites: int, backend_class, *, elemen
     pixels = width * height
     est = Estimate(what)
     backend_bytes = getattr(backend_class, "memory_estimate", None)
-    est.add("the backend's labels and moments", backend_bytes(width, height, n_sites) if backend_bytes
+    est.add("the backend's labels and moments", backend_bytes(width, height, n_elements) if backend_bytes
             else PER_PIXEL["labels"] * pixels)
     est.add("seeding", PER_PIXEL["seeding"] * pixels)
     for name, used in (("density", density), ("field", field), ("region", region)):
         if used:
             est.add(f"the {name} image", PER_PIXEL[name] * pixels)
     if placement:
-        est.add("placing and evaluating the elements", placement_bytes(pixels, n_sites, element))
+        est.add("placing and evaluating the elements", placement_bytes(pixels, n_elements, element))
     if pictures:
         est.add("the pictures", PER_PIXEL["cells.png"] * pixels + canvas_bytes(width, height))
     return est

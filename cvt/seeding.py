@@ -22,7 +22,7 @@ def initial_sites(problem: Problem) -> np.ndarray:
     """(N, 2) float64 sites in pixel units."""
     if problem.init_sites is not None:
         return problem.init_sites.copy()
-    grid, n = problem.grid, problem.n_sites
+    grid, n = problem.grid, problem.n_elements
     rng = np.random.default_rng(problem.seed)
     inside = np.flatnonzero(grid.inside().ravel())
     if problem.density is None:

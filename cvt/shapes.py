@@ -51,31 +51,31 @@ def element_ball(shape: str, aspect: float | None = 0.5) -> Metric:
     return make_metric(ELEMENT_METRIC[check_shape(shape)], aspect)
 
 
-def transform(outline: np.ndarray, centers, angles, sizes) -> np.ndarray:
-    """(N, M, 2) outlines scaled by ``sizes``, rotated by ``angles``, moved to ``centers``."""
-    centers = np.asarray(centers, dtype=np.float64).reshape(-1, 2)
-    n = len(centers)
+def transform(outline: np.ndarray, centres, angles, sizes) -> np.ndarray:
+    """(N, M, 2) outlines scaled by ``sizes``, rotated by ``angles``, moved to ``centres``."""
+    centres = np.asarray(centres, dtype=np.float64).reshape(-1, 2)
+    n = len(centres)
     angles = np.broadcast_to(np.asarray(angles, dtype=np.float64), (n,))
     sizes = np.broadcast_to(np.asarray(sizes, dtype=np.float64), (n,))
     c, s = np.cos(angles)[:, None], np.sin(angles)[:, None]
     ox, oy = outline[None, :, 0] * sizes[:, None], outline[None, :, 1] * sizes[:, None]
-    x = c * ox - s * oy + centers[:, 0:1]
-    y = s * ox + c * oy + centers[:, 1:2]
+    x = c * ox - s * oy + centres[:, 0:1]
+    y = s * ox + c * oy + centres[:, 1:2]
     return np.stack([x, y], axis=-1)
 
 
 CHUNK = 4096  # elements whose vertices are computed at once: bounds the temporaries
 
 
-def element_polygons(shape: str, aspect: float, centers, angles, sizes) -> np.ndarray:
+def element_polygons(shape: str, aspect: float, centres, angles, sizes) -> np.ndarray:
     """Shapely polygons (object array) of N elements."""
     outline = unit_outline(shape, aspect)
-    centers = np.asarray(centers, dtype=np.float64).reshape(-1, 2)
-    n = len(centers)
+    centres = np.asarray(centres, dtype=np.float64).reshape(-1, 2)
+    n = len(centres)
     angles = np.broadcast_to(np.asarray(angles, dtype=np.float64), (n,))
     sizes = np.broadcast_to(np.asarray(sizes, dtype=np.float64), (n,))
     out = np.empty(n, dtype=object)
     for a in range(0, n, CHUNK):
         b = min(n, a + CHUNK)
-        out[a:b] = shapely.polygons(transform(outline, centers[a:b], angles[a:b], sizes[a:b]))
+        out[a:b] = shapely.polygons(transform(outline, centres[a:b], angles[a:b], sizes[a:b]))
     return out

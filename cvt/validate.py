@@ -2,7 +2,7 @@
 and the Python API.
 
 Each function takes the raw value (a string from the command line, or whatever a caller
-passed) and the name the user knows it by (``--sites`` on the command line,
+passed) and the name the user knows it by (``--elements`` on the command line,
 ``n_elements`` in Python), and returns the parsed value or raises :class:`InputError`
 with one line that names the option and the bad value.
 """

@@ -195,12 +195,12 @@ def test_tile_pixels_are_the_pixel_centres_inside_the_outline(element, metric):
     shape = tile_shape(square_problem(metric=metric), element)
     rng = np.random.default_rng(3)
     for _ in range(6):
-        center = rng.uniform(-5, 65, 2)  # some tiles hang over the raster's edge
+        centre = rng.uniform(-5, 65, 2)  # some tiles hang over the raster's edge
         angle, size = rng.uniform(0, math.pi), rng.uniform(2, 12)
-        poly = element_polygons(element, shape.aspect, center, angle, size)[0]
+        poly = element_polygons(element, shape.aspect, centre, angle, size)[0]
         truth = _pixel_centres_inside(poly, 50, 60)
         got = np.zeros((50, 60), bool)
-        got[tile_pixels(shape, center, angle, size, grid)] = True
+        got[tile_pixels(shape, centre, angle, size, grid)] = True
         # curved outlines are 128-gons: a pixel centre within a hair of the curve may differ
         assert (got != truth).sum() <= (2 if element == "ellipse" else 0)
     assert len(tile_pixels(shape, (30.0, 20.0), 0.0, 0.0, grid)[0]) == 0
@@ -212,24 +212,24 @@ def test_smith_fit_counts_match_a_pixel_count_by_point_in_polygon(element, metri
     labels = np.full((30, 40), -1, np.int32)
     labels[:, 2:14], labels[:, 14:27], labels[:, 27:39] = 0, 1, 2
     shape = tile_shape(square_problem(metric=metric), element)
-    centers = np.array([[8.3, 14.2], [20.1, 15.7], [33.0, 9.4]])
+    centres = np.array([[8.3, 14.2], [20.1, 15.7], [33.0, 9.4]])
     sizes = np.array([7.0, 9.5, 6.0])
     angles = np.array([[0.0, 0.3, 0.7], [0.1, 0.5, 1.2], [-0.4, 0.25, 2.0]])
-    counts = smith2005.fit_counts(shape, labels, centers, sizes, angles)
+    counts = smith2005.fit_counts(shape, labels, centres, sizes, angles)
     for i in range(3):
         for a in range(3):
-            poly = element_polygons(element, shape.aspect, centers[i], angles[i, a], sizes[i])[0]
+            poly = element_polygons(element, shape.aspect, centres[i], angles[i, a], sizes[i])[0]
             truth = (_pixel_centres_inside(poly, 30, 40) & (labels == i)).sum()
             assert counts[i, a] == truth, (i, a)
 
 
 def _random_state(seed, n=30, size=96):
     rng = np.random.default_rng(seed)
-    centers = rng.uniform(0, size, (n, 2))
+    centres = rng.uniform(0, size, (n, 2))
     angles = rng.uniform(0, math.pi / 2, n)
     sizes = rng.uniform(0.5, 7.0, n)
     sizes[rng.random(n) < 0.2] = 0.0  # some absent tiles
-    return centers, angles, sizes
+    return centres, angles, sizes
 
 
 def test_hu_combinatorial_step_never_lowers_coverage():
@@ -237,10 +237,10 @@ def test_hu_combinatorial_step_never_lowers_coverage():
     shape = tile_shape(square_problem(), "square")
     accepted = 0
     for seed in range(8):
-        centers, angles, sizes = _random_state(seed)
-        shape_elems = hu2016.make_elements(shape, centers, angles, sizes, grid)[0]
+        centres, angles, sizes = _random_state(seed)
+        shape_elems = hu2016.make_elements(shape, centres, angles, sizes, grid)[0]
         before = evaluate(shape_elems, grid).coverage
-        c2, a2, s2, info = hu2016.combinatorial_step(shape, centers, angles, sizes, grid, moves=6)
+        c2, a2, s2, info = hu2016.combinatorial_step(shape, centres, angles, sizes, grid, moves=6)
         after = evaluate(hu2016.make_elements(shape, c2, a2, s2, grid)[0], grid).coverage
         assert after >= before - 1e-12
         assert after - before == pytest.approx(info["gain"], abs=1e-9)
@@ -253,13 +253,13 @@ def test_hu_combinatorial_step_moves_a_tiny_tile_into_a_hole():
     shape = tile_shape(square_problem(), "square")
     # a 4 x 4 lattice of 16 px cells, tiles of half-side 7, one of them tiny, one missing
     xs = (np.arange(4) + 0.5) * 16
-    centers = np.stack(np.meshgrid(xs, xs), axis=-1).reshape(-1, 2)
+    centres = np.stack(np.meshgrid(xs, xs), axis=-1).reshape(-1, 2)
     sizes = np.full(16, 7.0)
     sizes[5] = 0.5
     sizes[10] = 0.0
     angles = np.zeros(16)
-    before = evaluate(hu2016.make_elements(shape, centers, angles, sizes, grid)[0], grid).coverage
-    c2, a2, s2, info = hu2016.combinatorial_step(shape, centers, angles, sizes, grid, moves=2)
+    before = evaluate(hu2016.make_elements(shape, centres, angles, sizes, grid)[0], grid).coverage
+    c2, a2, s2, info = hu2016.combinatorial_step(shape, centres, angles, sizes, grid, moves=2)
     after = evaluate(hu2016.make_elements(shape, c2, a2, s2, grid)[0], grid).coverage
     assert info["accepted"] == 2
     assert after > before + 0.015
@@ -305,7 +305,7 @@ def test_cli_runs_a_baseline(tmp_path, capsys):
 
     out = tmp_path / "run"
     code = main(["run", "--method", "smith2005", "--metric", "linf", "--size", "96",
-                 "--sites", "30", "--iterations", "3", "--out", str(out), "--quiet"])
+                 "--elements", "30", "--iterations", "3", "--out", str(out), "--quiet"])
     assert code == 0
     result = json.loads((out / "result.json").read_text())
     assert result["method"] == "smith2005" and result["iterations"] == 3

@@ -155,15 +155,15 @@ def test_committed_table2_covers_every_method_and_backend():
 
 
 def test_backends_quick_rerun_matches_committed_columns(tmp_path):
-    code = main(["backends", "--quick", "--backends", "numpy,ckdtree", "--metrics", "l2", "--sites", "300",
+    code = main(["backends", "--quick", "--backends", "numpy,ckdtree", "--metrics", "l2", "--elements", "300",
                  "--sizes", "96", "--repeats", "1", "--out", str(tmp_path), "--quiet"])
     assert code == 0
     new = pd.read_csv(tmp_path / "backends.csv")
     assert list(new.columns) == list(_committed("quick/backends.csv").columns)
-    assert set(new.backend) == {"numpy", "ckdtree"} and (new.ms_median > 0).all()
+    assert set(new.backend) == {"numpy", "ckdtree"} and (new.ms_per_iteration > 0).all()
     assert new.loc[new.backend == "numpy", "x_numpy"].iloc[0] == pytest.approx(1.0)
     full = _committed("backends.csv")
-    assert {1000, 4000, 16000} <= set(full.n_sites) and {512, 1024, 2048} <= set(full["size"])
+    assert {1000, 4000, 16000} <= set(full.n_elements) and {512, 1024, 2048} <= set(full["size"])
     assert set(full.metric) == {"l2", "l1", "linf", "linf-axial", "l2-axial", "triangle"}
 
 

@@ -42,7 +42,7 @@ def images(tmp_path):
 
 def test_run_writes_result_sites_and_cells(tmp_path, capsys):
     out = tmp_path / "run"
-    code, _, err = run_cli(["run", "--sites", "60", "--size", "96x64", "--iterations", "3",
+    code, _, err = run_cli(["run", "--elements", "60", "--size", "96x64", "--iterations", "3",
                             "--metric", "linf-axial", "--aspect", "0.7", "--seed", "4",
                             "--field", "constant:30", "--out", str(out)], capsys)
     assert code == 0, err
@@ -54,7 +54,7 @@ def test_run_writes_result_sites_and_cells(tmp_path, capsys):
     assert r["size"] == [96, 64] and r["iterations"] == 3
     assert len(r["sites"]) == 60 and len(r["energy"]) == 3 and len(r["seconds"]) == 3
     np.testing.assert_allclose(r["angles"], np.radians(30))
-    assert r["command"].startswith("cvtbench run --sites 60")
+    assert r["command"].startswith("cvtbench run --elements 60")
     csv = (out / "sites.csv").read_text().splitlines()
     assert csv[0].startswith("x,y") and len(csv) == 61
     with Image.open(out / "cells.png") as im:
@@ -74,7 +74,7 @@ def test_init_csv_round_trip_and_zero_iterations(tmp_path, capsys):
 
 
 def test_density_region_and_image_field(tmp_path, images, capsys):
-    code, _, err = run_cli(["run", "--sites", "40", "--size", "80", "--iterations", "2",
+    code, _, err = run_cli(["run", "--elements", "40", "--size", "80", "--iterations", "2",
                             "--density", str(images["density"]), "--region", str(images["disc"]),
                             "--field", str(images["density"]), "--out", str(tmp_path / "o")], capsys)
     assert code == 0, err  # density of another size is resampled, as documented
@@ -87,9 +87,9 @@ def test_density_region_and_image_field(tmp_path, images, capsys):
 BAD = [
     (["--metric", "l3"], "unknown --metric 'l3'"),
     (["--backend", "vulkan"], "unknown backend 'vulkan'"),
-    (["--sites", "0"], "--sites must be a whole number between 1 and 4096"),
-    (["--sites", "many"], "--sites must be a whole number"),
-    (["--sites", "5000", "--size", "64"], "between 1 and 4096, got '5000'"),
+    (["--elements", "0"], "--elements must be a whole number between 1 and 4096"),
+    (["--elements", "many"], "--elements must be a whole number"),
+    (["--elements", "5000", "--size", "64"], "between 1 and 4096, got '5000'"),
     (["--size", "0"], "size '0'"),
     (["--size", "40000"], "size '40000'"),
     (["--size", "10x"], "size must be W or WxH"),
@@ -105,7 +105,7 @@ BAD = [
 @pytest.mark.parametrize("extra,message", BAD)
 def test_bad_arguments(extra, message, tmp_path, capsys):
     out = tmp_path / "out"
-    argv = ["run", "--sites", "20", "--size", "64", "--iterations", "1", "--out", str(out)]
+    argv = ["run", "--elements", "20", "--size", "64", "--iterations", "1", "--out", str(out)]
     code, _, err = run_cli(argv + extra, capsys)
     assert code == 2
     lines = err.strip().splitlines()
@@ -124,7 +124,7 @@ def test_bad_arguments(extra, message, tmp_path, capsys):
 def test_bad_images(option, which, message, images, tmp_path, capsys):
     path = images.get(which, tmp_path / "nope.png")
     out = tmp_path / "out"
-    code, _, err = run_cli(["run", "--sites", "10", "--size", "48", option, str(path),
+    code, _, err = run_cli(["run", "--elements", "10", "--size", "48", option, str(path),
                             "--out", str(out)], capsys)
     assert code == 2 and message in err and len(err.strip().splitlines()) == 1
     assert not out.exists()
@@ -157,7 +157,7 @@ def test_info_lists_every_backend(capsys):
 def test_console_script_end_to_end(tmp_path):
     """The installed entry point, as a user runs it (subprocess, real exit status)."""
     exe = [sys.executable, "-m", "compact_distributions.bench.cli"]
-    ok = subprocess.run(exe + ["run", "--sites", "30", "--size", "64", "--iterations", "2",
+    ok = subprocess.run(exe + ["run", "--elements", "30", "--size", "64", "--iterations", "2",
                                "--out", str(tmp_path / "o")], capture_output=True, text=True)
     assert ok.returncode == 0, ok.stderr
     assert (tmp_path / "o" / "result.json").exists()

@@ -202,7 +202,7 @@ def test_killed_worker_costs_a_retry_not_the_sweep(truth, dask_cluster, tmp_path
 @needs_dask
 @pytest.mark.slow
 def test_backend_timings_on_the_cluster(dask_cluster, tmp_path):
-    argv = ["backends", "--quick", "--backends", "numpy,ckdtree", "--metrics", "l2", "--sites", "100",
+    argv = ["backends", "--quick", "--backends", "numpy,ckdtree", "--metrics", "l2", "--elements", "100",
             "--sizes", "64", "--quiet", "--out", str(tmp_path), "--scheduler", dask_cluster]
     assert main(argv) == 0
     df = pd.read_csv(tmp_path / "backends.csv")
@@ -336,14 +336,14 @@ def test_exclusive_runs_never_share_a_host(tmp_path):
 def test_reports_name_hosts_when_rows_come_from_several():
     from compact_distributions.bench.backends_cmd import with_ratios
 
-    rows = [{"backend": b, "metric": "l2", "n_sites": 100, "size": 64, "ms_median": ms, "status": "ok", "host": h}
+    rows = [{"backend": b, "metric": "l2", "n_elements": 100, "size": 64, "ms_per_iteration": ms, "status": "ok", "host": h}
             for b, ms, h in [("numpy", 10.0, "a"), ("opencl", 2.0, "a"), ("numpy", 20.0, "b"), ("ckdtree", 5.0, "c")]]
     df = with_ratios(rows)
     # NumPy on the same host is the unit; none on host c: no ratio across machines
     assert list(df["x_numpy"].round(6).fillna(-1)) == [1.0, 5.0, 1.0, -1]
 
     base = {"method": "ours", "backend": "numpy", "element": "square", "metric": "linf", "width": 64, "height": 64,
-            "n_sites": 20, "iterations": 3, "label": "ours", "status": "ok", "reason": "", "device": "cpu",
+            "n_elements": 20, "iterations": 3, "label": "ours", "status": "ok", "reason": "", "device": "cpu",
             "coverage": 0.7, "overlap": 0.0, "total_seconds": 1.0, "ms_per_iteration": 3.0, "placed": 20,
             "empty_cells": 0}
     table = table2.aggregate([{**base, "seed": 0, "host": "a", "host_slots": 1},

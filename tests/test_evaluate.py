@@ -7,7 +7,7 @@ import numpy as np
 import pytest
 import shapely
 
-from compact_distributions.cvt.evaluate import empty_cell_count, evaluate, region_polygon
+from compact_distributions.cvt.evaluate import empty_cells, evaluate, region_polygon
 from compact_distributions.cvt.problem import Grid
 from compact_distributions.cvt.render import PAPER, draw_elements, element_coordinates, svg_document
 
@@ -77,11 +77,11 @@ def test_matches_the_plain_union_formula(seed):
 
 def test_empty_cells_and_nothing_placed():
     labels = np.array([[0, 0, 2], [-1, 2, 2]], dtype=np.int32)
-    assert empty_cell_count(labels, 4) == 2  # sites 1 and 3
+    assert empty_cells(labels, 4) == 2  # sites 1 and 3
     ev = evaluate([None, None, None, None], Grid(3, 2), labels=labels)
     assert (ev.coverage, ev.overlap, ev.elements, ev.skipped, ev.empty_cells) == (0.0, 0.0, 0, 4, 2)
     d = ev.as_dict()
-    assert {"coverage", "overlap", "placed", "skipped", "empty_cell_count",
+    assert {"coverage", "overlap", "placed", "skipped", "empty_cells",
             "min_element_area", "max_element_area"} <= set(d)
 
 

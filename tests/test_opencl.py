@@ -302,7 +302,7 @@ def test_cli_run_and_info(tmp_path, capsys):
     from compact_distributions.bench.cli import main
 
     out = tmp_path / "run"
-    code = main(["run", "--backend", "opencl", "--device", "0:0", "--sites", "150", "--size", "96",
+    code = main(["run", "--backend", "opencl", "--device", "0:0", "--elements", "150", "--size", "96",
                  "--iterations", "3", "--out", str(out), "--quiet"])
     assert code == 0
     result = json.loads((out / "result.json").read_text())

@@ -34,7 +34,7 @@ def test_compacted_elements_are_disjoint_inside_the_region_and_cover_more(elemen
     backend = NumpyBackend()
     dist = run_ours_compact(problem, backend, iterations=6, gap=1.0)
     polys = [p for p in dist.elements if p is not None]
-    assert len(polys) >= 0.9 * problem.n_sites
+    assert len(polys) >= 0.9 * problem.n_elements
     region = region_polygon(problem.grid)
     # exact geometry: inside the region's pixels, at least the gap apart (1 px), half of
     # it from the border
@@ -73,7 +73,7 @@ def test_alternating_triangles_point_both_ways_and_fill_more():
 ])
 def test_bad_input_is_one_line_and_writes_nothing(tmp_path, capsys, argv, needle):
     out = tmp_path / "out"
-    code = main(["run", "--sites", "20", "--size", "64", "--iterations", "1", "--out", str(out), *argv])
+    code = main(["run", "--elements", "20", "--size", "64", "--iterations", "1", "--out", str(out), *argv])
     err = capsys.readouterr().err
     assert code == 2 and len(err.strip().splitlines()) == 1 and needle in err
     assert not out.exists()

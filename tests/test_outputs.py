@@ -30,7 +30,7 @@ from compact_distributions.cvt.errors import InputError
 
 from .hostile import CLI
 
-RUN = ["run", "--size", "48", "--sites", "12", "--iterations", "1", "--quiet"]
+RUN = ["run", "--size", "48", "--elements", "12", "--iterations", "1", "--quiet"]
 RUN_FILES = ["cells.png", "elements.png", "elements.svg", "result.json", "sites.csv"]
 
 
@@ -184,7 +184,7 @@ def test_a_swap_cut_between_its_renames_is_undone(tmp_path):
 @pytest.mark.slow
 def test_killed_runs_leave_the_previous_or_the_new_output_and_no_temporaries(tmp_path):
     out = tmp_path / "out"
-    base = [*CLI, "run", "--size", "200", "--sites", "1500", "--iterations", "3", "--quiet", "--out", str(out)]
+    base = [*CLI, "run", "--size", "200", "--elements", "1500", "--iterations", "3", "--quiet", "--out", str(out)]
     assert subprocess.run(base, capture_output=True).returncode == 0
     for seed, delay in enumerate((0.8, 1.3, 1.8, 2.3, 2.8), start=1):
         proc = subprocess.Popen(base + ["--seed", str(seed)], stderr=subprocess.DEVNULL)
@@ -269,7 +269,7 @@ def test_reports_name_only_the_files_that_exist(tmp_path, capsys, monkeypatch):
     (tmp_path / "backends.png").write_bytes(b"an older sweep's plot")
     assert main(["table2", "--quick", "--methods", "ours", "--backends", "opencl", "--shapes", "square",
                  "--seeds", "1", "--quiet", "--out", str(tmp_path)]) == 0
-    assert main(["backends", "--quick", "--backends", "opencl", "--metrics", "l2", "--sites", "100",
+    assert main(["backends", "--quick", "--backends", "opencl", "--metrics", "l2", "--elements", "100",
                  "--sizes", "64", "--quiet", "--out", str(tmp_path)]) == 0
     err = capsys.readouterr().err
     assert "table2.png" not in err and "backends.png" not in err

@@ -77,7 +77,7 @@ def test_sixteen_bit_pictures_keep_their_full_scale_when_reduced(tmp_path):
 @pytest.mark.parametrize("option", ["--density", "--region", "--field", "mosaic"])
 def test_decompression_bombs_are_refused_with_one_line(option, tmp_path, capsys):
     bomb = blank_png(tmp_path / "bomb.png", 20000, 20000)  # 400 Mpx in a few hundred kB
-    argv = (["mosaic", bomb] if option == "mosaic" else ["run", "--size", "64", "--sites", "10", option, bomb])
+    argv = (["mosaic", bomb] if option == "mosaic" else ["run", "--size", "64", "--elements", "10", option, bomb])
     line = one_error(argv + ["--out", tmp_path / "o"], capsys)
     assert "declares 400 Mpx, more than the 179 Mpx Pillow decodes" in line
     assert not (tmp_path / "o").exists()
@@ -105,7 +105,7 @@ def test_a_picture_larger_than_the_memory_limit_is_refused(tmp_path, capsys):
 def test_unreadable_pictures_are_one_line(content, name, tmp_path, capsys):
     path = tmp_path / name
     path.write_bytes(content)
-    for argv in (["mosaic", path], ["run", "--size", "32", "--sites", "4", "--density", path]):
+    for argv in (["mosaic", path], ["run", "--size", "32", "--elements", "4", "--density", path]):
         assert str(path) in one_error(argv + ["--out", tmp_path / "o"], capsys)
         assert not (tmp_path / "o").exists()
 
@@ -129,7 +129,7 @@ def test_a_site_just_outside_is_reported_as_it_is(tmp_path, capsys):
 def test_named_fields_win_over_files_and_a_path_reads_the_file(tmp_path, capsys, monkeypatch):
     monkeypatch.chdir(tmp_path)
     Image.fromarray(np.full((32, 32), 64, np.uint8)).save(tmp_path / "radial", format="PNG")
-    base = ["run", "--size", "32", "--sites", "8", "--iterations", "0", "--quiet"]
+    base = ["run", "--size", "32", "--elements", "8", "--iterations", "0", "--quiet"]
     assert run_cli(base + ["--field", "radial", "--out", "a"], capsys)[0] == 0
     named = json.loads((tmp_path / "a" / "result.json").read_text())
     assert len(set(np.round(named["angles"], 6))) > 4  # radial: every site its own angle
@@ -150,7 +150,7 @@ def test_named_fields_win_over_files_and_a_path_reads_the_file(tmp_path, capsys,
     ("spiral", "neither a field nor an image file"),
 ])
 def test_bad_field_specs(spec, message, tmp_path, capsys):
-    line = one_error(["run", "--size", "32", "--sites", "4", "--field", spec, "--out", tmp_path / "o"], capsys)
+    line = one_error(["run", "--size", "32", "--elements", "4", "--field", spec, "--out", tmp_path / "o"], capsys)
     assert message in line and "--field" in line
 
 
@@ -168,7 +168,7 @@ def test_field_specs_in_python():
 ])
 def test_float_field_images_out_of_range(values, message, tmp_path, capsys):
     Image.fromarray(values, mode="F").save(tmp_path / "f.tif")
-    assert message in one_error(["run", "--size", "32", "--sites", "4", "--field", tmp_path / "f.tif",
+    assert message in one_error(["run", "--size", "32", "--elements", "4", "--field", tmp_path / "f.tif",
                                  "--out", tmp_path / "o"], capsys)
 
 
@@ -176,7 +176,7 @@ def test_a_density_of_huge_values_is_used_by_its_ratios(tmp_path, capsys):
     values = np.full((32, 32), 1e38, np.float32)
     values[:, 16:] = 3e38
     Image.fromarray(values, mode="F").save(tmp_path / "d.tif")
-    code, err = run_cli(["run", "--size", "32", "--sites", "40", "--iterations", "2", "--quiet",
+    code, err = run_cli(["run", "--size", "32", "--elements", "40", "--iterations", "2", "--quiet",
                          "--density", tmp_path / "d.tif", "--out", tmp_path / "o"], capsys)
     assert code == 0, err
     scales = np.array(json.loads((tmp_path / "o" / "result.json").read_text())["scales"])

@@ -260,7 +260,7 @@ def test_run_ours_returns_elements_and_labels(backend):
 # ------------------------------------------------------------------ CLI
 def test_cli_run_with_element_writes_svg_png_and_coverage(tmp_path, capsys):
     out = tmp_path / "run"
-    code = main(["run", "--sites", "40", "--size", "80x64", "--iterations", "3", "--metric", "linf",
+    code = main(["run", "--elements", "40", "--size", "80x64", "--iterations", "3", "--metric", "linf",
                  "--element", "circle", "--gap", "1", "--quiet", "--out", str(out)])
     err = capsys.readouterr().err
     assert code == 0, err
@@ -268,7 +268,7 @@ def test_cli_run_with_element_writes_svg_png_and_coverage(tmp_path, capsys):
     assert r["element"] == "circle" and r["gap"] == 1.0
     assert 0.2 < r["coverage"] < 1 and 0 <= r["overlap"] < 0.005
     assert r["placed"] + r["skipped"] == 40 and len(r["elements"]) == 40
-    assert r["empty_cell_count"] == 0 and r["min_element_area"] <= r["max_element_area"]
+    assert r["empty_cells"] == 0 and r["min_element_area"] <= r["max_element_area"]
     assert len(r["empty_cells"]) == 3  # the per-iteration field keeps its meaning
     placed = [e for e in r["elements"] if e is not None]
     assert all(len(e) >= 100 for e in placed)
@@ -288,7 +288,7 @@ def test_cli_run_with_element_writes_svg_png_and_coverage(tmp_path, capsys):
 ])
 def test_cli_bad_element_or_gap_exits_2(tmp_path, capsys, argv, needle):
     out = tmp_path / "bad"
-    assert needle in one_error(["run", "--sites", "10", "--size", "32", "--iterations", "1", "--out", out, *argv],
+    assert needle in one_error(["run", "--elements", "10", "--size", "32", "--iterations", "1", "--out", out, *argv],
                                capsys)
     assert not out.exists()
 

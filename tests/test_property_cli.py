@@ -82,7 +82,7 @@ def check(argv, out: Path, folder: Path, files: set[str]) -> None:
     if code == 0:
         assert {p.name for p in out.iterdir()} >= files, text
         result = json.loads((out / "result.json").read_text())
-        assert len(result["sites"]) == result["n_sites"] == len(result["elements"])
+        assert len(result["sites"]) == result["n_elements"] == len(result["elements"])
     else:
         lines = text.strip().splitlines()
         assert code == 2 and len(lines) == 1 and "error" in lines[0], (code, text)

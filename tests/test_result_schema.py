@@ -24,7 +24,7 @@ def outputs(tmp_path_factory):
     rgb = np.zeros((60, 80, 3), np.uint8)
     rgb[:, 40:] = (200, 30, 30)
     Image.fromarray(rgb).save(d / "pic.png")
-    assert main(["run", "--sites", "30", "--size", "64", "--iterations", "2", "--metric", "linf",
+    assert main(["run", "--elements", "30", "--size", "64", "--iterations", "2", "--metric", "linf",
                  "--out", str(d / "run"), "--quiet"]) == 0
     assert main(["mosaic", str(d / "pic.png"), "--elements", "40", "--iterations", "2",
                  "--out", str(d / "mosaic"), "--quiet"]) == 0
@@ -42,7 +42,7 @@ def test_both_commands_write_the_one_schema(outputs, kind):
     jsonschema.validate(record, schema())
     assert record["kind"] == kind
     # one word, one meaning: elements are the outlines, placed is their count
-    assert isinstance(record["elements"], list) and len(record["elements"]) == record["n_sites"]
+    assert isinstance(record["elements"], list) and len(record["elements"]) == record["n_elements"]
     assert record["placed"] == sum(e is not None for e in record["elements"])
 
 

@@ -33,7 +33,7 @@ def test_the_density_has_the_contrast_it_says_and_regions_hold_their_share():
     raw = d.values  # normalised to a maximum of 1
     assert raw.max() / raw.min() == pytest.approx(3.0, rel=0.02)
     star = scene_problem("region", 200, 400, make_metric("linf"), 0)
-    assert star.n_sites == round(400 * star.grid.pixel_count / 200 ** 2) < 400
+    assert star.n_elements == round(400 * star.grid.pixel_count / 200 ** 2) < 400
     both = scene_problem("combined", 200, 400, make_metric("linf"), 0)
     assert both.density is not None and both.field is not None and both.grid.mask is not None
 

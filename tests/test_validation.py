@@ -32,7 +32,7 @@ RUN_BAD = [
     (["--seed=-5"], "--seed must be a whole number between 0 and"),
     (["--seed", "1" + "0" * 30], "--seed must be a whole number"),
     (["--gap", "1e308"], "--gap must be a finite number between 0 and 32768"),
-    (["--sites", "inf"], "--sites must be a whole number"),
+    (["--elements", "inf"], "--elements must be a whole number"),
     (["--iterations", "1000000000000"], "--iterations must be a whole number between 0 and 100000"),
     (["--size", "-5x10"], "argument --size: expected one argument"),
     (["--size", "1e9"], "--size must be W or WxH"),
@@ -45,7 +45,7 @@ RUN_BAD = [
 
 @pytest.mark.parametrize("extra,message", RUN_BAD)
 def test_run_options(extra, message, tmp_path, capsys):
-    line = one_error(["run", "--size", "48", "--sites", "10", "--out", tmp_path / "o", *extra], capsys)
+    line = one_error(["run", "--size", "48", "--elements", "10", "--out", tmp_path / "o", *extra], capsys)
     assert message in line
     assert not (tmp_path / "o").exists()
 
@@ -131,7 +131,7 @@ def test_reproduce_checks_every_part_before_starting(extra, message, tmp_path, c
 
 @pytest.mark.parametrize("argv,message", [
     (["backends", "--sizes", "40000"], "--sizes must be a whole number between 1 and 32768"),
-    (["backends", "--quick", "--sizes", "64", "--sites", "5000"], "--sites must be a whole number between 1 and 4096"),
+    (["backends", "--quick", "--sizes", "64", "--elements", "5000"], "--elements must be a whole number between 1 and 4096"),
     (["backends", "--repeats", "0"], "--repeats must be a whole number between 1 and 1000"),
     (["table2", "--seeds", "2000"], "--seeds must be a whole number between 1 and 1000"),
     (["table2", "--methods", "ours,nope"], "unknown --methods 'nope'"),
@@ -182,9 +182,9 @@ def test_a_reader_that_leaves_ends_the_command_quietly():
 def test_closed_streams_end_quietly(tmp_path):
     r = shell("CVTBENCH info >&-; echo status $?")
     assert r.stdout.strip() == "status 0" and r.stderr == ""
-    r = shell(f"CVTBENCH run --size 32 --sites 4 --iterations 1 --out {tmp_path / 'o'} 2>&-; echo status $?")
+    r = shell(f"CVTBENCH run --size 32 --elements 4 --iterations 1 --out {tmp_path / 'o'} 2>&-; echo status $?")
     assert r.stdout.strip() == "status 0" and (tmp_path / "o" / "result.json").exists()
-    r = shell("CVTBENCH run --sites nope 2>&-; echo status $?")
+    r = shell("CVTBENCH run --elements nope 2>&-; echo status $?")
     assert r.stdout.strip() == "status 2"
     r = shell("CVTBENCH info > /dev/full; echo status $?")
     assert r.stdout.strip() == "status 1" and r.stderr.strip() == \

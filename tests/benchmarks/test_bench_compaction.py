@@ -47,7 +47,7 @@ def squares(request):
 def test_bench_compaction_squares(benchmark, squares, request):
     centres, sizes, grid, n = squares
     benchmark.group = f"compaction square N={n} {grid.width}²"
-    benchmark.extra_info.update(kind="compaction", shape="square", n_sites=n, size=grid.width)
+    benchmark.extra_info.update(kind="compaction", shape="square", n_elements=n, size=grid.width)
     res = benchmark.pedantic(compact, args=(centres, np.zeros(n), sizes, "square", 1.0, grid),
                              rounds=5 if _enabled(request.config) else 1, iterations=1)
     before = 4 * float(np.sum(sizes ** 2)) / grid.pixel_count

@@ -2,7 +2,7 @@
 
 Each case is (backend variant, metric, N, raster side); the benchmark group is
 "<kind> <metric> N=<N> <side>²" so that pytest-benchmark's table puts the backends of
-one problem next to each other.  ``extra_info`` carries backend, metric, n_sites, size
+one problem next to each other.  ``extra_info`` carries backend, metric, n_elements, size
 and kind, which is what `cvtbench backends --from-benchmark-json FILE` reads.
 
 Sizes: in normal CI (``--benchmark-disable`` from pyproject) each case runs once as a
@@ -51,8 +51,8 @@ def _grid_of_cases(config) -> list:
 
 
 def pytest_generate_tests(metafunc):
-    if {"variant", "metric", "n_sites", "size"} <= set(metafunc.fixturenames):
-        metafunc.parametrize("variant,metric,n_sites,size", _grid_of_cases(metafunc.config))
+    if {"variant", "metric", "n_elements", "size"} <= set(metafunc.fixturenames):
+        metafunc.parametrize("variant,metric,n_elements,size", _grid_of_cases(metafunc.config))
 
 
 @pytest.fixture(scope="module")
@@ -85,25 +85,25 @@ def _reference(metric_name, n, size):
     return NumpyBackend().label(sites, angles=angles, scales=scales, metric=metric, grid=grid)
 
 
-def test_bench_label(benchmark, backend, variant, metric, n_sites, size):
-    sites, scales, angles, metric_obj, grid = _problem(metric, n_sites, size)
+def test_bench_label(benchmark, backend, variant, metric, n_elements, size):
+    sites, scales, angles, metric_obj, grid = _problem(metric, n_elements, size)
     backend.label(sites, angles=angles, scales=scales, metric=metric_obj, grid=grid)  # warm-up: kernel builds, buffers
-    benchmark.group = f"label {metric} N={n_sites} {size}²"
-    benchmark.extra_info.update(kind="label", backend=variant, metric=metric, n_sites=n_sites,
+    benchmark.group = f"label {metric} N={n_elements} {size}²"
+    benchmark.extra_info.update(kind="label", backend=variant, metric=metric, n_elements=n_elements,
                                 size=size, device=backend.device())
     labels = benchmark(backend.label, sites, angles=angles, scales=scales, metric=metric_obj, grid=grid)
     assert labels.shape == (size, size) and labels.dtype == np.int32
-    assert labels.min() >= 0 and labels.max() < n_sites
+    assert labels.min() >= 0 and labels.max() < n_elements
     # against the float64 reference: only ties and the cones' facets may differ
-    wrong = float(np.mean(labels != _reference(metric, n_sites, size)))
+    wrong = float(np.mean(labels != _reference(metric, n_elements, size)))
     assert wrong < 0.01, f"{variant} {metric}: {100 * wrong:.2f} % of pixels differ from numpy"
 
 
-def test_bench_lloyd_step(benchmark, backend, variant, metric, n_sites, size):
-    sites, scales, angles, metric_obj, grid = _problem(metric, n_sites, size)
+def test_bench_lloyd_step(benchmark, backend, variant, metric, n_elements, size):
+    sites, scales, angles, metric_obj, grid = _problem(metric, n_elements, size)
     _step(backend, sites, scales, angles, metric_obj, grid)  # warm-up
-    benchmark.group = f"lloyd-step {metric} N={n_sites} {size}²"
-    benchmark.extra_info.update(kind="lloyd-step", backend=variant, metric=metric, n_sites=n_sites,
+    benchmark.group = f"lloyd-step {metric} N={n_elements} {size}²"
+    benchmark.extra_info.update(kind="lloyd-step", backend=variant, metric=metric, n_elements=n_elements,
                                 size=size, device=backend.device())
     mom, moved = benchmark(_step, backend, sites, scales, angles, metric_obj, grid)
     assert int(mom.count.sum()) == size * size  # every pixel belongs to exactly one cell
