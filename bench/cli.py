@@ -16,7 +16,7 @@ from compact_distributions.cvt.errors import BackendUnavailable, InputError
 from compact_distributions.cvt.quiet import configure as configure_output
 
 # subcommand modules, in the order `cvtbench --help` lists them
-SUBCOMMANDS = ["compact_distributions.bench.run_cmd", "compact_distributions.bench.info_cmd", "compact_distributions.bench.figures_cmd", "compact_distributions.bench.table2", "compact_distributions.bench.mosaic_cmd", "compact_distributions.bench.backends_cmd", "compact_distributions.bench.pipeline_cmd", "compact_distributions.bench.regress_cmd", "compact_distributions.bench.reproduce_cmd"]
+SUBCOMMANDS = ["compact_distributions.bench.run_cmd", "compact_distributions.bench.info_cmd", "compact_distributions.bench.figures_cmd", "compact_distributions.bench.table2", "compact_distributions.bench.table3", "compact_distributions.bench.mosaic_cmd", "compact_distributions.bench.backends_cmd", "compact_distributions.bench.pipeline_cmd", "compact_distributions.bench.regress_cmd", "compact_distributions.bench.reproduce_cmd"]
 
 
 class Parser(argparse.ArgumentParser):

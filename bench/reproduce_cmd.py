@@ -1,6 +1,7 @@
 """`cvtbench reproduce`: every table and figure of the suite, in one command.
 
-Runs, in order, `cvtbench table2`, `cvtbench backends`, `cvtbench pipeline` and `cvtbench figures` (which
+Runs, in order, `cvtbench table2`, `cvtbench table3`, `cvtbench backends`, `cvtbench pipeline` and
+`cvtbench figures` (which
 includes the mosaic Figures 18-19), each into the same report folder, then writes ``OUT/reproduce.md``: what ran, how long each part took, and
 the machine, devices, versions and commit.  ``--quick`` runs the quick form of each
 (under 5 minutes on 2 cores) into ``reports/quick``; the full form writes ``reports``.
@@ -18,10 +19,10 @@ from . import options
 
 
 def add_parser(sub):
-    p = sub.add_parser("reproduce", help="table2 + backends + pipeline + figures into reports/",
+    p = sub.add_parser("reproduce", help="table2 + table3 + backends + pipeline + figures into reports/",
                        description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     options.add_sweep_options(p, "the quick form of every part (< 5 min on 2 cores)")
-    options.add_seeds_option(p, "table2's: default 5; quick 2")
+    options.add_seeds_option(p, "table2's and table3's: default 5; quick 2")
     options.add_cluster_options(p, exclusive=True)
     options.add_memory_option(p)
     p.set_defaults(func=run)
@@ -33,6 +34,7 @@ def requests(args, out: Path, scheduler: str | None) -> list[tuple[str, object, 
     from .figures_cmd import FiguresRequest, figures
     from .pipeline_cmd import PipelineRequest, pipeline
     from .table2 import FULL, QUICK, Table2Request, table2
+    from .table3 import Table3Request, table3
 
     common = dict(quick=bool(args.quick), force=bool(args.force), quiet=bool(args.quiet), scheduler=scheduler,
                   memory_limit=args.memory_limit)
@@ -41,6 +43,8 @@ def requests(args, out: Path, scheduler: str | None) -> list[tuple[str, object, 
     return [
         ("table2", table2, Table2Request(out=out, **common, exclusive=bool(args.exclusive), seeds=seeds,
                                          command=f"cvtbench table2{quick} --out {out}")),
+        ("table3", table3, Table3Request(out=out, **common, seeds=int(args.seeds) if args.seeds else None,
+                                         command=f"cvtbench table3{quick} --out {out}")),
         ("backends", backends, BackendsRequest(out=out, **common, command=f"cvtbench backends{quick} --out {out}")),
         ("pipeline", pipeline, PipelineRequest(out=out, **common, command=f"cvtbench pipeline{quick} --out {out}")),
         ("figures", figures, FiguresRequest(out=out / "figures", quick=bool(args.quick), quiet=bool(args.quiet),
@@ -55,12 +59,13 @@ def run(args) -> int:
     from .outputs import command_line, report_folder
     from .pipeline_cmd import prepare as prepare_pipeline
     from .table2 import prepare as prepare_table2
+    from .table3 import check as prepare_table3
 
     chosen(args)  # bad cluster options fail before anything starts
     out = options.report_out(args)
     # every part's options, its output folder and the memory of its runs are checked
     # before the first one starts
-    checks = {"table2": prepare_table2, "backends": prepare_backends, "pipeline": prepare_pipeline,
+    checks = {"table2": prepare_table2, "table3": prepare_table3, "backends": prepare_backends, "pipeline": prepare_pipeline,
               "figures": prepare_figures}
     for name, _, request in requests(args, out, None):
         checks[name](request)

@@ -11,6 +11,7 @@ and ``write_json`` turn each into its outline as they write it.
 from __future__ import annotations
 
 import json
+import time
 from pathlib import Path
 
 import numpy as np
@@ -35,13 +36,24 @@ def stages_of(dist) -> dict:
 
 def build_result(kind: str, problem, dist, evaluation, backend, *, element: str, gap: float,
                  command: str, sources: dict | None = None, method_options: dict | None = None,
-                 stage_seconds: dict | None = None, **fields) -> dict:
+                 stage_seconds: dict | None = None, placed=None, grid=None, **fields) -> dict:
     """The result.json record of one run: the problem, the method's Distribution, the
     evaluation (coverage, overlap, ...) of its elements, the backend that ran it, plus
     the command's own ``fields`` (a mosaic's image, colours, ...); ``method_options`` are
     the method's own options as the user set them; ``stage_seconds`` the command's own
-    stages (evaluation, writing, ...), added to the method's (:func:`stages_of`)."""
+    stages (evaluation, writing, ...), added to the method's (:func:`stages_of`).  The
+    fidelity measures (``cvt.evaluate.MEASURES``) are taken of ``placed`` (default the
+    Distribution's elements) on ``grid`` (default the problem's, as ``evaluation``)."""
+    from compact_distributions.cvt.evaluate import coverage_at_overlap, coverage_overlap_curve, fidelity
+
     from .outputs import machine, versions
+
+    t0 = time.perf_counter()
+    placed = dist.elements if placed is None else placed
+    curve = coverage_overlap_curve(placed, problem.grid if grid is None else grid)
+    measured = {"coverage_at_1pct_overlap": _finite(coverage_at_overlap(curve, 0.01)),
+                **{k: _finite(v) for k, v in fidelity(placed, problem, element).items()}}
+    stage_seconds = {**(stage_seconds or {}), "measures": time.perf_counter() - t0}
 
     g = problem.grid
     sources = sources or {}
@@ -77,6 +89,7 @@ def build_result(kind: str, problem, dist, evaluation, backend, *, element: str,
         "element": element,
         "gap": gap,
         **evaluation.as_dict(),
+        **measured,
         "elements": dist.elements,  # outlines, converted one by one as the json is written
         "extra": dist.extra,
         **fields,
@@ -85,3 +98,8 @@ def build_result(kind: str, problem, dist, evaluation, backend, *, element: str,
         "command": command,
     }
     return record
+
+
+def _finite(value: float) -> float | None:
+    """JSON has no NaN: a measure that does not apply (circles' direction) is null."""
+    return float(value) if np.isfinite(value) else None

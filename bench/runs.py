@@ -38,6 +38,8 @@ class RunSpec:
     # a mapping is accepted and frozen)
     options: tuple = ()
     curve: bool = False  # also measure the coverage-overlap curve (elements scaled)
+    scene: str | None = None  # a standard problem of bench/scenes.py (None: the whole square)
+    measures: bool = False  # also the fidelity measures (cvt.evaluate.fidelity)
 
     def __post_init__(self):
         opts = self.options.items() if isinstance(self.options, dict) else self.options
@@ -58,7 +60,8 @@ class RunSpec:
         """The name of the run's raw json: the problem, then the options its method's
         record names (in the record's order)."""
         gap = f"__gap{self.gap:g}" if self.gap else ""
-        return (f"{self.method}__{self.backend}__{self.element}__{self.width}x{self.height}"
+        scene = f"{self.scene}__" if self.scene else ""
+        return (f"{scene}{self.method}__{self.backend}__{self.element}__{self.width}x{self.height}"
                 f"__n{self.n_elements}__it{self.iterations}__s{self.seed}{gap}"
                 f"{self.method_record.key(dict(self.options))}")
 
@@ -75,6 +78,7 @@ class RunSpec:
         d = asdict(self)
         d.pop("picture")
         d.pop("curve")
+        d.pop("measures")
         return {**d, "options": dict(self.options), "metric": self.metric, "label": self.label}
 
     def memory_estimate(self):
@@ -90,6 +94,10 @@ class RunSpec:
         from compact_distributions.cvt.problem import Grid, Problem
 
         aspect = self.aspect if self.metric.endswith("-axial") else None
+        if self.scene is not None:
+            from .scenes import scene_problem
+
+            return scene_problem(self.scene, self.width, self.n_elements, make_metric(self.metric, aspect), self.seed)
         return Problem(Grid(self.width, self.height), self.n_elements, make_metric(self.metric, aspect),
                        seed=self.seed)
 
@@ -97,7 +105,13 @@ class RunSpec:
         """Run the spec on ``backend``; the record keeps the final sites for seed 0 only
         (a json of 4000 sites is ~60 kB, and the digest already tells whether two runs
         agree)."""
-        from compact_distributions.cvt.evaluate import coverage_at_overlap, coverage_overlap_curve, evaluate
+        from compact_distributions.cvt.evaluate import (
+            coverage_at_overlap,
+            coverage_overlap_curve,
+            evaluate,
+            fidelity,
+            region_polygon,
+        )
 
         from .outputs import machine, versions
 
@@ -107,7 +121,8 @@ class RunSpec:
         t0 = time.perf_counter()
         dist = method(problem, backend, iterations=self.iterations, element=self.element, gap=self.gap, **options)
         wall = time.perf_counter() - t0
-        ev = evaluate(dist.elements, problem.grid)
+        region = region_polygon(problem.grid)
+        ev = evaluate(dist.elements, problem.grid, region=region)
         secs = list(map(float, dist.seconds))
         row = {
             "key": self.key, **self.params(), "status": "ok", "reason": "", "device": backend.device(),
@@ -119,9 +134,12 @@ class RunSpec:
             "final_energy": float(dist.energy[-1]) if dist.energy else None,
         }
         if self.curve:
-            curve = coverage_overlap_curve(dist.elements, problem.grid)
+            curve = coverage_overlap_curve(dist.elements, problem.grid, region=region)
             row["coverage_at_1pct_overlap"] = coverage_at_overlap(curve, 0.01)
             row["coverage_overlap"] = curve  # [[factor, coverage, overlap], ...]
+        if self.measures:
+            row.update(fidelity(dist.elements, problem, self.element, problem.metric.aspect))
+            row["n_elements"] = problem.n_elements
         record = {"row": row, "sites_sha1": sites_digest(dist.sites), "energy": dist.energy,
                   "seconds": secs, "empty_cells_per_iteration": list(dist.empty), "extra": dist.extra,
                   "machine": machine(), "versions": versions()}

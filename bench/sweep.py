@@ -1,6 +1,6 @@
 """The sweep engine: many independent runs, stored one raw json each, resumable.
 
-Every sweep of ``cvtbench`` (Table 2, the backend timings, the regression checks) is a
+Every sweep of ``cvtbench`` (Tables 2 and 3, the backend timings, the regression checks) is a
 list of *specs*.  A spec is a frozen description of one run with
 
 * ``suite`` (the raw/ sub-folder), ``backend`` (a backend variant name), ``key`` (the

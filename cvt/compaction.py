@@ -618,7 +618,7 @@ def compact(centres, angles, sizes, shape: str, aspect, region, gap: float = 0.0
             rounds: int = 4, move: float = 0.5, growth: float = 0.15, shrink: float = 0.05,
             max_growth: float | None = None, tol: float = 1e-4, tile_elements: int = 64,
             move_cost: float = 0.0, lp_options: dict | None = None,
-            on_round=None, walls=None) -> CompactionResult:
+            on_round=None, walls=None, max_sizes=None) -> CompactionResult:
     """Compact placed elements (module docstring): return new centres and sizes.
 
     ``centres`` (N, 2) px, ``angles`` (N,) radians (kept), ``sizes`` (N,) in unit-element
@@ -628,7 +628,8 @@ def compact(centres, angles, sizes, shape: str, aspect, region, gap: float = 0.0
     between elements (G/2 to the border).  Per round a centre moves at most ``move`` ×
     its element's in-radius along each axis, and a size grows by at most ``growth`` or
     shrinks by at most ``shrink`` of itself; ``max_growth`` caps each size at
-    (1 + max_growth) × its given size.  Stops after ``rounds`` or when a round adds less
+    (1 + max_growth) × its given size, ``max_sizes`` ((N,), optional) at an absolute size
+    each (a size above its cap may only shrink).  Stops after ``rounds`` or when a round adds less
     than ``tol`` of the covered area.  ``lp_options``: extra HiGHS options;
     ``on_round(k, centres, sizes)`` is called with each round's (overlap-free) state.
     ``walls`` ((H, W) bool, outside the region): thin walls whose centre lines
@@ -661,6 +662,10 @@ def compact(centres, angles, sizes, shape: str, aspect, region, gap: float = 0.0
     move_cost = real_number(move_cost, "move_cost", minimum=0.0)
     if max_growth is not None:
         max_growth = real_number(max_growth, "max_growth", above=0.0)
+    if max_sizes is not None:
+        max_sizes = np.broadcast_to(np.asarray(max_sizes, dtype=np.float64), (n,))
+        if not (np.isfinite(max_sizes).all() and (max_sizes > 0).all()):
+            raise InputError("max_sizes must be finite and positive")
     unit = _Unit(shape, aspect)
     placed = np.flatnonzero(r > 0)
     if len(placed):
@@ -691,6 +696,8 @@ def compact(centres, angles, sizes, shape: str, aspect, region, gap: float = 0.0
         up = growth * r
         if max_growth is not None:
             up = np.clip(r0 * (1 + max_growth) - r, 0.0, up)
+        if max_sizes is not None:
+            up = np.clip(max_sizes - r, 0.0, up)
         budget = math.sqrt(2) * delta + unit.rho * up
         i, j, px, py, _ = _near_pairs(unit, c, r, cos, sin, budget, gap, prev_p)
         e, s, sx, sy, _ = _near_segments(unit, c, r, cos, sin, budget, 0.5 * gap, segs, seg_tree,

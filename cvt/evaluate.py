@@ -261,3 +261,157 @@ def straddling_tiles(elements, edges: np.ndarray, depth: float = STRADDLE_DEPTH)
     hit = tiles[edges.ravel()[pixels]]
     out[np.asarray(placed)[np.unique(hit)]] = True
     return out
+
+
+# ----------------------------------------------------------------- fidelity measures
+#
+# How well placed elements follow the problem's density, its direction field, and how
+# even their joints are; each computed from the elements and the problem alone (so a
+# stored run can be measured again), vectorised over the elements.
+#
+#   size_fidelity      = sqrt(mean_i (log2(a_i / t_i) − m)²), m = mean_i log2(a_i / t_i):
+#                        the RMS of log2(area / target) with the target's scale fitted
+#                        (least squares in log2), a_i the element's area, t_i ∝ 1/density
+#                        at its centre (t_i = s_i², s_i the problem's size factor there,
+#                        cvt.fields.DensityMap.scales_at; 1 without a density).  0: every
+#                        area follows the density exactly; 1: off by a factor 2 (RMS)
+#   direction_fidelity = mean_i |wrap(φ_i − θ_i)| in degrees, wrap to (−180°/k, 180°/k]:
+#                        φ_i the element's orientation, θ_i the field at its centre (0
+#                        without a field), k the shape's rotational symmetry (square 4,
+#                        rectangle and ellipse 2, triangle 3).  φ_i from the outline
+#                        alone: arg(Σ_edges L·e^{ikψ})/k (L, ψ: an edge's length and
+#                        direction), less the same of the unit element at angle 0.  NaN
+#                        for circles (no direction)
+#   grout_mean, grout_cv = mean and coefficient of variation (sd / mean, population sd)
+#                        of the exact distances (shapely) between neighbouring elements;
+#                        0 where two touch or overlap.  Neighbours: the Urquhart graph of
+#                        the element centres (Delaunay edges less each triangle's strictly
+#                        longest edge): on a square lattice Delaunay's diagonals join
+#                        elements that meet only at corners, which are no joint
+#   coverage_at_1pct_overlap: coverage_at_overlap(coverage_overlap_curve(...), 0.01)
+
+# measure name -> (what it says, its unit): the one list of the measures a run reports
+MEASURES = {
+    "coverage": ("area of the union of the elements inside the region / area of the region", "share"),
+    "overlap": ("summed element area minus the union's, / area of the region", "share"),
+    "coverage_at_1pct_overlap": ("the largest coverage of the elements scaled about their centres "
+                                 "(0.80-1.20) with overlap at most 1 %", "share"),
+    "size_fidelity": ("RMS of log2(area / target), target ∝ 1/density at the element's centre, "
+                      "scale fitted; 0 is perfect", "log2"),
+    "direction_fidelity": ("mean angle between element and field at its centre, modulo the "
+                           "shape's symmetry", "degrees"),
+    "grout_mean": ("mean distance between neighbouring elements (Urquhart graph of the centres)", "px"),
+    "grout_cv": ("coefficient of variation of those distances; 0 is even grout", "share"),
+}
+FIDELITY_TIE = 1e-9  # relative: a triangle's longest edge must beat the next by this to go
+
+
+def _present(elements) -> tuple[np.ndarray, np.ndarray]:
+    """(indices, geometries) of the elements that are placed (not None, not empty)."""
+    idx = np.array([k for k, e in enumerate(elements) if e is not None and not e.is_empty], dtype=np.int64)
+    return idx, np.array([elements[k] for k in idx], dtype=object)
+
+
+def size_fidelity(areas, targets) -> float:
+    """RMS of log2(areas / targets) about its mean (the targets' scale fitted); NaN for
+    no element.  ``targets`` need only be proportional to the wanted areas."""
+    q = np.log2(np.asarray(areas, dtype=np.float64) / np.asarray(targets, dtype=np.float64))
+    return float(np.sqrt(np.mean((q - q.mean()) ** 2))) if len(q) else float("nan")
+
+
+def orientations(geoms, k: int) -> np.ndarray:
+    """(N,) the phase arg(Σ_edges L·e^{ikψ}) of each polygon's exterior (radians; divide
+    by k for an angle): the direction of its edges modulo 360°/k, weighted by length."""
+    coords, owner = shapely.get_coordinates(shapely.get_exterior_ring(geoms), return_index=True)
+    d = np.diff(coords, axis=0)
+    same = owner[1:] == owner[:-1]  # consecutive vertices of one ring (rings are closed)
+    d, own = d[same], owner[1:][same]
+    length = np.hypot(d[:, 0], d[:, 1])
+    psi = np.arctan2(d[:, 1], d[:, 0])
+    re = np.bincount(own, weights=length * np.cos(k * psi), minlength=len(geoms))
+    im = np.bincount(own, weights=length * np.sin(k * psi), minlength=len(geoms))
+    return np.arctan2(im, re)
+
+
+def direction_errors(geoms, field_angles, shape: str, aspect: float) -> np.ndarray:
+    """(N,) |angle between each element and the field angle at it| in degrees, modulo the
+    shape's rotational symmetry (in [0, 180/k]); NaN for shapes without a direction."""
+    from .shapes import rotational_symmetry, unit_outline
+
+    k = rotational_symmetry(shape, aspect)
+    if k == 0:
+        return np.full(len(geoms), np.nan)
+    ref = orientations(np.array([shapely.Polygon(unit_outline(shape, aspect))], dtype=object), k)[0]
+    phase = orientations(geoms, k) - ref - k * np.asarray(field_angles, dtype=np.float64)
+    return np.degrees(np.abs(np.angle(np.exp(1j * phase)))) / k
+
+
+def neighbour_pairs(points) -> tuple[np.ndarray, np.ndarray]:
+    """(a, b) with a < b: the edges of the Urquhart graph of ``points`` (Delaunay edges
+    less each triangle's strictly longest edge).  Fewer than 3 points, or all on a line:
+    consecutive points in sorted order."""
+    from scipy.spatial import Delaunay, QhullError
+
+    pts = np.asarray(points, dtype=np.float64).reshape(-1, 2)
+    n = len(pts)
+    try:
+        tri = Delaunay(pts).simplices if n >= 3 else None
+    except QhullError:
+        tri = None
+    if tri is None:
+        order = np.lexsort((pts[:, 1], pts[:, 0]))
+        a, b = order[:-1], order[1:]
+        return np.minimum(a, b), np.maximum(a, b)
+    e = np.stack([tri[:, [0, 1]], tri[:, [1, 2]], tri[:, [2, 0]]], axis=1)  # (T, 3, 2)
+    e = np.sort(e, axis=2)
+    length = np.linalg.norm(pts[e[..., 0]] - pts[e[..., 1]], axis=2)  # (T, 3)
+    srt = np.sort(length, axis=1)
+    longest = np.argmax(length, axis=1)
+    strict = srt[:, 2] > srt[:, 1] * (1 + FIDELITY_TIE)
+    edges = e.reshape(-1, 2)
+    drop = np.zeros((len(tri), 3), dtype=bool)
+    drop[np.flatnonzero(strict), longest[strict]] = True
+    key = edges[:, 0] * n + edges[:, 1]
+    dropped = np.unique(key[drop.ravel()])
+    keep = np.unique(key[~np.isin(key, dropped)])
+    return keep // n, keep % n
+
+
+def grout(geoms) -> tuple[float, float]:
+    """(mean, coefficient of variation) of the exact distances between neighbouring
+    elements (:func:`neighbour_pairs` of their centroids); NaN with fewer than 2."""
+    if len(geoms) < 2:
+        return float("nan"), float("nan")
+    a, b = neighbour_pairs(shapely.get_coordinates(shapely.centroid(geoms)))
+    d = shapely.distance(geoms[a], geoms[b])
+    mean = float(d.mean())
+    return mean, (float(d.std() / mean) if mean > 0 else float("nan"))
+
+
+def fidelity(elements, problem, shape: str, aspect: float | None = None) -> dict:
+    """size_fidelity, direction_fidelity, grout_mean and grout_cv (formulas above) of the
+    placed ``elements`` of ``shape`` (a ``cvt.shapes`` name; ``aspect`` β of rectangles
+    and ellipses, default the problem metric's) on ``problem`` (its density and field)."""
+    aspect = problem.metric.aspect if aspect is None else aspect
+    _, geoms = _present(elements)
+    if len(geoms) == 0:
+        nan = float("nan")
+        return {"size_fidelity": nan, "direction_fidelity": nan, "grout_mean": nan, "grout_cv": nan}
+    centres = shapely.get_coordinates(shapely.centroid(geoms))
+    targets = problem.scales_at(centres) ** 2
+    errors = direction_errors(geoms, problem.angles_at(centres), shape, aspect)
+    mean, cv = grout(geoms)
+    return {"size_fidelity": size_fidelity(shapely.area(geoms), targets),
+            "direction_fidelity": float(np.mean(errors)) if len(errors) else float("nan"),
+            "grout_mean": mean, "grout_cv": cv}
+
+
+def measures(elements, problem, shape: str, aspect: float | None = None, region=None) -> dict:
+    """Every measure of :data:`MEASURES` of the placed ``elements`` on ``problem``."""
+    region = region_polygon(problem.grid) if region is None else region
+    ev = evaluate(elements, problem.grid, region=region)
+    curve = coverage_overlap_curve(elements, problem.grid, region=region)
+    out = {"coverage": ev.coverage, "overlap": ev.overlap,
+           "coverage_at_1pct_overlap": coverage_at_overlap(curve, 0.01),
+           **fidelity(elements, problem, shape, aspect)}
+    return {name: out[name] for name in MEASURES}

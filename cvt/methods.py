@@ -31,7 +31,7 @@ from .errors import InputError
 from .lloyd import LloydSetup, final_labels, lloyd
 from .placement import element_for, fit_centres, parse_gap, place_elements
 from .problem import Problem
-from .shapes import element_polygons
+from .shapes import PACKING_DENSITY, element_polygons
 from .validate import whole_number
 
 # --------------------------------------------------------------------------- records
@@ -252,19 +252,52 @@ def run_ours_fit(problem: Problem, backend, **options) -> Distribution:
     return run_ours(problem, backend, fit="centre", **options)
 
 
+# ours-compact under a density: each size capped at (1 + slack) × the size that follows the
+# density exactly (see density_caps); without caps compaction grows elements by the room
+# around them, not by the density, and the sizes' spread about the density grows
+DENSITY_CAP_SLACK = 0.02
+
+
+def density_caps(problem: Problem, centres, sizes, shape: str, aspect: float, slack: float,
+                 packing: float = 1.0) -> np.ndarray:
+    """(N,) size caps that follow the density: κ·s_i·(1 + ``slack``), s_i the density's
+    size factor at element i's centre and κ the size at which elements of size κ·s_i (the
+    placed ones, ``sizes`` > 0) would together have ``packing`` × the region's area (the
+    shape's densest packing, ``cvt.shapes.PACKING_DENSITY``: caps no element can reach
+    would not bind)."""
+    import shapely
+
+    from .shapes import unit_outline
+
+    s = problem.scales_at(centres)
+    unit_area = float(shapely.area(shapely.Polygon(unit_outline(shape, aspect))))
+    weight = float(np.sum(s[np.asarray(sizes) > 0] ** 2)) * unit_area
+    kappa = math.sqrt(packing * problem.grid.pixel_count / weight) if weight > 0 else 1.0
+    return kappa * s * (1.0 + slack)
+
+
 def run_ours_compact(problem: Problem, backend, *, iterations: int = 20, progress=None,
                      element: str | None = None, gap: float = 0.0, alternate: bool = False,
-                     rounds: int = 4) -> Distribution:
+                     rounds: int = 4, density_slack: float | None = DENSITY_CAP_SLACK,
+                     turn_to_field: bool = True) -> Distribution:
     """Ours, then compaction: Lloyd as ``ours``, each element fitted in its cell from
     several starts (``cvt.placement.fit_centres``), then rounds of a linear program in
     which neighbouring elements share their walls (``cvt.compaction.compact``): every pair
     keeps ``gap`` px, the region's border ``gap``/2, angles stay the field's and sizes
-    keep the density's contrast.
+    keep the density's contrast; after the last round each element is turned to the
+    field at its own centre (compaction moves it off its site) and shrunk where that
+    turn made it overlap.
 
     ``alternate`` (triangles only) lets each triangle point either way: half the sites
     are turned by 180° during Lloyd, so that cells take both shapes, and each cell keeps
     the orientation whose triangle fits larger (``cvt.alternate``).  ``rounds``: at most
     this many compaction rounds.  The compaction's time and rounds are in ``extra``.
+
+    Under a density, each element starts at and grows to at most its cap of
+    :func:`density_caps` (``density_slack`` above the size that follows the density;
+    None: no caps), so that compaction keeps the sizes the density asks for.
+    ``turn_to_field``: under a field, turn each element to the field at its final centre
+    and run one more round (False: elements keep their sites' angles).
 
     Where the problem has thin walls (``Problem.walls``), elements come up to the walls'
     centre lines (G/2 off them) instead of stopping at their pixels."""
@@ -292,8 +325,22 @@ def run_ours_compact(problem: Problem, backend, *, iterations: int = 20, progres
     else:
         centres, sizes = fit_centres(labels, res.sites, angles, shape, aspect, gap)
     t3 = time.perf_counter()
+    caps = None
+    if problem.density is not None and density_slack is not None:
+        # triangles that point either way tile the plane; one way, they pack at 2/3
+        packing = 1.0 if alternate else PACKING_DENSITY[shape]
+        caps = density_caps(problem, centres, sizes, shape, aspect, density_slack, packing)
+        sizes = np.minimum(sizes, caps)
     packed = compact(centres, angles, sizes, shape, aspect, problem.grid, gap=gap, walls=problem.walls,
-                     rounds=rounds)
+                     rounds=rounds, max_sizes=caps)
+    if turn_to_field and problem.field is not None:
+        # compaction moved the elements off their sites: turn each by the field's change
+        # between its site and its centre, then shrink whatever that turn made overlap
+        angles = angles + problem.angles_at(packed.centres) - problem.angles_at(res.sites)
+        turned = compact(packed.centres, angles, packed.sizes, shape, aspect, problem.grid, gap=gap,
+                         walls=problem.walls, rounds=1, max_sizes=caps)
+        packed.centres, packed.sizes = turned.centres, turned.sizes
+        packed.dropped += turned.dropped
     placed = np.flatnonzero(packed.sizes > 0)
     elements = np.full(len(res.sites), None, dtype=object)
     if len(placed):
@@ -333,7 +380,10 @@ OURS_COMPACT = Method(
              MethodOption("rounds", int, 4, "compaction rounds at most (0 to 1000; default 4)", check=_rounds,
                           tag="r", label="rounds={}")),
     sweep_variants=(SweepVariant({"alternate": True}, ("triangle",), pictured=True),),
-    mosaic_options=MappingProxyType({"rounds": MOSAIC_COMPACTION_ROUNDS}),
+    # mosaics keep compaction without density caps and field turn: their measured coverage,
+    # figures and tests predate them
+    mosaic_options=MappingProxyType({"rounds": MOSAIC_COMPACTION_ROUNDS, "density_slack": None,
+                                     "turn_to_field": False}),
     summary="ours, fitted, then compacted: neighbouring elements share their walls")
 
 METHODS = {m.name: m for m in (OURS, OURS_FIT, OURS_COMPACT)}

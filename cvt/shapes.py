@@ -18,6 +18,22 @@ from .validate import one_of
 
 ELEMENT_SHAPES = tuple(ELEMENT_METRIC)
 CURVE_SEGMENTS = 128  # inscribed 128-gon: area within 0.04 % of the ellipse
+# rotational symmetry of each shape (turns by 360°/k map it onto itself; 0: every turn)
+SYMMETRY = {"square": 4, "rectangle": 2, "ellipse": 2, "triangle": 3, "circle": 0}
+# densest packing of translates of each shape (share of the plane): squares and rectangles
+# tile it; circles, and ellipses as their affine images, π/√12 (hexagonal); a triangle
+# that keeps its direction 2/3 (its densest lattice packing)
+PACKING_DENSITY = {"square": 1.0, "rectangle": 1.0, "ellipse": np.pi / np.sqrt(12.0), "triangle": 2.0 / 3.0,
+                   "circle": np.pi / np.sqrt(12.0)}
+
+
+def rotational_symmetry(shape: str, aspect: float = 0.5) -> int:
+    """k such that turning the element by 360°/k maps it onto itself (0 for a circle, or
+    an ellipse of β = 1; a rectangle of β = 1 is a square: 4)."""
+    k = SYMMETRY[check_shape(shape)]
+    if aspect is not None and np.isclose(aspect, 1.0) and k == 2:
+        return 4 if shape == "rectangle" else 0
+    return k
 
 
 def unit_outline(shape: str, aspect: float = 0.5) -> np.ndarray:

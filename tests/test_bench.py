@@ -284,13 +284,15 @@ def test_reproduce_hands_each_part_a_typed_request(tmp_path):
     from compact_distributions.bench.pipeline_cmd import PipelineRequest
     from compact_distributions.bench.reproduce_cmd import requests
     from compact_distributions.bench.table2 import Table2Request, table2
+    from compact_distributions.bench.table3 import Table3Request
 
     args = argparse.Namespace(quick=True, force=False, quiet=True, memory_limit="2G", seeds="3", exclusive=True)
     parts = requests(args, tmp_path, "tcp://127.0.0.1:1")
     assert [(name, type(req)) for name, _, req in parts] == [
-        ("table2", Table2Request), ("backends", BackendsRequest), ("pipeline", PipelineRequest),
-        ("figures", FiguresRequest)]
-    t2, bk, _, fig = (req for _, _, req in parts)
+        ("table2", Table2Request), ("table3", Table3Request), ("backends", BackendsRequest),
+        ("pipeline", PipelineRequest), ("figures", FiguresRequest)]
+    t2, t3, bk, _, fig = (req for _, _, req in parts)
+    assert (t3.seeds, t3.quick, t3.scheduler) == (3, True, "tcp://127.0.0.1:1")
     assert parts[0][1] is table2 and parts[1][1] is backends
     assert (t2.out, t2.seeds, t2.exclusive, t2.scheduler, t2.memory_limit) == (tmp_path, 3, True, "tcp://127.0.0.1:1", "2G")
     assert (bk.out, bk.quick, bk.exclusive, bk.scheduler) == (tmp_path, True, False, "tcp://127.0.0.1:1")

@@ -263,6 +263,17 @@ def test_max_growth_caps_each_size():
     assert (res.sizes <= sizes * 1.05 + 1e-9).all()
 
 
+def test_max_sizes_caps_each_size_absolutely():
+    grid, sites, angles, sizes = random_layout("circle", 5, 20, "full")
+    caps = sizes * np.linspace(0.9, 1.3, len(sizes))  # some below the start: those only shrink
+    res = compact(sites, angles, np.minimum(sizes, caps), "circle", 1.0, grid, rounds=4, max_sizes=caps)
+    assert (res.sizes <= caps + 1e-9).all()
+    free = compact(sites, angles, np.minimum(sizes, caps), "circle", 1.0, grid, rounds=4)
+    assert (free.sizes > caps + 1e-6).any()  # the caps did bind
+    with pytest.raises(InputError, match="max_sizes"):
+        compact(sites, angles, sizes, "circle", 1.0, grid, max_sizes=np.zeros(len(sizes)))
+
+
 def test_overlapping_start_is_repaired():
     """Two squares that overlap at the start (as placement may leave a corner half a
     pixel over its contour) come out apart; a centre closer than the gap is dropped."""

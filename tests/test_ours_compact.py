@@ -44,8 +44,12 @@ def test_compacted_elements_are_disjoint_inside_the_region_and_cover_more(elemen
     assert not np.any(a != b), "two elements closer than the 1 px gap"
     base = run_ours(problem, backend, iterations=6, gap=1.0)
     assert evaluate(polys, problem.grid).coverage > evaluate(base.elements, problem.grid).coverage
-    # angles stay the field's (radial): each element keeps the angle of its site
-    np.testing.assert_allclose(dist.angles, problem.angles_at(dist.sites))
+    # angles follow the field (radial) at each element's centre: it is turned to the field
+    # there before the last compaction round, which moves it by a fraction of a pixel
+    present = [k for k, p in enumerate(dist.elements) if p is not None]
+    centres = shapely.get_coordinates(shapely.centroid(np.array(polys, dtype=object)))
+    off = np.angle(np.exp(1j * (np.asarray(dist.angles)[present] - problem.angles_at(centres))))
+    assert np.degrees(np.abs(off)).mean() < 2.0
     assert dist.extra["compaction_rounds"] >= 1 and dist.extra["compaction_seconds"] > 0
 
 
@@ -109,3 +113,48 @@ def test_walls_must_lie_outside_the_region():
         Problem(Grid(16, 16), 4, make_metric("linf"), walls=walls)
     with pytest.raises(InputError, match="walls are"):
         Problem(Grid(16, 16, ~walls), 4, make_metric("linf"), walls=walls[:8])
+
+
+def test_density_caps_keep_the_sizes_the_density_asks_for():
+    """Under a density of contrast 3, compaction without caps spreads the sizes about the
+    density (size fidelity, cvt.evaluate) well beyond ours'; with the caps it stays
+    within 1.1x of ours' and still covers far more."""
+    from compact_distributions.bench.scenes import scene_problem
+    from compact_distributions.cvt.evaluate import fidelity
+    from compact_distributions.cvt.methods import density_caps
+
+    problem = scene_problem("density", 160, 100, make_metric("linf"), 0)
+    backend = NumpyBackend()
+    ours = run_ours(problem, backend, iterations=10)
+    capped = run_ours_compact(problem, backend, iterations=10)
+    free = run_ours_compact(problem, backend, iterations=10, density_slack=None)
+
+    def size_error(d):
+        return fidelity(d.elements, problem, "square")["size_fidelity"]
+
+    assert size_error(free) > 1.1 * size_error(ours)
+    assert size_error(capped) <= 1.1 * size_error(ours)
+    cov = {name: evaluate(d.elements, problem.grid).coverage for name, d in
+           (("ours", ours), ("capped", capped), ("free", free))}
+    assert cov["capped"] > cov["ours"] + 0.15 and cov["capped"] > cov["free"] - 0.06
+    # caps: 2 % above the sizes that would cover the region exactly at the density's sizes
+    polys = [p for p in capped.elements if p is not None]
+    centres = shapely.get_coordinates(shapely.centroid(np.array(polys, dtype=object)))
+    caps = density_caps(problem, centres, np.ones(len(polys)), "square", 1.0, 0.02)
+    assert np.sum(4 * (caps / 1.02) ** 2) == pytest.approx(problem.grid.pixel_count)
+    half_sides = np.sqrt(shapely.area(np.array(polys, dtype=object))) / 2
+    assert (half_sides <= caps * 1.01 + 0.05).mean() > 0.95  # the centres moved a little
+
+
+def test_compacted_elements_follow_the_field_at_their_own_centres():
+    """Compaction moves elements off their sites; under a circular field they are turned
+    to the field at their centres (direction error, cvt.evaluate, under 2°) and
+    still do not overlap."""
+    from compact_distributions.bench.scenes import scene_problem
+    from compact_distributions.cvt.evaluate import fidelity
+
+    problem = scene_problem("field", 160, 100, make_metric("linf-axial", 0.5), 0)
+    dist = run_ours_compact(problem, NumpyBackend(), iterations=10)
+    assert fidelity(dist.elements, problem, "rectangle", 0.5)["direction_fidelity"] < 2.0
+    ev = evaluate(dist.elements, problem.grid)
+    assert ev.overlap < 1e-9 and ev.coverage > 0.7
