@@ -143,7 +143,7 @@ def mosaic_result_json(args, m, backend) -> dict:
                "field": "picture" if m.problem.field is not None else None,
                "region": "picture less its strong edges" if m.walls else None}
     return build_result("mosaic", m.problem, m.to_distribution(), ev, backend, element=m.element, gap=m.gap,
-                        placed=m.polygons, grid=Grid(m.width, m.height),
+                        placed=m.polygons,
                         command=command_line(getattr(args, "argv", None)), sources=sources, image=m.source,
                         colours=[hex_colour(c) for c in m.colours], grout=hex_colour(m.grout),
                         contrast=m.contrast,

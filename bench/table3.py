@@ -248,7 +248,7 @@ def render_tradeoff(rows: list[dict], path: Path) -> bool:
         ax.set(xlabel=label, ylabel="coverage (% of the region)",
                title=f"{scene} scene (filled) and combined scene (hollow)")
         ax.grid(True, alpha=0.3)
-    fig.legend(fontsize=7, loc="outside right centre")
+    fig.legend(fontsize=7, loc="outside right center")
     fig.suptitle("Coverage against fidelity, squares, one point per seed (better: up and left)", fontsize=10)
     save_figure(fig, path)
     plt.close(fig)
