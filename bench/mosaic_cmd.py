@@ -145,7 +145,7 @@ def mosaic_result_json(args, m, backend, stage_seconds: dict | None = None) -> d
     return build_result("mosaic", m.problem, m.to_distribution(), ev, backend, element=m.element, gap=m.gap,
                         command=command_line(getattr(args, "argv", None)), sources=sources,
                         method_options=m.method_options, stage_seconds=stage_seconds,
-                        placed=m.polygons, grid=Grid(m.width, m.height), image=m.source,
+                        placed=m.polygons, image=m.source,
                         colours=[hex_colour(c) for c in m.colours], grout=hex_colour(m.grout),
                         contrast=m.contrast,
                         colour_error=m.colour_error if np.isfinite(m.colour_error) else None, straddling=m.straddling,

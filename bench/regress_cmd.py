@@ -29,6 +29,7 @@ N = 4000, all six metrics.
 from __future__ import annotations
 
 import argparse
+import math
 import os
 import sys
 import time
@@ -247,6 +248,36 @@ def measure_speed(cfg, backends, unavailable, baseline_speed: dict, quiet) -> tu
 # command
 
 
+# the figures each entry must hold, finite, for a comparison to mean anything
+REQUIRED_FIGURES = {"coverage": {"mean": (0.0, 1.0)}, "speed": {"ratio": (0.0, None)}}
+
+
+def check_figures(section: dict, where: str) -> None:
+    """Fail closed: every coverage and speed entry of ``section`` holds its figures as
+    finite numbers in range (a missing key, NaN, an infinity or a string is InputError
+    naming the key): a comparison with NaN is false, so a broken figure would pass."""
+    for kind, figures in REQUIRED_FIGURES.items():
+        entries = section.get(kind, {})
+        if not isinstance(entries, dict):
+            raise InputError(f"{where}: '{kind}' is not an object")
+        for key, entry in entries.items():
+            if not isinstance(entry, dict):
+                raise InputError(f"{where}: {kind} {key!r} is not an object, got {entry!r}")
+            for name, (low, high) in figures.items():
+                value = entry.get(name)
+                ok = isinstance(value, (int, float)) and not isinstance(value, bool) and math.isfinite(value) \
+                    and value >= low and (high is None or value <= high)
+                if not ok:
+                    state = "is missing" if name not in entry else f"is {value!r}"
+                    raise InputError(f"{where}: {kind} {key!r}: {name!r} {state}, not a finite number"
+                                     + (f" in [{low:g}, {high:g}]" if high is not None else f" >= {low:g}"))
+            for name in ("values", "ms", "reference_ms"):
+                values = entry.get(name)
+                values = values if isinstance(values, list) else [] if values is None else [values]
+                if any(isinstance(v, bool) or not isinstance(v, (int, float)) or not math.isfinite(v) for v in values):
+                    raise InputError(f"{where}: {kind} {key!r}: {name!r} holds {entry[name]!r}, not finite numbers")
+
+
 def load_baseline(path: Path) -> dict:
     """The baseline file: a json object whose sections ("quick", "full") are objects too."""
     if not path.exists():
@@ -258,6 +289,8 @@ def load_baseline(path: Path) -> dict:
                 isinstance(section.get(k, {}), dict) for k in ("coverage", "speed"))):
             raise InputError(f"regression baseline {path}: its {mode!r} section is not an object with "
                              "'coverage' and 'speed' objects")
+        if section is not None:
+            check_figures(section, f"regression baseline {path}, {mode!r}")
     return data
 
 
@@ -314,6 +347,7 @@ def run(args) -> int:
                           if not args.no_coverage and k.split("/")[0] in methods and k.split("/")[1] in backends},
              "speed": {k: v for k, v in baseline.get("speed", {}).items()
                        if not args.no_speed and k.split(" vs ")[0] in backends}}
+    check_figures(current, "this run's measurement")
     failures, notes = compare(asked, current)
     failures = run_failures + failures
     elapsed = time.perf_counter() - t0

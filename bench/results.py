@@ -36,23 +36,23 @@ def stages_of(dist) -> dict:
 
 def build_result(kind: str, problem, dist, evaluation, backend, *, element: str, gap: float,
                  command: str, sources: dict | None = None, method_options: dict | None = None,
-                 stage_seconds: dict | None = None, placed=None, grid=None, **fields) -> dict:
+                 stage_seconds: dict | None = None, placed=None, **fields) -> dict:
     """The result.json record of one run: the problem, the method's Distribution, the
     evaluation (coverage, overlap, ...) of its elements, the backend that ran it, plus
     the command's own ``fields`` (a mosaic's image, colours, ...); ``method_options`` are
     the method's own options as the user set them; ``stage_seconds`` the command's own
     stages (evaluation, writing, ...), added to the method's (:func:`stages_of`).  The
-    fidelity measures (``cvt.evaluate.MEASURES``) are taken of ``placed`` (default the
-    Distribution's elements) on ``grid`` (default the problem's, as ``evaluation``)."""
-    from compact_distributions.cvt.evaluate import coverage_at_overlap, coverage_overlap_curve, fidelity
+    fidelity measures (``cvt.evaluate.fidelity``) are taken of ``placed`` (default the
+    Distribution's elements)."""
+    from compact_distributions.cvt.evaluate import fidelity
 
     from .outputs import machine, versions
 
+    # coverage at ≤ 1 % overlap stays a sweep measure (Tables 2 and 3): its scaled copies
+    # cost tens of kB per element where elements are tiny and overlap when grown
     t0 = time.perf_counter()
     placed = dist.elements if placed is None else placed
-    curve = coverage_overlap_curve(placed, problem.grid if grid is None else grid)
-    measured = {"coverage_at_1pct_overlap": _finite(coverage_at_overlap(curve, 0.01)),
-                **{k: _finite(v) for k, v in fidelity(placed, problem, element).items()}}
+    measured = {k: _finite(v) for k, v in fidelity(placed, problem, element).items()}
     stage_seconds = {**(stage_seconds or {}), "measures": time.perf_counter() - t0}
 
     g = problem.grid

@@ -15,7 +15,6 @@ largest element area, and ``elements`` (per site its outline as [[x, y], ...], o
 from __future__ import annotations
 
 import argparse
-import csv
 import os
 import sys
 import time
@@ -52,38 +51,59 @@ def add_problem_arguments(p: argparse.ArgumentParser) -> None:
                    help="region mask image (light or opaque = inside); resampled to --size")
 
 
-def read_sites_csv(path, max_sites: int | None = None) -> np.ndarray:
-    """Sites (N, 2) from a CSV with columns x and y (pixels); a UTF-8 byte-order mark,
-    as spreadsheets write it, is accepted.  More rows than ``max_sites`` is an error
-    found while reading, before the rows are all held."""
+CHUNK_BYTES = 1 << 20  # streamed reads: what is held of a file while it is sized
+
+
+def count_csv_rows(path, limit: int | None = None) -> int:
+    """The data rows of the CSV ``path`` (its lines less the header), counted in a
+    streamed pass that holds a megabyte at a time and stops as soon as there are more
+    than ``limit``: a file is sized before anything is built from it."""
     if not os.path.isfile(path):
         raise InputError(f"init file not found: {path}" if not os.path.exists(path)
                          else f"init file {path} is not a file")
+    lines, last = 0, b"\n"
     try:
-        with open(path, newline="", encoding="utf-8-sig") as fh:
-            reader = csv.DictReader(fh)
-            cols = [c.strip() for c in (reader.fieldnames or [])]
-            if "x" not in cols or "y" not in cols:
-                raise InputError(f"init file {path} needs columns x and y, found {cols or 'none'}")
-            reader.fieldnames = cols
-            xs, ys = [], []
-            for line, row in enumerate(reader, start=2):
-                try:
-                    xs.append(float(row["x"]))
-                    ys.append(float(row["y"]))
-                except (TypeError, ValueError):
-                    raise InputError(
-                        f"init file {path}, line {line}: x and y must be numbers, got "
-                        f"{row.get('x')!r}, {row.get('y')!r}") from None
-                if max_sites is not None and len(xs) > max_sites:
-                    raise InputError(f"init file {path} holds more sites than the raster has pixels ({max_sites})")
-    except (UnicodeDecodeError, csv.Error):
-        raise InputError(f"init file {path} is not a text CSV file") from None
+        with open(path, "rb") as fh:
+            while chunk := fh.read(CHUNK_BYTES):
+                lines += chunk.count(b"\n")
+                last = chunk[-1:]
+                if limit is not None and lines - 1 > limit:
+                    raise InputError(f"init file {path} holds more sites than the raster has pixels ({limit})")
     except OSError as exc:
         raise InputError(f"cannot read init file {path}: {exc.strerror or exc}") from None
-    if not xs:
+    return max(0, lines + (last != b"\n") - 1)
+
+
+def read_sites_csv(path, max_sites: int | None = None) -> np.ndarray:
+    """Sites (N, 2) from a CSV with columns x and y (pixels); a UTF-8 byte-order mark,
+    as spreadsheets write it, is accepted.  The file is sized first
+    (:func:`count_csv_rows`: more rows than ``max_sites`` is refused before any is
+    parsed), then parsed whole by pandas' C reader."""
+    import pandas as pd
+
+    count_csv_rows(path, max_sites)
+    try:
+        df = pd.read_csv(path, encoding="utf-8-sig", dtype=str, keep_default_na=False, skip_blank_lines=True)
+    except (UnicodeDecodeError, pd.errors.ParserError):
+        raise InputError(f"init file {path} is not a text CSV file") from None
+    except pd.errors.EmptyDataError:
+        raise InputError(f"init file {path} needs columns x and y, found none") from None
+    except OSError as exc:
+        raise InputError(f"cannot read init file {path}: {exc.strerror or exc}") from None
+    df.columns = [str(c).strip() for c in df.columns]
+    if "x" not in df.columns or "y" not in df.columns:
+        raise InputError(f"init file {path} needs columns x and y, found {list(df.columns) or 'none'}")
+    if not len(df):
         raise InputError(f"init file {path} has no sites")
-    pts = np.column_stack([np.array(xs, dtype=np.float64), np.array(ys, dtype=np.float64)])
+    text = df[["x", "y"]].apply(lambda c: c.str.strip())
+    xy = text.apply(lambda c: pd.to_numeric(c, errors="coerce"))
+    # a NaN written as such is a number that is not finite (refused below), not a typo
+    bad = (xy.isna() & ~text.apply(lambda c: c.str.lower().isin(["nan", "+nan", "-nan"]))).any(axis=1).to_numpy()
+    if bad.any():
+        k = int(np.argmax(bad))
+        raise InputError(f"init file {path}, line {k + 2}: x and y must be numbers, got "
+                         f"{df['x'].iloc[k]!r}, {df['y'].iloc[k]!r}")
+    pts = xy.to_numpy(dtype=np.float64)
     bad = ~np.isfinite(pts).all(axis=1)
     if bad.any():
         raise InputError(f"init file {path}, line {int(np.argmax(bad)) + 2}: NaN or infinite coordinate")
@@ -105,10 +125,12 @@ class ProblemOptions:
     region: str | None
     field_file: str | None
     field_name: str | None  # a named field's spec
+    init_file: str | None = None  # read by load_init once the memory is known to fit
+    elements_given: int | None = None  # --elements as given
 
 
 def parse_problem_options(args) -> ProblemOptions:
-    """Every problem option checked (the init CSV read, images not yet): InputError
+    """Every problem option checked (the init CSV sized, images not yet): InputError
     with a one-line message naming the option."""
     from compact_distributions.cvt.fields import FIELD_HELP, parse_field_spec
     from compact_distributions.cvt.images import open_picture
@@ -132,11 +154,24 @@ def parse_problem_options(args) -> ProblemOptions:
         if path is not None:
             with open_picture(path, option):  # exists, is a picture, is no bomb: known before any work
                 pass
-    init = read_sites_csv(args.init, max_sites=w * h) if args.init else None
-    if init is not None and n is not None and len(init) != n:
-        raise InputError(f"--elements {n} but init file {args.init} holds {len(init)} sites")
-    n = len(init) if init is not None else (DEFAULT_ELEMENTS if n is None else n)
-    return ProblemOptions(w, h, n, metric, element, seed, init, args.density, args.region, field_file, field_name)
+    # the init file is sized here (a streamed row count) and read only once the run's
+    # memory for that many sites is known to fit (:func:`load_init`)
+    rows = count_csv_rows(args.init, w * h) if args.init else None
+    given = n
+    n = rows if rows is not None else (DEFAULT_ELEMENTS if n is None else n)
+    return ProblemOptions(w, h, n, metric, element, seed, None, args.density, args.region, field_file, field_name,
+                          args.init, given)
+
+
+def load_init(opts: ProblemOptions) -> None:
+    """Read the init file the options name into ``opts.init`` (after the memory check)."""
+    if opts.init_file is None:
+        return
+    opts.init = read_sites_csv(opts.init_file, max_sites=opts.width * opts.height)
+    if opts.elements_given is not None and len(opts.init) != opts.elements_given:
+        raise InputError(f"--elements {opts.elements_given} but init file {opts.init_file} holds "
+                         f"{len(opts.init)} sites")
+    opts.n_elements = len(opts.init)  # blank lines were counted as rows when it was sized
 
 
 def build_problem(opts: ProblemOptions) -> Problem:
@@ -193,6 +228,7 @@ def run(args) -> int:
     run_estimate(opts.width, opts.height, opts.n_elements, backend_class(backend_name), element=element,
                  density=bool(opts.density), field=bool(opts.field_file), region=bool(opts.region)).check(
         args.memory_limit, lower="use a smaller --size or fewer --elements")
+    load_init(opts)
     with OutputFolder(args.out, "--out", COMMAND_OUTPUTS) as tmp:
         problem = build_problem(opts)
         with options.open_backend(args) as backend:

@@ -123,6 +123,8 @@ class RunSpec:
         wall = time.perf_counter() - t0
         region = region_polygon(problem.grid)
         ev = evaluate(dist.elements, problem.grid, region=region)
+        if not (np.isfinite(ev.coverage) and np.isfinite(ev.overlap)):  # fail closed: no row from it
+            raise ValueError(f"{self.describe()}: coverage {ev.coverage!r}, overlap {ev.overlap!r} are not finite")
         secs = list(map(float, dist.seconds))
         row = {
             "key": self.key, **self.params(), "status": "ok", "reason": "", "device": backend.device(),

@@ -27,6 +27,7 @@ from __future__ import annotations
 
 import hashlib
 import json
+import math
 import platform
 import sys
 import traceback
@@ -178,13 +179,17 @@ def made_by() -> dict:
 
 
 def read_stored(path: Path) -> dict | None:
-    """The row of a stored run, or None when there is none, it is unreadable, or other
-    code or another host made it (then the caller runs it again)."""
+    """The row of a stored run, or None when there is none, it is unreadable, other code
+    or another host made it, or a figure of it is not finite (then the caller runs it
+    again: a stored NaN is no result)."""
     try:
         stored = json.loads(Path(path).read_text())
-        return stored["row"] if stored.get("made_by") == made_by() else None
+        row = stored["row"] if stored.get("made_by") == made_by() else None
     except (OSError, ValueError, KeyError, TypeError, AttributeError):
         return None
+    if not isinstance(row, dict) or any(isinstance(v, float) and not math.isfinite(v) for v in row.values()):
+        return None
+    return row
 
 
 def write_stored(path: Path, record: dict) -> None:

@@ -113,6 +113,12 @@ def aggregate(rows: list[dict]):
     if "label" in df:  # a run with another tile budget or option is a line of its own
         df["method"] = df["label"].fillna(df["method"])
     out = []
+    # fail closed: a run whose coverage or overlap is missing or not finite is a failed run
+    judged = [pd.to_numeric(df[c], errors="coerce") if c in df else pd.Series(np.nan, index=df.index)
+              for c in ("coverage", "overlap")]
+    broken = (df["status"] == "ok") & ~(np.isfinite(judged[0]) & np.isfinite(judged[1]))
+    df.loc[broken, "status"] = "failed"
+    df.loc[broken, "reason"] = "coverage or overlap is not a finite number"
     for (method, backend, element), g in df.groupby(["method", "backend", "element"], sort=False):
         ok = g[g["status"] == "ok"]
         first = g.iloc[0]

@@ -209,6 +209,22 @@ def coverage_at_overlap(curve, limit: float = 0.01) -> float:
     return max(candidates) if candidates else float("nan")
 
 
+def coverage_at_overlap_limit(elements, grid: Grid, limit: float = 0.01, factors=SCALE_FACTORS,
+                              region=None) -> float:
+    """:func:`coverage_at_overlap` of :func:`coverage_overlap_curve`, evaluating the factors
+    in increasing order only up to the first whose overlap passes ``limit``: the overlap
+    grows with the factor (every element grows about its own centre), so the larger
+    factors cannot change the answer, and they are the costly ones (every pair overlaps)."""
+    region = region_polygon(grid) if region is None else region
+    curve = []
+    for f in sorted(float(f) for f in factors):
+        ev = evaluate(scaled(elements, f), grid, region=region)
+        curve.append([f, ev.coverage, ev.overlap])
+        if ev.overlap > limit:
+            break
+    return coverage_at_overlap(curve, limit)
+
+
 def pixels_under(elements, width: int, height: int) -> tuple[np.ndarray, np.ndarray]:
     """(tile index, flat pixel index) pairs: every pixel of the ``width`` x ``height``
     raster whose centre (j + 0.5, i + 0.5) lies inside or on the outline of a tile
@@ -410,8 +426,7 @@ def measures(elements, problem, shape: str, aspect: float | None = None, region=
     """Every measure of :data:`MEASURES` of the placed ``elements`` on ``problem``."""
     region = region_polygon(problem.grid) if region is None else region
     ev = evaluate(elements, problem.grid, region=region)
-    curve = coverage_overlap_curve(elements, problem.grid, region=region)
     out = {"coverage": ev.coverage, "overlap": ev.overlap,
-           "coverage_at_1pct_overlap": coverage_at_overlap(curve, 0.01),
+           "coverage_at_1pct_overlap": coverage_at_overlap_limit(elements, problem.grid, 0.01, region=region),
            **fidelity(elements, problem, shape, aspect)}
     return {name: out[name] for name in MEASURES}

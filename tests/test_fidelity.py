@@ -148,3 +148,19 @@ def test_measures_lists_every_measure_once_and_skips_missing_elements():
     assert out["grout_mean"] == pytest.approx(4.0) and out["grout_cv"] == pytest.approx(0.0, abs=1e-9)
     # scaled by 1.2 the squares (19.2 px, pitch 20) still do not overlap: the curve's best
     assert out["coverage_at_1pct_overlap"] == pytest.approx(35 * 19.2 ** 2 / 120 ** 2)
+
+
+def test_coverage_at_the_overlap_limit_stops_early_with_the_full_curves_answer():
+    from compact_distributions.cvt.evaluate import (
+        coverage_at_overlap,
+        coverage_at_overlap_limit,
+        coverage_overlap_curve,
+    )
+
+    grid = Grid(120, 120)
+    rng = np.random.default_rng(3)
+    centres = lattice_sites(120, 120, 6) + rng.uniform(-2, 2, (36, 2))
+    els = list(element_polygons("square", 1.0, centres, rng.uniform(0, 0.3, 36), np.full(36, 8.5)))
+    full = coverage_at_overlap(coverage_overlap_curve(els, grid), 0.01)
+    assert 0 < full < 1
+    assert coverage_at_overlap_limit(els, grid, 0.01) == pytest.approx(full, rel=1e-12)
