@@ -178,11 +178,16 @@ def made_by() -> dict:
     return {"code": digest.hexdigest()[:16], "host": platform.node()}
 
 
+STORED_MAX_BYTES = 256 * 2**20
+
+
 def read_stored(path: Path) -> dict | None:
     """The row of a stored run, or None when there is none, it is unreadable, other code
     or another host made it, or a figure of it is not finite (then the caller runs it
     again: a stored NaN is no result)."""
     try:
+        if Path(path).stat().st_size > STORED_MAX_BYTES:  # sized before it is read: no run stores that much
+            return None
         stored = json.loads(Path(path).read_text())
         row = stored["row"] if stored.get("made_by") == made_by() else None
     except (OSError, ValueError, KeyError, TypeError, AttributeError):

@@ -87,26 +87,29 @@ def picture_array(image, at_least: tuple[int, int] | None = None, memory_limit=N
         from .images import load_rgb
 
         return load_rgb(image, at_least, name=name, memory_limit=memory_limit), os.fspath(image)
-    arr = np.asarray(image)
+    try:
+        arr = np.asarray(image)
+    except (ValueError, TypeError) as exc:  # ragged nested lists, objects numpy cannot hold
+        raise InputError(f"{name} is not an array of pixels: {exc}") from None
     if arr.ndim not in (2, 3) or (arr.ndim == 3 and arr.shape[2] not in (1, 3, 4)):
-        raise InputError(f"picture array must be (H, W), (H, W, 3) or (H, W, 4), got shape {arr.shape}")
+        raise InputError(f"{name} must be (H, W), (H, W, 3) or (H, W, 4), got shape {arr.shape}")
     if arr.size == 0:
-        raise InputError(f"picture array has no pixels (shape {arr.shape})")
+        raise InputError(f"{name} has no pixels (shape {arr.shape})")
     if arr.dtype == bool:
         arr = arr.astype(np.float64)
     elif np.issubdtype(arr.dtype, np.integer):
         info = np.iinfo(arr.dtype)
         if arr.min() < 0:
-            raise InputError("integer picture arrays must not hold negative values")
+            raise InputError(f"{name}: an integer picture must not hold negative values")
         arr = arr.astype(np.float64) / float(info.max)
     elif np.issubdtype(arr.dtype, np.floating):
         arr = arr.astype(np.float64)
         if not np.isfinite(arr).all():
-            raise InputError("picture array contains NaN or infinite values")
+            raise InputError(f"{name} contains NaN or infinite values")
         if arr.min() < 0 or arr.max() > 1:
-            raise InputError(f"float picture arrays must lie in 0..1, got {arr.min():g}..{arr.max():g}")
+            raise InputError(f"{name}: a float picture must lie in 0..1, got {arr.min():g}..{arr.max():g}")
     else:
-        raise InputError(f"picture array of dtype {arr.dtype} is not a numeric image")
+        raise InputError(f"{name} of dtype {arr.dtype} is not a numeric image")
     if arr.ndim == 2:
         arr = arr[..., None]
     if arr.shape[2] == 4:

@@ -51,13 +51,15 @@ class Grid:
         object.__setattr__(self, "width", whole_number(self.width, "width", minimum=1, maximum=MAX_SIDE))
         object.__setattr__(self, "height", whole_number(self.height, "height", minimum=1, maximum=MAX_SIDE))
         if self.mask is not None:
-            m = np.ascontiguousarray(self.mask, dtype=bool)
+            try:
+                m = np.ascontiguousarray(self.mask, dtype=bool)
+            except (ValueError, TypeError) as exc:
+                raise InputError(f"mask is not an array of booleans: {exc}") from None
             if m.shape != (self.height, self.width):
-                raise InputError(
-                    f"region mask is {m.shape[1]}x{m.shape[0]}, raster is {self.width}x{self.height}"
-                )
+                raise InputError(f"mask (the region) has shape {m.shape}, the raster is {self.width}x{self.height}: "
+                                 f"it must be ({self.height}, {self.width})")
             if not m.any():
-                raise InputError("region mask is empty: no pixel is inside the region")
+                raise InputError("mask (the region) is empty: no pixel is inside the region")
             object.__setattr__(self, "mask", m)
 
     @property

@@ -119,13 +119,24 @@ def byte_size(value, name: str) -> int:
     return int(size)
 
 
-def json_object(path, what: str) -> dict:
+JSON_MAX_BYTES = 64 * 2**20  # a settings or baseline file: far larger is no such file
+
+
+def json_object(path, what: str, max_bytes: int = JSON_MAX_BYTES) -> dict:
     """The JSON object stored in the file ``path`` (``what`` names it in messages):
-    a missing file, a folder, invalid JSON and valid JSON that is not an object are
-    each refused with one line."""
+    a missing file, a folder, a file over ``max_bytes`` (sized before it is read:
+    parsed json takes several times its size), invalid JSON and valid JSON that is not
+    an object are each refused with one line."""
     path = os.fspath(path)
     if os.path.isdir(path):
         raise InputError(f"{what} {path} is a folder, not a json file")
+    try:
+        size = os.path.getsize(path)
+    except OSError:
+        size = 0  # missing or unreadable: said below
+    if size > max_bytes:
+        raise InputError(f"{what} {path} holds {size / 2**20:.0f} MiB, more than the {max_bytes / 2**20:.0f} MiB "
+                         "such a file can hold; it is not read")
     try:
         with open(path, encoding="utf-8-sig") as fh:
             data = json.load(fh)

@@ -89,3 +89,42 @@ def test_table2_never_makes_a_row_of_a_nan_coverage():
     assert "not a finite number" in line["reason"]
     only_nan = aggregate([{**ok, "coverage": np.nan}]).iloc[0]
     assert only_nan["status"] == "failed" and np.isnan(only_nan["coverage_mean"])
+
+
+@pytest.mark.slow
+def test_an_oversized_init_file_is_refused_in_seconds_and_little_memory(tmp_path):
+    """Ten million sites under a 3 GB limit: the raster fits, the sites do not.  The file
+    is sized by a streamed row count and refused before any row is parsed."""
+    from compact_distributions.bench.pipeline_cmd import run_measured
+
+    path = tmp_path / "big.csv"
+    rows = 10_000_000
+    with open(path, "wb") as fh:
+        fh.write(b"x,y\n")
+        block = b"1.5,2.5\n" * 100_000
+        for _ in range(rows // 100_000):
+            fh.write(block)
+    out = tmp_path / "o"
+    code, err, seconds, peak = run_measured(["-m", "compact_distributions.bench.cli", "run", "--size", "4096",
+                                             "--init", str(path), "--memory-limit", "3G", "--out", str(out)])
+    lines = err.strip().splitlines()
+    assert code == 2 and len(lines) == 1 and "Traceback" not in err, err
+    assert "more than the limit --memory-limit sets (3 GiB)" in lines[0], lines[0]
+    assert seconds < 5 and peak < 300 * 2**20, (seconds, peak / 2**20)
+    assert not out.exists()
+
+
+def test_json_inputs_are_sized_before_they_are_parsed(tmp_path, monkeypatch):
+    from compact_distributions.bench import sweep
+    from compact_distributions.cvt import validate
+
+    path = tmp_path / "b.json"
+    path.write_text(json.dumps({"quick": {"coverage": {}, "speed": {}}, "pad": "x" * 4000}))
+    assert regress_cmd.load_baseline(path)["quick"] == {"coverage": {}, "speed": {}}
+    with pytest.raises(validate.InputError, match="more than the 0 MiB"):
+        validate.json_object(path, "regression baseline", max_bytes=1000)
+    stored = tmp_path / "run.json"
+    stored.write_text(json.dumps({"row": {"coverage": 0.5}, "made_by": sweep.made_by()}))
+    assert sweep.read_stored(stored) == {"coverage": 0.5}
+    monkeypatch.setattr(sweep, "STORED_MAX_BYTES", 10)
+    assert sweep.read_stored(stored) is None
