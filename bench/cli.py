@@ -12,7 +12,7 @@ import importlib
 import os
 import sys
 
-from compact_distributions.cvt.errors import BackendUnavailable, InputError
+from compact_distributions.cvt.errors import BackendUnavailable, InputError, RunAborted
 from compact_distributions.cvt.quiet import configure as configure_output
 
 # subcommand modules, in the order `cvtbench --help` lists them
@@ -88,6 +88,9 @@ def main(argv=None) -> int:
     except (InputError, BackendUnavailable) as exc:
         _say(f"cvtbench: error: {exc}")
         return 2
+    except RunAborted as exc:
+        _say(f"cvtbench: {exc}")
+        return 1
     except KeyboardInterrupt:
         _say("cvtbench: interrupted")
         return 130

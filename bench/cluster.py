@@ -31,13 +31,14 @@ import logging
 import os
 import platform
 import sys
+import tempfile
 import uuid
 from collections import deque
 from contextlib import contextmanager
 from functools import lru_cache
 from pathlib import Path
 
-from compact_distributions.cvt.errors import InputError
+from compact_distributions.cvt.errors import InputError, RunAborted
 from compact_distributions.cvt.validate import whole_number
 
 from .outputs import versions
@@ -189,27 +190,56 @@ class DaskExecutor:
             pending[future] = (i, spec, host)
 
         try:
-            if not self.exclusive:
-                while queue:
-                    submit(*queue.popleft())
-            while pending or queue:
-                if self.exclusive:
-                    yield from self._dispatch_exclusive(queue, pending, submit)
-                    if not pending:
-                        continue
-                if on_start is not None:  # the oldest run not finished: most likely one in hand
-                    on_start(next(iter(pending.values()))[1])
-                try:
-                    done, _ = wait(list(pending), timeout=POLL_S if self.exclusive else None,
-                                   return_when="FIRST_COMPLETED")
-                except TimeoutError:
-                    continue
-                for future in done:
-                    i, spec, _ = pending.pop(future)
-                    yield i, self.outcome(future)
+            yield from self._run(queue, pending, submit, on_start, wait)
+        except (KeyboardInterrupt, MemoryError):
+            raise
+        except Exception as exc:
+            if self.lost():
+                raise RunAborted(f"lost the Dask cluster at {self.address} in the middle of the sweep "
+                                 f"({_one_line(exc)}; Dask's log: {log_file()})") from None
+            raise
         finally:
-            if pending:
+            if pending and not self.lost():
                 self.client.cancel(list(pending))
+
+    def lost(self) -> bool:
+        """Whether the scheduler is gone (the client no longer runs, or cannot reach it)."""
+        if self.client.status != "running":
+            return True
+        try:
+            self.client.scheduler_info()
+        except Exception:
+            return True
+        return False
+
+    @property
+    def address(self) -> str:
+        try:
+            return self.client.scheduler.address
+        except Exception:
+            return "?"
+
+    def _run(self, queue, pending, submit, on_start, wait):
+        if not self.exclusive:
+            while queue:
+                submit(*queue.popleft())
+        while pending or queue:
+            if self.exclusive:
+                yield from self._dispatch_exclusive(queue, pending, submit)
+                if not pending:
+                    continue
+            if on_start is not None:  # the oldest run not finished: most likely one in hand
+                on_start(next(iter(pending.values()))[1])
+            try:
+                done, _ = wait(list(pending), timeout=POLL_S if self.exclusive else None,
+                               return_when="FIRST_COMPLETED")
+            except TimeoutError:
+                continue
+            for future in done:
+                i, spec, _ = pending.pop(future)
+                if future.status == "cancelled" and self.lost():
+                    raise RunAborted("the scheduler cancelled the runs")
+                yield i, self.outcome(future)
 
     def _dispatch_exclusive(self, queue, pending, submit):
         """Give each host without a run of this sweep the next queued run, pinned to that
@@ -255,11 +285,29 @@ def _one_line(exc: BaseException) -> str:
     return f"{type(exc).__name__}: {text[0]}" if text else type(exc).__name__
 
 
+def log_file() -> Path:
+    """Where Dask's own log of this process goes (named when a cluster is lost)."""
+    return Path(tempfile.gettempdir()) / f"cvtbench-dask-{os.getpid()}.log"
+
+
 def _quiet_logs() -> None:
-    """Dask's own log lines (a worker lost and replaced, a comm closed) would break the
-    progress bar; errors still show."""
-    for name in ("distributed", "dask"):
-        logging.getLogger(name).setLevel(logging.ERROR)
+    """Dask's own log lines (a worker lost and replaced, a comm closed, a scheduler gone)
+    go to :func:`log_file`, not the terminal: they would break the progress bar, and a
+    lost cluster is said in one line of the suite's own."""
+    handler = logging.FileHandler(log_file(), delay=True)
+    handler.setFormatter(logging.Formatter("%(asctime)s %(name)s %(levelname)s %(message)s"))
+    names = {"distributed", "dask", "tornado", "asyncio"}
+    names |= {n for n in logging.root.manager.loggerDict if n.split(".")[0] in names}
+    for name in sorted(names):
+        logger = logging.getLogger(name)
+        for old in list(logger.handlers):
+            if isinstance(old, logging.StreamHandler) and not isinstance(old, logging.FileHandler):
+                logger.removeHandler(old)
+        if not any(isinstance(h, logging.FileHandler) and h.baseFilename == handler.baseFilename
+                   for h in logger.handlers):
+            logger.addHandler(handler)
+        logger.setLevel(logging.INFO)
+        logger.propagate = False
 
 
 # ------------------------------------------------------------------ options
@@ -283,10 +331,15 @@ def local_cluster(n_workers: int):
     from distributed import LocalCluster
 
     _quiet_logs()
-    with dask.config.set(worker_config()), \
-            LocalCluster(n_workers=n_workers, threads_per_worker=1, processes=True, host="127.0.0.1",
-                         scheduler_port=0, dashboard_address="127.0.0.1:0", silence_logs=logging.ERROR) as cluster:
-        yield cluster
+    with dask.config.set(worker_config()):
+        try:
+            cluster = LocalCluster(n_workers=n_workers, threads_per_worker=1, processes=True, host="127.0.0.1",
+                                   scheduler_port=0, dashboard_address="127.0.0.1:0", silence_logs=logging.ERROR)
+        except Exception as exc:  # no process could start, no port, no memory: an outcome, not a crash
+            raise RunAborted(f"could not start a local Dask cluster of {n_workers} workers ({_one_line(exc)}; "
+                             f"Dask's log: {log_file()}); run without --workers to run here") from None
+        with cluster:
+            yield cluster
 
 
 @contextmanager

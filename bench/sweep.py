@@ -34,7 +34,7 @@ import traceback
 from functools import lru_cache
 from pathlib import Path
 
-from compact_distributions.cvt.errors import BackendUnavailable
+from compact_distributions.cvt.errors import BackendUnavailable, RunAborted
 
 
 class BackendCache:
@@ -153,6 +153,10 @@ def run_sweep(specs: list, out, *, force: bool = False, store: bool = True, quie
                         atomic_write(picture_path(out, spec), picture)
                     write_stored(raw_path(out, spec), value)
             bar.update(1)
+    except RunAborted as exc:
+        done = sum(1 for r in rows.values() if r.get("status") == "ok")
+        raise RunAborted(f"{exc}; {done} of {len(specs)} runs are stored under {Path(out) / 'raw'}: run the same "
+                         "command again to resume (without --scheduler/--workers it runs here)") from None
     except KeyboardInterrupt:
         done = sum(1 for r in rows.values() if r.get("status") == "ok")
         print(f"\ninterrupted: {done} of {len(specs)} runs are stored under {Path(out) / 'raw'}; "

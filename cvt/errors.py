@@ -11,3 +11,8 @@ class InputError(ValueError):
 
 class BackendUnavailable(RuntimeError):
     """A backend whose runtime is missing (no OpenCL platform, no EGL, ...)."""
+
+
+class RunAborted(RuntimeError):
+    """A command that could not finish for a reason outside its input (the Dask cluster
+    it ran on was lost): the CLI prints its one line and exits with status 1."""
