@@ -427,6 +427,16 @@ class GLBackend(Backend):
     bytes_per_pixel = 32  # the framebuffer is on the device; per site the instance data and the cone heights' bookkeeping
     bytes_per_site = 8000
 
+    MAX_FACETS = 4  # a polygon's facets travel in one vec4 pair per site
+
+    def supports(self, metric, angles, scales) -> str | None:
+        """Polygons of more than MAX_FACETS facets (hexagons, octagons, most of the
+        user's polygons) do not fit the per-site data of the pyramids."""
+        if metric.kind == "polygon" and len(metric.normals) > self.MAX_FACETS:
+            return (f"metric {metric.name!r} has {len(metric.normals)} facets; the gl backend's pyramids "
+                    f"take at most {self.MAX_FACETS}")
+        return super().supports(metric, angles, scales)
+
     def __init__(self, mode: str = "cone", max_error_px: float = 0.1, block: int = 8):
         self.mode = one_of(mode, "gl mode", MODES)
         self.max_error_px = real_number(max_error_px, "max_error_px", above=0.0)

@@ -36,7 +36,13 @@ from compact_distributions.cvt.metrics import Metric
 from compact_distributions.cvt.placement import contour_samples, parse_gap
 from compact_distributions.cvt.problem import Grid, Problem, in_own_cell
 from compact_distributions.cvt.seeding import initial_sites
-from compact_distributions.cvt.shapes import check_shape, element_ball, element_polygons, unit_outline
+from compact_distributions.cvt.shapes import (
+    check_shape,
+    element_ball,
+    element_polygons,
+    shape_record,
+    unit_outline,
+)
 from compact_distributions.cvt.validate import real_number
 
 BUDGET_DELTA = 0.95
@@ -64,9 +70,6 @@ def baseline(name: str, run, paper: str, year: int, paper_table2=None, fixed_siz
                   paper_table2=paper_table2, role="baseline", sweep_backends="reference",
                   compared_on=("square",), sweep_variants=SMALLER_BUDGET_VARIANTS if fixed_size else (),
                   summary=summary)
-# rotational symmetry of each element's outline: a rotation by this angle maps it onto itself
-SYMMETRY = {"square": math.pi / 2, "rectangle": math.pi, "ellipse": math.pi,
-            "triangle": 2 * math.pi / 3, "circle": 2 * math.pi}
 
 
 @dataclass(frozen=True)
@@ -80,7 +83,9 @@ class TileShape:
 
     @property
     def symmetry(self) -> float:
-        return SYMMETRY[self.name]
+        """The turn (radians) that maps the outline onto itself (its record's symmetry)."""
+        k = shape_record(self.name).symmetry
+        return 2 * math.pi / k if k else 2 * math.pi
 
     def gauge(self, vx, vy, theta) -> np.ndarray:
         """Gauge of world offsets (vx, vy) in the frame of a tile turned by ``theta``:

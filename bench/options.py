@@ -221,7 +221,7 @@ def add_list_options(p, *names: str) -> None:
     helps = {
         "methods": "comma list of methods (default: all registered)",
         "backends": "comma list of backend variants (default: every variant that computes every metric)",
-        "shapes": f"comma list of element shapes (default all: {', '.join(ELEMENT_SHAPES)})",
+        "shapes": f"comma list of element shapes ({', '.join(ELEMENT_SHAPES)}, or polygon:FILE; default the paper's five)",
         "metrics": f"comma list of metrics ({', '.join(METRIC_NAMES)})",
     }
     for name in names:

@@ -15,7 +15,8 @@ from dataclasses import asdict, dataclass
 
 import numpy as np
 
-from compact_distributions.cvt.metrics import DEFAULT_ASPECT, ELEMENT_METRIC
+from compact_distributions.cvt.metrics import DEFAULT_ASPECT
+from compact_distributions.cvt.shapes import shape_record
 
 
 @dataclass(frozen=True)
@@ -47,7 +48,7 @@ class RunSpec:
 
     @property
     def metric(self) -> str:
-        return ELEMENT_METRIC[self.element]
+        return shape_record(self.element).metric
 
     @property
     def method_record(self):

@@ -37,13 +37,13 @@ from compact_distributions.backends import REFERENCE as REFERENCE_BACKEND
 from compact_distributions.backends import variant_metrics, variant_names, variant_status
 from compact_distributions.cvt.errors import InputError
 from compact_distributions.cvt.registry import get_method, method_names
-from compact_distributions.cvt.shapes import ELEMENT_SHAPES
+from compact_distributions.cvt.shapes import ELEMENT_SHAPES, PAPER_SHAPES
 from compact_distributions.cvt.validate import name_list, one_of
 
 from . import options
 from .runs import RunSpec
 
-ELEMENTS = list(ELEMENT_SHAPES)
+ELEMENTS = list(PAPER_SHAPES)  # the default; --shapes may name any shape (hexagon, octagon, ...)
 
 FULL = {"size": 1024, "n_elements": 4000, "iterations": 20, "seeds": 5}
 QUICK = {"size": 256, "n_elements": 250, "iterations": 20, "seeds": 2}
@@ -459,7 +459,7 @@ class Table2Request(options.SweepRequest):
         cfg = QUICK if args.quick else FULL
         listed = {name: name_list(getattr(args, name), f"--{name}", choices)
                   for name, choices in (("methods", method_names()), ("backends", variant_names()),
-                                        ("shapes", ELEMENTS))}
+                                        ("shapes", ELEMENT_SHAPES))}
         return cls(**cls.common(args), seeds=options.seeds_value(args.seeds, cfg["seeds"]),
                    **{k: options.as_tuple(v) for k, v in listed.items()},
                    method_options=options.given_method_options(args))
@@ -478,7 +478,7 @@ def prepare(req: Table2Request) -> dict:
     chosen = [one_of(m, "--methods", all_methods) for m in req.methods or all_methods]
     methods = [m for m in all_methods if m in chosen]  # the registry's order
     backends, unavailable = sweep_backends(req.backends)
-    shapes = [one_of(s, "--shapes", ELEMENTS) for s in req.shapes] if req.shapes else None
+    shapes = [one_of(s, "--shapes", ELEMENT_SHAPES) for s in req.shapes] if req.shapes else None
     for name in req.method_options:  # an option is for the methods that declare it: one of them must run
         if not any(get_method(m).option(name) for m in methods):
             raise InputError(f"--{name.replace('_', '-')} is an option of none of --methods {','.join(methods)}")

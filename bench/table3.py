@@ -38,7 +38,7 @@ import numpy as np
 from compact_distributions.backends import REFERENCE as REFERENCE_BACKEND
 from compact_distributions.cvt.evaluate import MEASURES
 from compact_distributions.cvt.registry import get_method, method_names
-from compact_distributions.cvt.shapes import ELEMENT_SHAPES
+from compact_distributions.cvt.shapes import ELEMENT_SHAPES, PAPER_SHAPES
 from compact_distributions.cvt.validate import name_list, one_of
 
 from . import options
@@ -291,7 +291,7 @@ def plan(out, *, quick: bool = False, seeds=None, methods=None, shapes=None, sce
     cfg = QUICK if quick else FULL
     k = options.seeds_value(seeds, cfg["seeds"])
     methods = [one_of(m, "--methods", method_names()) for m in (methods or method_names())]
-    shapes = [one_of(s, "--shapes", ELEMENT_SHAPES) for s in (shapes or ELEMENT_SHAPES)]
+    shapes = [one_of(s, "--shapes", ELEMENT_SHAPES) for s in (shapes or PAPER_SHAPES)]
     scenes = [one_of(s, "--scenes", list(SCENES)) for s in (scenes or SCENES)]
     check_folder(out)
     _, unavailable = sweep_backends(None)

@@ -31,7 +31,7 @@ from .errors import InputError
 from .lloyd import LloydSetup, final_labels, lloyd
 from .placement import element_for, fit_centres, parse_gap, place_elements
 from .problem import Problem
-from .shapes import PACKING_DENSITY, element_polygons
+from .shapes import element_polygons, packing_density
 from .validate import whole_number
 
 # --------------------------------------------------------------------------- records
@@ -263,7 +263,7 @@ def density_caps(problem: Problem, centres, sizes, shape: str, aspect: float, sl
     """(N,) size caps that follow the density: κ·s_i·(1 + ``slack``), s_i the density's
     size factor at element i's centre and κ the size at which elements of size κ·s_i (the
     placed ones, ``sizes`` > 0) would together have ``packing`` × the region's area (the
-    shape's densest packing, ``cvt.shapes.PACKING_DENSITY``: caps no element can reach
+    shape's densest packing, the shape record's ``packing``: caps no element can reach
     would not bind)."""
     import shapely
 
@@ -328,7 +328,7 @@ def run_ours_compact(problem: Problem, backend, *, iterations: int = 20, progres
     caps = None
     if problem.density is not None and density_slack is not None:
         # triangles that point either way tile the plane; one way, they pack at 2/3
-        packing = 1.0 if alternate else PACKING_DENSITY[shape]
+        packing = 1.0 if alternate else packing_density(shape)
         caps = density_caps(problem, centres, sizes, shape, aspect, density_slack, packing)
         sizes = np.minimum(sizes, caps)
     packed = compact(centres, angles, sizes, shape, aspect, problem.grid, gap=gap, walls=problem.walls,

@@ -35,25 +35,78 @@ from functools import cached_property
 
 import numpy as np
 
+from .errors import InputError
 from .validate import one_of, real_number
 
-METRIC_NAMES = ("l2", "l1", "linf", "linf-axial", "l2-axial", "triangle")
+PAPER_METRICS = ("l2", "l1", "linf", "linf-axial", "l2-axial", "triangle")  # the paper's six
 AXIAL_METRICS = ("linf-axial", "l2-axial")
 DEFAULT_ASPECT = 0.5  # the paper's examples use β = 1/2
 # β beyond this range makes elements thinner than 1/10000 of their length: no raster
 # resolves them, and 1/β overflows long before β reaches the limits of a float
 ASPECT_RANGE = (0.01, 100.0)
 
-# The one element <-> metric table: each element shape is the unit ball of its metric
-# (cvt/shapes.py draws the shapes from it).  The reverse, a metric's natural element,
-# adds the l1 ball, a diamond, which is drawn as a square turned by 45°.
-ELEMENT_METRIC = {
-    "square": "linf",
-    "rectangle": "linf-axial",
-    "ellipse": "l2-axial",
-    "triangle": "triangle",
-    "circle": "l2",
-}
+
+
+@dataclass(frozen=True)
+class Shape:
+    """An element shape: every fact about it, in one record (the table :data:`SHAPES`).
+
+    Parameters
+    ----------
+    name : str
+        The element's name (``--element``).
+    metric : str
+        The metric whose unit ball it is (implied by ``--element``).
+    symmetry : int
+        Rotational symmetry: turning it by 360°/k maps it onto itself (0: every turn).
+    side_period : float
+        The turn (radians) after which a side lies along the same line again (a mosaic's
+        field is read modulo it).
+    packing : float
+        The densest packing of its translates, as a share of the plane (compaction's
+        size caps under a density).
+    curved : bool
+        Whether its outline is curved (drawn as a 128-gon; SVG ellipses).
+    axial : bool
+        Whether the aspect β stretches it (rectangles, ellipses).
+    sides : int
+        A regular polygon's number of sides (0: not one), with its first vertex at
+        ``phase`` degrees; such a shape's metric is built from it (circumradius 1).
+    distance : str
+        The distance transform that starts the fit's search in its cells:
+        ``chessboard``, ``scaled`` (Euclidean with the axes scaled by β) or ``euclidean``.
+    """
+
+    name: str
+    metric: str
+    symmetry: int
+    side_period: float
+    packing: float
+    curved: bool = False
+    axial: bool = False
+    sides: int = 0
+    phase: float = 0.0
+    distance: str = "euclidean"
+
+
+_HEX = math.pi / math.sqrt(12.0)  # circles' densest packing (hexagonal)
+# The one table of shapes.  The paper's five pair with its metrics; a hexagon and an
+# octagon are regular polygons whose metrics are their own unit balls.  A regular
+# octagon's densest lattice packing is (4 + 4√2) / (5 + 4√2) of the plane.
+SHAPES: dict[str, Shape] = {s.name: s for s in (
+    Shape("square", "linf", 4, math.pi / 2, 1.0, distance="chessboard"),
+    Shape("rectangle", "linf-axial", 2, math.pi, 1.0, axial=True, distance="scaled"),
+    Shape("ellipse", "l2-axial", 2, math.pi, _HEX, curved=True, axial=True, distance="scaled"),
+    Shape("triangle", "triangle", 3, math.pi / 3, 2.0 / 3.0),
+    Shape("circle", "l2", 0, math.pi / 2, _HEX, curved=True),
+    Shape("hexagon", "hexagon", 6, math.pi / 3, 1.0, sides=6, phase=90.0),
+    Shape("octagon", "octagon", 8, math.pi / 4, (4 + 4 * math.sqrt(2)) / (5 + 4 * math.sqrt(2)), sides=8,
+          phase=22.5),
+)}
+METRIC_NAMES = (*PAPER_METRICS, *(s.metric for s in SHAPES.values() if s.metric not in PAPER_METRICS))
+# The element <-> metric table, read from the records.  The reverse, a metric's natural
+# element, adds the l1 ball, a diamond, which is drawn as a square turned by 45°.
+ELEMENT_METRIC = {s.name: s.metric for s in SHAPES.values()}
 NATURAL_ELEMENT = {**{m: e for e, m in ELEMENT_METRIC.items()}, "l1": "square"}
 
 
@@ -102,7 +155,7 @@ class Metric:
 
     @property
     def natural_element(self) -> str:
-        return NATURAL_ELEMENT[self.name]
+        return NATURAL_ELEMENT.get(self.name, self.name)  # the user's polygon is its own element
 
     def cone(self, height: float) -> dict:
         """Paper Table 1: the cone or pyramid whose height over a base point equals the
@@ -147,12 +200,19 @@ def _regular_normals(angles_deg) -> np.ndarray:
 def make_metric(name: str, aspect: float | None = None, *, option: str = "aspect") -> Metric:
     """Build one of the six metrics; ``aspect`` (β, in :data:`ASPECT_RANGE`) is used by
     the axial ones only; ``option`` names it in messages (``--aspect`` on the command line)."""
-    one_of(name, "metric", METRIC_NAMES)
+    if isinstance(name, str) and name.startswith(POLYGON_PREFIX):
+        shape = polygon_shape(name)
+    else:  # a polygonal record of the table (a new shape is one record there)
+        shape = next((s for s in SHAPES.values() if s.metric == name and s.sides), None)
+    if shape is None:
+        one_of(name, "metric", METRIC_NAMES)
     beta = 1.0 if aspect is None else real_number(aspect, option, *ASPECT_RANGE)
     if aspect is None and name in AXIAL_METRICS:
         beta = DEFAULT_ASPECT
     if name not in AXIAL_METRICS:
         beta = 1.0
+    if shape is not None:
+        return polygon_metric(name, shape)
     if name == "l2":
         return Metric(name, beta, "ellipse", semi_axes=(1.0, 1.0))
     if name == "l2-axial":
@@ -168,6 +228,115 @@ def make_metric(name: str, aspect: float | None = None, *, option: str = "aspect
     # triangle: vertex up on screen (y down) at (0, -1); edges at inradius 1/2.
     # Outward normals point away from each vertex: 90° (down) and 90° ± 120°.
     return Metric(name, beta, "polygon", _regular_normals([90, 210, 330]), np.full(3, 0.5))
+
+
+def polygon_metric(name: str, shape: Shape) -> Metric:
+    """The metric of a polygonal record: a regular polygon of ``shape.sides`` sides
+    (circumradius 1, a vertex at ``shape.phase`` degrees), or a user's polygon."""
+    vertices = shape_vertices(shape)
+    edges = np.roll(vertices, -1, axis=0) - vertices
+    normals = np.stack([edges[:, 1], -edges[:, 0]], axis=1)  # outward for counter-clockwise vertices
+    normals /= np.hypot(*normals.T)[:, None]
+    offsets = np.einsum("ij,ij->i", normals, vertices)
+    return Metric(name, 1.0, "polygon", normals, offsets)
+
+
+def shape_vertices(shape: Shape) -> np.ndarray:
+    """(K, 2) counter-clockwise vertices of a polygonal record's unit ball."""
+    if shape.name in _USER_VERTICES:
+        return _USER_VERTICES[shape.name]
+    t = np.radians(shape.phase + 360.0 * np.arange(shape.sides) / shape.sides)
+    return np.stack([np.cos(t), np.sin(t)], axis=1)
+
+
+# ------------------------------------------------------------------ the user's polygon
+POLYGON_PREFIX = "polygon:"
+_USER_VERTICES: dict[str, np.ndarray] = {}
+
+
+def convex_unit_ball(points, name: str = "polygon") -> np.ndarray:
+    """(K, 2) counter-clockwise vertices of the convex polygon ``points`` (any order and
+    scale), moved to its area centroid and scaled to circumradius 1.  InputError naming
+    ``name`` for fewer than 3 distinct vertices, a degenerate polygon or one that is not
+    convex (a vertex strictly inside the hull of the others)."""
+    try:
+        pts = np.asarray(points, dtype=np.float64)
+    except (TypeError, ValueError):
+        raise InputError(f"{name}: its vertices must be [x, y] numbers") from None
+    if pts.ndim != 2 or pts.shape[1] != 2 or not np.isfinite(pts).all():
+        raise InputError(f"{name}: its vertices must be finite [x, y] pairs, got shape {pts.shape}")
+    pts = np.unique(pts, axis=0)
+    if len(pts) < 3:
+        raise InputError(f"{name} has {len(pts)} distinct vertices; a polygon needs at least 3")
+    centre = pts.mean(axis=0)
+    order = np.argsort(np.arctan2(pts[:, 1] - centre[1], pts[:, 0] - centre[0]))
+    ring = pts[order]
+    scale = np.ptp(pts, axis=0).max()
+    area2 = np.sum(ring[:, 0] * np.roll(ring[:, 1], -1) - np.roll(ring[:, 0], -1) * ring[:, 1])
+    if scale == 0 or abs(area2) < 1e-9 * scale * scale:
+        raise InputError(f"{name} is degenerate: its vertices lie on one line")
+    # the turn at each vertex: negative where the outline bends inwards
+    before, after = ring - np.roll(ring, 1, axis=0), np.roll(ring, -1, axis=0) - ring
+    turn = before[:, 0] * after[:, 1] - before[:, 1] * after[:, 0]
+    if np.any(turn < -1e-9 * scale * scale):
+        raise InputError(f"{name} is not convex: a vertex lies inside the others' outline")
+    ring = ring[turn > 1e-9 * scale * scale]  # a vertex in the middle of a side is no corner
+    if len(ring) < 3:
+        raise InputError(f"{name} is degenerate: fewer than 3 corners")
+    # area centroid of the polygon (shoelace)
+    x, y = ring[:, 0], ring[:, 1]
+    xn, yn = np.roll(x, -1), np.roll(y, -1)
+    c = x * yn - xn * y
+    a = c.sum() / 2.0
+    cx, cy = ((x + xn) * c).sum() / (6 * a), ((y + yn) * c).sum() / (6 * a)
+    ring = ring - [cx, cy]
+    return ring / np.hypot(*ring.T).max()
+
+
+def polygon_shape(name: str) -> Shape:
+    """The record of the user's polygon ``polygon:FILE`` (a CSV with columns x, y, or a
+    JSON list of [x, y]), read once and kept by its name; its metric has the same name."""
+    if name in SHAPES:
+        return SHAPES[name]
+    path = name[len(POLYGON_PREFIX):]
+    vertices = convex_unit_ball(read_vertices(path), f"polygon {path}")
+    k = len(vertices)
+    _USER_VERTICES[name] = vertices
+    shape = Shape(name, name, 1, math.pi, 1.0, sides=k)
+    SHAPES[name] = shape
+    return shape
+
+
+def read_vertices(path: str) -> np.ndarray:
+    """[x, y] rows of a polygon file: JSON (a list of [x, y]) or CSV (columns x, y)."""
+    import json
+    import os
+
+    if not os.path.isfile(path):
+        raise InputError(f"polygon file {path} does not exist" if not os.path.exists(path)
+                         else f"polygon file {path} is not a file")
+    if os.path.getsize(path) > 1 << 20:
+        raise InputError(f"polygon file {path} is over 1 MiB: no polygon of an element needs that")
+    try:
+        with open(path, encoding="utf-8-sig") as fh:
+            text = fh.read()
+    except (OSError, UnicodeDecodeError) as exc:
+        raise InputError(f"cannot read polygon file {path}: {exc}") from None
+    if text.lstrip().startswith("["):
+        try:
+            data = json.loads(text)
+        except ValueError as exc:
+            raise InputError(f"polygon file {path} is not valid json: {exc}") from None
+        return data
+    rows = [line.split(",") for line in text.splitlines() if line.strip()]
+    head = [c.strip() for c in rows[0]] if rows else []
+    if "x" not in head or "y" not in head:
+        raise InputError(f"polygon file {path} needs columns x and y (or a JSON list of [x, y]), found {head}")
+    ix, iy = head.index("x"), head.index("y")
+    try:
+        return [[float(r[ix]), float(r[iy])] for r in rows[1:]]
+    except (ValueError, IndexError):
+        raise InputError(f"polygon file {path}: x and y must be numbers on every line") from None
 
 
 # --------------------------------------------------------------------- per site

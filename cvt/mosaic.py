@@ -59,7 +59,7 @@ from .problem import Grid, Problem, parse_size
 from .registry import get_method
 from .render import draw_elements, ellipse_parameters, parse_colour, svg_lines
 from .resources import mosaic_estimate
-from .shapes import ELEMENT_SHAPES, element_ball, resolve_shapes, unit_outline
+from .shapes import ELEMENT_SHAPES, element_ball, resolve_shapes, shape_record, unit_outline
 from .validate import live_backend, real_number, whole_number
 
 # The method that places the tiles when none is named: compaction, whose tiles share their
@@ -274,7 +274,7 @@ def ellipse_rows(polygons, element: str, aspect: float) -> np.ndarray | None:
     polygonal shapes."""
     import shapely
 
-    if element not in ("circle", "ellipse"):
+    if not shape_record(element).curved:
         return None
     ball = element_ball(element, aspect)
     unit = unit_outline(element, aspect)

@@ -70,7 +70,7 @@ from .errors import InputError
 from .metrics import Metric, compile_sites
 from .pixels import pixel_index
 from .problem import MAX_SIDE, Grid, in_own_cell
-from .shapes import check_shape, element_ball, element_polygons
+from .shapes import check_shape, element_ball, element_polygons, shape_record
 from .validate import one_of, real_number
 
 
@@ -176,9 +176,10 @@ def _inscribed_centres(labels, shape: str, aspect, n: int) -> np.ndarray:
     pad = np.pad(labels, 1, constant_values=-1)
     inner = ((labels >= 0) & (pad[:-2, 1:-1] == labels) & (pad[2:, 1:-1] == labels)
              & (pad[1:-1, :-2] == labels) & (pad[1:-1, 2:] == labels))
-    if shape == "square":
+    kind = shape_record(shape).distance
+    if kind == "chessboard":
         dt = ndimage.distance_transform_cdt(inner, metric="chessboard").astype(np.float64)
-    elif shape in ("rectangle", "ellipse"):
+    elif kind == "scaled":
         beta = element_ball(shape, aspect).aspect  # gauge ~ hypot(β·dx, dy/β)
         dt = ndimage.distance_transform_edt(inner, sampling=(1.0 / beta, beta))
     else:

@@ -41,7 +41,6 @@ PER_PIXEL = {
 }
 # ... and per site (coefficients, the placed polygon, its outline in result.json)
 PER_SITE = {"polygon": 1_000, "curved": 4_000}  # a 128-gon outline costs ~2.5 kB in GEOS
-CURVED = ("circle", "ellipse")
 SUPERSAMPLE = 3  # cvt.render.draw_elements' default
 
 
@@ -146,7 +145,9 @@ class Estimate:
 
 def placement_bytes(pixels: int, n_elements: int, element: str | None) -> float:
     """Placing one element per cell, evaluating them and keeping their outlines."""
-    per_site = PER_SITE["curved" if element in CURVED else "polygon"]
+    from .shapes import shape_record
+
+    per_site = PER_SITE["curved" if element is not None and shape_record(element).curved else "polygon"]
     return PER_PIXEL["placement"] * pixels + per_site * n_elements
 
 

@@ -13,26 +13,47 @@ from __future__ import annotations
 import numpy as np
 import shapely
 
-from .metrics import ELEMENT_METRIC, METRIC_NAMES, NATURAL_ELEMENT, Metric, make_metric
+from .metrics import (
+    METRIC_NAMES,
+    NATURAL_ELEMENT,
+    PAPER_METRICS,
+    POLYGON_PREFIX,
+    SHAPES,
+    Metric,
+    Shape,
+    make_metric,
+    polygon_shape,
+)
 from .validate import one_of
 
-ELEMENT_SHAPES = tuple(ELEMENT_METRIC)
+ELEMENT_SHAPES = tuple(SHAPES)  # the built-in shapes; the user's polygon is "polygon:FILE"
+# the paper's five (the default shapes of the tables, whose committed runs they are)
+PAPER_SHAPES = tuple(s.name for s in SHAPES.values() if s.metric in PAPER_METRICS)
 CURVE_SEGMENTS = 128  # inscribed 128-gon: area within 0.04 % of the ellipse
-# rotational symmetry of each shape (turns by 360°/k map it onto itself; 0: every turn)
-SYMMETRY = {"square": 4, "rectangle": 2, "ellipse": 2, "triangle": 3, "circle": 0}
-# densest packing of translates of each shape (share of the plane): squares and rectangles
-# tile it; circles, and ellipses as their affine images, π/√12 (hexagonal); a triangle
-# that keeps its direction 2/3 (its densest lattice packing)
-PACKING_DENSITY = {"square": 1.0, "rectangle": 1.0, "ellipse": np.pi / np.sqrt(12.0), "triangle": 2.0 / 3.0,
-                   "circle": np.pi / np.sqrt(12.0)}
+
+
+def shape_record(shape) -> Shape:
+    """The record of element ``shape`` (a name, ``polygon:FILE``, or a record)."""
+    if isinstance(shape, Shape):
+        return shape
+    if isinstance(shape, str) and shape.startswith(POLYGON_PREFIX):
+        return polygon_shape(shape)
+    return SHAPES[one_of(shape, "element", list(SHAPES))]
+
+
+def packing_density(shape: str) -> float:
+    """The densest packing of the shape's translates (share of the plane)."""
+    return shape_record(shape).packing
 
 
 def rotational_symmetry(shape: str, aspect: float = 0.5) -> int:
     """k such that turning the element by 360°/k maps it onto itself (0 for a circle, or
-    an ellipse of β = 1; a rectangle of β = 1 is a square: 4)."""
-    k = SYMMETRY[check_shape(shape)]
-    if aspect is not None and np.isclose(aspect, 1.0) and k == 2:
-        return 4 if shape == "rectangle" else 0
+    an ellipse of β = 1; an axial shape of β = 1 keeps its β = 1 symmetry: a square's 4,
+    a circle's every turn)."""
+    record = shape_record(shape)
+    k = record.symmetry
+    if record.axial and aspect is not None and np.isclose(aspect, 1.0):
+        return 0 if record.curved else 4
     return k
 
 
@@ -42,8 +63,9 @@ def unit_outline(shape: str, aspect: float = 0.5) -> np.ndarray:
 
 
 def check_shape(shape) -> str:
-    """``shape`` if it names an element shape, else InputError naming it."""
-    return one_of(shape, "element", ELEMENT_SHAPES)
+    """``shape`` if it names an element shape (or a readable convex ``polygon:FILE``),
+    else InputError naming it."""
+    return shape_record(shape).name
 
 
 def resolve_shapes(metric: str | None, element: str | None, default: str = "square",
@@ -52,21 +74,23 @@ def resolve_shapes(metric: str | None, element: str | None, default: str = "squa
     whose unit ball it is; a metric's element is its own ball); neither means the element
     ``default``.  ``names`` name the two in messages (``--metric``, ``--element``)."""
     if element is not None:
-        one_of(element, names[1], ELEMENT_SHAPES)
-    if metric is not None:
-        one_of(metric, names[0], METRIC_NAMES)
+        element = shape_record(element).name if not isinstance(element, str) or element in SHAPES or \
+            element.startswith(POLYGON_PREFIX) else one_of(element, names[1], list(SHAPES))
+    if metric is not None and not str(metric).startswith(POLYGON_PREFIX):
+        one_of(metric, names[0], [*METRIC_NAMES, *(s.metric for s in SHAPES.values())])
     if metric is None and element is None:
         element = default
     if metric is None:
-        metric = ELEMENT_METRIC[element]
+        metric = shape_record(element).metric
     if element is None:
-        element = NATURAL_ELEMENT[metric]
+        own = [s.name for s in SHAPES.values() if s.metric == metric]
+        element = NATURAL_ELEMENT.get(metric) or (own[0] if own else metric)
     return metric, element
 
 
 def element_ball(shape: str, aspect: float | None = 0.5) -> Metric:
     """The unit ball (as a metric) whose outline is the element ``shape``."""
-    return make_metric(ELEMENT_METRIC[check_shape(shape)], aspect)
+    return make_metric(shape_record(shape).metric, aspect)
 
 
 def transform(outline: np.ndarray, centres, angles, sizes) -> np.ndarray:

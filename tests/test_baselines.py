@@ -99,8 +99,8 @@ def test_deterministic_by_seed(name):
 
 @pytest.mark.parametrize("name", NAMES)
 def test_bad_element_is_an_input_error(name):
-    with pytest.raises(InputError, match="hexagon"):
-        run(name, square_problem(), iterations=1, element="hexagon")
+    with pytest.raises(InputError, match="heptagon"):
+        run(name, square_problem(), iterations=1, element="heptagon")
 
 
 @pytest.mark.parametrize("name", ["fritzsche2005", "smith2005", "hu2016"])

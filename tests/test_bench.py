@@ -266,7 +266,7 @@ def test_regress_without_baseline_is_an_input_error(tmp_path, capsys):
 @pytest.mark.parametrize("argv, text", [
     (["table2", "--seeds", "0"], "--seeds"),
     (["table2", "--backends", "cuda"], "cuda"),
-    (["table2", "--shapes", "hexagon"], "hexagon"),
+    (["table2", "--shapes", "heptagon"], "heptagon"),
     (["backends", "--sizes", "big"], "--sizes"),
     (["regress", "--quick", "--methods", "magic"], "magic"),
 ])

@@ -118,9 +118,9 @@ def test_every_round_is_overlap_free_and_inside(shape, seed, n, region, gap, til
 def test_compaction_grows_coverage_in_a_non_convex_region(shape):
     """A Lloyd CVT in an L-shaped region: compaction covers more, nothing leaves the L."""
     grid = Grid(SIZE, SIZE, l_mask())
-    metric = {"square": "linf", "rectangle": "linf-axial", "circle": "l2", "ellipse": "l2-axial",
-              "triangle": "triangle"}[shape]
-    p = Problem(grid, 40, make_metric(metric, 0.5), seed=4)
+    from compact_distributions.cvt.shapes import shape_record
+
+    p = Problem(grid, 40, make_metric(shape_record(shape).metric, 0.5), seed=4)
     r = lloyd(p, BACKEND, 6)
     labels = final_labels(p, BACKEND, r)
     c0, s0 = fit_centres(labels, r.sites, r.angles, shape, 0.5)
@@ -312,8 +312,8 @@ def test_bad_input_names_the_value():
     c, a, s = np.array([[10.0, 10.0], [30.0, 30.0]]), np.zeros(2), np.array([4.0, 4.0])
     with pytest.raises(InputError, match="gap 9 px"):
         compact(c, a, s, "square", 1.0, grid, gap=9)
-    with pytest.raises(InputError, match="'hexagon'"):
-        compact(c, a, s, "hexagon", 1.0, grid)
+    with pytest.raises(InputError, match="'heptagon'"):
+        compact(c, a, s, "heptagon", 1.0, grid)
     with pytest.raises(InputError, match="'square'"):
         check_alternate("square", True)
     check_alternate("triangle", True)

@@ -10,7 +10,10 @@ from compact_distributions.backends import create_backend
 from compact_distributions.cvt.errors import BackendUnavailable, InputError
 from compact_distributions.cvt.fields import DensityMap, DirectionField
 from compact_distributions.cvt.lloyd import final_labels, lloyd
-from compact_distributions.cvt.metrics import METRIC_NAMES, make_metric
+from compact_distributions.cvt.metrics import (
+    PAPER_METRICS as METRIC_NAMES,  # the gl pyramids take at most 4 facets
+)
+from compact_distributions.cvt.metrics import make_metric
 from compact_distributions.cvt.moments import moments_from_labels
 from compact_distributions.cvt.problem import Grid, Problem
 
@@ -241,3 +244,12 @@ def test_missing_moderngl_is_one_clear_error(monkeypatch):
         gl.GLBackend()
     with pytest.raises(BackendUnavailable, match="moderngl"):  # the failure is remembered
         gl.GLBackend.probe()
+
+
+@pytest.mark.parametrize("name", ["hexagon", "octagon"])
+def test_polygons_of_more_facets_are_declined_with_the_reason(cone, name):
+    metric = make_metric(name)
+    reason = cone.supports(metric, np.zeros(3), np.ones(3))
+    assert reason and f"{len(metric.normals)} facets" in reason
+    with pytest.raises(InputError, match="at most 4"):
+        cone.label(np.array([[5.0, 5.0], [10.0, 12.0], [20.0, 3.0]]), metric=metric, grid=Grid(32, 32))

@@ -155,7 +155,7 @@ def test_bad_arrays_raise_input_error(bad, match):
 @pytest.mark.parametrize("kwargs,match", [
     (dict(n_elements=0), "elements"),
     (dict(n_elements=5000), "do not fit"),
-    (dict(element="hexagon"), "hexagon"),
+    (dict(element="heptagon"), "heptagon"),
     (dict(metric="l3"), "l3"),
     (dict(gap=-1), "gap"),
     (dict(grout="not-a-colour"), "colour"),

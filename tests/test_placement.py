@@ -239,8 +239,8 @@ def test_bad_inputs_raise_input_error():
     grid = Grid(10, 10)
     labels = np.zeros((10, 10), dtype=np.int32)
     sites = np.array([[5.0, 5.0]])
-    with pytest.raises(InputError, match="hexagon"):
-        place_elements(labels, sites, None, "hexagon", 1.0, grid)
+    with pytest.raises(InputError, match="heptagon"):
+        place_elements(labels, sites, None, "heptagon", 1.0, grid)
     for bad in (-1, float("nan"), float("inf"), "wide"):
         with pytest.raises(InputError, match="gap"):
             place_elements(labels, sites, None, "square", 1.0, grid, gap=bad)
@@ -282,7 +282,7 @@ def test_cli_run_with_element_writes_svg_png_and_coverage(tmp_path, capsys):
 
 
 @pytest.mark.parametrize("argv,needle", [
-    (["--element", "hexagon"], "hexagon"),
+    (["--element", "heptagon"], "heptagon"),
     (["--gap", "-1"], "-1"),
     (["--gap", "nan"], "nan"),
 ])
