@@ -79,9 +79,13 @@ def backend_class(name: str) -> type[Backend]:
         try:
             cls = _plugins()[base].load()
         except Exception as exc:  # a broken plug-in is unavailable with its reason, never a crash
-            raise BackendUnavailable(f"backend {base!r} could not be loaded: {type(exc).__name__}: {exc}") from None
+            raise BackendUnavailable(
+                f"backend {base!r} could not be loaded: {type(exc).__name__}: {exc}"
+            ) from None
         if not (isinstance(cls, type) and issubclass(cls, Backend)):
-            raise BackendUnavailable(f"backend {base!r}: its entry point names {cls!r}, not a Backend subclass")
+            raise BackendUnavailable(
+                f"backend {base!r}: its entry point names {cls!r}, not a Backend subclass"
+            )
         return cls
     module, _, cls = REGISTRY[base].partition(":")
     try:
@@ -131,5 +135,18 @@ def variant_status() -> dict[str, tuple[bool, str]]:
     return {v: probed[resolve(v)[0]] for v in variant_names()}
 
 
-__all__ = ["Backend", "BackendUnavailable", "REGISTRY", "VARIANTS", "REFERENCE", "BUILT_IN", "create_backend",
-           "probe_all", "variant_status", "variant_metrics", "variant_names", "backend_class", "resolve"]
+__all__ = [
+    "Backend",
+    "BackendUnavailable",
+    "REGISTRY",
+    "VARIANTS",
+    "REFERENCE",
+    "BUILT_IN",
+    "create_backend",
+    "probe_all",
+    "variant_status",
+    "variant_metrics",
+    "variant_names",
+    "backend_class",
+    "resolve",
+]

@@ -79,8 +79,9 @@ class Backend(ABC):
         return self._moments(sites, angles, scales, metric, grid)
 
     @abstractmethod
-    def _label(self, sites: np.ndarray, angles: np.ndarray, scales: np.ndarray,
-               metric: Metric, grid: Grid) -> np.ndarray:
+    def _label(
+        self, sites: np.ndarray, angles: np.ndarray, scales: np.ndarray, metric: Metric, grid: Grid
+    ) -> np.ndarray:
         """The labels, from checked inputs."""
 
     def _moments(self, sites, angles, scales, metric: Metric, grid: Grid) -> Moments:
@@ -100,7 +101,9 @@ class Backend(ABC):
         angles = np.zeros(n) if angles is None else np.asarray(angles, dtype=np.float64)
         scales = np.ones(n) if scales is None else np.asarray(scales, dtype=np.float64)
         if angles.shape != (n,) or scales.shape != (n,):
-            raise InputError(f"{n} sites but angles of shape {angles.shape} and scales of shape {scales.shape}")
+            raise InputError(
+                f"{n} sites but angles of shape {angles.shape} and scales of shape {scales.shape}"
+            )
         if not np.isfinite(sites).all():
             raise InputError("sites contain NaN or infinite coordinates")
         if not np.isfinite(angles).all():
@@ -121,3 +124,6 @@ class Backend(ABC):
 
     def __exit__(self, *exc) -> None:
         self.close()
+
+
+__all__ = ["Backend"]

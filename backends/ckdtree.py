@@ -58,3 +58,6 @@ class CKDTreeBackend(Backend):
             _, idx = tree.query(centres[inside], k=1, p=P_OF_METRIC[metric.name], workers=-1)
             labels[inside] = idx
         return labels.reshape(grid.height, grid.width)
+
+
+__all__ = ["P_OF_METRIC", "CKDTreeBackend"]

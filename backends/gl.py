@@ -104,8 +104,10 @@ def shared_context():
         _CONTEXT_ERROR = f"gl backend: no headless EGL OpenGL context ({reason})"
         raise BackendUnavailable(_CONTEXT_ERROR) from None
     if ctx.version_code < 430:
-        _CONTEXT_ERROR = (f"gl backend: needs OpenGL 4.3 (compute shaders), the driver gives "
-                          f"{ctx.info.get('GL_VERSION', ctx.version_code)}")
+        _CONTEXT_ERROR = (
+            f"gl backend: needs OpenGL 4.3 (compute shaders), the driver gives "
+            f"{ctx.info.get('GL_VERSION', ctx.version_code)}"
+        )
         ctx.release()
         raise BackendUnavailable(_CONTEXT_ERROR)
     _CONTEXT = ctx
@@ -145,14 +147,25 @@ def _depth32f_texture(ctx, size):
             _RAW_GL = _RawGL()
         gl = _RAW_GL
         gl.bind_texture(_GL_TEXTURE_2D, tex.glo)
-        gl.tex_image_2d(_GL_TEXTURE_2D, 0, _GL_DEPTH_COMPONENT32F, size[0], size[1], 0,
-                        _GL_DEPTH_COMPONENT, _GL_FLOAT, None)
+        gl.tex_image_2d(
+            _GL_TEXTURE_2D,
+            0,
+            _GL_DEPTH_COMPONENT32F,
+            size[0],
+            size[1],
+            0,
+            _GL_DEPTH_COMPONENT,
+            _GL_FLOAT,
+            None,
+        )
         fmt = ctypes.c_int(0)
         gl.get_tex_level_parameteriv(_GL_TEXTURE_2D, 0, _GL_TEXTURE_INTERNAL_FORMAT, ctypes.byref(fmt))
         gl.bind_texture(_GL_TEXTURE_2D, 0)
     except OSError as exc:
         tex.release()
-        raise BackendUnavailable(f"gl backend: cannot reach the GL library for a float depth buffer ({exc})") from None
+        raise BackendUnavailable(
+            f"gl backend: cannot reach the GL library for a float depth buffer ({exc})"
+        ) from None
     if fmt.value != _GL_DEPTH_COMPONENT32F:
         tex.release()
         raise BackendUnavailable("gl backend: the driver gives no 32-bit float depth buffer")
@@ -362,8 +375,14 @@ def box_max_distance(coeffs, idx: np.ndarray, blocks: _Blocks) -> np.ndarray:
     return out
 
 
-def cone_heights(coeffs, scales: np.ndarray, metric: Metric, blocks: _Blocks,
-                 passes: int = 2, neighbours: bool | None = None) -> np.ndarray:
+def cone_heights(
+    coeffs,
+    scales: np.ndarray,
+    metric: Metric,
+    blocks: _Blocks,
+    passes: int = 2,
+    neighbours: bool | None = None,
+) -> np.ndarray:
     """r_i: an upper bound on d_i over every region pixel whose nearest site is i.
 
     1. Candidates: each cell of the fine grid takes a site binned in its nearest occupied
@@ -395,8 +414,14 @@ def cone_heights(coeffs, scales: np.ndarray, metric: Metric, blocks: _Blocks,
     if neighbours:  # the candidates of the 8 adjacent tiles too: for elongated balls the
         # Euclidean-nearest site is often far in the metric
         grid3 = np.pad(cand.reshape(nby, nbx, -1), ((1, 1), (1, 1), (0, 0)), mode="edge")
-        cand = np.concatenate([grid3[1 + dy:1 + dy + nby, 1 + dx:1 + dx + nbx].reshape(nby * nbx, -1)
-                               for dy in (-1, 0, 1) for dx in (-1, 0, 1)], axis=1)
+        cand = np.concatenate(
+            [
+                grid3[1 + dy : 1 + dy + nby, 1 + dx : 1 + dx + nbx].reshape(nby * nbx, -1)
+                for dy in (-1, 0, 1)
+                for dx in (-1, 0, 1)
+            ],
+            axis=1,
+        )
     bound = box_max_distance(coeffs, cand[:, 0], blocks)
     for c in range(1, cand.shape[1]):
         np.minimum(bound, box_max_distance(coeffs, cand[:, c], blocks), out=bound)
@@ -424,7 +449,9 @@ class GLBackend(Backend):
     per-fragment exact distances (``mode="exact"``) into a depth-tested id buffer."""
 
     name = "gl"
-    bytes_per_pixel = 32  # the framebuffer is on the device; per site the instance data and the cone heights' bookkeeping
+    bytes_per_pixel = (
+        32  # the framebuffer is on the device; per site the instance data and the cone heights' bookkeeping
+    )
     bytes_per_site = 8000
 
     MAX_FACETS = 4  # a polygon's facets travel in one vec4 pair per site
@@ -433,8 +460,10 @@ class GLBackend(Backend):
         """Polygons of more than MAX_FACETS facets (hexagons, octagons, most of the
         user's polygons) do not fit the per-site data of the pyramids."""
         if metric.kind == "polygon" and len(metric.normals) > self.MAX_FACETS:
-            return (f"metric {metric.name!r} has {len(metric.normals)} facets; the gl backend's pyramids "
-                    f"take at most {self.MAX_FACETS}")
+            return (
+                f"metric {metric.name!r} has {len(metric.normals)} facets; the gl backend's pyramids "
+                f"take at most {self.MAX_FACETS}"
+            )
         return super().supports(metric, angles, scales)
 
     def __init__(self, mode: str = "cone", max_error_px: float = 0.1, block: int = 8):
@@ -609,10 +638,14 @@ class GLBackend(Backend):
             verts, reach = cone_vertices(metric, segments)
             vbo = self.ctx.buffer(verts.tobytes())
             self._ensure_instances(1)
-            vao = self.ctx.vertex_array(prog, [
-                (vbo, "3f", "in_vert"),
-                (self._instances, "2f 2f 2f 4f 4f/i", "in_site", "in_rot", "in_size", "in_c0", "in_c1"),
-            ], skip_errors=True)
+            vao = self.ctx.vertex_array(
+                prog,
+                [
+                    (vbo, "3f", "in_vert"),
+                    (self._instances, "2f 2f 2f 4f 4f/i", "in_site", "in_rot", "in_size", "in_c0", "in_c1"),
+                ],
+                skip_errors=True,
+            )
             vao.reach = reach
             self._geometry[key] = (vao, vbo)
         return self._geometry[key][0].reach
@@ -647,13 +680,18 @@ class GLBackend(Backend):
     def _mask_texture(self, grid: Grid):
         if grid.mask is None:
             return None
-        if self._mask is not None and self._mask[0] is not None and self._mask[0].shape == grid.mask.shape \
-                and np.array_equal(self._mask[0], grid.mask):
+        if (
+            self._mask is not None
+            and self._mask[0] is not None
+            and self._mask[0].shape == grid.mask.shape
+            and np.array_equal(self._mask[0], grid.mask)
+        ):
             return self._mask[1]
         if self._mask is not None and self._mask[1] is not None:
             self._mask[1].release()
-        tex = self.ctx.texture((grid.width, grid.height), 1, grid.mask.astype(np.uint8).tobytes(),
-                               dtype="u1", alignment=1)
+        tex = self.ctx.texture(
+            (grid.width, grid.height), 1, grid.mask.astype(np.uint8).tobytes(), dtype="u1", alignment=1
+        )
         tex.filter = (self._moderngl.NEAREST, self._moderngl.NEAREST)
         self._mask = (grid.mask.copy(), tex)
         return tex
@@ -663,7 +701,8 @@ class GLBackend(Backend):
         if self._blocks is not None:
             (okey, omask), blocks = self._blocks
             same_mask = (omask is None and grid.mask is None) or (
-                omask is not None and grid.mask is not None and np.array_equal(omask, grid.mask))
+                omask is not None and grid.mask is not None and np.array_equal(omask, grid.mask)
+            )
             if okey == key and same_mask:
                 return blocks
         blocks = _Blocks(grid, self.block)
@@ -673,6 +712,22 @@ class GLBackend(Backend):
     @staticmethod
     def _check_covered(missing: int):
         if missing:
-            raise RuntimeError(f"gl backend: {missing} region pixels were reached by no cone "
-                               "(cone heights too small: a bug)")
+            raise RuntimeError(
+                f"gl backend: {missing} region pixels were reached by no cone (cone heights too small: a bug)"
+            )
 
+
+__all__ = [
+    "MODES",
+    "ELLIPSE_SEGMENTS",
+    "EXACT_FOOTPRINT_SEGMENTS",
+    "RUN_LENGTH",
+    "SUM_WORDS",
+    "shared_context",
+    "ellipse_height_error",
+    "ellipse_segments",
+    "cone_vertices",
+    "box_max_distance",
+    "cone_heights",
+    "GLBackend",
+]

@@ -85,8 +85,9 @@ class NumpyBackend(Backend):
         pix_y = (offs[:, None] + np.zeros((1, t))).ravel()  # row offsets
         for row in np.unique(ty):
             sel = np.flatnonzero(ty == row)
-            cand, valid = self._candidates(lists, sel, coeffs, scales, centres, bound,
-                                           circum, halfdiag, x0, y0, x1, y1)
+            cand, valid = self._candidates(
+                lists, sel, coeffs, scales, centres, bound, circum, halfdiag, x0, y0, x1, y1
+            )
             px = (x0[sel][:, None] + pix_x[None, :])[:, :, None]  # (nt, t², 1)
             py = (y0[sel][:, None] + pix_y[None, :])[:, :, None]
             d = coeffs.distance(cand[:, None, :], px, py)  # (nt, t², K)
@@ -94,7 +95,7 @@ class NumpyBackend(Backend):
             best = np.take_along_axis(cand[:, None, :], d.argmin(axis=2)[:, :, None], axis=2)
             block = best[:, :, 0].reshape(len(sel), t, t)
             for m, col in enumerate(tx[sel]):
-                labels[row * t:(row + 1) * t, col * t:(col + 1) * t] = block[m]
+                labels[row * t : (row + 1) * t, col * t : (col + 1) * t] = block[m]
         labels = labels[:h, :w]
         if grid.mask is not None:
             labels[~grid.mask] = -1
@@ -109,8 +110,8 @@ class NumpyBackend(Backend):
         valid = np.zeros((len(sel), kmax), dtype=bool)
         for m, s in enumerate(sel):
             idx = np.asarray(lists[s], dtype=np.int64)
-            cand[m, :len(idx)] = idx
-            valid[m, :len(idx)] = True
+            cand[m, : len(idx)] = idx
+            valid[m, : len(idx)] = True
         # per-site scale: |c - p| - halfdiag <= B · R · s_i
         dist = np.hypot(sites[cand, 0] - centres[sel, 0:1], sites[cand, 1] - centres[sel, 1:2])
         lim = bound[sel, None] * circum * scales[cand] + halfdiag
@@ -122,8 +123,9 @@ class NumpyBackend(Backend):
         vx1 = (x1[sel, None] - sites[cand, 0])[..., None]
         vy0 = (y0[sel, None] - sites[cand, 1])[..., None]
         vy1 = (y1[sel, None] - sites[cand, 1])[..., None]
-        low = (np.minimum(f[..., 0] * vx0, f[..., 0] * vx1)
-               + np.minimum(f[..., 1] * vy0, f[..., 1] * vy1)).max(axis=-1)
+        low = (
+            np.minimum(f[..., 0] * vx0, f[..., 0] * vx1) + np.minimum(f[..., 1] * vy0, f[..., 1] * vy1)
+        ).max(axis=-1)
         valid &= low <= bound[sel, None] * (1 + 1e-9) + 1e-9
         # drop the pruned: valid ones first (stable, so still ascending), then shrink K
         order = np.argsort(~valid, axis=1, kind="stable")
@@ -131,3 +133,6 @@ class NumpyBackend(Backend):
         valid = np.take_along_axis(valid, order, axis=1)
         keep = max(1, int(valid.sum(axis=1).max()))
         return cand[:, :keep], valid[:, :keep]
+
+
+__all__ = ["NumpyBackend"]

@@ -74,8 +74,10 @@ def cache_problem() -> str | None:
         os.makedirs(path, exist_ok=True)
         tempfile.TemporaryFile(dir=path).close()
     except OSError as exc:
-        return (f"the OpenCL kernel cache folder {path} cannot be written ({exc.strerror or exc}; "
-                f"HOME={os.environ.get('HOME', '')!r}); set POCL_CACHE_DIR or XDG_CACHE_HOME to a writable folder")
+        return (
+            f"the OpenCL kernel cache folder {path} cannot be written ({exc.strerror or exc}; "
+            f"HOME={os.environ.get('HOME', '')!r}); set POCL_CACHE_DIR or XDG_CACHE_HOME to a writable folder"
+        )
     return None
 
 
@@ -163,12 +165,19 @@ class OpenCLBackend(Backend):
     spacings; ``local_size``: the label kernel's work-group shape (None: the driver's)."""
 
     name = "opencl"
-    bytes_per_pixel = 24  # labels and moments live on the device; the host reads back the raster for the final labels
+    bytes_per_pixel = (
+        24  # labels and moments live on the device; the host reads back the raster for the final labels
+    )
     bytes_per_site = 1000
 
-    def __init__(self, device: str | None = None, split_atomics: bool = False,
-                 cell_factor: float = 1.0, local_size: tuple[int, int] | None = None,
-                 block: int | None = None):
+    def __init__(
+        self,
+        device: str | None = None,
+        split_atomics: bool = False,
+        cell_factor: float = 1.0,
+        local_size: tuple[int, int] | None = None,
+        block: int | None = None,
+    ):
         cl = self._cl = _import_pyopencl()
         self._device = choose_device(cl, device)
         try:
@@ -176,7 +185,8 @@ class OpenCLBackend(Backend):
             self._queue = cl.CommandQueue(self._context)
         except cl.Error as exc:
             raise BackendUnavailable(
-                f"opencl: cannot open {describe_device(cl, self._device)}: {exc}") from None
+                f"opencl: cannot open {describe_device(cl, self._device)}: {exc}"
+            ) from None
         has64 = "cl_khr_int64_base_atomics" in self._device.extensions
         self.int64_atomics = has64 and not split_atomics
         self.cell_factor = float(cell_factor)
@@ -216,7 +226,12 @@ class OpenCLBackend(Backend):
         if key not in self._programs:
             cl = self._cl
             stride = 8 if metric.kind == "ellipse" else 4 + 2 * k
-            opts = [f"-DSTRIDE={stride}", f"-DK={k}", f"-DBW={max(self.block, 1)}", f"-DBH={max(self.block, 1)}"]
+            opts = [
+                f"-DSTRIDE={stride}",
+                f"-DK={k}",
+                f"-DBW={max(self.block, 1)}",
+                f"-DBH={max(self.block, 1)}",
+            ]
             if metric.kind == "ellipse":
                 opts.append("-DMETRIC_ELLIPSE")
             if self.int64_atomics:
@@ -248,7 +263,8 @@ class OpenCLBackend(Backend):
             if nbytes > limit:
                 raise BackendUnavailable(
                     f"opencl: {name} needs {nbytes / 2**20:.0f} MiB, more than the "
-                    f"{limit / 2**20:.0f} MiB one buffer may have on {self.device()}")
+                    f"{limit / 2**20:.0f} MiB one buffer may have on {self.device()}"
+                )
             if buf is not None:
                 buf.release()
             try:
@@ -256,7 +272,8 @@ class OpenCLBackend(Backend):
             except cl.Error as exc:
                 raise BackendUnavailable(
                     f"opencl: out of device memory for {name} ({nbytes / 2**20:.0f} MiB) "
-                    f"on {self.device()}: {exc}") from None
+                    f"on {self.device()}: {exc}"
+                ) from None
             self._buffers[name] = buf
         return buf
 
@@ -274,10 +291,18 @@ class OpenCLBackend(Backend):
         uniform = np.ptp(angles) == 0 and np.ptp(scales) == 0
         if uniform:  # one shape for all: compile it once and repeat it (N-fold less work)
             one = compile_sites(metric, sites[:1], angles[:1], scales[:1])
-            coeffs = one if n == 1 else type(one)(
-                one.kind, sites,
-                facets=None if one.facets is None else np.broadcast_to(one.facets, (n,) + one.facets.shape[1:]),
-                quad=None if one.quad is None else np.broadcast_to(one.quad, (n, 3)))
+            coeffs = (
+                one
+                if n == 1
+                else type(one)(
+                    one.kind,
+                    sites,
+                    facets=None
+                    if one.facets is None
+                    else np.broadcast_to(one.facets, (n,) + one.facets.shape[1:]),
+                    quad=None if one.quad is None else np.broadcast_to(one.quad, (n, 3)),
+                )
+            )
         else:
             coeffs = compile_sites(metric, sites, angles, scales)
         hi = sites.astype(np.float32)
@@ -338,9 +363,21 @@ class OpenCLBackend(Backend):
         labels_buf = self._buffer("labels", 4 * w * h)
         slack = 1e-3 + 4 * max(w, h) * 2.0**-24  # px: float32 rounding of far cell edges
         label_kernel.set_args(
-            np.int32(w), np.int32(h), np.int32(ncx), np.int32(ncy), np.float32(cell),
-            np.float32(reach), np.float32(slack), starts_buf, reach_buf, records_buf, index_buf,
-            mask_buf, np.int32(use_mask), labels_buf)
+            np.int32(w),
+            np.int32(h),
+            np.int32(ncx),
+            np.int32(ncy),
+            np.float32(cell),
+            np.float32(reach),
+            np.float32(slack),
+            starts_buf,
+            reach_buf,
+            records_buf,
+            index_buf,
+            mask_buf,
+            np.int32(use_mask),
+            labels_buf,
+        )
         local = self.local_size
         if self.block > 0:
             w, h = -(-w // self.block), -(-h // self.block)  # one work-item per block
@@ -377,8 +414,7 @@ class OpenCLBackend(Backend):
         acc_buf = self._buffer("moments", 4 * 2 * 5 * n)
         cl.enqueue_fill_buffer(self._queue, acc_buf, np.uint32(0), 0, 4 * 2 * 5 * n)
         w, h = grid.width, grid.height
-        moments_kernel.set_args(np.int32(w), np.int32(h), np.int32(SEGMENT), labels_buf,
-                                np.int32(n), acc_buf)
+        moments_kernel.set_args(np.int32(w), np.int32(h), np.int32(SEGMENT), labels_buf, np.int32(n), acc_buf)
         try:
             cl.enqueue_nd_range_kernel(self._queue, moments_kernel, (-(-w // SEGMENT), h), None)
         except cl.Error as exc:
@@ -390,6 +426,18 @@ class OpenCLBackend(Backend):
         else:
             acc = np.empty(words, dtype=np.uint32)
             self._read(acc, acc_buf)
-            lo, hi = acc[:5 * n].astype(np.int64), acc[5 * n:].astype(np.int64)
+            lo, hi = acc[: 5 * n].astype(np.int64), acc[5 * n :].astype(np.int64)
             sums = ((hi << 32) | lo).reshape(5, n)
         return Moments(*(np.ascontiguousarray(row) for row in sums))
+
+
+__all__ = [
+    "KERNEL_FILE",
+    "SEGMENT",
+    "REACH_MARGIN",
+    "pocl_cache_dir",
+    "cache_problem",
+    "describe_device",
+    "choose_device",
+    "OpenCLBackend",
+]

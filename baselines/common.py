@@ -57,19 +57,37 @@ def _delta(value, name: str) -> float:
 
 
 DELTA_OPTION = MethodOption(
-    "delta", float, BUDGET_DELTA, f"tile budget δ: tiles of the area of a square of side δ·sqrt(area/N) "
-    f"(0 < δ <= 2; default {BUDGET_DELTA})", check=_delta, tag="d", label="δ={:g}")
+    "delta",
+    float,
+    BUDGET_DELTA,
+    f"tile budget δ: tiles of the area of a square of side δ·sqrt(area/N) "
+    f"(0 < δ <= 2; default {BUDGET_DELTA})",
+    check=_delta,
+    tag="d",
+    label="δ={:g}",
+)
 SMALLER_BUDGET_VARIANTS = tuple(SweepVariant({"delta": d}, ("square",)) for d in SMALLER_BUDGETS)
 
 
-def baseline(name: str, run, paper: str, year: int, paper_table2=None, fixed_size: bool = True,
-             summary: str = "") -> Method:
+def baseline(
+    name: str, run, paper: str, year: int, paper_table2=None, fixed_size: bool = True, summary: str = ""
+) -> Method:
     """The record of one of the suite's baselines: a tile budget δ, run on the NumPy
     reference and compared on squares; fixed-size ones also with smaller budgets."""
-    return Method(name, run, options=(DELTA_OPTION,), fixed_size=fixed_size, paper=paper, year=year,
-                  paper_table2=paper_table2, role="baseline", sweep_backends="reference",
-                  compared_on=("square",), sweep_variants=SMALLER_BUDGET_VARIANTS if fixed_size else (),
-                  summary=summary)
+    return Method(
+        name,
+        run,
+        options=(DELTA_OPTION,),
+        fixed_size=fixed_size,
+        paper=paper,
+        year=year,
+        paper_table2=paper_table2,
+        role="baseline",
+        sweep_backends="reference",
+        compared_on=("square",),
+        sweep_variants=SMALLER_BUDGET_VARIANTS if fixed_size else (),
+        summary=summary,
+    )
 
 
 @dataclass(frozen=True)
@@ -145,8 +163,9 @@ def budget_size(shape: TileShape, grid: Grid, n: int, delta: float = BUDGET_DELT
 
 
 # ------------------------------------------------------------------ tiles on the raster
-def rasterize_tiles(shape: TileShape, centres, angles, sizes, grid: Grid,
-                    budget_entries: int = 2_000_000) -> np.ndarray:
+def rasterize_tiles(
+    shape: TileShape, centres, angles, sizes, grid: Grid, budget_entries: int = 2_000_000
+) -> np.ndarray:
     """(H, W) int32: the tile whose outline contains each pixel centre, -1 for none.
     Where tiles overlap the lower index keeps the pixel.  Tiles of size <= 0 are absent."""
     h, w = grid.shape
@@ -180,9 +199,14 @@ def tile_pixels(shape: TileShape, centre, angle: float, size: float, grid: Grid)
     if not (math.isfinite(size) and size > 0):
         return np.empty(0, np.int64), np.empty(0, np.int64)
     r = int(math.ceil(size * shape.ball.circumradius + 1.0))
-    flat, _ = _window_hits(shape, np.asarray(centre, np.float64).reshape(1, 2),
-                           np.array([angle], np.float64), np.array([size], np.float64),
-                           r, *grid.shape)
+    flat, _ = _window_hits(
+        shape,
+        np.asarray(centre, np.float64).reshape(1, 2),
+        np.array([angle], np.float64),
+        np.array([size], np.float64),
+        r,
+        *grid.shape,
+    )
     return np.divmod(flat, grid.shape[1])
 
 
@@ -337,8 +361,15 @@ def fixed_sizes(problem: Problem, shape: TileShape, base: float, centres, gap: f
     return sizes
 
 
-def tile_lloyd(problem: Problem, shape: TileShape, base_size: float, iterations: int,
-               turn, progress=None, gap: float = 0.0):
+def tile_lloyd(
+    problem: Problem,
+    shape: TileShape,
+    base_size: float,
+    iterations: int,
+    turn,
+    progress=None,
+    gap: float = 0.0,
+):
     """Lloyd's method extended from points to fixed-size tiles.
 
     Each iteration: rasterise the tiles, give every pixel to its nearest tile
@@ -369,8 +400,17 @@ def tile_lloyd(problem: Problem, shape: TileShape, base_size: float, iterations:
     return centres, angles, sizes, labels, log
 
 
-def run_fixed_tiles(method: str, problem: Problem, iterations: int, progress, element, gap,
-                    delta: float, make_turn, extra: dict):
+def run_fixed_tiles(
+    method: str,
+    problem: Problem,
+    iterations: int,
+    progress,
+    element,
+    gap,
+    delta: float,
+    make_turn,
+    extra: dict,
+):
     """The frame shared by the fixed-size tile methods (Fritzsche, Smith): set up the tile
     shape and budget size (timed apart), run :func:`tile_lloyd` with the method's turning
     rule ``make_turn(problem, shape)``, and package the result as a Distribution."""
@@ -382,13 +422,23 @@ def run_fixed_tiles(method: str, problem: Problem, iterations: int, progress, el
 
     t0 = time.perf_counter()
     centres, angles, sizes, labels, log = tile_lloyd(
-        problem, shape, base, iterations, make_turn(problem, shape), progress, gap)
+        problem, shape, base, iterations, make_turn(problem, shape), progress, gap
+    )
     elements, clipped = make_elements(shape, centres, angles, sizes, problem.grid)
     total = time.perf_counter() - t0
     return Distribution(
-        method=method, sites=centres, angles=angles, scales=sizes / base,
-        elements=elements, energy=log.energy, seconds=log.seconds, setup_seconds=setup,
-        lloyd_seconds=total, empty=log.empty, empty_sites=log.empty_sites, labels=labels,
+        method=method,
+        sites=centres,
+        angles=angles,
+        scales=sizes / base,
+        elements=elements,
+        energy=log.energy,
+        seconds=log.seconds,
+        setup_seconds=setup,
+        lloyd_seconds=total,
+        empty=log.empty,
+        empty_sites=log.empty_sites,
+        labels=labels,
         extra={
             **extra,
             "element": shape.name,
@@ -400,3 +450,27 @@ def run_fixed_tiles(method: str, problem: Problem, iterations: int, progress, el
             "clipped_area_fraction": clipped,
         },
     )
+
+
+__all__ = [
+    "BUDGET_DELTA",
+    "SMALLER_BUDGETS",
+    "DELTA_OPTION",
+    "SMALLER_BUDGET_VARIANTS",
+    "baseline",
+    "TileShape",
+    "tile_shape",
+    "budget_size",
+    "rasterize_tiles",
+    "tile_pixels",
+    "tile_voronoi",
+    "CellMoments",
+    "cell_moments",
+    "nearest_equivalent",
+    "angle_residual",
+    "Contours",
+    "make_elements",
+    "fixed_sizes",
+    "tile_lloyd",
+    "run_fixed_tiles",
+]

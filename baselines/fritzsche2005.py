@@ -66,17 +66,41 @@ def principal_axis_turn(problem: Problem, shape):
     return turn
 
 
-def run(problem: Problem, backend=None, *, iterations: int = 20, progress=None,
-        element: str | None = None, gap: float = 0.0, delta: float = BUDGET_DELTA) -> Distribution:
+def run(
+    problem: Problem,
+    backend=None,
+    *,
+    iterations: int = 20,
+    progress=None,
+    element: str | None = None,
+    gap: float = 0.0,
+    delta: float = BUDGET_DELTA,
+) -> Distribution:
     """Fritzsche et al. 2005 on ``problem``; ``backend`` is not used (the distance is to
     the tiles, which no point-metric backend computes)."""
     turn = "field" if problem.field is not None else "principal axis of the region"
-    return run_fixed_tiles("fritzsche2005", problem, iterations, progress, element, gap, delta,
-                           principal_axis_turn, {
-                               "paper": METHOD.paper,
-                               "turn": turn})
+    return run_fixed_tiles(
+        "fritzsche2005",
+        problem,
+        iterations,
+        progress,
+        element,
+        gap,
+        delta,
+        principal_axis_turn,
+        {"paper": METHOD.paper, "turn": turn},
+    )
 
 
-METHOD = baseline("fritzsche2005", run, paper="Fritzsche, Hellwig, Hiller, Deussen, Interactive design of authentic looking mosaics using Voronoi structures, ISVD 2005",
-                  year=2005, paper_table2=(0.648, '1 min'), fixed_size=True,
-                  summary="Lloyd's method extended from points to tiles (ISVD 2005)")
+METHOD = baseline(
+    "fritzsche2005",
+    run,
+    paper="Fritzsche, Hellwig, Hiller, Deussen, Interactive design of authentic looking mosaics using Voronoi structures, ISVD 2005",
+    year=2005,
+    paper_table2=(0.648, "1 min"),
+    fixed_size=True,
+    summary="Lloyd's method extended from points to tiles (ISVD 2005)",
+)
+
+
+__all__ = ["principal_axis_turn", "run", "METHOD"]

@@ -89,8 +89,16 @@ class EdgeField:
         return self.angles[pixel_index(sites, w, h)]
 
 
-def run(problem: Problem, backend, *, iterations: int = 20, progress=None,
-        element: str | None = None, gap: float = 0.0, delta: float = BUDGET_DELTA) -> Distribution:
+def run(
+    problem: Problem,
+    backend,
+    *,
+    iterations: int = 20,
+    progress=None,
+    element: str | None = None,
+    gap: float = 0.0,
+    delta: float = BUDGET_DELTA,
+) -> Distribution:
     """Hausner 2001 on ``problem`` (see the module docstring)."""
     t_setup = time.perf_counter()
     gap = parse_gap(gap)
@@ -105,8 +113,13 @@ def run(problem: Problem, backend, *, iterations: int = 20, progress=None,
     if not interior.any():  # region thinner than a tile: keep every pixel
         interior = grid.inside()
     field = problem.field if problem.field is not None else EdgeField(dist)
-    setup_l1 = LloydSetup.of(problem, metric=make_metric("l1"), grid=Grid(grid.width, grid.height, interior),
-                             angles_at=field.angles_at, turn=DIAMOND_TURN)
+    setup_l1 = LloydSetup.of(
+        problem,
+        metric=make_metric("l1"),
+        grid=Grid(grid.width, grid.height, interior),
+        angles_at=field.angles_at,
+        turn=DIAMOND_TURN,
+    )
     setup = time.perf_counter() - t_setup
 
     t0 = time.perf_counter()
@@ -119,9 +132,18 @@ def run(problem: Problem, backend, *, iterations: int = 20, progress=None,
     elements, clipped = make_elements(shape, sites, angles, tile_sizes, grid)
     total = time.perf_counter() - t0
     return Distribution(
-        method="hausner2001", sites=sites, angles=angles, scales=scales, elements=elements,
-        energy=res.energy, seconds=res.seconds, setup_seconds=setup, lloyd_seconds=total,
-        empty=res.empty, empty_sites=res.empty_sites, labels=labels,
+        method="hausner2001",
+        sites=sites,
+        angles=angles,
+        scales=scales,
+        elements=elements,
+        energy=res.energy,
+        seconds=res.seconds,
+        setup_seconds=setup,
+        lloyd_seconds=total,
+        empty=res.empty,
+        empty_sites=res.empty_sites,
+        labels=labels,
         extra={
             "paper": METHOD.paper,
             "element": shape.name,
@@ -129,7 +151,8 @@ def run(problem: Problem, backend, *, iterations: int = 20, progress=None,
             "tile_size": size,
             "tile_side_px": tile_side,
             "edge_band_px": band,
-            "field": getattr(problem.field, "spec", None) or "edges (gradient of the distance to the region border)",
+            "field": getattr(problem.field, "spec", None)
+            or "edges (gradient of the distance to the region border)",
             "voronoi": f"L1 metric turned by the field + 45°, backend {getattr(backend, 'name', '?')}",
             "energy": "mean squared Euclidean distance of counted pixels to their site (px²)",
             "clipped_area_fraction": clipped,
@@ -142,6 +165,15 @@ def _gap_factor(shape) -> float:
     return 1.0 / shape.ball.inradius
 
 
-METHOD = baseline("hausner2001", run, paper="Hausner, Simulating decorative mosaics, SIGGRAPH 2001",
-                  year=2001, paper_table2=None, fixed_size=True,
-                  summary="Lloyd under a turned Manhattan metric, equal squares centred at the sites (SIGGRAPH 2001)")
+METHOD = baseline(
+    "hausner2001",
+    run,
+    paper="Hausner, Simulating decorative mosaics, SIGGRAPH 2001",
+    year=2001,
+    paper_table2=None,
+    fixed_size=True,
+    summary="Lloyd under a turned Manhattan metric, equal squares centred at the sites (SIGGRAPH 2001)",
+)
+
+
+__all__ = ["DIAMOND_TURN", "border_distance", "EdgeField", "run", "METHOD"]

@@ -78,8 +78,16 @@ from .common import (
 )
 
 INITIAL_FRACTION = 0.25  # initial tile size, relative to the budget size
-SEARCH_SCHEDULE = ((2.0, 4.0), (2.0, 4.0), (1.0, 2.0), (1.0, 2.0),
-                   (0.5, 1.0), (0.5, 1.0), (0.25, 0.5), (0.25, 0.5))  # (px, degrees)
+SEARCH_SCHEDULE = (
+    (2.0, 4.0),
+    (2.0, 4.0),
+    (1.0, 2.0),
+    (1.0, 2.0),
+    (0.5, 1.0),
+    (0.5, 1.0),
+    (0.25, 0.5),
+    (0.25, 0.5),
+)  # (px, degrees)
 
 
 def continuous_step(shape, contours: Contours, centres, angles, centroids, gap: float = 0.0):
@@ -94,8 +102,14 @@ def continuous_step(shape, contours: Contours, centres, angles, centroids, gap: 
     rows = np.arange(n)
     for step_px, step_deg in SEARCH_SCHEDULE:
         da = math.radians(step_deg)
-        moves = ((step_px, 0.0, 0.0), (-step_px, 0.0, 0.0), (0.0, step_px, 0.0),
-                 (0.0, -step_px, 0.0), (0.0, 0.0, da), (0.0, 0.0, -da))
+        moves = (
+            (step_px, 0.0, 0.0),
+            (-step_px, 0.0, 0.0),
+            (0.0, step_px, 0.0),
+            (0.0, -step_px, 0.0),
+            (0.0, 0.0, da),
+            (0.0, 0.0, -da),
+        )
         sizes = np.empty((n, len(moves)))
         for m, (dx, dy, dt) in enumerate(moves):
             sizes[:, m] = contours.fit(shape, pos + [dx, dy], ang + dt, gap)
@@ -128,14 +142,22 @@ def _hole_candidates(free: np.ndarray, count: int) -> list[tuple[float, float, f
     return holes
 
 
-def _fit_in_hole(shape, blocked_pad: np.ndarray, pad: int, x: float, y: float, radius: float,
-                 angles: np.ndarray, gap: float) -> tuple[float, float]:
+def _fit_in_hole(
+    shape,
+    blocked_pad: np.ndarray,
+    pad: int,
+    x: float,
+    y: float,
+    radius: float,
+    angles: np.ndarray,
+    gap: float,
+) -> tuple[float, float]:
     """Largest size (and its angle, among ``angles``) of a tile centred at (x, y) whose
     outline stays half a pixel clear of every blocked pixel centre."""
     r = int(math.ceil(radius * shape.ball.circumradius / shape.ball.inradius)) + 2
     r = min(r, pad - 1)
     ci, cj = int(math.floor(y)), int(math.floor(x))
-    win = blocked_pad[ci + pad - r: ci + pad + r + 1, cj + pad - r: cj + pad + r + 1]
+    win = blocked_pad[ci + pad - r : ci + pad + r + 1, cj + pad - r : cj + pad + r + 1]
     bi, bj = np.nonzero(win)
     if len(bi) == 0:
         return 0.0, float(angles[0])
@@ -146,8 +168,9 @@ def _fit_in_hole(shape, blocked_pad: np.ndarray, pad: int, x: float, y: float, r
     return max(float(reach[k]), 0.0), float(angles[k])
 
 
-def combinatorial_step(shape, centres, angles, sizes, grid: Grid, moves: int | None = None,
-                       gap: float = 0.0, region=None):
+def combinatorial_step(
+    shape, centres, angles, sizes, grid: Grid, moves: int | None = None, gap: float = 0.0, region=None
+):
     """Replace the smallest tiles by tiles fitted into the largest holes, one at a time,
     accepting a replacement only if the coverage (area of the union of the tiles within
     the region, exactly as cvt.evaluate measures it) strictly grows.
@@ -175,16 +198,16 @@ def combinatorial_step(shape, centres, angles, sizes, grid: Grid, moves: int | N
     holes = _hole_candidates(free, moves)
     if not holes:
         return centres, angles, sizes, info
-    pad = int(math.ceil(max(r for _, _, r in holes) * shape.ball.circumradius
-                        / shape.ball.inradius)) + 4
+    pad = int(math.ceil(max(r for _, _, r in holes) * shape.ball.circumradius / shape.ball.inradius)) + 4
     h, w = free.shape
     blocked = np.ones((h + 2 * pad, w + 2 * pad), dtype=bool)
-    blocked[pad:pad + h, pad:pad + w] = ~free
+    blocked[pad : pad + h, pad : pad + w] = ~free
 
     geoms = np.full(n, None, dtype=object)
     live = np.flatnonzero(sizes > 0)
     geoms[live] = shapely.intersection(
-        element_polygons(shape.name, shape.aspect, centres[live], angles[live], sizes[live]), region)
+        element_polygons(shape.name, shape.aspect, centres[live], angles[live], sizes[live]), region
+    )
     present = ~shapely.is_missing(geoms) & ~shapely.is_empty(geoms)
     tree_ids = np.flatnonzero(present)
     tree = shapely.STRtree(geoms[tree_ids])
@@ -200,7 +223,7 @@ def combinatorial_step(shape, centres, angles, sizes, grid: Grid, moves: int | N
         others = shapely.union_all(geoms[near])
         return float(shapely.area(shapely.difference(poly, others)))
 
-    for (x, y, r), k in zip(holes, order[:len(holes)], strict=True):
+    for (x, y, r), k in zip(holes, order[: len(holes)], strict=True):
         info["tried"] += 1
         # candidate angles: the tile's own, and a sweep over the shape's symmetry period
         sweep = np.arange(0.0, shape.symmetry, math.radians(7.5))[:12]
@@ -209,7 +232,8 @@ def combinatorial_step(shape, centres, angles, sizes, grid: Grid, moves: int | N
         if size <= sizes[k] or size <= 0:
             continue
         new_poly = shapely.intersection(
-            element_polygons(shape.name, shape.aspect, (x, y), ang, size)[0], region)
+            element_polygons(shape.name, shape.aspect, (x, y), ang, size)[0], region
+        )
         delta = exclusive(new_poly, k) - exclusive(geoms[k] if present[k] else None, k)
         if delta <= 1e-9:
             continue
@@ -227,8 +251,16 @@ def combinatorial_step(shape, centres, angles, sizes, grid: Grid, moves: int | N
     return centres, angles, sizes, info
 
 
-def run(problem: Problem, backend=None, *, iterations: int = 20, progress=None,
-        element: str | None = None, gap: float = 0.0, delta: float = BUDGET_DELTA) -> Distribution:
+def run(
+    problem: Problem,
+    backend=None,
+    *,
+    iterations: int = 20,
+    progress=None,
+    element: str | None = None,
+    gap: float = 0.0,
+    delta: float = BUDGET_DELTA,
+) -> Distribution:
     """Hu et al. 2016 on ``problem`` (2D); ``backend`` is not used (the distance is to
     the tiles, which no point-metric backend computes)."""
     t_setup = time.perf_counter()
@@ -252,10 +284,12 @@ def run(problem: Problem, backend=None, *, iterations: int = 20, progress=None,
         tiles = rasterize_tiles(shape, centres, angles, sizes, grid)
         labels, dist = tile_voronoi(tiles, inside)
         mom = cell_moments(labels, n, centres)
-        centres, angles, sizes = continuous_step(shape, Contours.of(labels), centres, angles,
-                                                 mom.centroids, gap)
-        centres, angles, sizes, info = combinatorial_step(shape, centres, angles, sizes, grid,
-                                                          gap=gap, region=region)
+        centres, angles, sizes = continuous_step(
+            shape, Contours.of(labels), centres, angles, mom.centroids, gap
+        )
+        centres, angles, sizes, info = combinatorial_step(
+            shape, centres, angles, sizes, grid, gap=gap, region=region
+        )
         accepted.append(info["accepted"])
         gained.append(info["gain"])
         raster_cov.append(float((tiles[inside] >= 0).mean()))
@@ -267,9 +301,18 @@ def run(problem: Problem, backend=None, *, iterations: int = 20, progress=None,
     elements, clipped = make_elements(shape, centres, angles, sizes, grid, region)
     total = time.perf_counter() - t0
     return Distribution(
-        method="hu2016", sites=centres, angles=angles, scales=sizes / base,
-        elements=elements, energy=log.energy, seconds=log.seconds, setup_seconds=setup,
-        lloyd_seconds=total, empty=log.empty, empty_sites=log.empty_sites, labels=labels,
+        method="hu2016",
+        sites=centres,
+        angles=angles,
+        scales=sizes / base,
+        elements=elements,
+        energy=log.energy,
+        seconds=log.seconds,
+        setup_seconds=setup,
+        lloyd_seconds=total,
+        empty=log.empty,
+        empty_sites=log.empty_sites,
+        labels=labels,
         extra={
             "paper": METHOD.paper,
             "element": shape.name,
@@ -286,6 +329,15 @@ def run(problem: Problem, backend=None, *, iterations: int = 20, progress=None,
     )
 
 
-METHOD = baseline("hu2016", run, paper="Hu, Chen, Pan, Yu, Grinspun, Wang, Surface mosaic synthesis with irregular tiles, IEEE TVCG 22(3) 2016",
-                  year=2016, paper_table2=(0.843, '10 min'), fixed_size=False,
-                  summary="tiles grown and moved into the gaps (IEEE TVCG 2016)")
+METHOD = baseline(
+    "hu2016",
+    run,
+    paper="Hu, Chen, Pan, Yu, Grinspun, Wang, Surface mosaic synthesis with irregular tiles, IEEE TVCG 22(3) 2016",
+    year=2016,
+    paper_table2=(0.843, "10 min"),
+    fixed_size=False,
+    summary="tiles grown and moved into the gaps (IEEE TVCG 2016)",
+)
+
+
+__all__ = ["INITIAL_FRACTION", "SEARCH_SCHEDULE", "continuous_step", "combinatorial_step", "run", "METHOD"]

@@ -93,7 +93,9 @@ def best_fit_turn(shape):
 
     def turn(mom, labels, centres, angles, sizes):
         h, w = labels.shape
-        cl = np.clip(centres, [0.0, 0.0], [w - 1e-9, h - 1e-9])  # a centre off the raster is measured from its edge
+        cl = np.clip(
+            centres, [0.0, 0.0], [w - 1e-9, h - 1e-9]
+        )  # a centre off the raster is measured from its edge
         period = shape.symmetry
         if period >= 2 * math.pi - 1e-9 and shape.name == "circle":
             return angles  # a circle has no orientation
@@ -113,16 +115,49 @@ def best_fit_turn(shape):
     return turn
 
 
-def run(problem: Problem, backend=None, *, iterations: int = 20, progress=None,
-        element: str | None = None, gap: float = 0.0, delta: float = BUDGET_DELTA) -> Distribution:
+def run(
+    problem: Problem,
+    backend=None,
+    *,
+    iterations: int = 20,
+    progress=None,
+    element: str | None = None,
+    gap: float = 0.0,
+    delta: float = BUDGET_DELTA,
+) -> Distribution:
     """Smith et al. 2005 on ``problem``; ``backend`` is not used (the distance is to the
     tiles' areas, which no point-metric backend computes)."""
-    return run_fixed_tiles("smith2005", problem, iterations, progress, element, gap, delta,
-                           lambda problem, shape: best_fit_turn(shape), {
-                               "paper": METHOD.paper,
-                               "turn": "best fit: angle covering most of the tile's own region"})
+    return run_fixed_tiles(
+        "smith2005",
+        problem,
+        iterations,
+        progress,
+        element,
+        gap,
+        delta,
+        lambda problem, shape: best_fit_turn(shape),
+        {"paper": METHOD.paper, "turn": "best fit: angle covering most of the tile's own region"},
+    )
 
 
-METHOD = baseline("smith2005", run, paper="Smith, Liu, Klein, Animosaics, SCA 2005",
-                  year=2005, paper_table2=(0.681, '1 min'), fixed_size=True,
-                  summary="tiles moved and turned to cover their own regions best (SCA 2005)")
+METHOD = baseline(
+    "smith2005",
+    run,
+    paper="Smith, Liu, Klein, Animosaics, SCA 2005",
+    year=2005,
+    paper_table2=(0.681, "1 min"),
+    fixed_size=True,
+    summary="tiles moved and turned to cover their own regions best (SCA 2005)",
+)
+
+
+__all__ = [
+    "COARSE_STEP",
+    "FINE_STEPS",
+    "region_ring",
+    "ring_counts",
+    "fit_counts",
+    "best_fit_turn",
+    "run",
+    "METHOD",
+]

@@ -50,8 +50,18 @@ class RunResult:
         return self.distribution.method_seconds
 
 
-def problem(n_elements: int = 1000, size=512, *, element: str | None = None, metric: str | None = None,
-            aspect: float | None = None, seed: int = 0, density=None, field=None, mask=None) -> Problem:
+def problem(
+    n_elements: int = 1000,
+    size=512,
+    *,
+    element: str | None = None,
+    metric: str | None = None,
+    aspect: float | None = None,
+    seed: int = 0,
+    density=None,
+    field=None,
+    mask=None,
+) -> Problem:
     """A problem on a ``size`` raster (``W``, ``(W, H)`` or ``"WxH"``) with ``n_elements``.
 
     ``element`` and ``metric`` imply each other (neither: squares); ``aspect`` is β of
@@ -63,7 +73,9 @@ def problem(n_elements: int = 1000, size=512, *, element: str | None = None, met
     width, height = parse_size(str(size) if not isinstance(size, str) else size, "size")
     n_elements = whole_number(n_elements, "n_elements", minimum=1, maximum=width * height)
     metric_name, _ = resolve_shapes(metric, element)
-    return Problem(Grid(width, height, mask), n_elements, make_metric(metric_name, aspect), density, field, seed)
+    return Problem(
+        Grid(width, height, mask), n_elements, make_metric(metric_name, aspect), density, field, seed
+    )
 
 
 @contextlib.contextmanager
@@ -78,8 +90,17 @@ def _backend(backend):
         yield live
 
 
-def run(problem: Problem, method="ours", *, backend="numpy", iterations: int = 20, element: str | None = None,
-        gap: float = 0.0, progress=None, **method_options) -> RunResult:
+def run(
+    problem: Problem,
+    method="ours",
+    *,
+    backend="numpy",
+    iterations: int = 20,
+    element: str | None = None,
+    gap: float = 0.0,
+    progress=None,
+    **method_options,
+) -> RunResult:
     """Run ``method`` (a registered name, a record, or a callable with the method
     signature) on ``problem`` and measure its elements.
 
@@ -93,7 +114,9 @@ def run(problem: Problem, method="ours", *, backend="numpy", iterations: int = 2
     record = resolve_method(method)
     options = record.parse_options(method_options)
     with _backend(backend) as live:
-        dist = record(problem, live, iterations=iterations, progress=progress, element=element, gap=gap, **options)
+        dist = record(
+            problem, live, iterations=iterations, progress=progress, element=element, gap=gap, **options
+        )
     return RunResult(problem, dist, evaluate(dist.elements, problem.grid, labels=dist.labels), options)
 
 

@@ -39,15 +39,40 @@ from compact_distributions.cvt.validate import json_object, name_list, one_of, w
 from . import options
 from .timing import time_lloyd
 
-FULL = {"sites": [1000, 4000, 16000], "sizes": [512, 1024, 2048], "metrics": list(PAPER_METRICS),
-        "warmup": 1, "repeats": 3}
-QUICK = {"sites": [1000, 4000], "sizes": [256, 512, 1024], "metrics": ["l2", "linf", "triangle"], "warmup": 1,
-         "repeats": 3}
+FULL = {
+    "sites": [1000, 4000, 16000],
+    "sizes": [512, 1024, 2048],
+    "metrics": list(PAPER_METRICS),
+    "warmup": 1,
+    "repeats": 3,
+}
+QUICK = {
+    "sites": [1000, 4000],
+    "sizes": [256, 512, 1024],
+    "metrics": ["l2", "linf", "triangle"],
+    "warmup": 1,
+    "repeats": 3,
+}
 
 MAX_REPEATS = 1000
 
-COLUMNS = ["backend", "metric", "n_elements", "size", "pixels", "ms_per_iteration", "ms_min", "ms_max", "repeats",
-           "warmup", "x_numpy", "status", "reason", "device", "host"]
+COLUMNS = [
+    "backend",
+    "metric",
+    "n_elements",
+    "size",
+    "pixels",
+    "ms_per_iteration",
+    "ms_min",
+    "ms_max",
+    "repeats",
+    "warmup",
+    "x_numpy",
+    "status",
+    "reason",
+    "device",
+    "host",
+]
 
 
 @dataclass(frozen=True)
@@ -64,32 +89,65 @@ class TimingSpec:
 
     @property
     def key(self) -> str:
-        return f"{self.backend}__{self.metric}__{self.size}__n{self.n_elements}__w{self.warmup}r{self.repeats}"
+        return (
+            f"{self.backend}__{self.metric}__{self.size}__n{self.n_elements}__w{self.warmup}r{self.repeats}"
+        )
 
     def describe(self) -> str:
         return f"{self.backend} {self.metric} N={self.n_elements} {self.size}²"
 
     def params(self) -> dict:
-        return {"backend": self.backend, "metric": self.metric, "n_elements": self.n_elements, "size": self.size,
-                "pixels": self.size * self.size, "warmup": self.warmup, "repeats": self.repeats,
-                "ms_per_iteration": np.nan, "ms_min": np.nan, "ms_max": np.nan, "device": ""}
+        return {
+            "backend": self.backend,
+            "metric": self.metric,
+            "n_elements": self.n_elements,
+            "size": self.size,
+            "pixels": self.size * self.size,
+            "warmup": self.warmup,
+            "repeats": self.repeats,
+            "ms_per_iteration": np.nan,
+            "ms_min": np.nan,
+            "ms_max": np.nan,
+            "device": "",
+        }
 
     def memory_estimate(self):
         from compact_distributions.cvt.resources import run_estimate
 
         from .sweep import memory_class
 
-        return run_estimate(self.size, self.size, self.n_elements, memory_class(self.backend), placement=False,
-                            pictures=False, what=f"timing {self.describe()}")
+        return run_estimate(
+            self.size,
+            self.size,
+            self.n_elements,
+            memory_class(self.backend),
+            placement=False,
+            pictures=False,
+            what=f"timing {self.describe()}",
+        )
 
     def execute(self, backend) -> dict:
         from .outputs import machine, versions
 
         secs = time_lloyd(backend, self.metric, self.n_elements, self.size, self.warmup, self.repeats)
         ms = np.asarray(secs) * 1000
-        row = {"key": self.key, **self.params(), "status": "ok", "reason": "", "ms_per_iteration": float(np.median(ms)),
-               "ms_min": float(ms.min()), "ms_max": float(ms.max()), "device": backend.device()}
-        return {"row": row, "seconds": secs, "spec": asdict(self), "machine": machine(), "versions": versions()}
+        row = {
+            "key": self.key,
+            **self.params(),
+            "status": "ok",
+            "reason": "",
+            "ms_per_iteration": float(np.median(ms)),
+            "ms_min": float(ms.min()),
+            "ms_max": float(ms.max()),
+            "device": backend.device(),
+        }
+        return {
+            "row": row,
+            "seconds": secs,
+            "spec": asdict(self),
+            "machine": machine(),
+            "versions": versions(),
+        }
 
 
 def sweep_specs(cfg: dict, variants: list[str], suite: str) -> list[TimingSpec]:
@@ -119,13 +177,16 @@ def with_ratios(rows: list[dict]):
     ref = df[(df["backend"] == REFERENCE) & (df["status"] == "ok")]
     ref = ref.set_index(["metric", "n_elements", "size", "host"])["ms_per_iteration"]
     idx = list(zip(df["metric"], df["n_elements"], df["size"], df["host"], strict=True))
-    df["x_numpy"] = [float(ref.get(k, np.nan)) / m if m and m == m else np.nan
-                     for k, m in zip(idx, df["ms_per_iteration"], strict=True)]
+    df["x_numpy"] = [
+        float(ref.get(k, np.nan)) / m if m and m == m else np.nan
+        for k, m in zip(idx, df["ms_per_iteration"], strict=True)
+    ]
     return df[COLUMNS]
 
 
-def render_markdown(df, prov: dict, command: str, quick: bool, cfg: dict, elapsed: float, cached: int,
-                    plotted: bool = True) -> str:
+def render_markdown(
+    df, prov: dict, command: str, quick: bool, cfg: dict, elapsed: float, cached: int, plotted: bool = True
+) -> str:
     from .report import header_markdown, markdown_table, several_hosts
 
     notes = [
@@ -139,15 +200,19 @@ def render_markdown(df, prov: dict, command: str, quick: bool, cfg: dict, elapse
     ]
     if quick:
         notes.insert(0, "**QUICK**: a small subset of the full sweep")
-    text = header_markdown("Backends: ms per Lloyd iteration" + (" (QUICK)" if quick else ""), prov, command, notes)
+    text = header_markdown(
+        "Backends: ms per Lloyd iteration" + (" (QUICK)" if quick else ""), prov, command, notes
+    )
     ok = df[df["status"] == "ok"]
     order = [b for b in dict.fromkeys(df["backend"]) if b in set(ok["backend"])]
     cols = ["metric", "N", "raster"] + [f"{b} ms" if b == "numpy" else f"{b} ms (x numpy)" for b in order]
     by_host = several_hosts(ok["host"])  # a line from several machines says which ran what
     if by_host:
         cols.append("host")
-        text += ("\nThese timings come from several hosts (each configuration ran alone on its host); "
-                 "x numpy compares with NumPy on the same host only.\n")
+        text += (
+            "\nThese timings come from several hosts (each configuration ran alone on its host); "
+            "x numpy compares with NumPy on the same host only.\n"
+        )
     body = []
     for (metric, n, size), g in ok.groupby(["metric", "n_elements", "size"], sort=False):
         cells = []
@@ -159,20 +224,37 @@ def render_markdown(df, prov: dict, command: str, quick: bool, cfg: dict, elapse
             elif b == "numpy":
                 cells.append(f"{r['ms_per_iteration']:.3g}")
             else:
-                cells.append(f"{r['ms_per_iteration']:.3g} ({r['x_numpy']:.2g}x)" if r["x_numpy"] == r["x_numpy"]
-                             else f"{r['ms_per_iteration']:.3g}")
-        body.append([metric, n, f"{size}²"] + cells
-                    + ([", ".join(sorted({str(r["host"]) for r in by.values()}))] if by_host else []))
+                cells.append(
+                    f"{r['ms_per_iteration']:.3g} ({r['x_numpy']:.2g}x)"
+                    if r["x_numpy"] == r["x_numpy"]
+                    else f"{r['ms_per_iteration']:.3g}"
+                )
+        body.append(
+            [metric, n, f"{size}²"]
+            + cells
+            + ([", ".join(sorted({str(r["host"]) for r in by.values()}))] if by_host else [])
+        )
     text += "\n" + markdown_table(cols, body)
-    gm = ok[ok["backend"] != "numpy"].groupby("backend", sort=False)["x_numpy"].apply(
-        lambda s: float(np.exp(np.log(s.dropna()).mean())) if s.notna().any() else np.nan)
+    gm = (
+        ok[ok["backend"] != "numpy"]
+        .groupby("backend", sort=False)["x_numpy"]
+        .apply(lambda s: float(np.exp(np.log(s.dropna()).mean())) if s.notna().any() else np.nan)
+    )
     if len(gm):
-        text += "\nGeometric mean speed-up over NumPy: " + ", ".join(f"{b} {v:.2g}x" for b, v in gm.items()) + "\n"
+        text += (
+            "\nGeometric mean speed-up over NumPy: "
+            + ", ".join(f"{b} {v:.2g}x" for b, v in gm.items())
+            + "\n"
+        )
     bad = df[df["status"] != "ok"].drop_duplicates(subset=["backend", "status", "reason"])
     if len(bad):
         text += "\n## Not measured\n\n" + markdown_table(
-            ["backend", "status", "reason"], [[r["backend"], r["status"], r["reason"]] for _, r in bad.iterrows()])
-    text += ("\nPlot: `backends.png`; raw" if plotted else "\nRaw") + " json per configuration under `raw/`.\n"
+            ["backend", "status", "reason"],
+            [[r["backend"], r["status"], r["reason"]] for _, r in bad.iterrows()],
+        )
+    text += (
+        "\nPlot: `backends.png`; raw" if plotted else "\nRaw"
+    ) + " json per configuration under `raw/`.\n"
     return text
 
 
@@ -196,18 +278,33 @@ def render_plot(df, path: Path) -> bool:
     colours = plt.rcParams["axes.prop_cycle"].by_key()["color"]
     for k, (b, g) in enumerate(ok.groupby("backend", sort=False)):
         c = colours[k % len(colours)]
-        for ax, fixed, var, fixed_val in ((axes[0], "size", "n_elements", size_mid), (axes[1], "n_elements", "pixels", n_mid)):
+        for ax, fixed, var, fixed_val in (
+            (axes[0], "size", "n_elements", size_mid),
+            (axes[1], "n_elements", "pixels", n_mid),
+        ):
             sub = g[g[fixed] == fixed_val]
             l2 = sub[sub["metric"] == "l2"].sort_values(var)
             if len(l2):
                 ax.plot(l2[var], l2["ms_per_iteration"], "o-", color=c, label=f"{b} (l2)")
             other = sub[sub["metric"] != "l2"].groupby(var)["ms_per_iteration"].median()
             if len(other):
-                ax.plot(other.index, other.values, "s--", color=c, alpha=0.7, label=f"{b} (other metrics, median)")
-    axes[0].set(xscale="log", yscale="log", xlabel="N (sites)", ylabel="ms per Lloyd iteration",
-                title=f"time vs N at {size_mid}² px")
-    axes[1].set(xscale="log", yscale="log", xlabel="pixels", ylabel="ms per Lloyd iteration",
-                title=f"time vs pixels at N = {n_mid}")
+                ax.plot(
+                    other.index, other.values, "s--", color=c, alpha=0.7, label=f"{b} (other metrics, median)"
+                )
+    axes[0].set(
+        xscale="log",
+        yscale="log",
+        xlabel="N (sites)",
+        ylabel="ms per Lloyd iteration",
+        title=f"time vs N at {size_mid}² px",
+    )
+    axes[1].set(
+        xscale="log",
+        yscale="log",
+        xlabel="pixels",
+        ylabel="ms per Lloyd iteration",
+        title=f"time vs pixels at N = {n_mid}",
+    )
     from matplotlib.ticker import NullFormatter
 
     for ax in axes:
@@ -229,31 +326,57 @@ def rows_from_benchmark_json(path) -> list[dict]:
             if info.get("kind") != "lloyd-step":
                 continue
             st = b["stats"]
-            rows.append({"backend": info["backend"], "metric": info["metric"], "n_elements": info["n_elements"],
-                         "size": info["size"], "pixels": info["size"] ** 2, "ms_per_iteration": st["median"] * 1000,
-                         "ms_min": st["min"] * 1000, "ms_max": st["max"] * 1000, "repeats": st["rounds"],
-                         "warmup": 0, "status": "ok", "reason": "", "device": info.get("device", "")})
+            rows.append(
+                {
+                    "backend": info["backend"],
+                    "metric": info["metric"],
+                    "n_elements": info["n_elements"],
+                    "size": info["size"],
+                    "pixels": info["size"] ** 2,
+                    "ms_per_iteration": st["median"] * 1000,
+                    "ms_min": st["min"] * 1000,
+                    "ms_max": st["max"] * 1000,
+                    "repeats": st["rounds"],
+                    "warmup": 0,
+                    "status": "ok",
+                    "reason": "",
+                    "device": info.get("device", ""),
+                }
+            )
     except (AttributeError, KeyError, TypeError) as exc:
-        raise InputError(f"--from-benchmark-json {path}: not a pytest-benchmark json ({type(exc).__name__}: "
-                         f"{exc})") from None
+        raise InputError(
+            f"--from-benchmark-json {path}: not a pytest-benchmark json ({type(exc).__name__}: {exc})"
+        ) from None
     if not rows:
-        raise InputError(f"{path} holds no lloyd-step benchmarks (run pytest tests/benchmarks "
-                         "--benchmark-enable --benchmark-json FILE)")
+        raise InputError(
+            f"{path} holds no lloyd-step benchmarks (run pytest tests/benchmarks "
+            "--benchmark-enable --benchmark-json FILE)"
+        )
     return rows
 
 
 def add_parser(sub):
-    p = sub.add_parser("backends", help="ms per Lloyd iteration per backend, N, raster and metric",
-                       description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    p = sub.add_parser(
+        "backends",
+        help="ms per Lloyd iteration per backend, N, raster and metric",
+        description=__doc__,
+        formatter_class=argparse.RawDescriptionHelpFormatter,
+    )
     options.add_sweep_options(p, "small subset (N 1000/4000, 256²-1024², l2, linf, triangle)")
     options.add_list_options(p, "backends", "metrics")
     options.add_cluster_options(p)
-    p.add_argument("--elements", default=None, help="comma list of N (at most the pixels of the smallest raster)")
+    p.add_argument(
+        "--elements", default=None, help="comma list of N (at most the pixels of the smallest raster)"
+    )
     p.add_argument("--sizes", default=None, help="comma list of square raster sides (1 to 32768)")
     p.add_argument("--repeats", default=None, help="timed iterations per configuration (1 to 1000)")
     p.add_argument("--no-ckdtree", action="store_true", help="leave out the cKDTree reference row")
-    p.add_argument("--from-benchmark-json", metavar="FILE", default=None,
-                   help="build the report from a pytest-benchmark json instead of timing here")
+    p.add_argument(
+        "--from-benchmark-json",
+        metavar="FILE",
+        default=None,
+        help="build the report from a pytest-benchmark json instead of timing here",
+    )
     options.add_memory_option(p)
     p.set_defaults(func=run)
 
@@ -285,12 +408,18 @@ class BackendsRequest(options.SweepRequest):
         cfg = QUICK if args.quick else FULL
         counts = _int_list(args.elements, "--elements", min(sizes or cfg["sizes"]) ** 2)
         tup = options.as_tuple
-        return cls(**cls.common(args), backends=tup(name_list(args.backends, "--backends", variant_names())),
-                   metrics=tup(name_list(args.metrics, "--metrics", METRIC_NAMES)), sizes=tup(sizes),
-                   elements=tup(counts),
-                   repeats=None if args.repeats is None else whole_number(args.repeats, "--repeats", minimum=1,
-                                                                           maximum=MAX_REPEATS),
-                   no_ckdtree=bool(args.no_ckdtree), from_benchmark_json=args.from_benchmark_json)
+        return cls(
+            **cls.common(args),
+            backends=tup(name_list(args.backends, "--backends", variant_names())),
+            metrics=tup(name_list(args.metrics, "--metrics", METRIC_NAMES)),
+            sizes=tup(sizes),
+            elements=tup(counts),
+            repeats=None
+            if args.repeats is None
+            else whole_number(args.repeats, "--repeats", minimum=1, maximum=MAX_REPEATS),
+            no_ckdtree=bool(args.no_ckdtree),
+            from_benchmark_json=args.from_benchmark_json,
+        )
 
 
 def prepare(req: BackendsRequest) -> dict:
@@ -341,8 +470,14 @@ def backends(req: BackendsRequest) -> int:
             unavailable = {v: text for v, (ok, text) in variant_status().items() if not ok}
             # a timing never shares its host with another run of the sweep
             with executor_for(req, exclusive=True) as executor:
-                rows = run_sweep(plan["specs"], out, force=req.force, quiet=req.quiet, unavailable=unavailable,
-                                 executor=executor)
+                rows = run_sweep(
+                    plan["specs"],
+                    out,
+                    force=req.force,
+                    quiet=req.quiet,
+                    unavailable=unavailable,
+                    executor=executor,
+                )
         df = with_ratios(rows)
         elapsed = time.perf_counter() - t0
         cached = sum(1 for r in rows if r.get("cached"))
@@ -353,3 +488,22 @@ def backends(req: BackendsRequest) -> int:
         written = written_files(out, ["backends.md", "backends.csv", "backends.png"])
     print(f"wrote {out}/{', '.join(written)} ({elapsed:.0f} s)", file=sys.stderr)
     return 0
+
+
+__all__ = [
+    "FULL",
+    "QUICK",
+    "MAX_REPEATS",
+    "COLUMNS",
+    "TimingSpec",
+    "sweep_specs",
+    "with_ratios",
+    "render_markdown",
+    "render_plot",
+    "rows_from_benchmark_json",
+    "add_parser",
+    "BackendsRequest",
+    "prepare",
+    "run",
+    "backends",
+]

@@ -16,7 +16,18 @@ from compact_distributions.cvt.errors import BackendUnavailable, InputError, Run
 from compact_distributions.cvt.quiet import configure as configure_output
 
 # subcommand modules, in the order `cvtbench --help` lists them
-SUBCOMMANDS = ["compact_distributions.bench.run_cmd", "compact_distributions.bench.info_cmd", "compact_distributions.bench.figures_cmd", "compact_distributions.bench.table2", "compact_distributions.bench.table3", "compact_distributions.bench.mosaic_cmd", "compact_distributions.bench.backends_cmd", "compact_distributions.bench.pipeline_cmd", "compact_distributions.bench.regress_cmd", "compact_distributions.bench.reproduce_cmd"]
+SUBCOMMANDS = [
+    "compact_distributions.bench.run_cmd",
+    "compact_distributions.bench.info_cmd",
+    "compact_distributions.bench.figures_cmd",
+    "compact_distributions.bench.table2",
+    "compact_distributions.bench.table3",
+    "compact_distributions.bench.mosaic_cmd",
+    "compact_distributions.bench.backends_cmd",
+    "compact_distributions.bench.pipeline_cmd",
+    "compact_distributions.bench.regress_cmd",
+    "compact_distributions.bench.reproduce_cmd",
+]
 
 
 class Parser(argparse.ArgumentParser):
@@ -47,8 +58,11 @@ def build_parser() -> argparse.ArgumentParser:
     for name in SUBCOMMANDS:
         importlib.import_module(name).add_parser(sub)
     for p in sub.choices.values():  # every command: the same pair, third-party output off by default
-        p.add_argument("--verbose", action="store_true",
-                       help="also show the warnings and log records of the libraries the suite uses")
+        p.add_argument(
+            "--verbose",
+            action="store_true",
+            help="also show the warnings and log records of the libraries the suite uses",
+        )
         if "--quiet" not in p._option_string_actions:
             p.add_argument("--quiet", action="store_true", help="no progress output")
     return parser
@@ -109,6 +123,9 @@ def main(argv=None) -> int:
         _silence(sys.stdout)
         _say(f"cvtbench: error: cannot write the output ({exc.strerror})")
         return 1
+
+
+__all__ = ["SUBCOMMANDS", "Parser", "build_parser", "main"]
 
 
 if __name__ == "__main__":

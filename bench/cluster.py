@@ -67,17 +67,23 @@ def identity() -> dict:
     import dask
     import distributed
 
-    return {"code": made_by()["code"], "host": platform.node(),
-            "versions": {**versions(), "dask": dask.__version__, "distributed": distributed.__version__},
-            "slow_settings": slow_settings()}
+    return {
+        "code": made_by()["code"],
+        "host": platform.node(),
+        "versions": {**versions(), "dask": dask.__version__, "distributed": distributed.__version__},
+        "slow_settings": slow_settings(),
+    }
 
 
 def slow_settings() -> list[str]:
     """The settings of this process that :data:`CONFIG_FILE` turns off, where they are on."""
     import dask
 
-    found = [f"MALLOC_TRIM_THRESHOLD_={os.environ['MALLOC_TRIM_THRESHOLD_']}"] \
-        if "MALLOC_TRIM_THRESHOLD_" in os.environ else []
+    found = (
+        [f"MALLOC_TRIM_THRESHOLD_={os.environ['MALLOC_TRIM_THRESHOLD_']}"]
+        if "MALLOC_TRIM_THRESHOLD_" in os.environ
+        else []
+    )
     if dask.config.get("distributed.worker.profile.enabled", False):
         found.append("the Dask profiler")
     return found
@@ -118,13 +124,19 @@ def check_workers(client, mine: dict) -> dict:
             raise InputError(f"worker {address} cannot run the suite: {_one_line(theirs)}")
         diff = differences(mine, theirs)
         if diff:
-            raise InputError(f"worker {address} on {theirs.get('host')} differs from this process: "
-                             + "; ".join(diff))
-    slow = {address: theirs["slow_settings"] for address, theirs in found.items() if theirs.get("slow_settings")}
+            raise InputError(
+                f"worker {address} on {theirs.get('host')} differs from this process: " + "; ".join(diff)
+            )
+    slow = {
+        address: theirs["slow_settings"] for address, theirs in found.items() if theirs.get("slow_settings")
+    }
     if slow:
         address, what = sorted(slow.items())[0]
-        print(f"cvtbench: warning: {len(slow)} worker(s), e.g. {address}, run with {' and '.join(what)}, which "
-              f"slow runs down; start workers with DASK_CONFIG={CONFIG_FILE}", file=sys.stderr)
+        print(
+            f"cvtbench: warning: {len(slow)} worker(s), e.g. {address}, run with {' and '.join(what)}, which "
+            f"slow runs down; start workers with DASK_CONFIG={CONFIG_FILE}",
+            file=sys.stderr,
+        )
     return found
 
 
@@ -185,8 +197,15 @@ class DaskExecutor:
 
         def submit(i, spec, host=None):
             future = self.client.submit(
-                run_spec, spec, mine, key=f"cvtbench-{spec.key}-{uuid.uuid4().hex[:8]}", pure=False, retries=1,
-                workers=[host] if host else None, allow_other_workers=False)
+                run_spec,
+                spec,
+                mine,
+                key=f"cvtbench-{spec.key}-{uuid.uuid4().hex[:8]}",
+                pure=False,
+                retries=1,
+                workers=[host] if host else None,
+                allow_other_workers=False,
+            )
             pending[future] = (i, spec, host)
 
         try:
@@ -195,8 +214,10 @@ class DaskExecutor:
             raise
         except Exception as exc:
             if self.lost():
-                raise RunAborted(f"lost the Dask cluster at {self.address} in the middle of the sweep "
-                                 f"({_one_line(exc)}; Dask's log: {log_file()})") from None
+                raise RunAborted(
+                    f"lost the Dask cluster at {self.address} in the middle of the sweep "
+                    f"({_one_line(exc)}; Dask's log: {log_file()})"
+                ) from None
             raise
         finally:
             if pending and not self.lost():
@@ -231,8 +252,9 @@ class DaskExecutor:
             if on_start is not None:  # the oldest run not finished: most likely one in hand
                 on_start(next(iter(pending.values()))[1])
             try:
-                done, _ = wait(list(pending), timeout=POLL_S if self.exclusive else None,
-                               return_when="FIRST_COMPLETED")
+                done, _ = wait(
+                    list(pending), timeout=POLL_S if self.exclusive else None, return_when="FIRST_COMPLETED"
+                )
             except TimeoutError:
                 continue
             for future in done:
@@ -303,8 +325,10 @@ def _quiet_logs() -> None:
         for old in list(logger.handlers):
             if isinstance(old, logging.StreamHandler) and not isinstance(old, logging.FileHandler):
                 logger.removeHandler(old)
-        if not any(isinstance(h, logging.FileHandler) and h.baseFilename == handler.baseFilename
-                   for h in logger.handlers):
+        if not any(
+            isinstance(h, logging.FileHandler) and h.baseFilename == handler.baseFilename
+            for h in logger.handlers
+        ):
             logger.addHandler(handler)
         logger.setLevel(logging.INFO)
         logger.propagate = False
@@ -317,8 +341,10 @@ def chosen(args) -> tuple[str | None, int | None]:
     if scheduler is None and workers is None:
         return None, None
     if scheduler is not None and workers is not None:
-        raise InputError("--scheduler and --workers exclude each other: --workers N starts a local cluster, "
-                         "--scheduler ADDRESS uses a running one")
+        raise InputError(
+            "--scheduler and --workers exclude each other: --workers N starts a local cluster, "
+            "--scheduler ADDRESS uses a running one"
+        )
     require_distributed()
     return scheduler, None if workers is None else whole_number(workers, "--workers", minimum=1)
 
@@ -333,11 +359,20 @@ def local_cluster(n_workers: int):
     _quiet_logs()
     with dask.config.set(worker_config()):
         try:
-            cluster = LocalCluster(n_workers=n_workers, threads_per_worker=1, processes=True, host="127.0.0.1",
-                                   scheduler_port=0, dashboard_address="127.0.0.1:0", silence_logs=logging.ERROR)
+            cluster = LocalCluster(
+                n_workers=n_workers,
+                threads_per_worker=1,
+                processes=True,
+                host="127.0.0.1",
+                scheduler_port=0,
+                dashboard_address="127.0.0.1:0",
+                silence_logs=logging.ERROR,
+            )
         except Exception as exc:  # no process could start, no port, no memory: an outcome, not a crash
-            raise RunAborted(f"could not start a local Dask cluster of {n_workers} workers ({_one_line(exc)}; "
-                             f"Dask's log: {log_file()}); run without --workers to run here") from None
+            raise RunAborted(
+                f"could not start a local Dask cluster of {n_workers} workers ({_one_line(exc)}; "
+                f"Dask's log: {log_file()}); run without --workers to run here"
+            ) from None
         with cluster:
             yield cluster
 
@@ -371,8 +406,10 @@ def connect(address: str):
             try:
                 client.wait_for_workers(1, timeout=WORKER_WAIT_S)
             except TimeoutError:
-                raise InputError(f"no Dask worker joined the scheduler at {address} within {WORKER_WAIT_S} s "
-                                 f"(start one with: dask worker {address})") from None
+                raise InputError(
+                    f"no Dask worker joined the scheduler at {address} within {WORKER_WAIT_S} s "
+                    f"(start one with: dask worker {address})"
+                ) from None
         yield client
 
 
@@ -386,6 +423,29 @@ def executor_for(args, *, exclusive: bool = False):
         else:
             with connect(address) as client:
                 yield DaskExecutor(client, exclusive=exclusive)
+
+
+__all__ = [
+    "EXTRA",
+    "CONNECT_TIMEOUT_S",
+    "WORKER_WAIT_S",
+    "POLL_S",
+    "CONFIG_FILE",
+    "require_distributed",
+    "identity",
+    "slow_settings",
+    "worker_config",
+    "differences",
+    "check_workers",
+    "run_spec",
+    "DaskExecutor",
+    "log_file",
+    "chosen",
+    "local_cluster",
+    "scheduler_address",
+    "connect",
+    "executor_for",
+]
 
 
 if __name__ == "__main__":  # the worker settings file, for DASK_CONFIG

@@ -50,10 +50,15 @@ QUICK = Settings(size=96, sites=60, iterations=4, scale=1.0, fewer_mosaic_elemen
 
 
 def add_parser(sub):
-    p = sub.add_parser("figures", help="regenerate the figures (paper Figures 3, 14, 15) as PNG",
-                       description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
-    p.add_argument("--quick", action="store_true",
-                   help="small rasters, few sites and iterations (a smoke test, seconds)")
+    p = sub.add_parser(
+        "figures",
+        help="regenerate the figures (paper Figures 3, 14, 15) as PNG",
+        description=__doc__,
+        formatter_class=argparse.RawDescriptionHelpFormatter,
+    )
+    p.add_argument(
+        "--quick", action="store_true", help="small rasters, few sites and iterations (a smoke test, seconds)"
+    )
     options.add_backend_options(p)
     options.add_output_options(p, DEFAULT_OUT)
     p.set_defaults(func=run)
@@ -87,7 +92,7 @@ def ring_mask(size: int) -> np.ndarray:
 
 def panel_problem(st: Settings, metric: str, *, density=None, field=None, mask=None, seed=1) -> Problem:
     grid = Grid(st.size, st.size, mask)
-    n = st.sites if mask is None else max(1, round(st.sites * grid.pixel_count / st.size ** 2))
+    n = st.sites if mask is None else max(1, round(st.sites * grid.pixel_count / st.size**2))
     fld = None if field is None else DirectionField.named(field, st.size, st.size)
     return Problem(grid, n, make_metric(metric), density, fld, seed)
 
@@ -102,8 +107,15 @@ def _elements_panel(problem: Problem, backend, st: Settings, element=None):
     dist = run_ours(problem, backend, iterations=st.iterations, element=element)
     g = problem.grid
     ev = evaluate(dist.elements, g, region=region_polygon(g), labels=dist.labels)
-    img = draw_elements(dist.elements, g.width, g.height, region_colour=PAPER, region_mask=g.mask,
-                        scale=st.scale, supersample=2)
+    img = draw_elements(
+        dist.elements,
+        g.width,
+        g.height,
+        region_colour=PAPER,
+        region_mask=g.mask,
+        scale=st.scale,
+        supersample=2,
+    )
     return img, ev, dist
 
 
@@ -113,18 +125,27 @@ def figure_metrics(backend, st: Settings):
     from compact_distributions.cvt.methods import run_ours
     from compact_distributions.cvt.render import cells_image
 
-    names = [("l2", "(a) L2"), ("l1", "(b) L1 (Manhattan)"), ("linf", "(c) L∞ (Chebyshev)"),
-             ("linf-axial", "(d) L∞, axial β=0.5"), ("l2-axial", "(e) L2, axial β=0.5"),
-             ("triangle", "(f) triangle (equidistant line)")]
+    names = [
+        ("l2", "(a) L2"),
+        ("l1", "(b) L1 (Manhattan)"),
+        ("linf", "(c) L∞ (Chebyshev)"),
+        ("linf-axial", "(d) L∞, axial β=0.5"),
+        ("l2-axial", "(e) L2, axial β=0.5"),
+        ("triangle", "(f) triangle (equidistant line)"),
+    ]
     panels, caps = [], []
     for metric, cap in names:
         problem = panel_problem(st, metric)
         dist = run_ours(problem, backend, iterations=st.iterations)
         side = round(st.size * st.scale)
-        panels.append(cells_image(dist.labels, len(dist.sites), dist.sites).resize((side, side), Image.NEAREST))
+        panels.append(
+            cells_image(dist.labels, len(dist.sites), dist.sites).resize((side, side), Image.NEAREST)
+        )
         caps.append(cap)
-    title = (f"Figure 3: CVTs under the six metrics ({st.sites} sites, {st.iterations} "
-             "Lloyd iterations, cells coloured, sites dark)")
+    title = (
+        f"Figure 3: CVTs under the six metrics ({st.sites} sites, {st.iterations} "
+        "Lloyd iterations, cells coloured, sites dark)"
+    )
     return panel_grid(panels, caps, 3, title)
 
 
@@ -149,10 +170,14 @@ def figure_elements(backend, st: Settings):
 def figure_regions(backend, st: Settings):
     runs = [
         ("(a) squares in a star", panel_problem(st, "linf", mask=star_mask(st.size))),
-        ("(b) ellipses in a ring, circular field",
-         panel_problem(st, "l2-axial", mask=ring_mask(st.size), field="circular")),
-        ("(c) triangles in a star, radial field",
-         panel_problem(st, "triangle", mask=star_mask(st.size), field="radial")),
+        (
+            "(b) ellipses in a ring, circular field",
+            panel_problem(st, "l2-axial", mask=ring_mask(st.size), field="circular"),
+        ),
+        (
+            "(c) triangles in a star, radial field",
+            panel_problem(st, "triangle", mask=star_mask(st.size), field="radial"),
+        ),
     ]
     panels, caps = [], []
     for cap, problem in runs:
@@ -184,8 +209,14 @@ class FiguresRequest:
     @classmethod
     def from_args(cls, args) -> FiguresRequest:
         name, backend_options = options.backend_choice(args)
-        return cls(Path(args.out), bool(args.quick), bool(args.quiet), name, backend_options,
-                   options.command_text(getattr(args, "argv", None)))
+        return cls(
+            Path(args.out),
+            bool(args.quick),
+            bool(args.quiet),
+            name,
+            backend_options,
+            options.command_text(getattr(args, "argv", None)),
+        )
 
 
 def prepare(req: FiguresRequest) -> dict:
@@ -212,15 +243,41 @@ def figures(req: FiguresRequest) -> int:
 
     plan = prepare(req)
     out, st = plan["out"], plan["settings"]
-    with report_folder(out, command=req.command or "cvtbench figures" + (" --quick" if req.quick else "")), \
-            create_backend(req.backend, **req.backend_options) as backend:
+    with (
+        report_folder(out, command=req.command or "cvtbench figures" + (" --quick" if req.quick else "")),
+        create_backend(req.backend, **req.backend_options) as backend,
+    ):
         for name, make in FIGURES.items():
             t0 = time.perf_counter()
             data = png_bytes(make(backend, st))
             atomic_write(out / name, data)
             if not req.quiet:
-                print(f"wrote {out / name} ({len(data) // 1024} KB, {time.perf_counter() - t0:.1f} s)",
-                      file=sys.stderr)
-        write_paper_figures(out, backend, iterations=st.iterations, fewer=st.fewer_mosaic_elements,
-                            quiet=req.quiet)
+                print(
+                    f"wrote {out / name} ({len(data) // 1024} KB, {time.perf_counter() - t0:.1f} s)",
+                    file=sys.stderr,
+                )
+        write_paper_figures(
+            out, backend, iterations=st.iterations, fewer=st.fewer_mosaic_elements, quiet=req.quiet
+        )
     return 0
+
+
+__all__ = [
+    "DEFAULT_OUT",
+    "Settings",
+    "FULL",
+    "QUICK",
+    "add_parser",
+    "radial_density",
+    "star_mask",
+    "ring_mask",
+    "panel_problem",
+    "figure_metrics",
+    "figure_elements",
+    "figure_regions",
+    "FIGURES",
+    "FiguresRequest",
+    "prepare",
+    "run",
+    "figures",
+]

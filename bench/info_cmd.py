@@ -30,3 +30,6 @@ def run(args) -> int:
     for k, v in versions().items():
         print(f"  {k}: {v}")
     return 0
+
+
+__all__ = ["add_parser", "run"]

@@ -48,36 +48,62 @@ def add_parser(sub):
     from compact_distributions.cvt.image_fields import DEFAULT_EDGE_THRESHOLD
     from compact_distributions.cvt.mosaic import DEFAULT_ELEMENTS, DEFAULT_METHOD
 
-    p = sub.add_parser("mosaic", help="turn a picture into a mosaic (density and direction from the picture)",
-                       description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
-    p.add_argument("image", metavar="IMAGE", help="the picture: PNG, JPEG, ... (grey, RGB, RGBA, palette, 16-bit)")
-    p.add_argument("--elements", default=str(DEFAULT_ELEMENTS),
-                   help=f"number of elements N (default {DEFAULT_ELEMENTS})")
+    p = sub.add_parser(
+        "mosaic",
+        help="turn a picture into a mosaic (density and direction from the picture)",
+        description=__doc__,
+        formatter_class=argparse.RawDescriptionHelpFormatter,
+    )
+    p.add_argument(
+        "image", metavar="IMAGE", help="the picture: PNG, JPEG, ... (grey, RGB, RGBA, palette, 16-bit)"
+    )
+    p.add_argument(
+        "--elements", default=str(DEFAULT_ELEMENTS), help=f"number of elements N (default {DEFAULT_ELEMENTS})"
+    )
     options.add_shape_options(p)
-    p.add_argument("--size", default=None,
-                   help=f"{options.SIZE_HELP}; default the picture's size with the long side capped at 1024")
+    p.add_argument(
+        "--size",
+        default=None,
+        help=f"{options.SIZE_HELP}; default the picture's size with the long side capped at 1024",
+    )
     options.add_backend_options(p)
-    p.add_argument("--gap", default=None,
-                   help="grout width in pixels (default 5%% of the mean element spacing)")
+    p.add_argument(
+        "--gap", default=None, help="grout width in pixels (default 5%% of the mean element spacing)"
+    )
     p.add_argument("--grout", default="#383838", help="grout colour: a name or #rrggbb (default #383838)")
-    p.add_argument("--contrast", default=None,
-                   help="densest / sparsest cell area of the density map, 1 to 100 (default 3; 1 = uniform)")
+    p.add_argument(
+        "--contrast",
+        default=None,
+        help="densest / sparsest cell area of the density map, 1 to 100 (default 3; 1 = uniform)",
+    )
     p.add_argument("--no-field", action="store_true", help="all elements at angle 0 (no direction field)")
     p.add_argument("--no-density", action="store_true", help="one element size everywhere (no density map)")
-    p.add_argument("--no-edges", action="store_true",
-                   help="strong edges are not walls (tiles may cross them)")
-    p.add_argument("--no-cut", action="store_true",
-                   help="keep every tile whole (by default the ours-compact tiles beside a wall are cut to fit it)")
-    p.add_argument("--edge-threshold", default=None,
-                   help=f"contrast of a strong edge in ΔE*ab (CIELAB; default {DEFAULT_EDGE_THRESHOLD:g}): "
-                   "strong edges are walls, and the straddling measure counts tiles across them")
+    p.add_argument(
+        "--no-edges", action="store_true", help="strong edges are not walls (tiles may cross them)"
+    )
+    p.add_argument(
+        "--no-cut",
+        action="store_true",
+        help="keep every tile whole (by default the ours-compact tiles beside a wall are cut to fit it)",
+    )
+    p.add_argument(
+        "--edge-threshold",
+        default=None,
+        help=f"contrast of a strong edge in ΔE*ab (CIELAB; default {DEFAULT_EDGE_THRESHOLD:g}): "
+        "strong edges are walls, and the straddling measure counts tiles across them",
+    )
     options.add_method_option(p, default=DEFAULT_METHOD)
     options.add_run_options(p)
-    p.add_argument("--png-scale", default="1",
-                   help="mosaic.png size relative to the raster, 0.01 to 100 (default 1)")
-    p.add_argument("--compare", choices=list(COMPARE), default=None,
-                   help="also write compare_WHAT.png: original | without | with the field, the density or "
-                   "the edge walls; method: original | ours | ours-compact | hausner2001")
+    p.add_argument(
+        "--png-scale", default="1", help="mosaic.png size relative to the raster, 0.01 to 100 (default 1)"
+    )
+    p.add_argument(
+        "--compare",
+        choices=list(COMPARE),
+        default=None,
+        help="also write compare_WHAT.png: original | without | with the field, the density or "
+        "the edge walls; method: original | ours | ours-compact | hausner2001",
+    )
     options.add_output_options(p, DEFAULT_OUT)
     options.add_memory_option(p)
     p.set_defaults(func=run)
@@ -110,18 +136,23 @@ def mosaic_options(args) -> dict:
         method_options=options.method_options(args, args.method),
         edges=not args.no_edges,
         cut=False if args.no_cut else None,
-        edge_threshold=(DEFAULT_EDGE_THRESHOLD if args.edge_threshold is None
-                        else real_number(args.edge_threshold, "--edge-threshold", above=0)),
+        edge_threshold=(
+            DEFAULT_EDGE_THRESHOLD
+            if args.edge_threshold is None
+            else real_number(args.edge_threshold, "--edge-threshold", above=0)
+        ),
         n_elements=whole_number(args.elements, "--elements", minimum=1),
         metric=None if args.metric is None else one_of(args.metric, "--metric", METRIC_NAMES),
         element=None if args.element is None else one_of(args.element, "--element", ELEMENT_SHAPES),
         aspect=None if args.aspect is None else real_number(args.aspect, "--aspect", *ASPECT_RANGE),
         gap=None if args.gap is None else parse_gap(args.gap, "--gap"),
-        use_field=not args.no_field, use_density=not args.no_density,
+        use_field=not args.no_field,
+        use_density=not args.no_density,
         iterations=whole_number(args.iterations, "--iterations", minimum=0, maximum=MAX_ITERATIONS),
         seed=whole_number(args.seed, "--seed", minimum=0, maximum=MAX_SEED),
-        contrast=DEFAULT_CONTRAST if args.contrast is None else real_number(args.contrast, "--contrast",
-                                                                           *CONTRAST_RANGE),
+        contrast=DEFAULT_CONTRAST
+        if args.contrast is None
+        else real_number(args.contrast, "--contrast", *CONTRAST_RANGE),
         grout=parse_colour(args.grout, "--grout"),
         progress=options.progress_printer(args.quiet),
         memory_limit=args.memory_limit,
@@ -139,17 +170,34 @@ def mosaic_result_json(args, m, backend, stage_seconds: dict | None = None) -> d
 
     # coverage of the whole picture: wall pixels count as grout
     ev = evaluate(m.polygons, Grid(m.width, m.height), labels=m.labels)
-    sources = {"density": "picture" if m.problem.density is not None else None,
-               "field": "picture" if m.problem.field is not None else None,
-               "region": "picture less its strong edges" if m.walls else None}
-    return build_result("mosaic", m.problem, m.to_distribution(), ev, backend, element=m.element, gap=m.gap,
-                        command=command_line(getattr(args, "argv", None)), sources=sources,
-                        method_options=m.method_options, stage_seconds=stage_seconds,
-                        placed=m.polygons, image=m.source,
-                        colours=[hex_colour(c) for c in m.colours], grout=hex_colour(m.grout),
-                        contrast=m.contrast,
-                        colour_error=m.colour_error if np.isfinite(m.colour_error) else None, straddling=m.straddling,
-                        edge_threshold=m.edge_threshold, walls=m.walls, edge_pixels=int(m.edges.sum()))
+    sources = {
+        "density": "picture" if m.problem.density is not None else None,
+        "field": "picture" if m.problem.field is not None else None,
+        "region": "picture less its strong edges" if m.walls else None,
+    }
+    return build_result(
+        "mosaic",
+        m.problem,
+        m.to_distribution(),
+        ev,
+        backend,
+        element=m.element,
+        gap=m.gap,
+        command=command_line(getattr(args, "argv", None)),
+        sources=sources,
+        method_options=m.method_options,
+        stage_seconds=stage_seconds,
+        placed=m.polygons,
+        image=m.source,
+        colours=[hex_colour(c) for c in m.colours],
+        grout=hex_colour(m.grout),
+        contrast=m.contrast,
+        colour_error=m.colour_error if np.isfinite(m.colour_error) else None,
+        straddling=m.straddling,
+        edge_threshold=m.edge_threshold,
+        walls=m.walls,
+        edge_pixels=int(m.edges.sum()),
+    )
 
 
 PNG_SCALE_RANGE = (0.01, 100.0)
@@ -178,29 +226,45 @@ def run(args) -> int:
         pw, ph = upright_size(header)
     w, h = raster_size(pw, ph, args.size, "--size")
     if opts["n_elements"] > w * h:
-        raise InputError(f"--elements {opts['n_elements']} do not fit in a {w}x{h} raster (from a {pw}x{ph} "
-                         f"picture); use fewer --elements or a larger --size")
+        raise InputError(
+            f"--elements {opts['n_elements']} do not fit in a {w}x{h} raster (from a {pw}x{ph} "
+            f"picture); use fewer --elements or a larger --size"
+        )
     name, _ = options.backend_choice(args)
-    mosaic_estimate(w, h, opts["n_elements"], backend_class(name), element=element, png_scale=png_scale,
-                    compare=args.compare is not None).check(
-        args.memory_limit, lower="use a smaller --size, fewer --elements or a smaller --png-scale")
+    mosaic_estimate(
+        w,
+        h,
+        opts["n_elements"],
+        backend_class(name),
+        element=element,
+        png_scale=png_scale,
+        compare=args.compare is not None,
+    ).check(args.memory_limit, lower="use a smaller --size, fewer --elements or a smaller --png-scale")
     opts["size"] = (w, h)
     with OutputFolder(args.out, "--out", COMMAND_OUTPUTS) as tmp:
         rgb, _ = picture_array(args.image, at_least=(w, h), memory_limit=args.memory_limit, name="IMAGE")
         picture = resample(rgb, w, h)
-        _say(args.quiet, f"read {args.image}: {pw}x{ph} px, as {w}x{h} (read at {rgb.shape[1]}x{rgb.shape[0]})")
+        _say(
+            args.quiet, f"read {args.image}: {pw}x{ph} px, as {w}x{h} (read at {rgb.shape[1]}x{rgb.shape[0]})"
+        )
         del rgb
         with options.open_backend(args) as backend:
-            _say(args.quiet, f"mosaic of {opts['n_elements']} elements, {opts['iterations']} iterations "
-                 f"on {backend.variant}")
+            _say(
+                args.quiet,
+                f"mosaic of {opts['n_elements']} elements, {opts['iterations']} iterations "
+                f"on {backend.variant}",
+            )
             m = make_mosaic(picture, backend, **opts)
             m.source = args.image
             comparison = None
             if args.compare:
                 _say(args.quiet, f"comparison runs for --compare {args.compare}")
                 comparison = compare_figure(picture, backend, dict(opts, progress=None), args.compare, m)
-            _say(args.quiet, f"{m.method}: placed {m.placed} of {len(m.sites)} tiles, coverage {m.coverage:.3f}, "
-                 f"colour error {m.colour_error:.2f} ΔE*ab, straddling {100 * m.straddling:.1f} %; writing {args.out}")
+            _say(
+                args.quiet,
+                f"{m.method}: placed {m.placed} of {len(m.sites)} tiles, coverage {m.coverage:.3f}, "
+                f"colour error {m.colour_error:.2f} ΔE*ab, straddling {100 * m.straddling:.1f} %; writing {args.out}",
+            )
             # the other files first, so that result.json (written last) holds their writing time
             t_write = time.perf_counter()
             write_lines(tmp / "mosaic.svg", m.svg_lines())
@@ -210,27 +274,38 @@ def run(args) -> int:
             write_json(tmp / "result.json", result)
         if comparison is not None:
             comparison.save(tmp / f"compare_{args.compare}.png")
-    _say(args.quiet, f"wrote {args.out}/mosaic.svg, mosaic.png, result.json, sites.csv "
-         f"({time.perf_counter() - t0:.1f} s)")
+    _say(
+        args.quiet,
+        f"wrote {args.out}/mosaic.svg, mosaic.png, result.json, sites.csv ({time.perf_counter() - t0:.1f} s)",
+    )
     return 0
 
 
 # ----------------------------------------------------------------- figures 18-19
 
+
 def measures_line(m) -> str:
     # plain ASCII: the default bitmap font has no Δ
-    return (f"coverage {m.coverage:.3f}, colour error {m.colour_error:.1f} dE,\n"
-            f"straddling {100 * m.straddling:.1f} %, {m.placed} tiles")
+    return (
+        f"coverage {m.coverage:.3f}, colour error {m.colour_error:.1f} dE,\n"
+        f"straddling {100 * m.straddling:.1f} %, {m.placed} tiles"
+    )
 
 
 def comparison_figure(picture: np.ndarray, without, with_, what: str, scale: float = 1.0):
     """original | without | with, side by side with captions (a PIL image)."""
     from PIL import Image
 
-    names = {"field": ("without the direction field", "with the direction field"),
-             "density": ("without size variation", "with size variation (density)"),
-             "edges": ("edges not walls (--no-edges)", "strong edges as walls")}[what]
-    panels = [Image.fromarray(np.round(picture * 255).astype(np.uint8), "RGB"), without.render(), with_.render()]
+    names = {
+        "field": ("without the direction field", "with the direction field"),
+        "density": ("without size variation", "with size variation (density)"),
+        "edges": ("edges not walls (--no-edges)", "strong edges as walls"),
+    }[what]
+    panels = [
+        Image.fromarray(np.round(picture * 255).astype(np.uint8), "RGB"),
+        without.render(),
+        with_.render(),
+    ]
     captions = ["original\n", f"{names[0]}\n{measures_line(without)}", f"{names[1]}\n{measures_line(with_)}"]
     return panel_grid(panels, captions, scale=scale)
 
@@ -267,7 +342,9 @@ def compare_figure(picture, backend, opts: dict, what: str, done=None):
     key = COMPARE[what]
     on = bool(opts.get(key, True))
     with_ = done if done is not None and on else make_mosaic(picture, backend, **dict(opts, **{key: True}))
-    without = done if done is not None and not on else make_mosaic(picture, backend, **dict(opts, **{key: False}))
+    without = (
+        done if done is not None and not on else make_mosaic(picture, backend, **dict(opts, **{key: False}))
+    )
     return comparison_figure(with_.picture, without, with_, what)
 
 
@@ -275,8 +352,18 @@ def compare_figure(picture, backend, opts: dict, what: str, done=None):
 # our own pictures.  Figure 18 isolates the field (no density in either panel), Figure 19
 # the density (the field on in both, as in the paper's mosaics).
 PAPER_FIGURES = [
-    ("fig18_field_shapes.png", "shapes.png", "field", dict(n_elements=1800, element="square", use_density=False)),
-    ("fig18_field_leaf.png", "leaf.png", "field", dict(n_elements=1500, element="rectangle", use_density=False)),
+    (
+        "fig18_field_shapes.png",
+        "shapes.png",
+        "field",
+        dict(n_elements=1800, element="square", use_density=False),
+    ),
+    (
+        "fig18_field_leaf.png",
+        "leaf.png",
+        "field",
+        dict(n_elements=1500, element="rectangle", use_density=False),
+    ),
     ("fig19_density_rings.png", "rings.png", "density", dict(n_elements=1200, element="square")),
     ("fig19_density_shapes.png", "shapes.png", "density", dict(n_elements=1200, element="circle")),
 ]
@@ -285,12 +372,16 @@ PAPER_FIGURES = [
 SAMPLES_DIR = Path(__file__).resolve().parent.parent / "samples"
 # the README's full-size mosaic and its comparisons: a photograph-like picture, defaults
 SCENE = "scene.jpg"
-SCENE_FIGURES = {"mosaic": "mosaic_scene.png", "edges": "mosaic_scene_edges.png",
-                 "method": "mosaic_scene_methods.png"}
+SCENE_FIGURES = {
+    "mosaic": "mosaic_scene.png",
+    "edges": "mosaic_scene_edges.png",
+    "method": "mosaic_scene_methods.png",
+}
 
 
-def write_paper_figures(out_dir, backend, samples_dir=None, iterations: int = 20, fewer: int = 1,
-                        quiet: bool = False) -> list[Path]:
+def write_paper_figures(
+    out_dir, backend, samples_dir=None, iterations: int = 20, fewer: int = 1, quiet: bool = False
+) -> list[Path]:
     """Re-make Figures 18-19 (original | without | with) from the sample pictures, and
     the README's mosaic of samples/scene.jpg (2000 tiles, the defaults) with its
     comparisons without walls and by method (``fewer``: divide the number of elements,
@@ -321,15 +412,43 @@ def write_paper_figures(out_dir, backend, samples_dir=None, iterations: int = 20
         opts = dict(opts, n_elements=max(1, opts["n_elements"] // fewer))
         with_ = make_mosaic(picture, backend, iterations=iterations, **dict(opts, **{key: True}))
         without = make_mosaic(picture, backend, iterations=iterations, **dict(opts, **{key: False}))
-        save(comparison_figure(with_.picture, without, with_, what), name,
-             f"{opts['element']} x {opts['n_elements']}, coverage without {without.coverage:.3f}, "
-             f"with {with_.coverage:.3f}")
+        save(
+            comparison_figure(with_.picture, without, with_, what),
+            name,
+            f"{opts['element']} x {opts['n_elements']}, coverage without {without.coverage:.3f}, "
+            f"with {with_.coverage:.3f}",
+        )
 
     picture, _ = picture_array(samples_dir / SCENE)
     opts = dict(n_elements=max(1, DEFAULT_ELEMENTS // fewer), iterations=iterations)
     m = make_mosaic(picture, backend, **opts)
     save(m.render(), SCENE_FIGURES["mosaic"], f"{m.method}, {measures_line(m).replace(chr(10), ' ')}")
     for what in ("edges", "method"):
-        save(compare_figure(picture, backend, opts, what, done=m), SCENE_FIGURES[what], f"--compare {what}",
-             palette=True)
+        save(
+            compare_figure(picture, backend, opts, what, done=m),
+            SCENE_FIGURES[what],
+            f"--compare {what}",
+            palette=True,
+        )
     return written
+
+
+__all__ = [
+    "DEFAULT_OUT",
+    "COMPARE",
+    "COMPARE_METHODS",
+    "add_parser",
+    "mosaic_options",
+    "mosaic_result_json",
+    "PNG_SCALE_RANGE",
+    "run",
+    "measures_line",
+    "comparison_figure",
+    "compare_methods",
+    "compare_figure",
+    "PAPER_FIGURES",
+    "SAMPLES_DIR",
+    "SCENE",
+    "SCENE_FIGURES",
+    "write_paper_figures",
+]

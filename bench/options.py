@@ -19,20 +19,31 @@ from compact_distributions.cvt.shapes import ELEMENT_SHAPES
 from compact_distributions.cvt.validate import whole_number
 
 BACKEND_NAMES = list(dict.fromkeys([*REGISTRY, *VARIANTS]))
-SIZE_HELP = ("raster: WxH, or N for the long side (the other side follows the picture's aspect; "
-             "square when there is no picture)")
+SIZE_HELP = (
+    "raster: WxH, or N for the long side (the other side follows the picture's aspect; "
+    "square when there is no picture)"
+)
 
 
 # ------------------------------------------------------------------ one run
 def add_backend_options(p, default: str = "numpy") -> None:
-    p.add_argument("--backend", default=default,
-                   help=f"{', '.join(BACKEND_NAMES)} (default {default}; numpy is the float64 reference; "
-                   "gl is gl-cone)")
-    p.add_argument("--gl-mode", default=None, choices=["cone", "exact"],
-                   help="gl backend: cone (the paper's cones and pyramids, default) or exact (per-fragment "
-                   "metric); the same as --backend gl-cone / gl-exact")
-    p.add_argument("--device", default=None,
-                   help="OpenCL device as PLATFORM[:DEVICE] indices, like PYOPENCL_CTX (opencl backend)")
+    p.add_argument(
+        "--backend",
+        default=default,
+        help=f"{', '.join(BACKEND_NAMES)} (default {default}; numpy is the float64 reference; gl is gl-cone)",
+    )
+    p.add_argument(
+        "--gl-mode",
+        default=None,
+        choices=["cone", "exact"],
+        help="gl backend: cone (the paper's cones and pyramids, default) or exact (per-fragment "
+        "metric); the same as --backend gl-cone / gl-exact",
+    )
+    p.add_argument(
+        "--device",
+        default=None,
+        help="OpenCL device as PLATFORM[:DEVICE] indices, like PYOPENCL_CTX (opencl backend)",
+    )
 
 
 def backend_choice(args) -> tuple[str, dict]:
@@ -60,14 +71,24 @@ def open_backend(args):
 def add_shape_options(p, default_element: str = "square") -> None:
     """``--metric``, ``--element`` (either implies the other; neither: ``default_element``)
     and ``--aspect``."""
-    p.add_argument("--metric", default=None,
-                   help=f"Lloyd distance: {', '.join(METRIC_NAMES)} (default: the element's own; neither "
-                   f"given: {ELEMENT_METRIC[default_element]})")
-    p.add_argument("--element", metavar="SHAPE", default=None,
-                   help=f"element placed in each cell: {', '.join(ELEMENT_SHAPES)} (default: the metric's own; "
-                   f"neither given: {default_element}s)")
-    p.add_argument("--aspect", default=None, help="β of rectangles and ellipses and of the axial metrics "
-                   "(default 0.5); > 0")
+    p.add_argument(
+        "--metric",
+        default=None,
+        help=f"Lloyd distance: {', '.join(METRIC_NAMES)} (default: the element's own; neither "
+        f"given: {ELEMENT_METRIC[default_element]})",
+    )
+    p.add_argument(
+        "--element",
+        metavar="SHAPE",
+        default=None,
+        help=f"element placed in each cell: {', '.join(ELEMENT_SHAPES)} (default: the metric's own; "
+        f"neither given: {default_element}s)",
+    )
+    p.add_argument(
+        "--aspect",
+        default=None,
+        help="β of rectangles and ellipses and of the axial metrics (default 0.5); > 0",
+    )
 
 
 def add_method_option(p, default: str = "ours", several: bool = False) -> None:
@@ -78,9 +99,12 @@ def add_method_option(p, default: str = "ours", several: bool = False) -> None:
 
     records = methods()
     if not several:
-        p.add_argument("--method", default=default, help="; ".join(
-            f"{m.name}: {m.summary}" if m.summary else m.name for m in records.values())
-            + f" (cvtbench info lists them; default {default})")
+        p.add_argument(
+            "--method",
+            default=default,
+            help="; ".join(f"{m.name}: {m.summary}" if m.summary else m.name for m in records.values())
+            + f" (cvtbench info lists them; default {default})",
+        )
     seen = {}
     for m in records.values():
         for opt in m.options:
@@ -101,8 +125,11 @@ def add_method_option(p, default: str = "ours", several: bool = False) -> None:
 
 def given_method_options(args) -> dict:
     """The method options set on the command line, by option name (unset ones left out)."""
-    return {k.removeprefix("method_option_"): v for k, v in vars(args).items()
-            if k.startswith("method_option_") and v is not None}
+    return {
+        k.removeprefix("method_option_"): v
+        for k, v in vars(args).items()
+        if k.startswith("method_option_") and v is not None
+    }
 
 
 def method_options(args, method=None) -> dict:
@@ -115,8 +142,9 @@ def method_options(args, method=None) -> dict:
 
 
 def add_run_options(p, iterations: int = 20, seed_help: str = "random seed (default 0)") -> None:
-    p.add_argument("--iterations", default=str(iterations),
-                   help=f"Lloyd iterations (default {iterations}; 0 allowed)")
+    p.add_argument(
+        "--iterations", default=str(iterations), help=f"Lloyd iterations (default {iterations}; 0 allowed)"
+    )
     p.add_argument("--seed", default="0", help=seed_help)
 
 
@@ -136,8 +164,12 @@ def progress_printer(quiet: bool):
         elapsed = time.perf_counter() - start
         tty = sys.stderr.isatty()
         if tty or k == total or k % max(1, total // 10) == 0:
-            print(f"\riteration {k}/{total}  energy {energy:.4g} px²  {elapsed:.1f} s",
-                  end="\n" if k == total or not tty else "", file=sys.stderr, flush=True)
+            print(
+                f"\riteration {k}/{total}  energy {energy:.4g} px²  {elapsed:.1f} s",
+                end="\n" if k == total or not tty else "",
+                file=sys.stderr,
+                flush=True,
+            )
 
     return report
 
@@ -171,12 +203,17 @@ class SweepRequest:
     def common(args) -> dict:
         """The shared fields from a parsed command line."""
         workers = getattr(args, "workers", None)
-        return dict(out=report_out(args), quick=bool(args.quick), force=bool(getattr(args, "force", False)),
-                    quiet=bool(args.quiet), scheduler=getattr(args, "scheduler", None),
-                    workers=None if workers is None else whole_number(workers, "--workers", minimum=1),
-                    exclusive=bool(getattr(args, "exclusive", False)),
-                    memory_limit=getattr(args, "memory_limit", None),
-                    command=command_text(getattr(args, "argv", None)))
+        return dict(
+            out=report_out(args),
+            quick=bool(args.quick),
+            force=bool(getattr(args, "force", False)),
+            quiet=bool(args.quiet),
+            scheduler=getattr(args, "scheduler", None),
+            workers=None if workers is None else whole_number(workers, "--workers", minimum=1),
+            exclusive=bool(getattr(args, "exclusive", False)),
+            memory_limit=getattr(args, "memory_limit", None),
+            command=command_text(getattr(args, "argv", None)),
+        )
 
 
 def as_tuple(items) -> tuple | None:
@@ -194,26 +231,40 @@ def command_text(argv) -> str | None:
 def add_sweep_options(p, quick_help: str) -> None:
     p.add_argument("--quick", action="store_true", help=quick_help)
     p.add_argument("--force", action="store_true", help="re-run runs whose raw json exists")
-    p.add_argument("--out", default=None, help="report folder (default reports, or reports/quick with --quick)")
+    p.add_argument(
+        "--out", default=None, help="report folder (default reports, or reports/quick with --quick)"
+    )
     p.add_argument("--quiet", action="store_true", help="no progress bar")
 
 
 def add_cluster_options(p, exclusive: bool = False) -> None:
     """Where a sweep's runs go: a Dask cluster (--scheduler), a local one (--workers), or
     in-process (neither).  ``exclusive``: also offer --exclusive (table2's time columns)."""
-    p.add_argument("--scheduler", metavar="ADDRESS", default=None,
-                   help="run on the Dask cluster of this scheduler, e.g. tcp://10.0.0.5:8786 "
-                   "(needs the cluster extra)")
-    p.add_argument("--workers", metavar="N", default=None,
-                   help="run on a local Dask cluster of N worker processes (needs the cluster extra)")
+    p.add_argument(
+        "--scheduler",
+        metavar="ADDRESS",
+        default=None,
+        help="run on the Dask cluster of this scheduler, e.g. tcp://10.0.0.5:8786 (needs the cluster extra)",
+    )
+    p.add_argument(
+        "--workers",
+        metavar="N",
+        default=None,
+        help="run on a local Dask cluster of N worker processes (needs the cluster extra)",
+    )
     if exclusive:
-        p.add_argument("--exclusive", action="store_true",
-                       help="with --scheduler/--workers: each run has its host to itself, so its time is "
-                       "not shared with other runs (fewer runs at once)")
+        p.add_argument(
+            "--exclusive",
+            action="store_true",
+            help="with --scheduler/--workers: each run has its host to itself, so its time is "
+            "not shared with other runs (fewer runs at once)",
+        )
 
 
 def add_seeds_option(p, default_text: str = "default 5; quick 2") -> None:
-    p.add_argument("--seeds", default=None, help=f"number of seeds K (1 to 1000): seeds 0..K-1 ({default_text})")
+    p.add_argument(
+        "--seeds", default=None, help=f"number of seeds K (1 to 1000): seeds 0..K-1 ({default_text})"
+    )
 
 
 def add_list_options(p, *names: str) -> None:
@@ -237,6 +288,37 @@ def seeds_value(text, default: int) -> int:
 
 # ------------------------------------------------------------------ memory
 def add_memory_option(p) -> None:
-    p.add_argument("--memory-limit", metavar="SIZE", default=None,
-                   help="memory this command may plan to use, e.g. 8G or 512M (default: what the machine "
-                   "has available now); a configuration estimated to need more is refused before it starts")
+    p.add_argument(
+        "--memory-limit",
+        metavar="SIZE",
+        default=None,
+        help="memory this command may plan to use, e.g. 8G or 512M (default: what the machine "
+        "has available now); a configuration estimated to need more is refused before it starts",
+    )
+
+
+__all__ = [
+    "BACKEND_NAMES",
+    "SIZE_HELP",
+    "add_backend_options",
+    "backend_choice",
+    "open_backend",
+    "add_shape_options",
+    "add_method_option",
+    "given_method_options",
+    "method_options",
+    "add_run_options",
+    "add_output_options",
+    "progress_printer",
+    "report_out",
+    "SweepRequest",
+    "as_tuple",
+    "command_text",
+    "add_sweep_options",
+    "add_cluster_options",
+    "add_seeds_option",
+    "add_list_options",
+    "MAX_SEEDS",
+    "seeds_value",
+    "add_memory_option",
+]

@@ -21,8 +21,7 @@ import numpy as np
 
 from compact_distributions.cvt.errors import InputError
 
-PACKAGES = ("numpy", "scipy", "shapely", "pandas", "matplotlib", "pillow", "pyopencl",
-            "moderngl")
+PACKAGES = ("numpy", "scipy", "shapely", "pandas", "matplotlib", "pillow", "pyopencl", "moderngl")
 
 
 def versions() -> dict:
@@ -40,8 +39,11 @@ def versions() -> dict:
 
 
 def machine() -> dict:
-    return {"platform": platform.platform(), "processor": platform.processor() or platform.machine(),
-            "cpus": os.cpu_count()}
+    return {
+        "platform": platform.platform(),
+        "processor": platform.processor() or platform.machine(),
+        "cpus": os.cpu_count(),
+    }
 
 
 # ------------------------------------------------------------------ writing files and folders
@@ -51,9 +53,19 @@ def machine() -> dict:
 TEMP_MARK = ".cvtbench-tmp"
 # what `cvtbench run` and `cvtbench mosaic` write: a folder holding only these may be
 # replaced by another run or mosaic
-COMMAND_OUTPUTS = ("result.json", "sites.csv", "cells.png", "elements.svg", "elements.png", "mosaic.svg",
-                   "mosaic.png", "compare_field.png", "compare_density.png", "compare_edges.png",
-                   "compare_method.png")
+COMMAND_OUTPUTS = (
+    "result.json",
+    "sites.csv",
+    "cells.png",
+    "elements.svg",
+    "elements.png",
+    "mosaic.svg",
+    "mosaic.png",
+    "compare_field.png",
+    "compare_density.png",
+    "compare_edges.png",
+    "compare_method.png",
+)
 LOCK_NAME = ".cvtbench.lock"
 
 
@@ -178,9 +190,13 @@ def atomic_write(path, data: str | bytes) -> None:
 
 
 def _kind_of(st) -> str:
-    for test, name in ((stat.S_ISREG, "a file"), (stat.S_ISCHR, "a character device"),
-                       (stat.S_ISBLK, "a block device"), (stat.S_ISFIFO, "a named pipe"),
-                       (stat.S_ISSOCK, "a socket")):
+    for test, name in (
+        (stat.S_ISREG, "a file"),
+        (stat.S_ISCHR, "a character device"),
+        (stat.S_ISBLK, "a block device"),
+        (stat.S_ISFIFO, "a named pipe"),
+        (stat.S_ISSOCK, "a socket"),
+    ):
         if test(st.st_mode):
             return name
     return "not a folder"
@@ -256,14 +272,17 @@ class OutputFolder:
                     folder.mkdir()
                     self._made.append(folder)
             remove_leftovers(self.target.parent, self.target.name)
-            self.tmp, self._fd = _new_temporary(self.target.parent, f".{self.target.name}.", TEMP_MARK,
-                                                directory=True)
+            self.tmp, self._fd = _new_temporary(
+                self.target.parent, f".{self.target.name}.", TEMP_MARK, directory=True
+            )
             os.chmod(self.tmp, 0o777 & ~_umask())  # mkdtemp makes 0700; an output folder is shared
             if self.target.is_dir():
                 remove_leftovers(self.target)
         except OSError as exc:
             self._abandon()
-            where = exc.filename if exc.filename and TEMP_MARK not in str(exc.filename) else self.target.parent
+            where = (
+                exc.filename if exc.filename and TEMP_MARK not in str(exc.filename) else self.target.parent
+            )
             raise InputError(f"{option} {self.shown}: cannot write in {where} ({_why(exc)})") from None
 
     def _check_contents(self) -> None:
@@ -274,8 +293,10 @@ class OutputFolder:
         foreign = sorted(n for n in names if n not in self.replaceable and TEMP_MARK not in n)
         if foreign:
             more = f" and {len(foreign) - 3} more" if len(foreign) > 3 else ""
-            raise InputError(f"{self.option} {self.shown} holds files that are not the output of a cvtbench "
-                             f"command ({', '.join(foreign[:3])}{more}); give a new or an empty folder")
+            raise InputError(
+                f"{self.option} {self.shown} holds files that are not the output of a cvtbench "
+                f"command ({', '.join(foreign[:3])}{more}); give a new or an empty folder"
+            )
 
     def __enter__(self) -> Path:
         return self.tmp
@@ -286,7 +307,9 @@ class OutputFolder:
                 self._commit()
             except OSError as err:
                 self._abandon()
-                raise InputError(f"{self.option} {self.shown}: cannot write the output ({_why(err)})") from None
+                raise InputError(
+                    f"{self.option} {self.shown}: cannot write the output ({_why(err)})"
+                ) from None
         else:
             self._abandon()
 
@@ -312,7 +335,9 @@ class OutputFolder:
                 here = Path.cwd().resolve()
             except OSError:
                 here = None
-            if target.exists() and (os.path.ismount(target) or (here is not None and (here == target or target in here.parents))):
+            if target.exists() and (
+                os.path.ismount(target) or (here is not None and (here == target or target in here.parents))
+            ):
                 self._commit_in_place()
             else:
                 old = tmp.with_name(tmp.name.replace(TEMP_MARK, ".old" + TEMP_MARK))
@@ -413,19 +438,27 @@ def report_folder(path, option: str = "--out", command: str | None = None):
         folder.mkdir(parents=True, exist_ok=True)
         fd = _take_lock_file(lock)
     except OSError as exc:
-        raise InputError(f"{option} {shown}: cannot write in {exc.filename or folder} ({_why(exc)})") from None
+        raise InputError(
+            f"{option} {shown}: cannot write in {exc.filename or folder} ({_why(exc)})"
+        ) from None
     if fd is None:
         try:
             holder = lock.read_text(errors="replace").strip()
         except OSError:
             holder = ""
-        raise InputError(f"{option} {shown} is in use by {holder or 'another cvtbench command'}; wait for it "
-                         f"to end or choose another {option}")
+        raise InputError(
+            f"{option} {shown} is in use by {holder or 'another cvtbench command'}; wait for it "
+            f"to end or choose another {option}"
+        )
     try:
         started = time.strftime("%Y-%m-%d %H:%M:%S")
         os.ftruncate(fd, 0)
-        os.pwrite(fd, f"cvtbench pid {os.getpid()} on {platform.node()} (`{command or command_line()}`, "
-                      f"since {started})\n".encode(), 0)
+        os.pwrite(
+            fd,
+            f"cvtbench pid {os.getpid()} on {platform.node()} (`{command or command_line()}`, "
+            f"since {started})\n".encode(),
+            0,
+        )
         remove_leftovers(folder, recursive=True)
         _HELD[folder] = 1
         try:
@@ -500,3 +533,27 @@ def command_line(argv=None) -> str:
 
     argv = sys.argv[1:] if argv is None else argv
     return "cvtbench " + shlex.join(argv)
+
+
+__all__ = [
+    "PACKAGES",
+    "versions",
+    "machine",
+    "TEMP_MARK",
+    "COMMAND_OUTPUTS",
+    "LOCK_NAME",
+    "remove_leftovers",
+    "atomic_path",
+    "atomic_write",
+    "check_folder",
+    "folder_problem",
+    "OutputFolder",
+    "report_folder",
+    "to_jsonable",
+    "json_chunks",
+    "dumps",
+    "write_json",
+    "write_lines",
+    "write_sites_csv",
+    "command_line",
+]

@@ -30,16 +30,21 @@ def panel_grid(panels, captions, columns: int | None = None, title: str = "", sc
     from PIL import Image, ImageDraw
 
     if scale != 1.0:
-        panels = [p.resize((round(p.width * scale), round(p.height * scale)), Image.Resampling.LANCZOS)
-                  for p in panels]
+        panels = [
+            p.resize((round(p.width * scale), round(p.height * scale)), Image.Resampling.LANCZOS)
+            for p in panels
+        ]
     columns = columns or len(panels)
     pw, ph = panels[0].size
     pad, line = 10, 18
     cap_h = line * max(len(c.splitlines()) or 1 for c in captions) + 6
     title_h = 30 if title else pad
     rows = math.ceil(len(panels) / columns)
-    img = Image.new("RGB", (columns * pw + (columns + 1) * pad, title_h + rows * (ph + cap_h + pad) + pad),
-                    (255, 255, 255))
+    img = Image.new(
+        "RGB",
+        (columns * pw + (columns + 1) * pad, title_h + rows * (ph + cap_h + pad) + pad),
+        (255, 255, 255),
+    )
     draw = ImageDraw.Draw(img)
     if title:
         draw.text((pad, 7), title, fill=(0, 0, 0), font=caption_font(16))
@@ -59,7 +64,8 @@ def png_bytes(img, colours: int = 128) -> bytes:
 
     buf = io.BytesIO()
     img.quantize(colors=colours, method=Image.Quantize.MEDIANCUT, dither=Image.Dither.NONE).save(
-        buf, format="PNG", optimize=True)
+        buf, format="PNG", optimize=True
+    )
     return buf.getvalue()
 
 

@@ -41,9 +41,23 @@ DEFAULT_BACKENDS = ("opencl",)
 MAX_ELEMENTS = 1_000_000
 # the stages drawn, in pipeline order (result.json's stage_seconds keys)
 STAGES = ("lloyd", "final_label", "fit", "compaction", "cutting", "fills", "evaluation", "writing")
-COLUMNS = ["kind", "backend", "n_elements", "size", "whole_seconds", "peak_mb", "bytes_per_pixel",
-           *(f"{s}_seconds" for s in STAGES), "method_seconds", "coverage", "overlap", "status", "reason",
-           "device", "host"]
+COLUMNS = [
+    "kind",
+    "backend",
+    "n_elements",
+    "size",
+    "whole_seconds",
+    "peak_mb",
+    "bytes_per_pixel",
+    *(f"{s}_seconds" for s in STAGES),
+    "method_seconds",
+    "coverage",
+    "overlap",
+    "status",
+    "reason",
+    "device",
+    "host",
+]
 SAMPLE = "scene.jpg"
 
 
@@ -83,8 +97,11 @@ def run_measured(python_args: list[str]) -> tuple[int, str, float, int]:
     with tempfile.TemporaryDirectory(prefix="cvtbench-peak-") as tmp:
         report = Path(tmp) / "peak_kb"
         t0 = time.perf_counter()
-        done = subprocess.run([sys.executable, "-c", _LAUNCHER, str(report), *python_args],
-                              stdout=subprocess.DEVNULL, stderr=subprocess.PIPE)
+        done = subprocess.run(
+            [sys.executable, "-c", _LAUNCHER, str(report), *python_args],
+            stdout=subprocess.DEVNULL,
+            stderr=subprocess.PIPE,
+        )
         seconds = time.perf_counter() - t0
         peak = int(report.read_text()) * 1024 if report.exists() else -1
     return done.returncode, done.stderr.decode(errors="replace"), seconds, peak
@@ -116,10 +133,17 @@ class PipelineSpec:
         from .sweep import memory_class
 
         if self.kind == "mosaic":
-            return mosaic_estimate(self.size, self.size, self.n_elements, memory_class(self.backend),
-                                   element="square")
-        return run_estimate(self.size, self.size, self.n_elements, memory_class(self.backend), element="square",
-                            what=f"the run {self.describe()}")
+            return mosaic_estimate(
+                self.size, self.size, self.n_elements, memory_class(self.backend), element="square"
+            )
+        return run_estimate(
+            self.size,
+            self.size,
+            self.n_elements,
+            memory_class(self.backend),
+            element="square",
+            what=f"the run {self.describe()}",
+        )
 
     def argv(self, out: Path) -> list[str]:
         """The command line of this configuration, writing into ``out``."""
@@ -138,16 +162,32 @@ class PipelineSpec:
             out = Path(tmp) / "out"
             code, err, whole, peak = run_measured(["-m", "compact_distributions.bench.cli", *self.argv(out)])
             if code != 0:
-                raise RuntimeError(f"`cvtbench {' '.join(self.argv(out))}` exited {code}: {err.strip()[-300:]}")
+                raise RuntimeError(
+                    f"`cvtbench {' '.join(self.argv(out))}` exited {code}: {err.strip()[-300:]}"
+                )
             result = json.loads((out / "result.json").read_text())
         stages = result.get("stage_seconds", {})
-        row = {"key": self.key, **self.params(), "status": "ok", "reason": "", "whole_seconds": whole,
-               "peak_mb": peak / 2**20, "bytes_per_pixel": peak / self.size**2,
-               **{f"{s}_seconds": float(stages[s]) if s in stages else np.nan for s in STAGES},
-               "method_seconds": float(result["method_seconds"]), "coverage": float(result["coverage"]),
-               "overlap": float(result["overlap"]), "device": result["device"]}
-        return {"row": row, "stage_seconds": stages, "spec": asdict(self), "machine": machine(),
-                "versions": versions()}
+        row = {
+            "key": self.key,
+            **self.params(),
+            "status": "ok",
+            "reason": "",
+            "whole_seconds": whole,
+            "peak_mb": peak / 2**20,
+            "bytes_per_pixel": peak / self.size**2,
+            **{f"{s}_seconds": float(stages[s]) if s in stages else np.nan for s in STAGES},
+            "method_seconds": float(result["method_seconds"]),
+            "coverage": float(result["coverage"]),
+            "overlap": float(result["overlap"]),
+            "device": result["device"],
+        }
+        return {
+            "row": row,
+            "stage_seconds": stages,
+            "spec": asdict(self),
+            "machine": machine(),
+            "versions": versions(),
+        }
 
 
 @dataclass(frozen=True)
@@ -163,21 +203,35 @@ class PipelineRequest(options.SweepRequest):
     @classmethod
     def from_args(cls, args) -> PipelineRequest:
         counts = name_list(args.elements, "--elements")
-        return cls(**cls.common(args), kinds=options.as_tuple(name_list(args.kinds, "--kinds", KINDS)),
-                   backends=options.as_tuple(name_list(args.backends, "--backends", variant_names())),
-                   elements=None if counts is None else tuple(
-                       whole_number(c, "--elements", minimum=16, maximum=MAX_ELEMENTS) for c in counts))
+        return cls(
+            **cls.common(args),
+            kinds=options.as_tuple(name_list(args.kinds, "--kinds", KINDS)),
+            backends=options.as_tuple(name_list(args.backends, "--backends", variant_names())),
+            elements=None
+            if counts is None
+            else tuple(whole_number(c, "--elements", minimum=16, maximum=MAX_ELEMENTS) for c in counts),
+        )
 
 
 def add_parser(sub):
-    p = sub.add_parser("pipeline", help="time every stage of ours-compact and of a mosaic over N (reports/pipeline.md)",
-                       description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    p = sub.add_parser(
+        "pipeline",
+        help="time every stage of ours-compact and of a mosaic over N (reports/pipeline.md)",
+        description=__doc__,
+        formatter_class=argparse.RawDescriptionHelpFormatter,
+    )
     options.add_sweep_options(p, f"N in {', '.join(map(str, QUICK_ELEMENTS))} only")
     p.add_argument("--kinds", default=None, help=f"comma list of {', '.join(KINDS)} (default both)")
-    p.add_argument("--backends", default=None,
-                   help=f"comma list of backend variants (default {', '.join(DEFAULT_BACKENDS)}, else numpy)")
-    p.add_argument("--elements", default=None,
-                   help=f"comma list of element counts (default {', '.join(map(str, FULL_ELEMENTS))})")
+    p.add_argument(
+        "--backends",
+        default=None,
+        help=f"comma list of backend variants (default {', '.join(DEFAULT_BACKENDS)}, else numpy)",
+    )
+    p.add_argument(
+        "--elements",
+        default=None,
+        help=f"comma list of element counts (default {', '.join(map(str, FULL_ELEMENTS))})",
+    )
     options.add_memory_option(p)
     p.set_defaults(func=run)
 
@@ -216,7 +270,9 @@ def pipeline(req: PipelineRequest) -> int:
     cmd = req.command or "cvtbench pipeline" + (" --quick" if req.quick else "")
     with report_folder(req.out, command=cmd):
         # runs are timed one at a time: each owns the machine while it runs
-        rows = run_sweep(plan["specs"], req.out, force=req.force, quiet=req.quiet, unavailable=plan["unavailable"])
+        rows = run_sweep(
+            plan["specs"], req.out, force=req.force, quiet=req.quiet, unavailable=plan["unavailable"]
+        )
         table = pd.DataFrame(rows)
         for c in COLUMNS:
             if c not in table:
@@ -255,24 +311,40 @@ def render_markdown(table, prov: dict, command: str, elapsed: float, plotted: bo
     text = header_markdown("Pipeline: the whole method, stage by stage", prov, command, notes)
     ok = table[table["status"] == "ok"]
     cols = ["kind", "backend", "N", "raster", "whole", "peak", "B/px", *STAGES, "coverage"]
-    body = [[r["kind"], r["backend"], int(r["n_elements"]), f"{int(r['size'])}²", fmt_seconds(r["whole_seconds"]),
-             f"{r['peak_mb']:.0f} MB", f"{r['bytes_per_pixel']:.0f}",
-             *(fmt_seconds(r[f"{s}_seconds"]) if np.isfinite(r[f"{s}_seconds"]) else "–" for s in STAGES),
-             f"{100 * r['coverage']:.1f} %"] for _, r in ok.iterrows()]
+    body = [
+        [
+            r["kind"],
+            r["backend"],
+            int(r["n_elements"]),
+            f"{int(r['size'])}²",
+            fmt_seconds(r["whole_seconds"]),
+            f"{r['peak_mb']:.0f} MB",
+            f"{r['bytes_per_pixel']:.0f}",
+            *(fmt_seconds(r[f"{s}_seconds"]) if np.isfinite(r[f"{s}_seconds"]) else "–" for s in STAGES),
+            f"{100 * r['coverage']:.1f} %",
+        ]
+        for _, r in ok.iterrows()
+    ]
     text += "\n" + markdown_table(cols, body)
     growth = []
     for (kind, backend), g in ok.groupby(["kind", "backend"], sort=False):
         parts = [f"whole {growth_exponent(g['n_elements'], g['whole_seconds']):.2f}"]
-        parts += [f"{s} {e:.2f}" for s in STAGES
-                  if np.isfinite(e := growth_exponent(g["n_elements"], g[f"{s}_seconds"]))]
+        parts += [
+            f"{s} {e:.2f}"
+            for s in STAGES
+            if np.isfinite(e := growth_exponent(g["n_elements"], g[f"{s}_seconds"]))
+        ]
         growth.append([kind, backend, ", ".join(parts)])
     if growth:
-        text += "\n## How each stage grows with N\n\n" + markdown_table(["kind", "backend", "exponent"], growth)
+        text += "\n## How each stage grows with N\n\n" + markdown_table(
+            ["kind", "backend", "exponent"], growth
+        )
     bad = table[table["status"] != "ok"]
     if len(bad):
         text += "\n## Not run or failed\n\n" + markdown_table(
             ["kind", "backend", "N", "status", "reason"],
-            [[r["kind"], r["backend"], r["n_elements"], r["status"], r["reason"]] for _, r in bad.iterrows()])
+            [[r["kind"], r["backend"], r["n_elements"], r["status"], r["reason"]] for _, r in bad.iterrows()],
+        )
     if plotted:
         text += "\n![seconds and peak memory against N](pipeline.png)\n"
     return text
@@ -293,8 +365,14 @@ def render_plot(table, path: Path) -> bool:
     if not groups:
         path.unlink(missing_ok=True)
         return False
-    fig, axes = plt.subplots(1, len(groups) + 1, figsize=(4.6 * (len(groups) + 1), 4.2), dpi=110,
-                             layout="constrained", squeeze=False)
+    fig, axes = plt.subplots(
+        1,
+        len(groups) + 1,
+        figsize=(4.6 * (len(groups) + 1), 4.2),
+        dpi=110,
+        layout="constrained",
+        squeeze=False,
+    )
     for ax, ((kind, backend), g) in zip(axes[0], groups, strict=False):
         g = g.sort_values("n_elements")
         ax.plot(g["n_elements"], g["whole_seconds"], "k-o", lw=2, label="whole command")
@@ -302,7 +380,9 @@ def render_plot(table, path: Path) -> bool:
             y = g[f"{s}_seconds"]
             if np.isfinite(y).any():
                 ax.plot(g["n_elements"], y, "-o", ms=3, label=s)
-        ax.set(xscale="log", yscale="log", xlabel="N (elements)", ylabel="seconds", title=f"{kind}, {backend}")
+        ax.set(
+            xscale="log", yscale="log", xlabel="N (elements)", ylabel="seconds", title=f"{kind}, {backend}"
+        )
         ax.grid(True, which="both", alpha=0.3)
         ax.legend(fontsize=7)
     mem = axes[0][-1]
@@ -317,4 +397,13 @@ def render_plot(table, path: Path) -> bool:
     return True
 
 
-__all__ = ["run_measured", "PipelineSpec", "PipelineRequest", "pipeline", "prepare", "raster_side", "growth_exponent", "run"]
+__all__ = [
+    "run_measured",
+    "PipelineSpec",
+    "PipelineRequest",
+    "pipeline",
+    "prepare",
+    "raster_side",
+    "growth_exponent",
+    "run",
+]

@@ -51,14 +51,30 @@ COVERAGE_DROP_PP = 0.5  # percentage points
 SLOWDOWN = 2.0  # ratio against the reference measured in the same run
 
 SETS = {
-    "quick": {"size": 256, "n_elements": 250, "iterations": 20, "seeds": [0, 1],
-              "elements": ["square", "circle", "triangle"], "baseline_seeds": [0],
-              "speed": {"size": 512, "n_elements": 2000, "metrics": ["l2", "linf"], "warmup": 1, "repeats": 7}},
-    "full": {"size": 512, "n_elements": 1000, "iterations": 20, "seeds": [0, 1, 2],
-             "elements": ["square", "rectangle", "ellipse", "triangle", "circle"], "baseline_seeds": [0, 1, 2],
-             "speed": {"size": 1024, "n_elements": 4000,
-                       "metrics": ["l2", "l1", "linf", "linf-axial", "l2-axial", "triangle"],
-                       "warmup": 1, "repeats": 7}},
+    "quick": {
+        "size": 256,
+        "n_elements": 250,
+        "iterations": 20,
+        "seeds": [0, 1],
+        "elements": ["square", "circle", "triangle"],
+        "baseline_seeds": [0],
+        "speed": {"size": 512, "n_elements": 2000, "metrics": ["l2", "linf"], "warmup": 1, "repeats": 7},
+    },
+    "full": {
+        "size": 512,
+        "n_elements": 1000,
+        "iterations": 20,
+        "seeds": [0, 1, 2],
+        "elements": ["square", "rectangle", "ellipse", "triangle", "circle"],
+        "baseline_seeds": [0, 1, 2],
+        "speed": {
+            "size": 1024,
+            "n_elements": 4000,
+            "metrics": ["l2", "l1", "linf", "linf-axial", "l2-axial", "triangle"],
+            "warmup": 1,
+            "repeats": 7,
+        },
+    },
 }
 
 
@@ -66,8 +82,9 @@ SETS = {
 # the logic (pure: tested with fabricated figures in tests/test_bench.py)
 
 
-def compare(baseline: dict, current: dict, coverage_drop_pp: float = COVERAGE_DROP_PP,
-            slowdown: float = SLOWDOWN) -> tuple[list[str], list[str]]:
+def compare(
+    baseline: dict, current: dict, coverage_drop_pp: float = COVERAGE_DROP_PP, slowdown: float = SLOWDOWN
+) -> tuple[list[str], list[str]]:
     """(failures, notes) of ``current`` against ``baseline``; both are sections
     ``{"coverage": {key: {"mean": float, ...}}, "speed": {key: {"ratio": float, ...}}}``
     with optional ``"unavailable": {key: reason}`` in ``current``."""
@@ -81,14 +98,19 @@ def compare(baseline: dict, current: dict, coverage_drop_pp: float = COVERAGE_DR
             continue
         drop_pp = 100 * (b["mean"] - c["mean"])
         if drop_pp > coverage_drop_pp:
-            failures.append(f"coverage of {key} fell from {100 * b['mean']:.2f} % to {100 * c['mean']:.2f} % "
-                            f"(-{drop_pp:.2f} pp; more than {coverage_drop_pp} pp)")
+            failures.append(
+                f"coverage of {key} fell from {100 * b['mean']:.2f} % to {100 * c['mean']:.2f} % "
+                f"(-{drop_pp:.2f} pp; more than {coverage_drop_pp} pp)"
+            )
         elif drop_pp < -coverage_drop_pp:
-            notes.append(f"coverage of {key} rose from {100 * b['mean']:.2f} % to {100 * c['mean']:.2f} % "
-                         "(run --update to raise the bar)")
+            notes.append(
+                f"coverage of {key} rose from {100 * b['mean']:.2f} % to {100 * c['mean']:.2f} % "
+                "(run --update to raise the bar)"
+            )
     for key in cur_cov.keys() - base_cov.keys():
-        notes.append(f"new: coverage {key} = {100 * cur_cov[key]['mean']:.2f} % is not in the baseline "
-                     "(run --update)")
+        notes.append(
+            f"new: coverage {key} = {100 * cur_cov[key]['mean']:.2f} % is not in the baseline (run --update)"
+        )
     base_sp, cur_sp = baseline.get("speed", {}), current.get("speed", {})
     for key, b in base_sp.items():
         c = cur_sp.get(key)
@@ -97,8 +119,10 @@ def compare(baseline: dict, current: dict, coverage_drop_pp: float = COVERAGE_DR
             continue
         factor = c["ratio"] / b["ratio"]
         if factor > slowdown:
-            failures.append(f"speed of {key}: {c['ratio']:.3g}x the reference's time, baseline "
-                            f"{b['ratio']:.3g}x ({factor:.2f} times slower; limit {slowdown}x)")
+            failures.append(
+                f"speed of {key}: {c['ratio']:.3g}x the reference's time, baseline "
+                f"{b['ratio']:.3g}x ({factor:.2f} times slower; limit {slowdown}x)"
+            )
     for key in cur_sp.keys() - base_sp.keys():
         notes.append(f"new: speed {key} = {cur_sp[key]['ratio']:.3g}x is not in the baseline (run --update)")
     return failures, notes
@@ -128,11 +152,35 @@ def coverage_specs(cfg: dict, methods: list[str], backends: list[str]):
         for method in methods:
             if get_method(method).sweep_backends == "every":
                 for b in backends:
-                    specs += [RunSpec("regress", method, b, element, cfg["size"], cfg["size"], cfg["n_elements"],
-                                      cfg["iterations"], s) for s in cfg["seeds"]]
+                    specs += [
+                        RunSpec(
+                            "regress",
+                            method,
+                            b,
+                            element,
+                            cfg["size"],
+                            cfg["size"],
+                            cfg["n_elements"],
+                            cfg["iterations"],
+                            s,
+                        )
+                        for s in cfg["seeds"]
+                    ]
             elif element == "square" and REFERENCE_BACKEND in backends:
-                specs += [RunSpec("regress", method, REFERENCE_BACKEND, element, cfg["size"], cfg["size"],
-                                  cfg["n_elements"], cfg["iterations"], s) for s in cfg["baseline_seeds"]]
+                specs += [
+                    RunSpec(
+                        "regress",
+                        method,
+                        REFERENCE_BACKEND,
+                        element,
+                        cfg["size"],
+                        cfg["size"],
+                        cfg["n_elements"],
+                        cfg["iterations"],
+                        s,
+                    )
+                    for s in cfg["baseline_seeds"]
+                ]
     return specs
 
 
@@ -159,16 +207,17 @@ def measure_coverage(cfg, methods, backends, unavailable, quiet) -> tuple[dict, 
         if bad:
             failed.append(f"{key} failed to run: {bad[0]['reason']}")
         if len(ok) == len(rs):
-            cov[key] = {"mean": float(np.mean([r["coverage"] for r in ok])),
-                        "values": [round(float(r["coverage"]), 6) for r in ok],
-                        "seeds": [r["seed"] for r in ok]}
+            cov[key] = {
+                "mean": float(np.mean([r["coverage"] for r in ok])),
+                "values": [round(float(r["coverage"]), 6) for r in ok],
+                "seeds": [r["seed"] for r in ok],
+            }
         elif not bad:
             skipped[key] = rs[0]["reason"]
     return cov, skipped, failed
 
 
-def measure_speed_pair(backend: str, reference: str, metric: str, n: int, size: int, sp: dict,
-                       cache) -> dict:
+def measure_speed_pair(backend: str, reference: str, metric: str, n: int, size: int, sp: dict, cache) -> dict:
     """Ratio of ``backend``'s time to ``reference``'s on the same problem, their Lloyd
     iterations interleaved (ref, backend, ref, backend, ...) so that a neighbour's load
     hits both alike, each the fastest of its timed iterations (the least disturbed one)."""
@@ -265,17 +314,29 @@ def check_figures(section: dict, where: str) -> None:
                 raise InputError(f"{where}: {kind} {key!r} is not an object, got {entry!r}")
             for name, (low, high) in figures.items():
                 value = entry.get(name)
-                ok = isinstance(value, (int, float)) and not isinstance(value, bool) and math.isfinite(value) \
-                    and value >= low and (high is None or value <= high)
+                ok = (
+                    isinstance(value, (int, float))
+                    and not isinstance(value, bool)
+                    and math.isfinite(value)
+                    and value >= low
+                    and (high is None or value <= high)
+                )
                 if not ok:
                     state = "is missing" if name not in entry else f"is {value!r}"
-                    raise InputError(f"{where}: {kind} {key!r}: {name!r} {state}, not a finite number"
-                                     + (f" in [{low:g}, {high:g}]" if high is not None else f" >= {low:g}"))
+                    raise InputError(
+                        f"{where}: {kind} {key!r}: {name!r} {state}, not a finite number"
+                        + (f" in [{low:g}, {high:g}]" if high is not None else f" >= {low:g}")
+                    )
             for name in ("values", "ms", "reference_ms"):
                 values = entry.get(name)
                 values = values if isinstance(values, list) else [] if values is None else [values]
-                if any(isinstance(v, bool) or not isinstance(v, (int, float)) or not math.isfinite(v) for v in values):
-                    raise InputError(f"{where}: {kind} {key!r}: {name!r} holds {entry[name]!r}, not finite numbers")
+                if any(
+                    isinstance(v, bool) or not isinstance(v, (int, float)) or not math.isfinite(v)
+                    for v in values
+                ):
+                    raise InputError(
+                        f"{where}: {kind} {key!r}: {name!r} holds {entry[name]!r}, not finite numbers"
+                    )
 
 
 def load_baseline(path: Path) -> dict:
@@ -285,18 +346,26 @@ def load_baseline(path: Path) -> dict:
     data = json_object(path, "regression baseline")
     for mode in SETS:
         section = data.get(mode)
-        if section is not None and not (isinstance(section, dict) and all(
-                isinstance(section.get(k, {}), dict) for k in ("coverage", "speed"))):
-            raise InputError(f"regression baseline {path}: its {mode!r} section is not an object with "
-                             "'coverage' and 'speed' objects")
+        if section is not None and not (
+            isinstance(section, dict)
+            and all(isinstance(section.get(k, {}), dict) for k in ("coverage", "speed"))
+        ):
+            raise InputError(
+                f"regression baseline {path}: its {mode!r} section is not an object with "
+                "'coverage' and 'speed' objects"
+            )
         if section is not None:
             check_figures(section, f"regression baseline {path}, {mode!r}")
     return data
 
 
 def add_parser(sub):
-    p = sub.add_parser("regress", help="fail on a coverage drop (> 0.5 pp) or a 2x slowdown vs the baseline",
-                       description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    p = sub.add_parser(
+        "regress",
+        help="fail on a coverage drop (> 0.5 pp) or a 2x slowdown vs the baseline",
+        description=__doc__,
+        formatter_class=argparse.RawDescriptionHelpFormatter,
+    )
     p.add_argument("--quick", action="store_true", help="the CI set (well under a minute)")
     p.add_argument("--update", action="store_true", help="write the current figures into the baseline file")
     p.add_argument("--baseline", default=None, help=f"baseline file (default {BASELINE_FILE})")
@@ -325,8 +394,10 @@ def run(args) -> int:
     baseline_all = load_baseline(path) if (path.exists() or not args.update) else {}
     baseline = baseline_all.get(mode)
     if baseline is None and not args.update:
-        raise InputError(f"{path} has no {mode!r} section; create it with `cvtbench regress "
-                         f"{'--quick ' if args.quick else ''}--update`")
+        raise InputError(
+            f"{path} has no {mode!r} section; create it with `cvtbench regress "
+            f"{'--quick ' if args.quick else ''}--update`"
+        )
     baseline = baseline or {}
     all_methods = method_names()
     methods = name_list(args.methods, "method", all_methods) or all_methods
@@ -343,10 +414,18 @@ def run(args) -> int:
         current["speed"], run_failures = sp, run_failures + failed
         current["unavailable"].update(skipped)
     # compare only what was asked for: a --backends/--methods subset is not a regression
-    asked = {"coverage": {k: v for k, v in baseline.get("coverage", {}).items()
-                          if not args.no_coverage and k.split("/")[0] in methods and k.split("/")[1] in backends},
-             "speed": {k: v for k, v in baseline.get("speed", {}).items()
-                       if not args.no_speed and k.split(" vs ")[0] in backends}}
+    asked = {
+        "coverage": {
+            k: v
+            for k, v in baseline.get("coverage", {}).items()
+            if not args.no_coverage and k.split("/")[0] in methods and k.split("/")[1] in backends
+        },
+        "speed": {
+            k: v
+            for k, v in baseline.get("speed", {}).items()
+            if not args.no_speed and k.split(" vs ")[0] in backends
+        },
+    }
     check_figures(current, "this run's measurement")
     failures, notes = compare(asked, current)
     failures = run_failures + failures
@@ -370,15 +449,44 @@ def run(args) -> int:
         baseline_all[mode] = merged
         baseline_all["tolerances"] = {"coverage_drop_pp": COVERAGE_DROP_PP, "slowdown": SLOWDOWN}
         atomic_write(path, dumps(baseline_all))
-        print(f"updated {path} ({mode}; {len(current['coverage'])} coverage and {len(current['speed'])} "
-              f"speed entries; {elapsed:.0f} s)")
+        print(
+            f"updated {path} ({mode}; {len(current['coverage'])} coverage and {len(current['speed'])} "
+            f"speed entries; {elapsed:.0f} s)"
+        )
         return 1 if run_failures else 0
     if failures:
         for f in failures:
             print(f"REGRESSION: {f}", file=sys.stderr)
-        print(f"cvtbench regress: {len(failures)} regression(s) against {path} ({mode}, {elapsed:.0f} s)",
-              file=sys.stderr)
+        print(
+            f"cvtbench regress: {len(failures)} regression(s) against {path} ({mode}, {elapsed:.0f} s)",
+            file=sys.stderr,
+        )
         return 1
-    print(f"regress ({mode}): no regression against {path}: {len(asked['coverage'])} coverage and "
-          f"{len(asked['speed'])} speed checks ({elapsed:.0f} s)")
+    print(
+        f"regress ({mode}): no regression against {path}: {len(asked['coverage'])} coverage and "
+        f"{len(asked['speed'])} speed checks ({elapsed:.0f} s)"
+    )
     return 0
+
+
+__all__ = [
+    "CKDTREE",
+    "BASELINE_FILE",
+    "COVERAGE_DROP_PP",
+    "SLOWDOWN",
+    "SETS",
+    "compare",
+    "merge",
+    "coverage_specs",
+    "coverage_key",
+    "speed_key",
+    "measure_coverage",
+    "measure_speed_pair",
+    "speed_pairs",
+    "measure_speed",
+    "REQUIRED_FIGURES",
+    "check_figures",
+    "load_baseline",
+    "add_parser",
+    "run",
+]

@@ -21,15 +21,20 @@ def git_commit(cwd=None) -> str:
     "unknown" outside a repository or without git."""
     cwd = cwd or Path(__file__).resolve().parent.parent
     try:
-        head = subprocess.run(["git", "rev-parse", "HEAD"], cwd=cwd, capture_output=True,
-                              text=True, timeout=10)
+        head = subprocess.run(
+            ["git", "rev-parse", "HEAD"], cwd=cwd, capture_output=True, text=True, timeout=10
+        )
         if head.returncode != 0:
             return "unknown"
         commit = head.stdout.strip()
         # reports/ itself is rewritten while a sweep runs: it does not make the code dirty
-        dirty = subprocess.run(["git", "status", "--porcelain", "--untracked-files=no", "--",
-                                ".", ":(exclude)reports"], cwd=cwd,
-                               capture_output=True, text=True, timeout=10)
+        dirty = subprocess.run(
+            ["git", "status", "--porcelain", "--untracked-files=no", "--", ".", ":(exclude)reports"],
+            cwd=cwd,
+            capture_output=True,
+            text=True,
+            timeout=10,
+        )
         if dirty.returncode == 0 and dirty.stdout.strip():
             commit += " (+ uncommitted changes)"
         return commit
@@ -50,7 +55,9 @@ def provenance() -> dict:
     }
 
 
-def header_markdown(title: str, prov: dict, command: str | None = None, notes: list[str] | None = None) -> str:
+def header_markdown(
+    title: str, prov: dict, command: str | None = None, notes: list[str] | None = None
+) -> str:
     m = prov["machine"]
     lines = [f"# {title}", ""]
     if command:
@@ -68,6 +75,7 @@ def header_markdown(title: str, prov: dict, command: str | None = None, notes: l
 
 def markdown_table(columns: list[str], rows: list[list]) -> str:
     """A GitHub markdown table (cells converted with str; '|' escaped)."""
+
     def cell(v) -> str:
         return str(v).replace("|", "\\|").replace("\n", " ")
 
@@ -136,3 +144,20 @@ def fmt_seconds(s) -> str:
     if s >= 1:
         return f"{s:.1f} s"
     return f"{s * 1000:.0f} ms"
+
+
+__all__ = [
+    "git_commit",
+    "provenance",
+    "header_markdown",
+    "markdown_table",
+    "write_csv",
+    "write_markdown",
+    "written_files",
+    "save_figure",
+    "hosts_of",
+    "host_slots_of",
+    "several_hosts",
+    "fmt_pct",
+    "fmt_seconds",
+]

@@ -19,8 +19,12 @@ from . import options
 
 
 def add_parser(sub):
-    p = sub.add_parser("reproduce", help="table2 + table3 + backends + pipeline + figures into reports/",
-                       description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    p = sub.add_parser(
+        "reproduce",
+        help="table2 + table3 + backends + pipeline + figures into reports/",
+        description=__doc__,
+        formatter_class=argparse.RawDescriptionHelpFormatter,
+    )
     options.add_sweep_options(p, "the quick form of every part (< 5 min on 2 cores)")
     options.add_seeds_option(p, "table2's and table3's: default 5; quick 2")
     options.add_cluster_options(p, exclusive=True)
@@ -36,19 +40,57 @@ def requests(args, out: Path, scheduler: str | None) -> list[tuple[str, object, 
     from .table2 import FULL, QUICK, Table2Request, table2
     from .table3 import Table3Request, table3
 
-    common = dict(quick=bool(args.quick), force=bool(args.force), quiet=bool(args.quiet), scheduler=scheduler,
-                  memory_limit=args.memory_limit)
+    common = dict(
+        quick=bool(args.quick),
+        force=bool(args.force),
+        quiet=bool(args.quiet),
+        scheduler=scheduler,
+        memory_limit=args.memory_limit,
+    )
     seeds = options.seeds_value(args.seeds, (QUICK if args.quick else FULL)["seeds"])
     quick = " --quick" if args.quick else ""
     return [
-        ("table2", table2, Table2Request(out=out, **common, exclusive=bool(args.exclusive), seeds=seeds,
-                                         command=f"cvtbench table2{quick} --out {out}")),
-        ("table3", table3, Table3Request(out=out, **common, seeds=int(args.seeds) if args.seeds else None,
-                                         command=f"cvtbench table3{quick} --out {out}")),
-        ("backends", backends, BackendsRequest(out=out, **common, command=f"cvtbench backends{quick} --out {out}")),
-        ("pipeline", pipeline, PipelineRequest(out=out, **common, command=f"cvtbench pipeline{quick} --out {out}")),
-        ("figures", figures, FiguresRequest(out=out / "figures", quick=bool(args.quick), quiet=bool(args.quiet),
-                                            command=f"cvtbench figures{quick} --out {out / 'figures'}")),
+        (
+            "table2",
+            table2,
+            Table2Request(
+                out=out,
+                **common,
+                exclusive=bool(args.exclusive),
+                seeds=seeds,
+                command=f"cvtbench table2{quick} --out {out}",
+            ),
+        ),
+        (
+            "table3",
+            table3,
+            Table3Request(
+                out=out,
+                **common,
+                seeds=int(args.seeds) if args.seeds else None,
+                command=f"cvtbench table3{quick} --out {out}",
+            ),
+        ),
+        (
+            "backends",
+            backends,
+            BackendsRequest(out=out, **common, command=f"cvtbench backends{quick} --out {out}"),
+        ),
+        (
+            "pipeline",
+            pipeline,
+            PipelineRequest(out=out, **common, command=f"cvtbench pipeline{quick} --out {out}"),
+        ),
+        (
+            "figures",
+            figures,
+            FiguresRequest(
+                out=out / "figures",
+                quick=bool(args.quick),
+                quiet=bool(args.quiet),
+                command=f"cvtbench figures{quick} --out {out / 'figures'}",
+            ),
+        ),
     ]
 
 
@@ -65,8 +107,13 @@ def run(args) -> int:
     out = options.report_out(args)
     # every part's options, its output folder and the memory of its runs are checked
     # before the first one starts
-    checks = {"table2": prepare_table2, "table3": prepare_table3, "backends": prepare_backends, "pipeline": prepare_pipeline,
-              "figures": prepare_figures}
+    checks = {
+        "table2": prepare_table2,
+        "table3": prepare_table3,
+        "backends": prepare_backends,
+        "pipeline": prepare_pipeline,
+        "figures": prepare_figures,
+    }
     for name, _, request in requests(args, out, None):
         checks[name](request)
     cmd = command_line(getattr(args, "argv", None) or ["reproduce"] + (["--quick"] if args.quick else []))
@@ -95,11 +142,22 @@ def _run_parts(parts, out: Path, cmd: str, quick: bool) -> int:
         results.append((name, "ok" if rc == 0 else "failed", time.perf_counter() - t0, note))
         status = status or rc
     total = time.perf_counter() - t_all
-    text = header_markdown("Reproduce" + (" (QUICK)" if quick else ""), provenance(), cmd,
-                           [f"total: {total:.0f} s on this machine (runs read back from raw/ take ~0 s; "
-                            "--force for a cold run)"])
-    text += "\n" + markdown_table(["part", "status", "seconds", "command / note"],
-                                  [[n, s, f"{t:.0f}", note] for n, s, t, note in results])
+    text = header_markdown(
+        "Reproduce" + (" (QUICK)" if quick else ""),
+        provenance(),
+        cmd,
+        [
+            f"total: {total:.0f} s on this machine (runs read back from raw/ take ~0 s; "
+            "--force for a cold run)"
+        ],
+    )
+    text += "\n" + markdown_table(
+        ["part", "status", "seconds", "command / note"],
+        [[n, s, f"{t:.0f}", note] for n, s, t, note in results],
+    )
     write_markdown(out / "reproduce.md", text)
     print(f"reproduce: done in {total:.0f} s; summary in {out}/reproduce.md", file=sys.stderr)
     return status
+
+
+__all__ = ["add_parser", "requests", "run"]

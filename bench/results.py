@@ -34,9 +34,22 @@ def stages_of(dist) -> dict:
     return stages
 
 
-def build_result(kind: str, problem, dist, evaluation, backend, *, element: str, gap: float,
-                 command: str, sources: dict | None = None, method_options: dict | None = None,
-                 stage_seconds: dict | None = None, placed=None, **fields) -> dict:
+def build_result(
+    kind: str,
+    problem,
+    dist,
+    evaluation,
+    backend,
+    *,
+    element: str,
+    gap: float,
+    command: str,
+    sources: dict | None = None,
+    method_options: dict | None = None,
+    stage_seconds: dict | None = None,
+    placed=None,
+    **fields,
+) -> dict:
     """The result.json record of one run: the problem, the method's Distribution, the
     evaluation (coverage, overlap, ...) of its elements, the backend that ran it, plus
     the command's own ``fields`` (a mosaic's image, colours, ...); ``method_options`` are
@@ -103,3 +116,6 @@ def build_result(kind: str, problem, dist, evaluation, backend, *, element: str,
 def _finite(value: float) -> float | None:
     """JSON has no NaN: a measure that does not apply (circles' direction) is null."""
     return float(value) if np.isfinite(value) else None
+
+
+__all__ = ["SCHEMA_FILE", "schema", "stages_of", "build_result"]

@@ -42,13 +42,20 @@ def add_problem_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--elements", default=None, help=f"number of sites N (default {DEFAULT_ELEMENTS})")
     p.add_argument("--size", default=DEFAULT_SIZE, help=f"{options.SIZE_HELP} (default {DEFAULT_SIZE})")
     p.add_argument("--init", metavar="SITES.CSV", help="start from these sites (columns x,y in pixels)")
-    p.add_argument("--density", metavar="IMAGE",
-                   help="density image (bright = dense = small cells); resampled to --size")
-    p.add_argument("--field", metavar="FIELD",
-                   help="direction field: constant:DEG, radial, circular, wave:PERIOD, or a grey "
-                   "image (0..255 -> 0..180 degrees)")
-    p.add_argument("--region", metavar="MASK_IMAGE",
-                   help="region mask image (light or opaque = inside); resampled to --size")
+    p.add_argument(
+        "--density", metavar="IMAGE", help="density image (bright = dense = small cells); resampled to --size"
+    )
+    p.add_argument(
+        "--field",
+        metavar="FIELD",
+        help="direction field: constant:DEG, radial, circular, wave:PERIOD, or a grey "
+        "image (0..255 -> 0..180 degrees)",
+    )
+    p.add_argument(
+        "--region",
+        metavar="MASK_IMAGE",
+        help="region mask image (light or opaque = inside); resampled to --size",
+    )
 
 
 CHUNK_BYTES = 1 << 20  # streamed reads: what is held of a file while it is sized
@@ -59,8 +66,9 @@ def count_csv_rows(path, limit: int | None = None) -> int:
     streamed pass that holds a megabyte at a time and stops as soon as there are more
     than ``limit``: a file is sized before anything is built from it."""
     if not os.path.isfile(path):
-        raise InputError(f"init file not found: {path}" if not os.path.exists(path)
-                         else f"init file {path} is not a file")
+        raise InputError(
+            f"init file not found: {path}" if not os.path.exists(path) else f"init file {path} is not a file"
+        )
     lines, last = 0, b"\n"
     try:
         with open(path, "rb") as fh:
@@ -68,7 +76,9 @@ def count_csv_rows(path, limit: int | None = None) -> int:
                 lines += chunk.count(b"\n")
                 last = chunk[-1:]
                 if limit is not None and lines - 1 > limit:
-                    raise InputError(f"init file {path} holds more sites than the raster has pixels ({limit})")
+                    raise InputError(
+                        f"init file {path} holds more sites than the raster has pixels ({limit})"
+                    )
     except OSError as exc:
         raise InputError(f"cannot read init file {path}: {exc.strerror or exc}") from None
     return max(0, lines + (last != b"\n") - 1)
@@ -98,11 +108,17 @@ def read_sites_csv(path, max_sites: int | None = None) -> np.ndarray:
     text = df[["x", "y"]].apply(lambda c: c.str.strip())
     xy = text.apply(lambda c: pd.to_numeric(c, errors="coerce"))
     # a NaN written as such is a number that is not finite (refused below), not a typo
-    bad = (xy.isna() & ~text.apply(lambda c: c.str.lower().isin(["nan", "+nan", "-nan"]))).any(axis=1).to_numpy()
+    bad = (
+        (xy.isna() & ~text.apply(lambda c: c.str.lower().isin(["nan", "+nan", "-nan"])))
+        .any(axis=1)
+        .to_numpy()
+    )
     if bad.any():
         k = int(np.argmax(bad))
-        raise InputError(f"init file {path}, line {k + 2}: x and y must be numbers, got "
-                         f"{df['x'].iloc[k]!r}, {df['y'].iloc[k]!r}")
+        raise InputError(
+            f"init file {path}, line {k + 2}: x and y must be numbers, got "
+            f"{df['x'].iloc[k]!r}, {df['y'].iloc[k]!r}"
+        )
     pts = xy.to_numpy(dtype=np.float64)
     bad = ~np.isfinite(pts).all(axis=1)
     if bad.any():
@@ -137,7 +153,9 @@ def parse_problem_options(args) -> ProblemOptions:
     from compact_distributions.cvt.problem import MAX_SEED
 
     w, h = parse_size(args.size, "--size")
-    metric_name, element = resolve_shapes(args.metric, args.element, DEFAULT_ELEMENT, ("--metric", "--element"))
+    metric_name, element = resolve_shapes(
+        args.metric, args.element, DEFAULT_ELEMENT, ("--metric", "--element")
+    )
     metric = make_metric(metric_name, args.aspect, option="--aspect")
     n = None if args.elements is None else whole_number(args.elements, "--elements", minimum=1, maximum=w * h)
     seed = whole_number(args.seed, "--seed", minimum=0, maximum=MAX_SEED)
@@ -159,8 +177,21 @@ def parse_problem_options(args) -> ProblemOptions:
     rows = count_csv_rows(args.init, w * h) if args.init else None
     given = n
     n = rows if rows is not None else (DEFAULT_ELEMENTS if n is None else n)
-    return ProblemOptions(w, h, n, metric, element, seed, None, args.density, args.region, field_file, field_name,
-                          args.init, given)
+    return ProblemOptions(
+        w,
+        h,
+        n,
+        metric,
+        element,
+        seed,
+        None,
+        args.density,
+        args.region,
+        field_file,
+        field_name,
+        args.init,
+        given,
+    )
 
 
 def load_init(opts: ProblemOptions) -> None:
@@ -169,8 +200,9 @@ def load_init(opts: ProblemOptions) -> None:
         return
     opts.init = read_sites_csv(opts.init_file, max_sites=opts.width * opts.height)
     if opts.elements_given is not None and len(opts.init) != opts.elements_given:
-        raise InputError(f"--elements {opts.elements_given} but init file {opts.init_file} holds "
-                         f"{len(opts.init)} sites")
+        raise InputError(
+            f"--elements {opts.elements_given} but init file {opts.init_file} holds {len(opts.init)} sites"
+        )
     opts.n_elements = len(opts.init)  # blank lines were counted as rows when it was sized
 
 
@@ -184,22 +216,31 @@ def build_problem(opts: ProblemOptions) -> Problem:
     field = None
     if opts.field_file:
         grey, full = load_grey(opts.field_file, w, h, name="--field")
-        field = DirectionField.from_angles(angles_from_grey(grey, full, f"--field {opts.field_file}"),
-                                           spec=opts.field_file)
+        field = DirectionField.from_angles(
+            angles_from_grey(grey, full, f"--field {opts.field_file}"), spec=opts.field_file
+        )
     elif opts.field_name:
         field = DirectionField.named(opts.field_name, w, h, name="--field")
     return Problem(Grid(w, h, mask), opts.n_elements, opts.metric, density, field, opts.seed, opts.init)
 
 
 def add_parser(sub):
-    p = sub.add_parser("run", help="run one CVT (Lloyd relaxation), place the elements and write result.json",
-                       description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    p = sub.add_parser(
+        "run",
+        help="run one CVT (Lloyd relaxation), place the elements and write result.json",
+        description=__doc__,
+        formatter_class=argparse.RawDescriptionHelpFormatter,
+    )
     options.add_backend_options(p)
     options.add_method_option(p)
     add_problem_arguments(p)
     options.add_run_options(p)
-    p.add_argument("--gap", metavar="G", default="0",
-                   help="grout: width in pixels of the joint between elements (default 0)")
+    p.add_argument(
+        "--gap",
+        metavar="G",
+        default="0",
+        help="grout: width in pixels of the joint between elements (default 0)",
+    )
     options.add_output_options(p, "out/run")
     options.add_memory_option(p)
     p.set_defaults(func=run)
@@ -225,15 +266,29 @@ def run(args) -> int:
     opts = parse_problem_options(args)
     element = opts.element
     backend_name, _ = options.backend_choice(args)
-    run_estimate(opts.width, opts.height, opts.n_elements, backend_class(backend_name), element=element,
-                 density=bool(opts.density), field=bool(opts.field_file), region=bool(opts.region)).check(
-        args.memory_limit, lower="use a smaller --size or fewer --elements")
+    run_estimate(
+        opts.width,
+        opts.height,
+        opts.n_elements,
+        backend_class(backend_name),
+        element=element,
+        density=bool(opts.density),
+        field=bool(opts.field_file),
+        region=bool(opts.region),
+    ).check(args.memory_limit, lower="use a smaller --size or fewer --elements")
     load_init(opts)
     with OutputFolder(args.out, "--out", COMMAND_OUTPUTS) as tmp:
         problem = build_problem(opts)
         with options.open_backend(args) as backend:
-            dist = method(problem, backend, iterations=iterations,
-                          progress=options.progress_printer(args.quiet), element=element, gap=gap, **extra)
+            dist = method(
+                problem,
+                backend,
+                iterations=iterations,
+                progress=options.progress_printer(args.quiet),
+                element=element,
+                gap=gap,
+                **extra,
+            )
             t0 = time.perf_counter()
             region = region_polygon(problem.grid)
             ev = evaluate(dist.elements, problem.grid, region=region, labels=dist.labels)
@@ -245,19 +300,52 @@ def run(args) -> int:
         write_sites_csv(tmp / "sites.csv", dist.sites, dist.angles, dist.scales)
         if dist.labels is not None:
             cells_image(dist.labels, len(dist.sites), dist.sites).save(tmp / "cells.png")
-        write_lines(tmp / "elements.svg", svg_lines(dist.elements, g.width, g.height,
-                                                    region=None if g.mask is None else region))
-        draw_elements(dist.elements, g.width, g.height, region_colour=PAPER,
-                      region_mask=g.mask).save(tmp / "elements.png")
+        write_lines(
+            tmp / "elements.svg",
+            svg_lines(dist.elements, g.width, g.height, region=None if g.mask is None else region),
+        )
+        draw_elements(dist.elements, g.width, g.height, region_colour=PAPER, region_mask=g.mask).save(
+            tmp / "elements.png"
+        )
         stages = {"evaluation": evaluation_seconds, "writing": time.perf_counter() - t0}
-        result = build_result("run", problem, dist, ev, backend, element=dist.extra["element"], gap=gap,
-                              command=command_line(args.argv), sources=sources, method_options=extra,
-                              stage_seconds=stages)
+        result = build_result(
+            "run",
+            problem,
+            dist,
+            ev,
+            backend,
+            element=dist.extra["element"],
+            gap=gap,
+            command=command_line(args.argv),
+            sources=sources,
+            method_options=extra,
+            stage_seconds=stages,
+        )
         write_json(tmp / "result.json", result)
     if not args.quiet:
         mean = np.median(dist.seconds) * 1000 if dist.seconds else float("nan")
-        print(f"wrote {args.out}/result.json, sites.csv, cells.png, elements.svg, elements.png  "
-              f"({len(dist.sites)} sites, {dist.iterations} iterations, median {mean:.1f} ms/iteration; "
-              f"{result['element']}s: coverage {ev.coverage:.2%}, overlap {ev.overlap:.3%}, "
-              f"{ev.skipped} skipped)", file=sys.stderr)
+        print(
+            f"wrote {args.out}/result.json, sites.csv, cells.png, elements.svg, elements.png  "
+            f"({len(dist.sites)} sites, {dist.iterations} iterations, median {mean:.1f} ms/iteration; "
+            f"{result['element']}s: coverage {ev.coverage:.2%}, overlap {ev.overlap:.3%}, "
+            f"{ev.skipped} skipped)",
+            file=sys.stderr,
+        )
     return 0
+
+
+__all__ = [
+    "DEFAULT_SIZE",
+    "DEFAULT_ELEMENTS",
+    "DEFAULT_ELEMENT",
+    "add_problem_arguments",
+    "CHUNK_BYTES",
+    "count_csv_rows",
+    "read_sites_csv",
+    "ProblemOptions",
+    "parse_problem_options",
+    "load_init",
+    "build_problem",
+    "add_parser",
+    "run",
+]

@@ -62,9 +62,11 @@ class RunSpec:
         record names (in the record's order)."""
         gap = f"__gap{self.gap:g}" if self.gap else ""
         scene = f"{self.scene}__" if self.scene else ""
-        return (f"{scene}{self.method}__{self.backend}__{self.element}__{self.width}x{self.height}"
-                f"__n{self.n_elements}__it{self.iterations}__s{self.seed}{gap}"
-                f"{self.method_record.key(dict(self.options))}")
+        return (
+            f"{scene}{self.method}__{self.backend}__{self.element}__{self.width}x{self.height}"
+            f"__n{self.n_elements}__it{self.iterations}__s{self.seed}{gap}"
+            f"{self.method_record.key(dict(self.options))}"
+        )
 
     @property
     def label(self) -> str:
@@ -72,8 +74,10 @@ class RunSpec:
         return self.method_record.label(dict(self.options))
 
     def describe(self) -> str:
-        return (f"{self.method}/{self.backend} {self.element} {self.width}x{self.height} "
-                f"N={self.n_elements} seed {self.seed}")
+        return (
+            f"{self.method}/{self.backend} {self.element} {self.width}x{self.height} "
+            f"N={self.n_elements} seed {self.seed}"
+        )
 
     def params(self) -> dict:
         d = asdict(self)
@@ -87,8 +91,15 @@ class RunSpec:
 
         from .sweep import memory_class
 
-        return run_estimate(self.width, self.height, self.n_elements, memory_class(self.backend), element=self.element,
-                            pictures=self.picture, what=f"the run {self.describe()}")
+        return run_estimate(
+            self.width,
+            self.height,
+            self.n_elements,
+            memory_class(self.backend),
+            element=self.element,
+            pictures=self.picture,
+            what=f"the run {self.describe()}",
+        )
 
     def problem(self):
         from compact_distributions.cvt.metrics import make_metric
@@ -98,9 +109,12 @@ class RunSpec:
         if self.scene is not None:
             from .scenes import scene_problem
 
-            return scene_problem(self.scene, self.width, self.n_elements, make_metric(self.metric, aspect), self.seed)
-        return Problem(Grid(self.width, self.height), self.n_elements, make_metric(self.metric, aspect),
-                       seed=self.seed)
+            return scene_problem(
+                self.scene, self.width, self.n_elements, make_metric(self.metric, aspect), self.seed
+            )
+        return Problem(
+            Grid(self.width, self.height), self.n_elements, make_metric(self.metric, aspect), seed=self.seed
+        )
 
     def execute(self, backend) -> dict:
         """Run the spec on ``backend``; the record keeps the final sites for seed 0 only
@@ -120,19 +134,32 @@ class RunSpec:
         method = self.method_record
         options = method.parse_options(dict(self.options))
         t0 = time.perf_counter()
-        dist = method(problem, backend, iterations=self.iterations, element=self.element, gap=self.gap, **options)
+        dist = method(
+            problem, backend, iterations=self.iterations, element=self.element, gap=self.gap, **options
+        )
         wall = time.perf_counter() - t0
         region = region_polygon(problem.grid)
         ev = evaluate(dist.elements, problem.grid, region=region)
         if not (np.isfinite(ev.coverage) and np.isfinite(ev.overlap)):  # fail closed: no row from it
-            raise ValueError(f"{self.describe()}: coverage {ev.coverage!r}, overlap {ev.overlap!r} are not finite")
+            raise ValueError(
+                f"{self.describe()}: coverage {ev.coverage!r}, overlap {ev.overlap!r} are not finite"
+            )
         secs = list(map(float, dist.seconds))
         row = {
-            "key": self.key, **self.params(), "status": "ok", "reason": "", "device": backend.device(),
-            "coverage": ev.coverage, "overlap": ev.overlap, "placed": ev.elements, "skipped": ev.skipped,
+            "key": self.key,
+            **self.params(),
+            "status": "ok",
+            "reason": "",
+            "device": backend.device(),
+            "coverage": ev.coverage,
+            "overlap": ev.overlap,
+            "placed": ev.elements,
+            "skipped": ev.skipped,
             "empty_cells": int(dist.empty[-1]) if dist.empty else 0,
-            "method_seconds": wall, "lloyd_seconds": float(dist.lloyd_seconds),
-            "setup_seconds": float(dist.setup_seconds), "placement_seconds": float(dist.extra.get("placement_seconds", 0.0)),
+            "method_seconds": wall,
+            "lloyd_seconds": float(dist.lloyd_seconds),
+            "setup_seconds": float(dist.setup_seconds),
+            "placement_seconds": float(dist.extra.get("placement_seconds", 0.0)),
             "ms_per_iteration": float(np.median(secs) * 1000) if secs else None,
             "final_energy": float(dist.energy[-1]) if dist.energy else None,
         }
@@ -143,15 +170,24 @@ class RunSpec:
         if self.measures:
             row.update(fidelity(dist.elements, problem, self.element, problem.metric.aspect))
             row["n_elements"] = problem.n_elements
-        record = {"row": row, "sites_sha1": sites_digest(dist.sites), "energy": dist.energy,
-                  "seconds": secs, "empty_cells_per_iteration": list(dist.empty), "extra": dist.extra,
-                  "machine": machine(), "versions": versions()}
+        record = {
+            "row": row,
+            "sites_sha1": sites_digest(dist.sites),
+            "energy": dist.energy,
+            "seconds": secs,
+            "empty_cells_per_iteration": list(dist.empty),
+            "extra": dist.extra,
+            "machine": machine(),
+            "versions": versions(),
+        }
         if self.seed == 0:
             # 0.01 px is far below a pixel; angles/scales only where they vary (a field, a density)
             record["sites"] = np.round(dist.sites, 2)
             for name in ("angles", "scales"):
                 v = np.asarray(getattr(dist, name), dtype=np.float64)
-                record[name] = np.round(v, 5) if len(v) and np.ptp(v) > 0 else (float(v[0]) if len(v) else None)
+                record[name] = (
+                    np.round(v, 5) if len(v) and np.ptp(v) > 0 else (float(v[0]) if len(v) else None)
+                )
         if self.picture:
             buf = io.BytesIO()
             effect_picture(dist.elements, problem.grid).save(buf, format="PNG")
@@ -165,8 +201,18 @@ def sites_digest(sites) -> str:
 
 
 PICTURE_ELEMENTS = 250  # about this many elements in an effect picture, to stay legible
-PICTURE_PALETTE = np.array([(230, 159, 0), (86, 180, 233), (0, 158, 115), (240, 228, 66), (213, 94, 0),
-                            (204, 121, 167), (0, 114, 178)], dtype=np.uint8)  # colour-blind safe
+PICTURE_PALETTE = np.array(
+    [
+        (230, 159, 0),
+        (86, 180, 233),
+        (0, 158, 115),
+        (240, 228, 66),
+        (213, 94, 0),
+        (204, 121, 167),
+        (0, 114, 178),
+    ],
+    dtype=np.uint8,
+)  # colour-blind safe
 
 
 def picture_crop(n_elements: int) -> float:
@@ -184,6 +230,18 @@ def effect_picture(elements, grid, side: int = 512, crop: float | None = None):
     crop = picture_crop(len(elements)) if crop is None else crop
     cw, ch = grid.width * crop, grid.height * crop
     fills = PICTURE_PALETTE[np.arange(len(elements)) % len(PICTURE_PALETTE)]
-    return draw_elements(elements, grid.width, grid.height, fills, background=(40, 40, 46),
-                         region_colour=None if grid.mask is None else (70, 70, 70), region_mask=grid.mask,
-                         scale=side / max(cw, ch), supersample=2, window=(0, 0, cw, ch))
+    return draw_elements(
+        elements,
+        grid.width,
+        grid.height,
+        fills,
+        background=(40, 40, 46),
+        region_colour=None if grid.mask is None else (70, 70, 70),
+        region_mask=grid.mask,
+        scale=side / max(cw, ch),
+        supersample=2,
+        window=(0, 0, cw, ch),
+    )
+
+
+__all__ = ["RunSpec", "sites_digest", "PICTURE_ELEMENTS", "PICTURE_PALETTE", "picture_crop", "effect_picture"]

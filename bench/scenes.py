@@ -51,6 +51,15 @@ def scene_problem(scene: str, size: int, n: int, metric, seed: int):
     density, field, region = SCENES[one_of(scene, "scene", list(SCENES))]
     mask = {"star": star_mask, "ring": ring_mask, None: lambda _: None}[region](size)
     grid = Grid(size, size, mask)
-    n_region = n if mask is None else max(1, round(n * grid.pixel_count / size ** 2))
-    return Problem(grid, n_region, metric, density=radial_gradient(size) if density else None,
-                   field=DirectionField.named(field, size, size) if field else None, seed=seed)
+    n_region = n if mask is None else max(1, round(n * grid.pixel_count / size**2))
+    return Problem(
+        grid,
+        n_region,
+        metric,
+        density=radial_gradient(size) if density else None,
+        field=DirectionField.named(field, size, size) if field else None,
+        seed=seed,
+    )
+
+
+__all__ = ["DENSITY_CONTRAST", "SCENES", "SCENE_TEXT", "radial_gradient", "scene_problem"]

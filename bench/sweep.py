@@ -117,8 +117,16 @@ def not_run_row(spec, reason: str, status: str = "skipped") -> dict:
     return {"key": spec.key, **spec.params(), "status": status, "reason": reason}
 
 
-def run_sweep(specs: list, out, *, force: bool = False, store: bool = True, quiet: bool = False,
-              unavailable: dict[str, str] | None = None, executor=None) -> list[dict]:
+def run_sweep(
+    specs: list,
+    out,
+    *,
+    force: bool = False,
+    store: bool = True,
+    quiet: bool = False,
+    unavailable: dict[str, str] | None = None,
+    executor=None,
+) -> list[dict]:
     """Run every spec (stored raw json read back unless ``force``) and return the rows in
     the order of ``specs``.  ``unavailable`` maps a backend variant to the reason it
     cannot run.  ``store=False`` (regression checks) neither reads nor writes raw json.
@@ -138,8 +146,16 @@ def run_sweep(specs: list, out, *, force: bool = False, store: bool = True, quie
         else:
             pending.append((i, spec))
     executor = executor or InProcessExecutor()
-    bar = tqdm(total=len(specs), initial=len(specs) - len(pending), desc="runs", unit="run", disable=quiet,
-               file=sys.stderr, dynamic_ncols=True, mininterval=0.5)
+    bar = tqdm(
+        total=len(specs),
+        initial=len(specs) - len(pending),
+        desc="runs",
+        unit="run",
+        disable=quiet,
+        file=sys.stderr,
+        dynamic_ncols=True,
+        mininterval=0.5,
+    )
     try:
         for i, (status, value) in executor.run(pending, on_start=lambda s: bar.set_postfix_str(s.describe())):
             spec = specs[i]
@@ -155,12 +171,17 @@ def run_sweep(specs: list, out, *, force: bool = False, store: bool = True, quie
             bar.update(1)
     except RunAborted as exc:
         done = sum(1 for r in rows.values() if r.get("status") == "ok")
-        raise RunAborted(f"{exc}; {done} of {len(specs)} runs are stored under {Path(out) / 'raw'}: run the same "
-                         "command again to resume (without --scheduler/--workers it runs here)") from None
+        raise RunAborted(
+            f"{exc}; {done} of {len(specs)} runs are stored under {Path(out) / 'raw'}: run the same "
+            "command again to resume (without --scheduler/--workers it runs here)"
+        ) from None
     except KeyboardInterrupt:
         done = sum(1 for r in rows.values() if r.get("status") == "ok")
-        print(f"\ninterrupted: {done} of {len(specs)} runs are stored under {Path(out) / 'raw'}; "
-              "run the same command again to resume", file=sys.stderr)
+        print(
+            f"\ninterrupted: {done} of {len(specs)} runs are stored under {Path(out) / 'raw'}; "
+            "run the same command again to resume",
+            file=sys.stderr,
+        )
         raise
     finally:
         bar.close()
@@ -231,3 +252,20 @@ def check_memory(specs: list, limit=None, lower: str = "leave it out", name: str
     estimates = [spec.memory_estimate() for spec in specs]
     worst = max(range(len(specs)), key=lambda i: estimates[i].total)
     estimates[worst].check(limit, lower=lower, name=name)
+
+
+__all__ = [
+    "BackendCache",
+    "execute",
+    "InProcessExecutor",
+    "raw_path",
+    "picture_path",
+    "not_run_row",
+    "run_sweep",
+    "made_by",
+    "STORED_MAX_BYTES",
+    "read_stored",
+    "write_stored",
+    "memory_class",
+    "check_memory",
+]

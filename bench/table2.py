@@ -48,15 +48,47 @@ ELEMENTS = list(PAPER_SHAPES)  # the default; --shapes may name any shape (hexag
 FULL = {"size": 1024, "n_elements": 4000, "iterations": 20, "seeds": 5}
 QUICK = {"size": 256, "n_elements": 250, "iterations": 20, "seeds": 2}
 
-COLUMNS = ["method", "backend", "element", "metric", "width", "height", "n_elements", "iterations",
-           "seeds", "runs", "coverage_mean", "coverage_sd", "overlap_mean", "overlap_sd",
-           "method_seconds_mean", "method_seconds_sd", "lloyd_seconds_mean", "ms_per_iteration", "placed_mean", "empty_cells_mean",
-           "coverage_at_1pct_overlap", "paper_coverage", "paper_time", "status", "reason", "device", "hosts", "host_slots"]
+COLUMNS = [
+    "method",
+    "backend",
+    "element",
+    "metric",
+    "width",
+    "height",
+    "n_elements",
+    "iterations",
+    "seeds",
+    "runs",
+    "coverage_mean",
+    "coverage_sd",
+    "overlap_mean",
+    "overlap_sd",
+    "method_seconds_mean",
+    "method_seconds_sd",
+    "lloyd_seconds_mean",
+    "ms_per_iteration",
+    "placed_mean",
+    "empty_cells_mean",
+    "coverage_at_1pct_overlap",
+    "paper_coverage",
+    "paper_time",
+    "status",
+    "reason",
+    "device",
+    "hosts",
+    "host_slots",
+]
 
 
-def problem_set(quick: bool, seeds: int | None, methods: list[str], backends: list[str],
-                elements: list[str] | None = None, variant_backend: str = REFERENCE_BACKEND,
-                method_options: dict | None = None) -> list[RunSpec]:
+def problem_set(
+    quick: bool,
+    seeds: int | None,
+    methods: list[str],
+    backends: list[str],
+    elements: list[str] | None = None,
+    variant_backend: str = REFERENCE_BACKEND,
+    method_options: dict | None = None,
+) -> list[RunSpec]:
     """The runs of Table 2 (see the module docstring), as each method's record asks:
     on the shapes it is compared on, on every variant of ``backends`` (available or not:
     unavailable ones become skipped rows), on ``variant_backend`` (the fastest) or on the
@@ -71,18 +103,33 @@ def problem_set(quick: bool, seeds: int | None, methods: list[str], backends: li
 
     def add(method, backend, element, picture_first, options, curve=True):
         for s in range(k):
-            specs.append(RunSpec(suite, method, backend, element, cfg["size"], cfg["size"],
-                                 cfg["n_elements"], cfg["iterations"], s, picture=picture_first and s == 0,
-                                 options=options, curve=curve and s == 0))
+            specs.append(
+                RunSpec(
+                    suite,
+                    method,
+                    backend,
+                    element,
+                    cfg["size"],
+                    cfg["size"],
+                    cfg["n_elements"],
+                    cfg["iterations"],
+                    s,
+                    picture=picture_first and s == 0,
+                    options=options,
+                    curve=curve and s == 0,
+                )
+            )
 
     records = [get_method(m) for m in methods]
     for element in elements:
         for rec in records:
-            if (rec.compared_on is not None and element not in rec.compared_on) or \
-                    (rec.elements is not None and element not in rec.elements):
+            if (rec.compared_on is not None and element not in rec.compared_on) or (
+                rec.elements is not None and element not in rec.elements
+            ):
                 continue
-            given = rec.parse_options({k: v for k, v in (method_options or {}).items() if rec.option(k)},
-                                      flags=True)
+            given = rec.parse_options(
+                {k: v for k, v in (method_options or {}).items() if rec.option(k)}, flags=True
+            )
             if rec.sweep_backends == "every":
                 for b in backends:
                     first = b == backends[0]
@@ -92,8 +139,13 @@ def problem_set(quick: bool, seeds: int | None, methods: list[str], backends: li
             add(rec.name, backend, element, picture_first=True, options=given)
             for variant in rec.sweep_variants:
                 if variant.elements is None or element in variant.elements:
-                    add(rec.name, backend, element, picture_first=variant.pictured,
-                        options={**given, **variant.options})
+                    add(
+                        rec.name,
+                        backend,
+                        element,
+                        picture_first=variant.pictured,
+                        options={**given, **variant.options},
+                    )
     return specs
 
 
@@ -114,8 +166,10 @@ def aggregate(rows: list[dict]):
         df["method"] = df["label"].fillna(df["method"])
     out = []
     # fail closed: a run whose coverage or overlap is missing or not finite is a failed run
-    judged = [pd.to_numeric(df[c], errors="coerce") if c in df else pd.Series(np.nan, index=df.index)
-              for c in ("coverage", "overlap")]
+    judged = [
+        pd.to_numeric(df[c], errors="coerce") if c in df else pd.Series(np.nan, index=df.index)
+        for c in ("coverage", "overlap")
+    ]
     broken = (df["status"] == "ok") & ~(np.isfinite(judged[0]) & np.isfinite(judged[1]))
     df.loc[broken, "status"] = "failed"
     df.loc[broken, "reason"] = "coverage or overlap is not a finite number"
@@ -123,26 +177,47 @@ def aggregate(rows: list[dict]):
         ok = g[g["status"] == "ok"]
         first = g.iloc[0]
         # the paper's figures stand on the square rows of a method run with its defaults
-        paper = get_method(first["base"]).paper_table2 if element == "square" and method == first["base"] else None
+        paper = (
+            get_method(first["base"]).paper_table2
+            if element == "square" and method == first["base"]
+            else None
+        )
         rec = {
-            "method": method, "backend": backend, "element": element, "metric": first["metric"],
-            "width": first["width"], "height": first["height"], "n_elements": first["n_elements"],
-            "iterations": first["iterations"], "seeds": len(g), "runs": len(ok),
-            "paper_coverage": paper[0] if paper else np.nan, "paper_time": paper[1] if paper else "",
+            "method": method,
+            "backend": backend,
+            "element": element,
+            "metric": first["metric"],
+            "width": first["width"],
+            "height": first["height"],
+            "n_elements": first["n_elements"],
+            "iterations": first["iterations"],
+            "seeds": len(g),
+            "runs": len(ok),
+            "paper_coverage": paper[0] if paper else np.nan,
+            "paper_time": paper[1] if paper else "",
         }
         if len(ok):
             rec.update(
-                coverage_mean=float(ok["coverage"].mean()), coverage_sd=_sd(ok, "coverage"),
-                overlap_mean=float(ok["overlap"].mean()), overlap_sd=_sd(ok, "overlap"),
-                method_seconds_mean=float(ok["method_seconds"].mean()), method_seconds_sd=_sd(ok, "method_seconds"),
+                coverage_mean=float(ok["coverage"].mean()),
+                coverage_sd=_sd(ok, "coverage"),
+                overlap_mean=float(ok["overlap"].mean()),
+                overlap_sd=_sd(ok, "overlap"),
+                method_seconds_mean=float(ok["method_seconds"].mean()),
+                method_seconds_sd=_sd(ok, "method_seconds"),
                 lloyd_seconds_mean=float(ok["lloyd_seconds"].mean()),
                 ms_per_iteration=float(ok["ms_per_iteration"].median()),
-                placed_mean=float(ok["placed"].mean()), empty_cells_mean=float(ok["empty_cells"].mean()),
-                coverage_at_1pct_overlap=(float(ok["coverage_at_1pct_overlap"].mean())
-                                          if "coverage_at_1pct_overlap" in ok else np.nan),
+                placed_mean=float(ok["placed"].mean()),
+                empty_cells_mean=float(ok["empty_cells"].mean()),
+                coverage_at_1pct_overlap=(
+                    float(ok["coverage_at_1pct_overlap"].mean())
+                    if "coverage_at_1pct_overlap" in ok
+                    else np.nan
+                ),
                 status="ok" if len(ok) == len(g) else "partial",
                 reason="; ".join(sorted(set(g.loc[g["status"] != "ok", "reason"].astype(str)))),
-                device=str(ok.iloc[0]["device"]), hosts=hosts_of(ok), host_slots=host_slots_of(ok),
+                device=str(ok.iloc[0]["device"]),
+                hosts=hosts_of(ok),
+                host_slots=host_slots_of(ok),
             )
         else:
             rec.update(status=str(first["status"]), reason=str(first["reason"]), device="")
@@ -171,8 +246,11 @@ def discussion(table) -> str:
 
     sq = table[(table["element"] == "square") & table["status"].isin(["ok", "partial"])]
     # one row per method: those swept over every backend by their reference backend's row
-    cov = {r["method"]: r for _, r in sq.iterrows()
-           if not _every_backend(r["method"]) or r["backend"] == REFERENCE_BACKEND}
+    cov = {
+        r["method"]: r
+        for _, r in sq.iterrows()
+        if not _every_backend(r["method"]) or r["backend"] == REFERENCE_BACKEND
+    }
     role = {m: _record(m).role for m in cov}
     paper_method = next((m for m in cov if role[m] == "paper" and m == _record(m).name), None)
     if paper_method is None:
@@ -180,23 +258,34 @@ def discussion(table) -> str:
 
     def c(name):
         r = cov.get(name)
-        return f"{fmt_pct(r['coverage_mean'])} (overlap {fmt_pct(r['overlap_mean'], digits=2)})" \
-            if r is not None else "not run"
+        return (
+            f"{fmt_pct(r['coverage_mean'])} (overlap {fmt_pct(r['overlap_mean'], digits=2)})"
+            if r is not None
+            else "not run"
+        )
 
     plain = [m for m in cov if m == _record(m).name]  # each method with its default options
     lines = ["", "## How this compares with the paper", ""]
-    in_paper = sorted((m for m in plain if role[m] in ("paper", "baseline") and _record(m).paper_table2),
-                      key=lambda m: _record(m).paper_table2[0])
+    in_paper = sorted(
+        (m for m in plain if role[m] in ("paper", "baseline") and _record(m).paper_table2),
+        key=lambda m: _record(m).paper_table2[0],
+    )
     measured = sorted(in_paper, key=lambda m: cov[m]["coverage_mean"])
     same = measured == in_paper
     extensions = [m for m in plain if role[m] == "extension"]
     baselines = [m for m in plain if role[m] not in ("paper", "extension")]
     lines.append(
-        "- The paper's order (" + " < ".join(f"{m} {fmt_pct(_record(m).paper_table2[0])}" for m in in_paper)
-        + ") is " + ("reproduced" if same else "**not** reproduced") + f" by the paper's own placement: "
+        "- The paper's order ("
+        + " < ".join(f"{m} {fmt_pct(_record(m).paper_table2[0])}" for m in in_paper)
+        + ") is "
+        + ("reproduced" if same else "**not** reproduced")
+        + f" by the paper's own placement: "
         f"{paper_method} covers {c(paper_method)}"
-        + "".join(f"; {m} {c(m)}" for m in extensions) + "; the baselines: "
-        + ", ".join(f"{m} {c(m)}" for m in baselines) + ".")
+        + "".join(f"; {m} {c(m)}" for m in extensions)
+        + "; the baselines: "
+        + ", ".join(f"{m} {c(m)}" for m in baselines)
+        + "."
+    )
     baseline_rows = [m for m in cov if role[m] not in ("paper", "extension")]
     for m in extensions:
         rc = cov[m]
@@ -205,38 +294,63 @@ def discussion(table) -> str:
             continue  # said only of an extension that beats every baseline row at no overlap
         lines.append(
             f"- {m} ({_record(m).summary}) covers {c(m)}, more than every baseline row, and none of its "
-            "elements overlap; the paper's " + fmt_pct(_record(paper_method).paper_table2[0]) + " "
-            + ("is passed" if rc["coverage_mean"] > _record(paper_method).paper_table2[0] else "is not reached")
-            + ".")
+            "elements overlap; the paper's "
+            + fmt_pct(_record(paper_method).paper_table2[0])
+            + " "
+            + (
+                "is passed"
+                if rc["coverage_mean"] > _record(paper_method).paper_table2[0]
+                else "is not reached"
+            )
+            + "."
+        )
     smaller = [f"{name} {c(name)}" for name in cov if name != _record(name).name and _record(name).fixed_size]
     if smaller:
         lines.append(
             "- The fixed-size baselines' coverage at their default tile budget is bought with overlap, which "
             "they allow and we count; with smaller tiles: " + "; ".join(smaller) + ". The paper gives "
-            "neither its tile sizes nor how it treats overlap.")
+            "neither its tile sizes nor how it treats overlap."
+        )
     fair = sq[sq["coverage_at_1pct_overlap"].notna()] if "coverage_at_1pct_overlap" in sq else sq.iloc[0:0]
-    fair = fair[[not _every_backend(m) or b == REFERENCE_BACKEND for m, b in zip(fair["method"], fair["backend"], strict=True)]]
+    fair = fair[
+        [
+            not _every_backend(m) or b == REFERENCE_BACKEND
+            for m, b in zip(fair["method"], fair["backend"], strict=True)
+        ]
+    ]
     if len(fair):
         ranked = fair.sort_values("coverage_at_1pct_overlap", ascending=False)
         lines.append(
             "- At equal overlap (every method's elements scaled about their centres until the overlap "
             "is 1 %, `coverage_overlap.csv`, `coverage_overlap.png`) the squares rank: "
-            + ", ".join(f"{r['method']} {fmt_pct(r['coverage_at_1pct_overlap'])}" for _, r in ranked.iterrows())
-            + ".")
+            + ", ".join(
+                f"{r['method']} {fmt_pct(r['coverage_at_1pct_overlap'])}" for _, r in ranked.iterrows()
+            )
+            + "."
+        )
     per_backend = sq[sq["method"] == paper_method]
-    fast = [f"{r['backend']} {fmt_seconds(r['lloyd_seconds_mean'])}" for _, r in per_backend.iterrows()
-            if r["status"] == "ok"]
+    fast = [
+        f"{r['backend']} {fmt_seconds(r['lloyd_seconds_mean'])}"
+        for _, r in per_backend.iterrows()
+        if r["status"] == "ok"
+    ]
     if fast:
-        lines.append(f"- Time for the 20 iterations of {paper_method} (mean over seeds): " + ", ".join(fast)
-                     + f"; the paper reports {_record(paper_method).paper_table2[1]} on a GPU (N not stated).")
+        lines.append(
+            f"- Time for the 20 iterations of {paper_method} (mean over seeds): "
+            + ", ".join(fast)
+            + f"; the paper reports {_record(paper_method).paper_table2[1]} on a GPU (N not stated)."
+        )
     return "\n".join(lines) + "\n"
 
 
 def _problem_notes(methods: list[str]) -> list[str]:
     """What the problem set runs, said from the methods' records."""
     records = [get_method(m) for m in methods]
-    where = {"every": "every available backend", "fastest": "the OpenCL backend where it is available "
-             "(else NumPy)", "reference": "the NumPy reference backend"}
+    where = {
+        "every": "every available backend",
+        "fastest": "the OpenCL backend where it is available (else NumPy)",
+        "reference": "the NumPy reference backend",
+    }
     notes = []
     for key, text in where.items():
         names = [r.name for r in records if r.sweep_backends == key]
@@ -244,19 +358,37 @@ def _problem_notes(methods: list[str]) -> list[str]:
             notes.append(f"{', '.join(names)}: on {text}")
     for r in records:
         shapes = "every element shape" if r.compared_on is None else ", ".join(r.compared_on)
-        extra = "; also " + "; ".join(
-            r.label(dict(v.options)) + (f" on {', '.join(v.elements)}" if v.elements else "")
-            for v in r.sweep_variants) if r.sweep_variants else ""
+        extra = (
+            "; also "
+            + "; ".join(
+                r.label(dict(v.options)) + (f" on {', '.join(v.elements)}" if v.elements else "")
+                for v in r.sweep_variants
+            )
+            if r.sweep_variants
+            else ""
+        )
         notes.append(f"{r.name}: {shapes}{extra}" + (f" ({r.paper})" if r.paper else ""))
     return notes
 
 
-def render_markdown(table, prov: dict, command: str, quick: bool, cfg: dict, seeds: int,
-                    elapsed: float, cached: int, total: int, pictured: bool = True,
-                    methods: list[str] | None = None) -> str:
+def render_markdown(
+    table,
+    prov: dict,
+    command: str,
+    quick: bool,
+    cfg: dict,
+    seeds: int,
+    elapsed: float,
+    cached: int,
+    total: int,
+    pictured: bool = True,
+    methods: list[str] | None = None,
+) -> str:
     from .report import fmt_pct, fmt_seconds, header_markdown, markdown_table, several_hosts
 
-    title = "Table 2, regenerated" + (" (QUICK: small raster, 2 seeds; not the paper's scale)" if quick else "")
+    title = "Table 2, regenerated" + (
+        " (QUICK: small raster, 2 seeds; not the paper's scale)" if quick else ""
+    )
     notes = [
         f"problem set: square region, whole {cfg['size']}x{cfg['size']} px raster, N = {cfg['n_elements']} "
         f"sites, {cfg['iterations']} Lloyd iterations, seeds 0..{seeds - 1}, no density, no direction "
@@ -278,38 +410,66 @@ def render_markdown(table, prov: dict, command: str, quick: bool, cfg: dict, see
     text = header_markdown("Table 2" if not quick else title, prov, command, notes)
     if quick:
         text += f"\n**{title}**\n"
-    cols = ["method", "backend", "element", "coverage", "overlap", "coverage at ≤ 1 % overlap", "time",
-            "Lloyd", "ms/it", "runs", "paper coverage", "paper time"]
+    cols = [
+        "method",
+        "backend",
+        "element",
+        "coverage",
+        "overlap",
+        "coverage at ≤ 1 % overlap",
+        "time",
+        "Lloyd",
+        "ms/it",
+        "runs",
+        "paper coverage",
+        "paper time",
+    ]
     by_host = several_hosts(table["hosts"])  # rows from several machines say which
     shared = table["host_slots"].fillna(1) > 1  # times taken beside other runs of the sweep
     body = []
     for k, r in table.iterrows():
         if r["status"] not in ("ok", "partial"):
             continue
-        body.append([
-            r["method"], r["backend"], r["element"],
-            fmt_pct(r["coverage_mean"], r["coverage_sd"]), fmt_pct(r["overlap_mean"], r["overlap_sd"], digits=2),
-            fmt_pct(r["coverage_at_1pct_overlap"]),
-            fmt_seconds(r["method_seconds_mean"]) + (" ‡" if shared[k] else ""),
-            fmt_seconds(r["lloyd_seconds_mean"]), f"{r['ms_per_iteration']:.3g}",
-            f"{r['runs']}/{r['seeds']}",
-            fmt_pct(r["paper_coverage"]) if r["paper_time"] else "", r["paper_time"] or "",
-        ] + ([r["hosts"]] if by_host else []))
+        body.append(
+            [
+                r["method"],
+                r["backend"],
+                r["element"],
+                fmt_pct(r["coverage_mean"], r["coverage_sd"]),
+                fmt_pct(r["overlap_mean"], r["overlap_sd"], digits=2),
+                fmt_pct(r["coverage_at_1pct_overlap"]),
+                fmt_seconds(r["method_seconds_mean"]) + (" ‡" if shared[k] else ""),
+                fmt_seconds(r["lloyd_seconds_mean"]),
+                f"{r['ms_per_iteration']:.3g}",
+                f"{r['runs']}/{r['seeds']}",
+                fmt_pct(r["paper_coverage"]) if r["paper_time"] else "",
+                r["paper_time"] or "",
+            ]
+            + ([r["hosts"]] if by_host else [])
+        )
     text += "\n" + markdown_table(cols + (["host"] if by_host else []), body)
     if shared.any():
-        text += (f"\n‡ time taken while up to {int(table['host_slots'].max())} runs of this sweep shared the "
-                 "host (--workers or --scheduler without --exclusive): compare it only with times taken the "
-                 "same way; coverage and overlap do not depend on it.\n")
+        text += (
+            f"\n‡ time taken while up to {int(table['host_slots'].max())} runs of this sweep shared the "
+            "host (--workers or --scheduler without --exclusive): compare it only with times taken the "
+            "same way; coverage and overlap do not depend on it.\n"
+        )
     missing = table[~table["status"].isin(["ok"])]
     if len(missing):
         text += "\n## Not run, failed or partial\n\n"
-        text += markdown_table(["method", "backend", "element", "status", "reason"],
-                               [[r["method"], r["backend"], r["element"], r["status"], r["reason"]]
-                                for _, r in missing.iterrows()])
+        text += markdown_table(
+            ["method", "backend", "element", "status", "reason"],
+            [
+                [r["method"], r["backend"], r["element"], r["status"], r["reason"]]
+                for _, r in missing.iterrows()
+            ],
+        )
     text += discussion(table)
     if pictured:
-        text += ("\nThe picture `table2.png` shows one effect picture per method (seed 0, the top-left "
-                 "corner of the region, about 250 elements); the raw json")
+        text += (
+            "\nThe picture `table2.png` shows one effect picture per method (seed 0, the top-left "
+            "corner of the region, about 250 elements); the raw json"
+        )
     else:
         text += "\nNo run made an effect picture, so there is no `table2.png`; the raw json"
     text += " of every run, with its sites and timings, is under `raw/`.\n"
@@ -324,14 +484,27 @@ def coverage_overlap_table(rows: list[dict]):
     out = []
     for r in rows:
         for factor, coverage, overlap in r.get("coverage_overlap") or []:
-            out.append({"method": r.get("label") or r["method"], "backend": r["backend"], "element": r["element"],
-                        "seed": r["seed"], "factor": factor, "coverage": coverage, "overlap": overlap})
+            out.append(
+                {
+                    "method": r.get("label") or r["method"],
+                    "backend": r["backend"],
+                    "element": r["element"],
+                    "seed": r["seed"],
+                    "factor": factor,
+                    "coverage": coverage,
+                    "overlap": overlap,
+                }
+            )
     if not out:
-        return pd.DataFrame(columns=["method", "backend", "element", "factor", "coverage", "overlap", "seeds"])
+        return pd.DataFrame(
+            columns=["method", "backend", "element", "factor", "coverage", "overlap", "seeds"]
+        )
     df = pd.DataFrame(out)
-    return (df.groupby(["method", "backend", "element", "factor"], sort=False)
-              .agg(coverage=("coverage", "mean"), overlap=("overlap", "mean"), seeds=("seed", "nunique"))
-              .reset_index())
+    return (
+        df.groupby(["method", "backend", "element", "factor"], sort=False)
+        .agg(coverage=("coverage", "mean"), overlap=("overlap", "mean"), seeds=("seed", "nunique"))
+        .reset_index()
+    )
 
 
 def render_coverage_overlap(curves, path: Path) -> bool:
@@ -352,13 +525,24 @@ def render_coverage_overlap(curves, path: Path) -> bool:
         g = g.sort_values("factor")
         record = _record(method)
         ours = record.role in ("paper", "extension")
-        ax.plot(100 * g["overlap"], 100 * g["coverage"], "os^vD<>"[k % 7] + ("-" if ours else "--"),
-                ms=3.5, lw=2.2 if record.tight else 1.1, color=colours[k % len(colours)], label=method)
+        ax.plot(
+            100 * g["overlap"],
+            100 * g["coverage"],
+            "os^vD<>"[k % 7] + ("-" if ours else "--"),
+            ms=3.5,
+            lw=2.2 if record.tight else 1.1,
+            color=colours[k % len(colours)],
+            label=method,
+        )
         one = g[np.isclose(g["factor"], 1.0)]
         ax.plot(100 * one["overlap"], 100 * one["coverage"], "k.", ms=8)
     ax.axvline(1.0, color="grey", lw=0.8, ls=":")
-    ax.set(xlabel="overlap (% of the region)", ylabel="coverage (% of the region)", xlim=(-0.5, 15),
-           title="Squares at equal overlap: elements scaled 0.80-1.20 about their centres (black: as placed)")
+    ax.set(
+        xlabel="overlap (% of the region)",
+        ylabel="coverage (% of the region)",
+        xlim=(-0.5, 15),
+        title="Squares at equal overlap: elements scaled 0.80-1.20 about their centres (black: as placed)",
+    )
     ax.grid(True, alpha=0.3)
     ax.legend(fontsize=7, loc="lower right")
     save_figure(fig, path)
@@ -392,8 +576,9 @@ def render_picture(table, out: Path, suite_specs: list[RunSpec], path: Path) -> 
     shapes = list(dict.fromkeys(spec.element for spec, _ in panels))
     rows = [[x for x in panels if x[0].element == shape] for shape in shapes]
     ncol = max(len(r) for r in rows)
-    fig, axes = plt.subplots(len(rows), ncol, figsize=(2.6 * ncol, 3.1 * len(rows)), dpi=110,
-                             squeeze=False, layout="constrained")
+    fig, axes = plt.subplots(
+        len(rows), ncol, figsize=(2.6 * ncol, 3.1 * len(rows)), dpi=110, squeeze=False, layout="constrained"
+    )
     for ax in axes.ravel():
         ax.axis("off")
     for i, row in enumerate(rows):
@@ -414,8 +599,12 @@ def render_picture(table, out: Path, suite_specs: list[RunSpec], path: Path) -> 
 
 
 def add_parser(sub):
-    p = sub.add_parser("table2", help="regenerate the paper's Table 2 into reports/",
-                       description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    p = sub.add_parser(
+        "table2",
+        help="regenerate the paper's Table 2 into reports/",
+        description=__doc__,
+        formatter_class=argparse.RawDescriptionHelpFormatter,
+    )
     options.add_sweep_options(p, "small version (256² px, N=250, 2 seeds): < 2 min")
     options.add_seeds_option(p)
     options.add_list_options(p, "methods", "backends", "shapes")
@@ -457,12 +646,20 @@ class Table2Request(options.SweepRequest):
     @classmethod
     def from_args(cls, args) -> Table2Request:
         cfg = QUICK if args.quick else FULL
-        listed = {name: name_list(getattr(args, name), f"--{name}", choices)
-                  for name, choices in (("methods", method_names()), ("backends", variant_names()),
-                                        ("shapes", ELEMENT_SHAPES))}
-        return cls(**cls.common(args), seeds=options.seeds_value(args.seeds, cfg["seeds"]),
-                   **{k: options.as_tuple(v) for k, v in listed.items()},
-                   method_options=options.given_method_options(args))
+        listed = {
+            name: name_list(getattr(args, name), f"--{name}", choices)
+            for name, choices in (
+                ("methods", method_names()),
+                ("backends", variant_names()),
+                ("shapes", ELEMENT_SHAPES),
+            )
+        }
+        return cls(
+            **cls.common(args),
+            seeds=options.seeds_value(args.seeds, cfg["seeds"]),
+            **{k: options.as_tuple(v) for k, v in listed.items()},
+            method_options=options.given_method_options(args),
+        )
 
 
 def prepare(req: Table2Request) -> dict:
@@ -481,8 +678,12 @@ def prepare(req: Table2Request) -> dict:
     shapes = [one_of(s, "--shapes", ELEMENT_SHAPES) for s in req.shapes] if req.shapes else None
     for name in req.method_options:  # an option is for the methods that declare it: one of them must run
         if not any(get_method(m).option(name) for m in methods):
-            raise InputError(f"--{name.replace('_', '-')} is an option of none of --methods {','.join(methods)}")
-    specs = problem_set(req.quick, seeds, methods, backends, shapes, variant_backend(unavailable), req.method_options)
+            raise InputError(
+                f"--{name.replace('_', '-')} is an option of none of --methods {','.join(methods)}"
+            )
+    specs = problem_set(
+        req.quick, seeds, methods, backends, shapes, variant_backend(unavailable), req.method_options
+    )
     check_memory(specs, req.memory_limit, lower="run the --quick set, or fewer --methods or --shapes")
     return {"out": req.out, "cfg": cfg, "seeds": seeds, "specs": specs, "unavailable": unavailable}
 
@@ -504,24 +705,44 @@ def table2(req: Table2Request) -> int:
     cmd = req.command or "cvtbench table2" + (" --quick" if req.quick else "")
     with report_folder(out, command=cmd):
         with executor_for(req, exclusive=req.exclusive) as executor:
-            rows = run_sweep(specs, out, force=req.force, quiet=req.quiet, unavailable=plan["unavailable"],
-                             executor=executor)
+            rows = run_sweep(
+                specs,
+                out,
+                force=req.force,
+                quiet=req.quiet,
+                unavailable=plan["unavailable"],
+                executor=executor,
+            )
         table = aggregate(rows)
         elapsed = time.perf_counter() - t0
         cached = sum(1 for r in rows if r.get("cached"))
         pictured = render_picture(table, out, specs, out / "table2.png")
-        md = render_markdown(table, provenance(), cmd, req.quick, cfg, seeds, elapsed, cached, len(rows), pictured,
-                             methods=list(dict.fromkeys(spec.method for spec in specs)))
+        md = render_markdown(
+            table,
+            provenance(),
+            cmd,
+            req.quick,
+            cfg,
+            seeds,
+            elapsed,
+            cached,
+            len(rows),
+            pictured,
+            methods=list(dict.fromkeys(spec.method for spec in specs)),
+        )
         curves = coverage_overlap_table(rows)
         if len(curves):
             write_csv(out / "coverage_overlap.csv", curves)
         if not (len(curves) and render_coverage_overlap(curves, out / "coverage_overlap.png")):
-            for name in ("coverage_overlap.png",) if len(curves) else ("coverage_overlap.csv", "coverage_overlap.png"):
+            for name in (
+                ("coverage_overlap.png",) if len(curves) else ("coverage_overlap.csv", "coverage_overlap.png")
+            ):
                 (out / name).unlink(missing_ok=True)  # a stale view from an earlier sweep
         write_csv(out / "table2.csv", table)
         write_markdown(out / "table2.md", md)
-        written = written_files(out, ["table2.md", "table2.csv", "table2.png", "coverage_overlap.csv",
-                                      "coverage_overlap.png"])
+        written = written_files(
+            out, ["table2.md", "table2.csv", "table2.png", "coverage_overlap.csv", "coverage_overlap.png"]
+        )
     _print_summary(table, out, written)
     return 0
 
@@ -531,12 +752,16 @@ def _print_summary(table, out: Path, written: list[str]) -> None:
 
     for _, r in table.iterrows():
         if r["status"] in ("ok", "partial"):
-            print(f"{r['method']:<14} {r['backend']:<9} {r['element']:<9} "
-                  f"{fmt_pct(r['coverage_mean'], r['coverage_sd']):>16}  {fmt_seconds(r['method_seconds_mean'])}",
-                  file=sys.stderr)
+            print(
+                f"{r['method']:<14} {r['backend']:<9} {r['element']:<9} "
+                f"{fmt_pct(r['coverage_mean'], r['coverage_sd']):>16}  {fmt_seconds(r['method_seconds_mean'])}",
+                file=sys.stderr,
+            )
         else:
-            print(f"{r['method']:<14} {r['backend']:<9} {r['element']:<9} {r['status']}: {r['reason']}",
-                  file=sys.stderr)
+            print(
+                f"{r['method']:<14} {r['backend']:<9} {r['element']:<9} {r['status']}: {r['reason']}",
+                file=sys.stderr,
+            )
     print(f"wrote {out}/{', '.join(written)}", file=sys.stderr)
 
 

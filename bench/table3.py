@@ -50,12 +50,28 @@ QUICK = {"size": 192, "n_elements": 150, "iterations": 20, "seeds": 2}
 SUITE = {False: "table3", True: "table3-quick"}
 
 MEASURE_COLUMNS = [c for m in MEASURES for c in (f"{m}_mean", f"{m}_sd")]
-COLUMNS = (["scene", "method", "backend", "element", "metric", "width", "height", "n_elements", "iterations",
-            "seeds", "runs"] + MEASURE_COLUMNS + ["method_seconds_mean", "status", "reason", "device", "hosts"])
+COLUMNS = (
+    [
+        "scene",
+        "method",
+        "backend",
+        "element",
+        "metric",
+        "width",
+        "height",
+        "n_elements",
+        "iterations",
+        "seeds",
+        "runs",
+    ]
+    + MEASURE_COLUMNS
+    + ["method_seconds_mean", "status", "reason", "device", "hosts"]
+)
 
 
-def problem_set(quick: bool, seeds: int, methods: list[str], shapes: list[str], scenes: list[str],
-                variant_backend: str) -> list[RunSpec]:
+def problem_set(
+    quick: bool, seeds: int, methods: list[str], shapes: list[str], scenes: list[str], variant_backend: str
+) -> list[RunSpec]:
     """The runs of Table 3 (module docstring), scene by scene: each method on the shapes
     its record says it is compared on, on the fast variant backend unless its record
     keeps it on the reference."""
@@ -66,13 +82,28 @@ def problem_set(quick: bool, seeds: int, methods: list[str], shapes: list[str], 
         for element in shapes:
             for method in methods:
                 rec = records[method]
-                if (rec.compared_on is not None and element not in rec.compared_on) or \
-                        (rec.elements is not None and element not in rec.elements):
+                if (rec.compared_on is not None and element not in rec.compared_on) or (
+                    rec.elements is not None and element not in rec.elements
+                ):
                     continue
                 backend = REFERENCE_BACKEND if rec.sweep_backends == "reference" else variant_backend
-                specs += [RunSpec(SUITE[quick], method, backend, element, cfg["size"], cfg["size"], cfg["n_elements"],
-                                  cfg["iterations"], s, curve=True, scene=scene, measures=True)
-                          for s in range(seeds)]
+                specs += [
+                    RunSpec(
+                        SUITE[quick],
+                        method,
+                        backend,
+                        element,
+                        cfg["size"],
+                        cfg["size"],
+                        cfg["n_elements"],
+                        cfg["iterations"],
+                        s,
+                        curve=True,
+                        scene=scene,
+                        measures=True,
+                    )
+                    for s in range(seeds)
+                ]
     return specs
 
 
@@ -86,21 +117,36 @@ def aggregate(rows: list[dict]):
 
     df = pd.DataFrame(rows)
     out = []
-    for (scene, method, backend, element), g in df.groupby(["scene", "method", "backend", "element"], sort=False):
+    for (scene, method, backend, element), g in df.groupby(
+        ["scene", "method", "backend", "element"], sort=False
+    ):
         ok = g[g["status"] == "ok"]
         first = g.iloc[0]
-        rec = {"scene": scene, "method": method, "backend": backend, "element": element, "metric": first["metric"],
-               "width": first["width"], "height": first["height"], "iterations": first["iterations"],
-               "seeds": len(g), "runs": len(ok)}
+        rec = {
+            "scene": scene,
+            "method": method,
+            "backend": backend,
+            "element": element,
+            "metric": first["metric"],
+            "width": first["width"],
+            "height": first["height"],
+            "iterations": first["iterations"],
+            "seeds": len(g),
+            "runs": len(ok),
+        }
         if len(ok):
             for m in MEASURES:
                 values = ok[m].astype(float)
                 rec[f"{m}_mean"] = float(values.mean())
                 rec[f"{m}_sd"] = _sd(ok.assign(**{m: values}), m)
-            rec.update(n_elements=int(ok["n_elements"].iloc[0]), method_seconds_mean=float(ok["method_seconds"].mean()),
-                       status="ok" if len(ok) == len(g) else "partial",
-                       reason="; ".join(sorted(set(g.loc[g["status"] != "ok", "reason"].astype(str)))),
-                       device=str(ok.iloc[0]["device"]), hosts=hosts_of(ok))
+            rec.update(
+                n_elements=int(ok["n_elements"].iloc[0]),
+                method_seconds_mean=float(ok["method_seconds"].mean()),
+                status="ok" if len(ok) == len(g) else "partial",
+                reason="; ".join(sorted(set(g.loc[g["status"] != "ok", "reason"].astype(str)))),
+                device=str(ok.iloc[0]["device"]),
+                hosts=hosts_of(ok),
+            )
         else:
             rec.update(status=str(first["status"]), reason=str(first["reason"]), device="")
         out.append(rec)
@@ -156,34 +202,57 @@ def discussion(table) -> str:
                 + ("" if ratio <= 1.1 else f": its sizes spread more about the target than {paper}'s")
                 + f"), coverage {100 * ext['coverage_mean']:.1f} % ({_lead(ext, others, 'coverage_mean')}; at ≤ 1 % "
                 f"overlap {_lead(ext, others, 'coverage_at_1pct_overlap_mean')}), direction error "
-                f"{ext['direction_fidelity_mean']:.2f}°.")
-    lines.append("- ours-compact caps its sizes only under a density (`cvt.methods.density_caps`): under a "
-                 "uniform density (the field and region scenes) each element grows by the room around it, "
-                 "which is what buys Table 2's coverage and what the size error counts.")
+                f"{ext['direction_fidelity_mean']:.2f}°."
+            )
+    lines.append(
+        "- ours-compact caps its sizes only under a density (`cvt.methods.density_caps`): under a "
+        "uniform density (the field and region scenes) each element grows by the room around it, "
+        "which is what buys Table 2's coverage and what the size error counts."
+    )
     flat = [(m, r["size_fidelity_mean"]) for (s, m), r in row.items() if s == "density"]
     if flat:
-        lines.append("- Under the density, squares' size error (0: every area follows 1/density, 1: an RMS "
-                     "factor of 2): " + ", ".join(f"{m} {v:.3f}" for m, v in sorted(flat, key=lambda x: x[1]))
-                     + ". The fixed-size baselines size each tile by the density exactly and pay in overlap.")
+        lines.append(
+            "- Under the density, squares' size error (0: every area follows 1/density, 1: an RMS "
+            "factor of 2): "
+            + ", ".join(f"{m} {v:.3f}" for m, v in sorted(flat, key=lambda x: x[1]))
+            + ". The fixed-size baselines size each tile by the density exactly and pay in overlap."
+        )
     turned = [(m, r["direction_fidelity_mean"]) for (s, m), r in row.items() if s == "field"]
     if turned:
-        lines.append("- Under the circular field, squares' mean angle to the field: "
-                     + ", ".join(f"{m} {v:.2f}°" for m, v in sorted(turned, key=lambda x: x[1])) + ".")
+        lines.append(
+            "- Under the circular field, squares' mean angle to the field: "
+            + ", ".join(f"{m} {v:.2f}°" for m, v in sorted(turned, key=lambda x: x[1]))
+            + "."
+        )
     tight = [m for m in dict.fromkeys(ok["method"]) if get_method(m).tight]
     for name in tight:
         dirs = ok[(ok["method"] == name) & ok["direction_fidelity_mean"].notna()]
         if len(dirs):
             worst = dirs.loc[dirs["direction_fidelity_mean"].idxmax()]
-            lines.append(f"- {name}'s largest direction error over every scene and shape: "
-                         f"{worst['direction_fidelity_mean']:.2f}° ({worst['element']}, {worst['scene']}).")
-    lines.append("- `table3_tradeoff.png`: coverage against size error (density scene) and against "
-                 "direction error (field scene), one point per seed, squares; hollow markers: the "
-                 "combined scene.")
+            lines.append(
+                f"- {name}'s largest direction error over every scene and shape: "
+                f"{worst['direction_fidelity_mean']:.2f}° ({worst['element']}, {worst['scene']})."
+            )
+    lines.append(
+        "- `table3_tradeoff.png`: coverage against size error (density scene) and against "
+        "direction error (field scene), one point per seed, squares; hollow markers: the "
+        "combined scene."
+    )
     return "\n".join(lines) + "\n"
 
 
-def render_markdown(table, prov: dict, command: str, quick: bool, cfg: dict, seeds: int, elapsed: float,
-                    cached: int, total: int, pictured: bool) -> str:
+def render_markdown(
+    table,
+    prov: dict,
+    command: str,
+    quick: bool,
+    cfg: dict,
+    seeds: int,
+    elapsed: float,
+    cached: int,
+    total: int,
+    pictured: bool,
+) -> str:
     from .report import fmt_seconds, header_markdown, markdown_table
 
     title = "Table 3: density, direction and region" + (" (QUICK: small raster, 2 seeds)" if quick else "")
@@ -194,18 +263,30 @@ def render_markdown(table, prov: dict, command: str, quick: bool, cfg: dict, see
         "record compares it on (the baselines on squares; rectangle and ellipse β = 0.5)",
         "the baselines on the NumPy reference backend, the others on the OpenCL backend where it is "
         "available (else NumPy)",
-        "measures (cvt.evaluate, formulas in the README): " + "; ".join(
-            f"{m}: {text}" for m, (text, _) in MEASURES.items()),
+        "measures (cvt.evaluate, formulas in the README): "
+        + "; ".join(f"{m}: {text}" for m, (text, _) in MEASURES.items()),
         f"this command took {fmt_seconds(elapsed)}; {cached} of {total} runs were read back from raw/ "
         "(run with --force to redo them)",
     ]
     text = header_markdown(title, prov, command, notes)
-    heads = ["coverage", "overlap", "coverage at ≤ 1 % overlap", "size error", "direction error",
-             "grout mean (px)", "grout CV"]
+    heads = [
+        "coverage",
+        "overlap",
+        "coverage at ≤ 1 % overlap",
+        "size error",
+        "direction error",
+        "grout mean (px)",
+        "grout CV",
+    ]
     for scene in dict.fromkeys(table["scene"]):
         part = table[table["scene"] == scene]
-        body = [[r["method"], r["element"]] + [_fmt(m, r[f"{m}_mean"], r[f"{m}_sd"]) for m in MEASURES]
-                + [f"{r['runs']}/{r['seeds']}"] for _, r in part.iterrows() if r["status"] in ("ok", "partial")]
+        body = [
+            [r["method"], r["element"]]
+            + [_fmt(m, r[f"{m}_mean"], r[f"{m}_sd"]) for m in MEASURES]
+            + [f"{r['runs']}/{r['seeds']}"]
+            for _, r in part.iterrows()
+            if r["status"] in ("ok", "partial")
+        ]
         n = part["n_elements"].dropna()
         text += f"\n## {scene}: {SCENE_TEXT[scene]}" + (f" (N = {int(n.iloc[0])})" if len(n) else "") + "\n\n"
         text += markdown_table(["method", "element"] + heads + ["runs"], body)
@@ -213,8 +294,11 @@ def render_markdown(table, prov: dict, command: str, quick: bool, cfg: dict, see
     if len(missing):
         text += "\n## Not run, failed or partial\n\n" + markdown_table(
             ["scene", "method", "backend", "element", "status", "reason"],
-            [[r["scene"], r["method"], r["backend"], r["element"], r["status"], r["reason"]]
-             for _, r in missing.iterrows()])
+            [
+                [r["scene"], r["method"], r["backend"], r["element"], r["status"], r["reason"]]
+                for _, r in missing.iterrows()
+            ],
+        )
     text += discussion(table)
     if pictured:
         text += "\n![coverage against size and direction fidelity](table3_tradeoff.png)\n"
@@ -234,8 +318,10 @@ def render_tradeoff(rows: list[dict], path: Path) -> bool:
     from .report import save_figure
 
     df = pd.DataFrame([r for r in rows if r.get("status") == "ok" and r.get("element") == "square"])
-    panels = [("size_fidelity", "density", "size error: RMS log2(area / target)"),
-              ("direction_fidelity", "field", "direction error: mean angle to the field (°)")]
+    panels = [
+        ("size_fidelity", "density", "size error: RMS log2(area / target)"),
+        ("direction_fidelity", "field", "direction error: mean angle to the field (°)"),
+    ]
     if df.empty or not df["scene"].isin([p[1] for p in panels] + ["combined"]).any():
         path.unlink(missing_ok=True)  # a figure of another sweep must not pass for this one's
         return False
@@ -249,12 +335,21 @@ def render_tradeoff(rows: list[dict], path: Path) -> bool:
                 g = df[(df["method"] == method) & (df["scene"] == sc)]
                 if g.empty:
                     continue
-                ax.scatter(g[measure], 100 * g["coverage"], s=28, marker="os^vD<>P"[k % 8],
-                           facecolors=colours[k % 10] if filled else "none", edgecolors=colours[k % 10],
-                           label=None if method in labelled else method)
+                ax.scatter(
+                    g[measure],
+                    100 * g["coverage"],
+                    s=28,
+                    marker="os^vD<>P"[k % 8],
+                    facecolors=colours[k % 10] if filled else "none",
+                    edgecolors=colours[k % 10],
+                    label=None if method in labelled else method,
+                )
                 labelled.add(method)
-        ax.set(xlabel=label, ylabel="coverage (% of the region)",
-               title=f"{scene} scene (filled) and combined scene (hollow)")
+        ax.set(
+            xlabel=label,
+            ylabel="coverage (% of the region)",
+            title=f"{scene} scene (filled) and combined scene (hollow)",
+        )
         ax.grid(True, alpha=0.3)
     fig.legend(fontsize=7, loc="outside right center")
     fig.suptitle("Coverage against fidelity, squares, one point per seed (better: up and left)", fontsize=10)
@@ -268,20 +363,35 @@ def prepare(args) -> dict:
     folder and the memory too) before anything runs, as ``cvtbench reproduce`` asks."""
     from .cluster import chosen
 
-    kwargs = {"out": options.report_out(args), "quick": args.quick, "seeds": args.seeds,
-              "methods": name_list(args.methods, "--methods", method_names()),
-              "shapes": name_list(args.shapes, "--shapes", ELEMENT_SHAPES),
-              "scenes": name_list(args.scenes, "--scenes", list(SCENES)),
-              "force": args.force, "quiet": args.quiet, "scheduler": args.scheduler, "workers": args.workers,
-              "memory_limit": args.memory_limit}
+    kwargs = {
+        "out": options.report_out(args),
+        "quick": args.quick,
+        "seeds": args.seeds,
+        "methods": name_list(args.methods, "--methods", method_names()),
+        "shapes": name_list(args.shapes, "--shapes", ELEMENT_SHAPES),
+        "scenes": name_list(args.scenes, "--scenes", list(SCENES)),
+        "force": args.force,
+        "quiet": args.quiet,
+        "scheduler": args.scheduler,
+        "workers": args.workers,
+        "memory_limit": args.memory_limit,
+    }
     chosen(args)
-    plan(kwargs["out"], quick=args.quick, seeds=args.seeds, methods=kwargs["methods"], shapes=kwargs["shapes"],
-         scenes=kwargs["scenes"], memory_limit=args.memory_limit)
+    plan(
+        kwargs["out"],
+        quick=args.quick,
+        seeds=args.seeds,
+        methods=kwargs["methods"],
+        shapes=kwargs["shapes"],
+        scenes=kwargs["scenes"],
+        memory_limit=args.memory_limit,
+    )
     return kwargs
 
 
-def plan(out, *, quick: bool = False, seeds=None, methods=None, shapes=None, scenes=None,
-         memory_limit=None) -> dict:
+def plan(
+    out, *, quick: bool = False, seeds=None, methods=None, shapes=None, scenes=None, memory_limit=None
+) -> dict:
     """Every argument checked, the report folder and each run's memory too, before
     anything runs or is written: the runs of Table 3 and what they need."""
     from .outputs import check_folder
@@ -300,10 +410,21 @@ def plan(out, *, quick: bool = False, seeds=None, methods=None, shapes=None, sce
     return {"cfg": cfg, "seeds": k, "specs": specs, "unavailable": unavailable}
 
 
-def run_table3(out, *, quick: bool = False, seeds: int | str | None = None, methods: list[str] | None = None,
-               shapes: list[str] | None = None, scenes: list[str] | None = None, force: bool = False,
-               quiet: bool = False, scheduler: str | None = None, workers: int | str | None = None,
-               memory_limit=None, command: str | None = None):
+def run_table3(
+    out,
+    *,
+    quick: bool = False,
+    seeds: int | str | None = None,
+    methods: list[str] | None = None,
+    shapes: list[str] | None = None,
+    scenes: list[str] | None = None,
+    force: bool = False,
+    quiet: bool = False,
+    scheduler: str | None = None,
+    workers: int | str | None = None,
+    memory_limit=None,
+    command: str | None = None,
+):
     """Run Table 3 into the folder ``out`` and return its table (a DataFrame).
 
     ``quick``: the small set; ``seeds``: K (seeds 0..K-1; default 5, quick 2);
@@ -320,19 +441,28 @@ def run_table3(out, *, quick: bool = False, seeds: int | str | None = None, meth
     out = Path(out)
     cluster = SimpleNamespace(scheduler=scheduler, workers=workers)
     chosen(cluster)  # bad cluster options fail before anything starts
-    p = plan(out, quick=quick, seeds=seeds, methods=methods, shapes=shapes, scenes=scenes,
-             memory_limit=memory_limit)
+    p = plan(
+        out,
+        quick=quick,
+        seeds=seeds,
+        methods=methods,
+        shapes=shapes,
+        scenes=scenes,
+        memory_limit=memory_limit,
+    )
     command = command or "cvtbench table3" + (" --quick" if quick else "")
     with report_folder(out, command=command):
         with executor_for(cluster) as executor:
-            rows = run_sweep(p["specs"], out, force=force, quiet=quiet, unavailable=p["unavailable"],
-                             executor=executor)
+            rows = run_sweep(
+                p["specs"], out, force=force, quiet=quiet, unavailable=p["unavailable"], executor=executor
+            )
         table = aggregate(rows)
         elapsed = time.perf_counter() - t0
         cached = sum(1 for r in rows if r.get("cached"))
         pictured = render_tradeoff(rows, out / "table3_tradeoff.png")
-        md = render_markdown(table, provenance(), command, quick, p["cfg"], p["seeds"], elapsed, cached,
-                             len(rows), pictured)
+        md = render_markdown(
+            table, provenance(), command, quick, p["cfg"], p["seeds"], elapsed, cached, len(rows), pictured
+        )
         write_csv(out / "table3.csv", table)
         write_markdown(out / "table3.md", md)
         written = written_files(out, ["table3.md", "table3.csv", "table3_tradeoff.png"])
@@ -354,21 +484,43 @@ class Table3Request(options.SweepRequest):
 
 def check(req: Table3Request) -> dict:
     """Every field checked, the folder and each run's memory too (:func:`plan`)."""
-    return plan(req.out, quick=req.quick, seeds=req.seeds, methods=req.methods, shapes=req.shapes,
-                scenes=req.scenes, memory_limit=req.memory_limit)
+    return plan(
+        req.out,
+        quick=req.quick,
+        seeds=req.seeds,
+        methods=req.methods,
+        shapes=req.shapes,
+        scenes=req.scenes,
+        memory_limit=req.memory_limit,
+    )
 
 
 def table3(req: Table3Request) -> int:
     """Run Table 3 as ``req`` asks (what ``cvtbench table3`` does)."""
-    run_table3(req.out, quick=req.quick, seeds=req.seeds, methods=req.methods, shapes=req.shapes,
-               scenes=req.scenes, force=req.force, quiet=req.quiet, scheduler=req.scheduler, workers=req.workers,
-               memory_limit=req.memory_limit, command=req.command)
+    run_table3(
+        req.out,
+        quick=req.quick,
+        seeds=req.seeds,
+        methods=req.methods,
+        shapes=req.shapes,
+        scenes=req.scenes,
+        force=req.force,
+        quiet=req.quiet,
+        scheduler=req.scheduler,
+        workers=req.workers,
+        memory_limit=req.memory_limit,
+        command=req.command,
+    )
     return 0
 
 
 def add_parser(sub):
-    p = sub.add_parser("table3", help="Table 3: density, direction and region, with fidelity measures",
-                       description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    p = sub.add_parser(
+        "table3",
+        help="Table 3: density, direction and region, with fidelity measures",
+        description=__doc__,
+        formatter_class=argparse.RawDescriptionHelpFormatter,
+    )
     options.add_sweep_options(p, "small version (192² px, N=150, 2 seeds)")
     options.add_seeds_option(p)
     options.add_list_options(p, "methods", "shapes")

@@ -34,8 +34,9 @@ class LloydStepper:
         return time.perf_counter() - t0
 
 
-def time_lloyd(backend, metric_name: str, n_elements: int, size: int, warmup: int, repeats: int,
-               seed: int = 0) -> list[float]:
+def time_lloyd(
+    backend, metric_name: str, n_elements: int, size: int, warmup: int, repeats: int, seed: int = 0
+) -> list[float]:
     """Seconds of each timed Lloyd iteration (after ``warmup`` untimed ones)."""
     step = LloydStepper(backend, metric_name, n_elements, size, seed)
     for _ in range(warmup):

@@ -30,8 +30,7 @@ from .placement import FITS, fit_centres, placement_sizes
 from .validate import one_of
 
 
-def alternate_triangles(labels, sites, angles, aspect=None, gap: float = 0.0,
-                        fit: str = "centre"):
+def alternate_triangles(labels, sites, angles, aspect=None, gap: float = 0.0, fit: str = "centre"):
     """Per cell, the triangle's angle (θ or θ + π), centre and size: the orientation
     whose element fits larger.  ``fit`` "centre" (:func:`cvt.placement.fit_centres`)
     or "site".  Returns ``(angles, centres, sizes)`` as (N,), (N, 2), (N,)."""
@@ -63,3 +62,6 @@ def check_alternate(shape: str, alternate: bool) -> None:
     """``alternate`` is for triangles only (InputError otherwise)."""
     if alternate and shape != "triangle":
         raise InputError(f"alternate orientation is for triangles only, not {shape!r}")
+
+
+__all__ = ["alternate_triangles", "alternating_turns", "check_alternate"]

@@ -17,9 +17,9 @@ from __future__ import annotations
 import numpy as np
 
 # linear sRGB -> XYZ (sRGB primaries, D65)
-_RGB_TO_XYZ = np.array([[0.4124564, 0.3575761, 0.1804375],
-                        [0.2126729, 0.7151522, 0.0721750],
-                        [0.0193339, 0.1191920, 0.9503041]])
+_RGB_TO_XYZ = np.array(
+    [[0.4124564, 0.3575761, 0.1804375], [0.2126729, 0.7151522, 0.0721750], [0.0193339, 0.1191920, 0.9503041]]
+)
 _XYZ_TO_RGB = np.linalg.inv(_RGB_TO_XYZ)
 _WHITE = _RGB_TO_XYZ.sum(axis=1)  # XYZ of sRGB white: the reference white
 _D = 6.0 / 29.0
@@ -30,10 +30,10 @@ def srgb_to_lab(rgb) -> np.ndarray:
     rgb = np.asarray(rgb, dtype=np.float64)
     lin = np.where(rgb <= 0.04045, rgb / 12.92, ((rgb + 0.055) / 1.055) ** 2.4)
     xyz = lin @ _RGB_TO_XYZ.T / _WHITE
-    f = np.where(xyz > _D ** 3, np.cbrt(xyz), xyz / (3 * _D * _D) + 4.0 / 29.0)
-    return np.stack([116.0 * f[..., 1] - 16.0,
-                     500.0 * (f[..., 0] - f[..., 1]),
-                     200.0 * (f[..., 1] - f[..., 2])], axis=-1)
+    f = np.where(xyz > _D**3, np.cbrt(xyz), xyz / (3 * _D * _D) + 4.0 / 29.0)
+    return np.stack(
+        [116.0 * f[..., 1] - 16.0, 500.0 * (f[..., 0] - f[..., 1]), 200.0 * (f[..., 1] - f[..., 2])], axis=-1
+    )
 
 
 def lab_to_srgb(lab) -> np.ndarray:
@@ -42,7 +42,7 @@ def lab_to_srgb(lab) -> np.ndarray:
     lab = np.asarray(lab, dtype=np.float64)
     fy = (lab[..., 0] + 16.0) / 116.0
     f = np.stack([fy + lab[..., 1] / 500.0, fy, fy - lab[..., 2] / 200.0], axis=-1)
-    xyz = np.where(f > _D, f ** 3, 3 * _D * _D * (f - 4.0 / 29.0)) * _WHITE
+    xyz = np.where(f > _D, f**3, 3 * _D * _D * (f - 4.0 / 29.0)) * _WHITE
     lin = np.clip(xyz @ _XYZ_TO_RGB.T, 0.0, 1.0)
     return np.clip(np.where(lin <= 0.0031308, 12.92 * lin, 1.055 * lin ** (1 / 2.4) - 0.055), 0.0, 1.0)
 

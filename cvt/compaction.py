@@ -137,8 +137,12 @@ class CompactionResult:
     history: list = field(default_factory=list)  # per round: pairs, pieces, area, seconds
 
     def as_dict(self) -> dict:
-        return {"compaction_rounds": self.rounds, "compaction_seconds": self.seconds,
-                "compaction_lp_seconds": self.lp_seconds, "compaction_dropped": self.dropped}
+        return {
+            "compaction_rounds": self.rounds,
+            "compaction_seconds": self.seconds,
+            "compaction_lp_seconds": self.lp_seconds,
+            "compaction_dropped": self.dropped,
+        }
 
 
 # --------------------------------------------------------------------- unit element
@@ -226,7 +230,9 @@ def _best_direction(gap_of, nx, ny, curved_from=None, enough=None):
         ks, _ = _argmax_rows(gap_of(np.cos(phis), np.sin(phis), sub))
         phi, gref = _refine_angles(
             lambda p: gap_of(np.cos(p)[:, None], np.sin(p)[:, None], sub)[:, 0],
-            phis[np.arange(len(sub)), ks], off[1] - off[0])
+            phis[np.arange(len(sub)), ks],
+            off[1] - off[0],
+        )
         better = gref > best[sub] + _TIE
         take = sub[better]
         bx[take], by[take], best[take] = np.cos(phi[better]), np.sin(phi[better]), gref[better]
@@ -236,8 +242,7 @@ def _best_direction(gap_of, nx, ny, curved_from=None, enough=None):
 # --------------------------------------------------------------------- pairs
 def _pair_gap(unit, dx, dy, ri, rj, ci, si, cj, sj, nx, ny):
     """Left side of (1) without G: the gap between two elements along n (broadcasting)."""
-    return (nx * dx + ny * dy - ri * unit.support(nx, ny, ci, si)
-            - rj * unit.support(-nx, -ny, cj, sj))
+    return nx * dx + ny * dy - ri * unit.support(nx, ny, ci, si) - rj * unit.support(-nx, -ny, cj, sj)
 
 
 def _best_pair_directions(unit, c, r, cos, sin, i, j, prev_n, enough=None):
@@ -255,9 +260,13 @@ def _best_pair_directions(unit, c, r, cos, sin, i, j, prev_n, enough=None):
         cands_y = [fy, -gy] + cands_y
     args = tuple(v[:, None] for v in (dx, dy, r[i], r[j], cos[i], sin[i], cos[j], sin[j]))
     curved = unit.kind == "ellipse" and unit.axes[0] != unit.axes[1]  # circles: centre line
-    return _best_direction(lambda nx, ny, k: _pair_gap(unit, *(a[k] for a in args), nx, ny),
-                           np.concatenate(cands_x, axis=1), np.concatenate(cands_y, axis=1),
-                           np.arctan2(cly, clx) if curved else None, enough)
+    return _best_direction(
+        lambda nx, ny, k: _pair_gap(unit, *(a[k] for a in args), nx, ny),
+        np.concatenate(cands_x, axis=1),
+        np.concatenate(cands_y, axis=1),
+        np.arctan2(cly, clx) if curved else None,
+        enough,
+    )
 
 
 def _near_pairs(unit, c, r, cos, sin, budget, gap, prev):
@@ -345,15 +354,22 @@ def wall_segments(walls: np.ndarray) -> np.ndarray:
         left = np.zeros_like(walls)
         left[:, 1:] = walls[:, 1:] & walls[:, :-1]
         lone &= ~(up[i, j] | left[i, j])
-    pieces = [np.stack([x[r], y[r], x[r] + 1, y[r]], axis=1), np.stack([x[d], y[d], x[d], y[d] + 1], axis=1),
-              np.stack([x[lone], y[lone], x[lone], y[lone]], axis=1)]
+    pieces = [
+        np.stack([x[r], y[r], x[r] + 1, y[r]], axis=1),
+        np.stack([x[d], y[d], x[d], y[d] + 1], axis=1),
+        np.stack([x[lone], y[lone], x[lone], y[lone]], axis=1),
+    ]
     return np.concatenate(pieces).astype(np.float64).reshape(-1, 4)
 
 
 def _seg_gap(unit, px, py, qx, qy, cx, cy, r, cos, sin, nx, ny):
     """Left side of (2): gap between an element and a segment along n (element → segment)."""
-    return (np.minimum(nx * px + ny * py, nx * qx + ny * qy) - nx * cx - ny * cy
-            - r * unit.support(nx, ny, cos, sin))
+    return (
+        np.minimum(nx * px + ny * py, nx * qx + ny * qy)
+        - nx * cx
+        - ny * cy
+        - r * unit.support(nx, ny, cos, sin)
+    )
 
 
 def _closest_on_segment(px, py, qx, qy, x, y):
@@ -398,9 +414,13 @@ def _near_segments(unit, c, r, cos, sin, budget, half, segs, seg_tree, prev):
     args = tuple(v[:, None] for v in (px, py, qx, qy, x, y, r[e], cos[e], sin[e]))
     curved = unit.kind == "ellipse" and unit.axes[0] != unit.axes[1]  # circles: nearest point
     enough = half + budget[e] + _SELECT
-    bx, by, best = _best_direction(lambda nx, ny, k: _seg_gap(unit, *(a[k] for a in args), nx, ny),
-                                   np.concatenate(cx_, axis=1), np.concatenate(cy_, axis=1),
-                                   np.arctan2(ty, tx) if curved else None, enough)
+    bx, by, best = _best_direction(
+        lambda nx, ny, k: _seg_gap(unit, *(a[k] for a in args), nx, ny),
+        np.concatenate(cx_, axis=1),
+        np.concatenate(cy_, axis=1),
+        np.arctan2(ty, tx) if curved else None,
+        enough,
+    )
     keep = best < enough
     return e[keep], s[keep], bx[keep], by[keep], best[keep]
 
@@ -427,13 +447,20 @@ class _Rows:
         """The rows whose elements are all still present (size > 0)."""
         kp = (r[self.i] > 0) & (r[self.j] > 0)
         ks = r[self.e] > 0
-        return _Rows(*(getattr(self, f)[kp] for f in ("i", "j", "nx", "ny", "hi", "hj")),
-                     *(getattr(self, f)[ks] for f in ("e", "s", "sx", "sy", "he", "sm")))
+        return _Rows(
+            *(getattr(self, f)[kp] for f in ("i", "j", "nx", "ny", "hi", "hj")),
+            *(getattr(self, f)[ks] for f in ("e", "s", "sx", "sy", "he", "sm")),
+        )
 
     def pair_slack(self, c, r, gap):
         i, j = self.i, self.j
-        return (self.nx * (c[j, 0] - c[i, 0]) + self.ny * (c[j, 1] - c[i, 1])
-                - self.hi * r[i] - self.hj * r[j] - gap)
+        return (
+            self.nx * (c[j, 0] - c[i, 0])
+            + self.ny * (c[j, 1] - c[i, 1])
+            - self.hi * r[i]
+            - self.hj * r[j]
+            - gap
+        )
 
     def seg_slack(self, c, r, half):
         e = self.e
@@ -479,8 +506,7 @@ def _shrink_to_fit(rows: _Rows, c, r, gap, need):
     raise RuntimeError("compaction: could not restore separation after shrinking")
 
 
-def _solve_lp(rows: _Rows, act, c, r, gap, delta, lo_dr, hi_dr, weight, tile, options,
-              move_cost=0.0):
+def _solve_lp(rows: _Rows, act, c, r, gap, delta, lo_dr, hi_dr, weight, tile, options, move_cost=0.0):
     """The round's program in displacements (Δc, Δr) of the active elements, one HiGHS
     model per tile; returns Δc (N, 2), Δr (N,), the simplex iterations and the number of
     tiles HiGHS did not solve to optimality (those keep Δ = 0)."""
@@ -512,8 +538,10 @@ def _solve_lp(rows: _Rows, act, c, r, gap, delta, lo_dr, hi_dr, weight, tile, op
     def entries(cidx, ax, ay, ah):
         """Column indices and values of one element's part of the rows."""
         if split:
-            return (np.stack([cidx, cidx + 1, cidx + 2, cidx + 3, cidx + 4], axis=1),
-                    np.stack([ax, -ax, ay, -ay, ah], axis=1))
+            return (
+                np.stack([cidx, cidx + 1, cidx + 2, cidx + 3, cidx + 4], axis=1),
+                np.stack([ax, -ax, ay, -ay, ah], axis=1),
+            )
         return np.stack([cidx, cidx + 1, cidx + 2], axis=1), np.stack([ax, ay, ah], axis=1)
 
     nx, ny, hi_, hj_ = rows.nx[inner], rows.ny[inner], rows.hi[inner], rows.hj[inner]
@@ -524,9 +552,12 @@ def _solve_lp(rows: _Rows, act, c, r, gap, delta, lo_dr, hi_dr, weight, tile, op
     p_tile = tile[rows.i[inner]]
     # one-element rows: pieces, and the two halves of each cross pair
     one = np.concatenate([rows.e, rows.i[cross], rows.j[cross]])
-    o_idx, o_val = entries(k * col[one], np.concatenate([-rows.sx, -rows.nx[cross], rows.nx[cross]]),
-                           np.concatenate([-rows.sy, -rows.ny[cross], rows.ny[cross]]),
-                           np.concatenate([-rows.he, -rows.hi[cross], -rows.hj[cross]]))
+    o_idx, o_val = entries(
+        k * col[one],
+        np.concatenate([-rows.sx, -rows.nx[cross], rows.nx[cross]]),
+        np.concatenate([-rows.sy, -rows.ny[cross], rows.ny[cross]]),
+        np.concatenate([-rows.he, -rows.hi[cross], -rows.hj[cross]]),
+    )
     half_s = 0.5 * ps[cross]
     o_lo = -np.concatenate([rows.seg_slack(c, r, 0.5 * gap), half_s, half_s])
     o_tile = tile[one]
@@ -548,8 +579,8 @@ def _solve_lp(rows: _Rows, act, c, r, gap, delta, lo_dr, hi_dr, weight, tile, op
     else:
         lo[0::3] = lo[1::3] = -d
         hi[0::3] = hi[1::3] = d
-    cost[k - 1::k] = -weight[elems]
-    lo[k - 1::k], hi[k - 1::k] = lo_dr[elems], hi_dr[elems]
+    cost[k - 1 :: k] = -weight[elems]
+    lo[k - 1 :: k], hi[k - 1 :: k] = lo_dr[elems], hi_dr[elems]
     x = np.empty(ncol)
 
     h = quiet_highs()
@@ -569,10 +600,12 @@ def _solve_lp(rows: _Rows, act, c, r, gap, delta, lo_dr, hi_dr, weight, tile, op
         lp.row_lower_ = np.minimum(row_lo, 0.0)  # the current state (0) is feasible
         lp.row_upper_ = np.full(npr + nor, highspy.kHighsInf)
         lp.a_matrix_.format_ = highspy.MatrixFormat.kRowwise
-        lp.a_matrix_.start_ = np.concatenate([np.arange(npr + 1) * 2 * k,
-                                              2 * k * npr + np.arange(1, nor + 1) * k]).astype(np.int32)
-        lp.a_matrix_.index_ = (np.concatenate([p_idx[a0:a1].ravel(), o_idx[b0:b1].ravel()])
-                               - c0).astype(np.int32)
+        lp.a_matrix_.start_ = np.concatenate(
+            [np.arange(npr + 1) * 2 * k, 2 * k * npr + np.arange(1, nor + 1) * k]
+        ).astype(np.int32)
+        lp.a_matrix_.index_ = (np.concatenate([p_idx[a0:a1].ravel(), o_idx[b0:b1].ravel()]) - c0).astype(
+            np.int32
+        )
         lp.a_matrix_.value_ = np.concatenate([p_val[a0:a1].ravel(), o_val[b0:b1].ravel()])
         h.passModel(lp)
         h.run()
@@ -614,11 +647,27 @@ def _region_mask(region) -> np.ndarray:
     return m
 
 
-def compact(centres, angles, sizes, shape: str, aspect, region, gap: float = 0.0,
-            rounds: int = 4, move: float = 0.5, growth: float = 0.15, shrink: float = 0.05,
-            max_growth: float | None = None, tol: float = 1e-4, tile_elements: int = 64,
-            move_cost: float = 0.0, lp_options: dict | None = None,
-            on_round=None, walls=None, max_sizes=None) -> CompactionResult:
+def compact(
+    centres,
+    angles,
+    sizes,
+    shape: str,
+    aspect,
+    region,
+    gap: float = 0.0,
+    rounds: int = 4,
+    move: float = 0.5,
+    growth: float = 0.15,
+    shrink: float = 0.05,
+    max_growth: float | None = None,
+    tol: float = 1e-4,
+    tile_elements: int = 64,
+    move_cost: float = 0.0,
+    lp_options: dict | None = None,
+    on_round=None,
+    walls=None,
+    max_sizes=None,
+) -> CompactionResult:
     """Compact placed elements (module docstring): return new centres and sizes.
 
     ``centres`` (N, 2) px, ``angles`` (N,) radians (kept), ``sizes`` (N,) in unit-element
@@ -641,15 +690,22 @@ def compact(centres, angles, sizes, shape: str, aspect, region, gap: float = 0.0
     if walls is not None:
         walls = np.asarray(walls, dtype=bool)
         if walls.shape != mask.shape:
-            raise InputError(f"walls are {walls.shape[1]}x{walls.shape[0]}, the region {mask.shape[1]}x{mask.shape[0]}")
+            raise InputError(
+                f"walls are {walls.shape[1]}x{walls.shape[0]}, the region {mask.shape[1]}x{mask.shape[0]}"
+            )
         mask = mask | walls
     c = np.array(centres, dtype=np.float64).reshape(-1, 2)
     n = len(c)
     r = np.array(sizes, dtype=np.float64).reshape(-1)
-    th = np.broadcast_to(np.asarray(angles, dtype=np.float64), (n,)).copy() if angles is not None else np.zeros(n)
+    th = (
+        np.broadcast_to(np.asarray(angles, dtype=np.float64), (n,)).copy()
+        if angles is not None
+        else np.zeros(n)
+    )
     if len(r) != n or len(th) != n:
-        raise InputError(f"centres, angles and sizes must have one entry per element: "
-                         f"{n}, {len(th)}, {len(r)}")
+        raise InputError(
+            f"centres, angles and sizes must have one entry per element: {n}, {len(th)}, {len(r)}"
+        )
     if not (np.isfinite(c).all() and np.isfinite(r).all() and np.isfinite(th).all()):
         raise InputError("centres, angles and sizes must be finite")
     if (r < 0).any():
@@ -671,16 +727,20 @@ def compact(centres, angles, sizes, shape: str, aspect, region, gap: float = 0.0
     if len(placed):
         widest = 2 * unit.inr * r[placed].max()
         if gap >= widest:
-            raise InputError(f"gap {gap:g} px is not smaller than the largest element "
-                             f"({widest:.3g} px across its narrowest side)")
+            raise InputError(
+                f"gap {gap:g} px is not smaller than the largest element "
+                f"({widest:.3g} px across its narrowest side)"
+            )
         h, w = mask.shape
         x, y = c[placed, 0], c[placed, 1]
         inside = (x >= 0) & (x < w) & (y >= 0) & (y < h)
         inside[inside] = mask[y[inside].astype(np.int64), x[inside].astype(np.int64)]
         if not inside.all():
             k = placed[np.argmin(inside)]
-            raise InputError(f"element {k} has its centre ({c[k, 0]:g}, {c[k, 1]:g}) outside the "
-                             f"region; compaction keeps elements where they start")
+            raise InputError(
+                f"element {k} has its centre ({c[k, 0]:g}, {c[k, 1]:g}) outside the "
+                f"region; compaction keeps elements where they start"
+            )
     t0 = time.perf_counter()
     cos, sin = np.cos(th), np.sin(th)
     r0 = r.copy()
@@ -700,12 +760,22 @@ def compact(centres, angles, sizes, shape: str, aspect, region, gap: float = 0.0
             up = np.clip(max_sizes - r, 0.0, up)
         budget = math.sqrt(2) * delta + unit.rho * up
         i, j, px, py, _ = _near_pairs(unit, c, r, cos, sin, budget, gap, prev_p)
-        e, s, sx, sy, _ = _near_segments(unit, c, r, cos, sin, budget, 0.5 * gap, segs, seg_tree,
-                                         prev_s)
+        e, s, sx, sy, _ = _near_segments(unit, c, r, cos, sin, budget, 0.5 * gap, segs, seg_tree, prev_s)
         seg_m = np.minimum(sx * segs[s, 0] + sy * segs[s, 1], sx * segs[s, 2] + sy * segs[s, 3])
-        rows = _Rows(i, j, px, py, unit.support(px, py, cos[i], sin[i]),
-                     unit.support(-px, -py, cos[j], sin[j]), e, s, sx, sy,
-                     unit.support(sx, sy, cos[e], sin[e]), seg_m)
+        rows = _Rows(
+            i,
+            j,
+            px,
+            py,
+            unit.support(px, py, cos[i], sin[i]),
+            unit.support(-px, -py, cos[j], sin[j]),
+            e,
+            s,
+            sx,
+            sy,
+            unit.support(sx, sy, cos[e], sin[e]),
+            seg_m,
+        )
         kp = i * n + j
         order = np.argsort(kp)
         prev_p = (kp[order], np.stack([px, py], axis=1)[order])
@@ -742,11 +812,22 @@ def compact(centres, angles, sizes, shape: str, aspect, region, gap: float = 0.0
             on_round(k + 1, c.copy(), r.copy())
         area1 = float(np.sum(r * r))
         result.rounds = k + 1
-        result.history.append({"pairs": len(i), "pieces": len(e), "area_gain": area1 / area0 - 1,
-                               "lp_cpu": tcpu, "iters": iters, "failed_tiles": failed,
-                               "seconds": time.perf_counter() - t0})
+        result.history.append(
+            {
+                "pairs": len(i),
+                "pieces": len(e),
+                "area_gain": area1 / area0 - 1,
+                "lp_cpu": tcpu,
+                "iters": iters,
+                "failed_tiles": failed,
+                "seconds": time.perf_counter() - t0,
+            }
+        )
         if area1 < area0 * (1 + tol):
             break
     result.centres, result.sizes = c, r
     result.seconds = time.perf_counter() - t0
     return result
+
+
+__all__ = ["SLACK", "SEGMENT_LENGTH", "CompactionResult", "boundary_segments", "wall_segments", "compact"]

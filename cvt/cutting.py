@@ -92,8 +92,14 @@ def _turns(pairs: np.ndarray, n: int) -> np.ndarray:
     return turn
 
 
-def cut_to_walls(polygons, walls: np.ndarray, gap: float, spacing: float,
-                 enlarge: float = CUT_ENLARGE, reach: float = CUT_REACH) -> tuple[list, int]:
+def cut_to_walls(
+    polygons,
+    walls: np.ndarray,
+    gap: float,
+    spacing: float,
+    enlarge: float = CUT_ENLARGE,
+    reach: float = CUT_REACH,
+) -> tuple[list, int]:
     """``polygons`` (shapely, None where there is no tile; pairwise at least ``gap`` apart
     and at least gap/2 from the walls' centre lines and the raster's border) with the
     tiles within ``reach`` spacings of a wall cut to fit (module docstring).  ``walls``:
@@ -131,8 +137,11 @@ def cut_to_walls(polygons, walls: np.ndarray, gap: float, spacing: float,
         # less the walls near each tile (their lines clipped to its box, grown by G/2)
         li_t, li = line_tree.query(cand, predicate="dwithin", distance=half)
         box = shapely.box(*(shapely.bounds(cand[li_t]) + np.array([-1, -1, 1, 1]) * 2 * half).T)
-        cand = _robust(shapely.difference, cand, _grouped_buffer(
-            shapely.intersection(lines[li], box), li_t, len(members), half))
+        cand = _robust(
+            shapely.difference,
+            cand,
+            _grouped_buffer(shapely.intersection(lines[li], box), li_t, len(members), half),
+        )
         # less each other tile near it grown by G: one vectorised difference per neighbour rank
         ci, oi = tile_tree.query(cand, predicate="intersects")
         other = oi != tiles[ci]
@@ -197,3 +206,6 @@ def _piece_holding(cand: np.ndarray, whole: np.ndarray) -> np.ndarray:
     last = np.append(index[order][1:] != index[order][:-1], True)
     out[index[order[last]]] = parts[order[last]]
     return out
+
+
+__all__ = ["CUT_ENLARGE", "CUT_REACH", "wall_lines", "cut_to_walls"]

@@ -28,3 +28,6 @@ class Distribution:
     @property
     def iterations(self) -> int:
         return len(self.seconds)
+
+
+__all__ = ["Distribution"]

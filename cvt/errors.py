@@ -16,3 +16,6 @@ class BackendUnavailable(RuntimeError):
 class RunAborted(RuntimeError):
     """A command that could not finish for a reason outside its input (the Dask cluster
     it ran on was lost): the CLI prints its one line and exits with status 1."""
+
+
+__all__ = ["InputError", "BackendUnavailable", "RunAborted"]

@@ -209,8 +209,9 @@ def coverage_at_overlap(curve, limit: float = 0.01) -> float:
     return max(candidates) if candidates else float("nan")
 
 
-def coverage_at_overlap_limit(elements, grid: Grid, limit: float = 0.01, factors=SCALE_FACTORS,
-                              region=None) -> float:
+def coverage_at_overlap_limit(
+    elements, grid: Grid, limit: float = 0.01, factors=SCALE_FACTORS, region=None
+) -> float:
     """:func:`coverage_at_overlap` of :func:`coverage_overlap_curve`, evaluating the factors
     in increasing order only up to the first whose overlap passes ``limit``: the overlap
     grows with the factor (every element grows about its own centre), so the larger
@@ -249,8 +250,9 @@ def pixels_under(elements, width: int, height: int) -> tuple[np.ndarray, np.ndar
     return idx[tile[inside]], ii[inside] * width + jj[inside]
 
 
-def colour_error(picture_lab: np.ndarray, fills_lab: np.ndarray, tiles: np.ndarray,
-                 pixels: np.ndarray) -> float:
+def colour_error(
+    picture_lab: np.ndarray, fills_lab: np.ndarray, tiles: np.ndarray, pixels: np.ndarray
+) -> float:
     """Mean ΔE*ab between each pixel and the fill of the tile it lies under, over the
     (tile, pixel) pairs of :func:`pixels_under`; NaN when no tile holds a pixel."""
     if len(tiles) == 0:
@@ -310,12 +312,19 @@ def straddling_tiles(elements, edges: np.ndarray, depth: float = STRADDLE_DEPTH)
 MEASURES = {
     "coverage": ("area of the union of the elements inside the region / area of the region", "share"),
     "overlap": ("summed element area minus the union's, / area of the region", "share"),
-    "coverage_at_1pct_overlap": ("the largest coverage of the elements scaled about their centres "
-                                 "(0.80-1.20) with overlap at most 1 %", "share"),
-    "size_fidelity": ("RMS of log2(area / target), target ∝ 1/density at the element's centre, "
-                      "scale fitted; 0 is perfect", "log2"),
-    "direction_fidelity": ("mean angle between element and field at its centre, modulo the "
-                           "shape's symmetry", "degrees"),
+    "coverage_at_1pct_overlap": (
+        "the largest coverage of the elements scaled about their centres "
+        "(0.80-1.20) with overlap at most 1 %",
+        "share",
+    ),
+    "size_fidelity": (
+        "RMS of log2(area / target), target ∝ 1/density at the element's centre, scale fitted; 0 is perfect",
+        "log2",
+    ),
+    "direction_fidelity": (
+        "mean angle between element and field at its centre, modulo the shape's symmetry",
+        "degrees",
+    ),
     "grout_mean": ("mean distance between neighbouring elements (Urquhart graph of the centres)", "px"),
     "grout_cv": ("coefficient of variation of those distances; 0 is even grout", "share"),
 }
@@ -417,16 +426,49 @@ def fidelity(elements, problem, shape: str, aspect: float | None = None) -> dict
     targets = problem.scales_at(centres) ** 2
     errors = direction_errors(geoms, problem.angles_at(centres), shape, aspect)
     mean, cv = grout(geoms)
-    return {"size_fidelity": size_fidelity(shapely.area(geoms), targets),
-            "direction_fidelity": float(np.mean(errors)) if len(errors) else float("nan"),
-            "grout_mean": mean, "grout_cv": cv}
+    return {
+        "size_fidelity": size_fidelity(shapely.area(geoms), targets),
+        "direction_fidelity": float(np.mean(errors)) if len(errors) else float("nan"),
+        "grout_mean": mean,
+        "grout_cv": cv,
+    }
 
 
 def measures(elements, problem, shape: str, aspect: float | None = None, region=None) -> dict:
     """Every measure of :data:`MEASURES` of the placed ``elements`` on ``problem``."""
     region = region_polygon(problem.grid) if region is None else region
     ev = evaluate(elements, problem.grid, region=region)
-    out = {"coverage": ev.coverage, "overlap": ev.overlap,
-           "coverage_at_1pct_overlap": coverage_at_overlap_limit(elements, problem.grid, 0.01, region=region),
-           **fidelity(elements, problem, shape, aspect)}
+    out = {
+        "coverage": ev.coverage,
+        "overlap": ev.overlap,
+        "coverage_at_1pct_overlap": coverage_at_overlap_limit(elements, problem.grid, 0.01, region=region),
+        **fidelity(elements, problem, shape, aspect),
+    }
     return {name: out[name] for name in MEASURES}
+
+
+__all__ = [
+    "Evaluation",
+    "region_polygon",
+    "empty_cells",
+    "UNION_BATCH",
+    "evaluate",
+    "SCALE_FACTORS",
+    "scaled",
+    "coverage_overlap_curve",
+    "coverage_at_overlap",
+    "coverage_at_overlap_limit",
+    "pixels_under",
+    "colour_error",
+    "STRADDLE_DEPTH",
+    "straddling_tiles",
+    "MEASURES",
+    "FIDELITY_TIE",
+    "size_fidelity",
+    "orientations",
+    "direction_errors",
+    "neighbour_pairs",
+    "grout",
+    "fidelity",
+    "measures",
+]

@@ -117,8 +117,10 @@ NAMED_FIELDS = {
     "circular": (None, None, None),
     "wave": ("a period in pixels", (1.0, 1e6), 200.0),
 }
-FIELD_HELP = ("constant:DEG, radial, circular, wave:PERIOD or an image file (a file named like a field "
-              "is given as a path with a slash, e.g. ./radial)")
+FIELD_HELP = (
+    "constant:DEG, radial, circular, wave:PERIOD or an image file (a file named like a field "
+    "is given as a path with a slash, e.g. ./radial)"
+)
 
 
 def parse_field_spec(spec, name: str = "field") -> tuple[str | None, float | None]:
@@ -141,8 +143,9 @@ def parse_field_spec(spec, name: str = "field") -> tuple[str | None, float | Non
     try:
         value = real_number(arg, name, minimum=low, maximum=high)
     except InputError:
-        raise InputError(f"{name} {text!r}: {kind} needs {what} between {low:g} and {high:g}, "
-                         f"e.g. {example}") from None
+        raise InputError(
+            f"{name} {text!r}: {kind} needs {what} between {low:g} and {high:g}, e.g. {example}"
+        ) from None
     return kind, value
 
 
@@ -154,6 +157,19 @@ def angles_from_grey(grey: np.ndarray, full_scale: float, name: str = "field ima
         raise InputError(f"{name} holds NaN or infinite values")
     low, high = float(grey.min()), float(grey.max())
     if low < 0 or high > full_scale:
-        raise InputError(f"{name}: values must lie in 0..{full_scale:g} (0..180 degrees), "
-                         f"found {low:g}..{high:g}")
+        raise InputError(
+            f"{name}: values must lie in 0..{full_scale:g} (0..180 degrees), found {low:g}..{high:g}"
+        )
     return grey / full_scale * math.pi
+
+
+__all__ = [
+    "DENSITY_FLOOR",
+    "sample_at",
+    "DensityMap",
+    "DirectionField",
+    "NAMED_FIELDS",
+    "FIELD_HELP",
+    "parse_field_spec",
+    "angles_from_grey",
+]

@@ -155,8 +155,13 @@ def smooth_angles(angles: np.ndarray, sigma: float, period: float) -> np.ndarray
     return np.arctan2(s, c) / m
 
 
-def picture_fields(picture: np.ndarray, spacing: float, element: str = "square",
-                   contrast: float = DEFAULT_CONTRAST, sigma: float = 1.0) -> PictureFields:
+def picture_fields(
+    picture: np.ndarray,
+    spacing: float,
+    element: str = "square",
+    contrast: float = DEFAULT_CONTRAST,
+    sigma: float = 1.0,
+) -> PictureFields:
     """Density map and direction field of ``picture`` ((H, W) or (H, W, C), values 0..1).
 
     ``spacing`` is the mean element spacing in pixels (sqrt(area / N)): the density is
@@ -185,8 +190,7 @@ def picture_fields(picture: np.ndarray, spacing: float, element: str = "square",
     field = DirectionField.from_angles(angles, spec="picture")
 
     # density: smoothed colour gradient magnitude, 1 .. contrast
-    magnitude = np.sqrt(np.maximum(
-        ndimage.gaussian_filter(jxx + jyy, spacing, mode="nearest"), 0.0))
+    magnitude = np.sqrt(np.maximum(ndimage.gaussian_filter(jxx + jyy, spacing, mode="nearest"), 0.0))
     ref = float(np.percentile(magnitude, 99)) if magnitude.size else 0.0
     detail = np.clip(magnitude / ref, 0.0, 1.0) if ref > EDGE_FLOOR / 10 else np.zeros_like(magnitude)
     density = DensityMap(1.0 + (contrast - 1.0) * detail)
@@ -194,6 +198,7 @@ def picture_fields(picture: np.ndarray, spacing: float, element: str = "square",
 
 
 # ----------------------------------------------------------------- strong edges
+
 
 @lru_cache(maxsize=8)
 def step_response(sigma: float = 1.0, window: float = 2.0) -> float:
@@ -218,8 +223,9 @@ def edge_contrast(lab: np.ndarray, sigma: float = 1.0) -> tuple[np.ndarray, np.n
 _ACROSS = ((0, 1), (1, 1), (1, 0), (1, -1))
 
 
-def strong_edges(lab: np.ndarray, threshold: float = DEFAULT_EDGE_THRESHOLD,
-                 min_length: float = 0.0, sigma: float = 1.0) -> np.ndarray:
+def strong_edges(
+    lab: np.ndarray, threshold: float = DEFAULT_EDGE_THRESHOLD, min_length: float = 0.0, sigma: float = 1.0
+) -> np.ndarray:
     """(H, W) bool: the strong edges of a CIELAB picture as thin 4-connected lines.
 
     ``threshold`` in ΔE*ab (see the module docstring), ``min_length`` in pixels."""
@@ -229,8 +235,8 @@ def strong_edges(lab: np.ndarray, threshold: float = DEFAULT_EDGE_THRESHOLD,
     pad = np.pad(contrast, 1)
     ridge = np.zeros((h, w), dtype=bool)
     for k, (di, dj) in enumerate(_ACROSS):
-        ahead = pad[1 + di:1 + di + h, 1 + dj:1 + dj + w]
-        behind = pad[1 - di:1 - di + h, 1 - dj:1 - dj + w]
+        ahead = pad[1 + di : 1 + di + h, 1 + dj : 1 + dj + w]
+        behind = pad[1 - di : 1 - di + h, 1 - dj : 1 - dj + w]
         # strictly above one neighbour, at least the other: one pixel of a flat ridge
         ridge |= (sector == k) & (contrast > ahead) & (contrast >= behind)
     weak = ridge & (contrast >= EDGE_HYSTERESIS * threshold)
@@ -256,3 +262,23 @@ def strong_edges(lab: np.ndarray, threshold: float = DEFAULT_EDGE_THRESHOLD,
     edges[:-1, :-1] |= fill_tl
     edges[1:, 1:] |= fill_br
     return edges
+
+
+__all__ = [
+    "DEFAULT_CONTRAST",
+    "FIELD_SMOOTHING",
+    "CONTRAST_RANGE",
+    "EDGE_FRACTION",
+    "EDGE_FLOOR",
+    "DEFAULT_EDGE_THRESHOLD",
+    "EDGE_HYSTERESIS",
+    "PictureFields",
+    "as_channels",
+    "structure_tensor",
+    "edge_orientation",
+    "smooth_angles",
+    "picture_fields",
+    "step_response",
+    "edge_contrast",
+    "strong_edges",
+]

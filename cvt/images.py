@@ -58,9 +58,11 @@ def open_picture(path, name: str = "image"):
     except Image.DecompressionBombError as exc:
         size = re.search(r"\((\d+) pixels\)", str(exc))
         declared = f"declares {int(size.group(1)) / 1e6:.0f} Mpx, " if size else ""
-        raise InputError(f"{name} {path}: {declared}more than the {2 * Image.MAX_IMAGE_PIXELS / 1e6:.0f} Mpx "
-                         "Pillow decodes (its guard against decompression bombs: 2 x Image.MAX_IMAGE_PIXELS); "
-                         "shrink the picture first") from None
+        raise InputError(
+            f"{name} {path}: {declared}more than the {2 * Image.MAX_IMAGE_PIXELS / 1e6:.0f} Mpx "
+            "Pillow decodes (its guard against decompression bombs: 2 x Image.MAX_IMAGE_PIXELS); "
+            "shrink the picture first"
+        ) from None
     except (OSError, ValueError, SyntaxError) as exc:
         raise InputError(f"{name} {path}: cannot read image: {exc}") from None
     if img.width < 1 or img.height < 1:
@@ -92,8 +94,13 @@ def upright_size(img) -> tuple[int, int]:
     return (h, w) if _orientation(img) in _TRANSPOSED else (w, h)
 
 
-def read_picture(path, name: str = "image", at_least: tuple[int, int] | None = None, memory_limit=None,
-                 memory_option: str = "--memory-limit"):
+def read_picture(
+    path,
+    name: str = "image",
+    at_least: tuple[int, int] | None = None,
+    memory_limit=None,
+    memory_option: str = "--memory-limit",
+):
     """The picture at ``path`` decoded and upright, no smaller than ``at_least`` (W, H)
     on either side (the picture's own size when it is smaller): a PIL image.
 
@@ -106,8 +113,11 @@ def read_picture(path, name: str = "image", at_least: tuple[int, int] | None = N
     turned = _orientation(img) in _TRANSPOSED
     want = None
     if at_least is not None:
-        want = (max(1, int(at_least[1])), max(1, int(at_least[0]))) if turned else \
-            (max(1, int(at_least[0])), max(1, int(at_least[1])))
+        want = (
+            (max(1, int(at_least[1])), max(1, int(at_least[0])))
+            if turned
+            else (max(1, int(at_least[0])), max(1, int(at_least[1])))
+        )
         if img.format == "JPEG" and img.mode in ("L", "RGB", "CMYK", "YCbCr"):
             img.draft(img.mode, want)  # DCT scaling: decodes at 1/2, 1/4 or 1/8 when that is enough
     w, h = img.size
@@ -162,7 +172,9 @@ def _resize(arr: np.ndarray, width: int, height: int, nearest: bool) -> np.ndarr
     return np.asarray(out, dtype=np.float64)
 
 
-def load_grey(path, width: int, height: int, name: str = "image", memory_limit=None) -> tuple[np.ndarray, float]:
+def load_grey(
+    path, width: int, height: int, name: str = "image", memory_limit=None
+) -> tuple[np.ndarray, float]:
     """Greyscale values resampled to (height, width), and the image's full scale.
     Float images must hold finite values."""
     arr, full = _to_float_grey(read_picture(path, name, (width, height), memory_limit))
@@ -187,7 +199,9 @@ def load_mask(path, width: int, height: int, name: str = "region mask", memory_l
     return inside
 
 
-def load_rgb(path, at_least: tuple[int, int] | None = None, name: str = "image", memory_limit=None) -> np.ndarray:
+def load_rgb(
+    path, at_least: tuple[int, int] | None = None, name: str = "image", memory_limit=None
+) -> np.ndarray:
     """(H, W, 3) float64 RGB in 0..1 (16-bit and palette images converted), no smaller
     than ``at_least`` where the picture is larger."""
     img = read_picture(path, name, at_least, memory_limit)
@@ -202,3 +216,6 @@ def load_rgb(path, at_least: tuple[int, int] | None = None, name: str = "image",
         a = rgba[..., 3:4]
         return rgba[..., :3] * a + (1 - a)  # composite on white
     return np.asarray(img.convert("RGB"), dtype=np.float64) / 255.0
+
+
+__all__ = ["open_picture", "upright_size", "read_picture", "load_grey", "load_mask", "load_rgb"]

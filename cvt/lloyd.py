@@ -82,8 +82,9 @@ class LloydSetup:
 
     @classmethod
     def of(cls, problem: Problem, **changes) -> LloydSetup:
-        base = dict(metric=problem.metric, grid=problem.grid, angles_at=problem.angles_at,
-                    scales_at=problem.scales_at)
+        base = dict(
+            metric=problem.metric, grid=problem.grid, angles_at=problem.angles_at, scales_at=problem.scales_at
+        )
         return cls(**{**base, **changes})
 
     def cell_angles(self, sites: np.ndarray) -> np.ndarray:
@@ -96,15 +97,26 @@ def lloyd_step(backend, setup: LloydSetup) -> Callable:
     speed reports time it."""
 
     def step(current):
-        mom = backend.moments(current, angles=setup.cell_angles(current),
-                              scales=setup.scales_at(current), metric=setup.metric, grid=setup.grid)
+        mom = backend.moments(
+            current,
+            angles=setup.cell_angles(current),
+            scales=setup.scales_at(current),
+            metric=setup.metric,
+            grid=setup.grid,
+        )
         return mom.centroids(current), mom.energy(current), mom.empty
 
     return step
 
 
-def lloyd(problem: Problem, backend, iterations: int = 20, progress=None,
-          sites: np.ndarray | None = None, setup: LloydSetup | None = None) -> LloydResult:
+def lloyd(
+    problem: Problem,
+    backend,
+    iterations: int = 20,
+    progress=None,
+    sites: np.ndarray | None = None,
+    setup: LloydSetup | None = None,
+) -> LloydResult:
     """Run ``iterations`` Lloyd steps of ``problem`` on ``backend``.
 
     ``sites`` overrides the problem's seeding; ``setup`` the metric, region and angles
@@ -122,10 +134,28 @@ def lloyd(problem: Problem, backend, iterations: int = 20, progress=None,
     return result
 
 
-def final_labels(problem: Problem, backend, result: LloydResult,
-                 setup: LloydSetup | None = None) -> np.ndarray:
+def final_labels(
+    problem: Problem, backend, result: LloydResult, setup: LloydSetup | None = None
+) -> np.ndarray:
     """The label raster of the final sites over the whole region (for pictures and
     element placement)."""
     setup = LloydSetup.of(problem) if setup is None else setup
-    return backend.label(result.sites, angles=setup.cell_angles(result.sites), scales=result.scales,
-                         metric=setup.metric, grid=problem.grid)
+    return backend.label(
+        result.sites,
+        angles=setup.cell_angles(result.sites),
+        scales=result.scales,
+        metric=setup.metric,
+        grid=problem.grid,
+    )
+
+
+__all__ = [
+    "MAX_ITERATIONS",
+    "IterationLog",
+    "iterate",
+    "LloydResult",
+    "LloydSetup",
+    "lloyd_step",
+    "lloyd",
+    "final_labels",
+]

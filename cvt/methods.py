@@ -167,10 +167,14 @@ class Method:
         if not callable(self.run):
             raise InputError(f"method {self.name!r}: run must be callable, got {self.run!r}")
         if self.role not in ROLES:
-            raise InputError(f"method {self.name!r}: role must be one of {', '.join(ROLES)}, got {self.role!r}")
+            raise InputError(
+                f"method {self.name!r}: role must be one of {', '.join(ROLES)}, got {self.role!r}"
+            )
         if self.sweep_backends not in SWEEP_BACKENDS:
-            raise InputError(f"method {self.name!r}: sweep_backends must be one of {', '.join(SWEEP_BACKENDS)}, "
-                             f"got {self.sweep_backends!r}")
+            raise InputError(
+                f"method {self.name!r}: sweep_backends must be one of {', '.join(SWEEP_BACKENDS)}, "
+                f"got {self.sweep_backends!r}"
+            )
         for variant in self.sweep_variants:
             self.parse_options(variant.options)
         names = [o.name for o in self.options]
@@ -199,8 +203,11 @@ class Method:
             shown = ("--" + str(name).replace("_", "-")) if flags else str(name)
             if opt is None:
                 declared = ", ".join(o.flag if flags else o.name for o in self.options) or "none"
-                raise InputError(f"{shown} is not an option of --method {self.name} (its options: {declared})"
-                                 if flags else f"method {self.name!r} has no option {name!r} (its options: {declared})")
+                raise InputError(
+                    f"{shown} is not an option of --method {self.name} (its options: {declared})"
+                    if flags
+                    else f"method {self.name!r} has no option {name!r} (its options: {declared})"
+                )
             out[name] = opt.parse(value, shown)
         return out
 
@@ -214,9 +221,16 @@ class Method:
         return " ".join([self.name, *[p for p in parts if p]])
 
 
-
-def run_ours(problem: Problem, backend, *, iterations: int = 20, progress=None,
-             element: str | None = None, gap: float = 0.0, fit: str = "site") -> Distribution:
+def run_ours(
+    problem: Problem,
+    backend,
+    *,
+    iterations: int = 20,
+    progress=None,
+    element: str | None = None,
+    gap: float = 0.0,
+    fit: str = "site",
+) -> Distribution:
     """The paper's method: Lloyd relaxation under the metric whose unit ball is the
     element's shape, on any backend, then one element per cell (cvt.placement).
 
@@ -234,15 +248,29 @@ def run_ours(problem: Problem, backend, *, iterations: int = 20, progress=None,
     t1 = time.perf_counter()
     labels = final_labels(problem, backend, res)
     t2 = time.perf_counter()
-    elements = place_elements(labels, res.sites, res.angles + turn, shape, problem.metric.aspect,
-                              problem.grid, gap, fit=fit)
+    elements = place_elements(
+        labels, res.sites, res.angles + turn, shape, problem.metric.aspect, problem.grid, gap, fit=fit
+    )
     t3 = time.perf_counter()
     return Distribution(
-        method="ours" if fit == "site" else "ours-fit", sites=res.sites, angles=res.angles, scales=res.scales,
-        elements=elements, energy=res.energy, seconds=res.seconds, lloyd_seconds=total,
-        empty=res.empty, empty_sites=res.empty_sites, labels=labels,
-        extra={"element": shape, "element_turn_deg": round(math.degrees(turn), 6),
-               "gap": gap, "final_label_seconds": t2 - t1, "placement_seconds": t3 - t2},
+        method="ours" if fit == "site" else "ours-fit",
+        sites=res.sites,
+        angles=res.angles,
+        scales=res.scales,
+        elements=elements,
+        energy=res.energy,
+        seconds=res.seconds,
+        lloyd_seconds=total,
+        empty=res.empty,
+        empty_sites=res.empty_sites,
+        labels=labels,
+        extra={
+            "element": shape,
+            "element_turn_deg": round(math.degrees(turn), 6),
+            "gap": gap,
+            "final_label_seconds": t2 - t1,
+            "placement_seconds": t3 - t2,
+        },
     )
 
 
@@ -258,8 +286,9 @@ def run_ours_fit(problem: Problem, backend, **options) -> Distribution:
 DENSITY_CAP_SLACK = 0.02
 
 
-def density_caps(problem: Problem, centres, sizes, shape: str, aspect: float, slack: float,
-                 packing: float = 1.0) -> np.ndarray:
+def density_caps(
+    problem: Problem, centres, sizes, shape: str, aspect: float, slack: float, packing: float = 1.0
+) -> np.ndarray:
     """(N,) size caps that follow the density: κ·s_i·(1 + ``slack``), s_i the density's
     size factor at element i's centre and κ the size at which elements of size κ·s_i (the
     placed ones, ``sizes`` > 0) would together have ``packing`` × the region's area (the
@@ -276,10 +305,19 @@ def density_caps(problem: Problem, centres, sizes, shape: str, aspect: float, sl
     return kappa * s * (1.0 + slack)
 
 
-def run_ours_compact(problem: Problem, backend, *, iterations: int = 20, progress=None,
-                     element: str | None = None, gap: float = 0.0, alternate: bool = False,
-                     rounds: int = 4, density_slack: float | None = DENSITY_CAP_SLACK,
-                     turn_to_field: bool = True) -> Distribution:
+def run_ours_compact(
+    problem: Problem,
+    backend,
+    *,
+    iterations: int = 20,
+    progress=None,
+    element: str | None = None,
+    gap: float = 0.0,
+    alternate: bool = False,
+    rounds: int = 4,
+    density_slack: float | None = DENSITY_CAP_SLACK,
+    turn_to_field: bool = True,
+) -> Distribution:
     """Ours, then compaction: Lloyd as ``ours``, each element fitted in its cell from
     several starts (``cvt.placement.fit_centres``), then rounds of a linear program in
     which neighbouring elements share their walls (``cvt.compaction.compact``): every pair
@@ -306,8 +344,10 @@ def run_ours_compact(problem: Problem, backend, *, iterations: int = 20, progres
     gap = parse_gap(gap)
     spacing = float(np.sqrt(problem.grid.pixel_count / problem.n_elements))
     if gap >= spacing:
-        raise InputError(f"gap {gap:g} px is not smaller than the elements: {problem.n_elements} elements in "
-                         f"{problem.grid.pixel_count} px are about {spacing:.3g} px apart")
+        raise InputError(
+            f"gap {gap:g} px is not smaller than the elements: {problem.n_elements} elements in "
+            f"{problem.grid.pixel_count} px are about {spacing:.3g} px apart"
+        )
     setup = LloydSetup.of(problem)
     if alternate:
         turns = alternating_turns(problem.n_elements, problem.seed)
@@ -331,28 +371,64 @@ def run_ours_compact(problem: Problem, backend, *, iterations: int = 20, progres
         packing = 1.0 if alternate else packing_density(shape)
         caps = density_caps(problem, centres, sizes, shape, aspect, density_slack, packing)
         sizes = np.minimum(sizes, caps)
-    packed = compact(centres, angles, sizes, shape, aspect, problem.grid, gap=gap, walls=problem.walls,
-                     rounds=rounds, max_sizes=caps)
+    packed = compact(
+        centres,
+        angles,
+        sizes,
+        shape,
+        aspect,
+        problem.grid,
+        gap=gap,
+        walls=problem.walls,
+        rounds=rounds,
+        max_sizes=caps,
+    )
     if turn_to_field and problem.field is not None:
         # compaction moved the elements off their sites: turn each by the field's change
         # between its site and its centre, then shrink whatever that turn made overlap
         angles = angles + problem.angles_at(packed.centres) - problem.angles_at(res.sites)
-        turned = compact(packed.centres, angles, packed.sizes, shape, aspect, problem.grid, gap=gap,
-                         walls=problem.walls, rounds=1, max_sizes=caps)
+        turned = compact(
+            packed.centres,
+            angles,
+            packed.sizes,
+            shape,
+            aspect,
+            problem.grid,
+            gap=gap,
+            walls=problem.walls,
+            rounds=1,
+            max_sizes=caps,
+        )
         packed.centres, packed.sizes = turned.centres, turned.sizes
         packed.dropped += turned.dropped
     placed = np.flatnonzero(packed.sizes > 0)
     elements = np.full(len(res.sites), None, dtype=object)
     if len(placed):
-        elements[placed] = element_polygons(shape, aspect, packed.centres[placed], angles[placed],
-                                            packed.sizes[placed])
+        elements[placed] = element_polygons(
+            shape, aspect, packed.centres[placed], angles[placed], packed.sizes[placed]
+        )
     return Distribution(
-        method="ours-compact", sites=res.sites, angles=angles - turn, scales=res.scales,
-        elements=elements.tolist(), energy=res.energy, seconds=res.seconds, lloyd_seconds=total,
-        empty=res.empty, empty_sites=res.empty_sites, labels=labels,
-        extra={"element": shape, "element_turn_deg": round(math.degrees(turn), 6), "gap": gap,
-               "alternate": bool(alternate), "final_label_seconds": t2 - t1, "fit_seconds": t3 - t2,
-               "placement_seconds": time.perf_counter() - t2, **packed.as_dict()},
+        method="ours-compact",
+        sites=res.sites,
+        angles=angles - turn,
+        scales=res.scales,
+        elements=elements.tolist(),
+        energy=res.energy,
+        seconds=res.seconds,
+        lloyd_seconds=total,
+        empty=res.empty,
+        empty_sites=res.empty_sites,
+        labels=labels,
+        extra={
+            "element": shape,
+            "element_turn_deg": round(math.degrees(turn), 6),
+            "gap": gap,
+            "alternate": bool(alternate),
+            "final_label_seconds": t2 - t1,
+            "fit_seconds": t3 - t2,
+            "placement_seconds": time.perf_counter() - t2,
+            **packed.as_dict(),
+        },
     )
 
 
@@ -366,28 +442,75 @@ PAPER_TABLE2 = (0.856, "19 s")  # the paper's own row of its Table 2: "ours"
 MOSAIC_COMPACTION_ROUNDS = 6
 
 OURS = Method(
-    "ours", run_ours, role="paper", sweep_backends="every", compared_on=None, paper_table2=PAPER_TABLE2,
-    summary="the paper's method: Lloyd under the element's metric, each element centred at its site")
+    "ours",
+    run_ours,
+    role="paper",
+    sweep_backends="every",
+    compared_on=None,
+    paper_table2=PAPER_TABLE2,
+    summary="the paper's method: Lloyd under the element's metric, each element centred at its site",
+)
 OURS_FIT = Method(
-    "ours-fit", run_ours_fit, role="extension", sweep_backends="fastest", compared_on=None,
-    paper_table2=PAPER_TABLE2, summary="ours, each element moved inside its cell to where it can be largest")
+    "ours-fit",
+    run_ours_fit,
+    role="extension",
+    sweep_backends="fastest",
+    compared_on=None,
+    paper_table2=PAPER_TABLE2,
+    summary="ours, each element moved inside its cell to where it can be largest",
+)
 OURS_COMPACT = Method(
-    "ours-compact", run_ours_compact, role="extension", sweep_backends="fastest", compared_on=None,
-    paper_table2=PAPER_TABLE2, tight=True,
-    options=(MethodOption("alternate", bool, False, "triangles only: each triangle points either way (its "
-                          "angle or the angle + 180°), whichever fits larger in its cell", tag="alt",
-                          label="alternate"),
-             MethodOption("rounds", int, 4, "compaction rounds at most (0 to 1000; default 4)", check=_rounds,
-                          tag="r", label="rounds={}")),
+    "ours-compact",
+    run_ours_compact,
+    role="extension",
+    sweep_backends="fastest",
+    compared_on=None,
+    paper_table2=PAPER_TABLE2,
+    tight=True,
+    options=(
+        MethodOption(
+            "alternate",
+            bool,
+            False,
+            "triangles only: each triangle points either way (its "
+            "angle or the angle + 180°), whichever fits larger in its cell",
+            tag="alt",
+            label="alternate",
+        ),
+        MethodOption(
+            "rounds",
+            int,
+            4,
+            "compaction rounds at most (0 to 1000; default 4)",
+            check=_rounds,
+            tag="r",
+            label="rounds={}",
+        ),
+    ),
     sweep_variants=(SweepVariant({"alternate": True}, ("triangle",), pictured=True),),
     # mosaics keep compaction without density caps and field turn: their measured coverage,
     # figures and tests predate them
-    mosaic_options=MappingProxyType({"rounds": MOSAIC_COMPACTION_ROUNDS, "density_slack": None,
-                                     "turn_to_field": False}),
-    summary="ours, fitted, then compacted: neighbouring elements share their walls")
+    mosaic_options=MappingProxyType(
+        {"rounds": MOSAIC_COMPACTION_ROUNDS, "density_slack": None, "turn_to_field": False}
+    ),
+    summary="ours, fitted, then compacted: neighbouring elements share their walls",
+)
 
 METHODS = {m.name: m for m in (OURS, OURS_FIT, OURS_COMPACT)}
 """The paper's method and its variants, by name (:mod:`.registry` adds the others)."""
 
-__all__ = ["Method", "MethodOption", "SweepVariant", "METHODS", "OURS", "OURS_FIT", "OURS_COMPACT", "run_ours",
-           "run_ours_fit", "run_ours_compact", "ROLES", "SWEEP_BACKENDS", "MOSAIC_COMPACTION_ROUNDS"]
+__all__ = [
+    "Method",
+    "MethodOption",
+    "SweepVariant",
+    "METHODS",
+    "OURS",
+    "OURS_FIT",
+    "OURS_COMPACT",
+    "run_ours",
+    "run_ours_fit",
+    "run_ours_compact",
+    "ROLES",
+    "SWEEP_BACKENDS",
+    "MOSAIC_COMPACTION_ROUNDS",
+]

@@ -46,7 +46,6 @@ DEFAULT_ASPECT = 0.5  # the paper's examples use β = 1/2
 ASPECT_RANGE = (0.01, 100.0)
 
 
-
 @dataclass(frozen=True)
 class Shape:
     """An element shape: every fact about it, in one record (the table :data:`SHAPES`).
@@ -93,16 +92,26 @@ _HEX = math.pi / math.sqrt(12.0)  # circles' densest packing (hexagonal)
 # The one table of shapes.  The paper's five pair with its metrics; a hexagon and an
 # octagon are regular polygons whose metrics are their own unit balls.  A regular
 # octagon's densest lattice packing is (4 + 4√2) / (5 + 4√2) of the plane.
-SHAPES: dict[str, Shape] = {s.name: s for s in (
-    Shape("square", "linf", 4, math.pi / 2, 1.0, distance="chessboard"),
-    Shape("rectangle", "linf-axial", 2, math.pi, 1.0, axial=True, distance="scaled"),
-    Shape("ellipse", "l2-axial", 2, math.pi, _HEX, curved=True, axial=True, distance="scaled"),
-    Shape("triangle", "triangle", 3, math.pi / 3, 2.0 / 3.0),
-    Shape("circle", "l2", 0, math.pi / 2, _HEX, curved=True),
-    Shape("hexagon", "hexagon", 6, math.pi / 3, 1.0, sides=6, phase=90.0),
-    Shape("octagon", "octagon", 8, math.pi / 4, (4 + 4 * math.sqrt(2)) / (5 + 4 * math.sqrt(2)), sides=8,
-          phase=22.5),
-)}
+SHAPES: dict[str, Shape] = {
+    s.name: s
+    for s in (
+        Shape("square", "linf", 4, math.pi / 2, 1.0, distance="chessboard"),
+        Shape("rectangle", "linf-axial", 2, math.pi, 1.0, axial=True, distance="scaled"),
+        Shape("ellipse", "l2-axial", 2, math.pi, _HEX, curved=True, axial=True, distance="scaled"),
+        Shape("triangle", "triangle", 3, math.pi / 3, 2.0 / 3.0),
+        Shape("circle", "l2", 0, math.pi / 2, _HEX, curved=True),
+        Shape("hexagon", "hexagon", 6, math.pi / 3, 1.0, sides=6, phase=90.0),
+        Shape(
+            "octagon",
+            "octagon",
+            8,
+            math.pi / 4,
+            (4 + 4 * math.sqrt(2)) / (5 + 4 * math.sqrt(2)),
+            sides=8,
+            phase=22.5,
+        ),
+    )
+}
 METRIC_NAMES = (*PAPER_METRICS, *(s.metric for s in SHAPES.values() if s.metric not in PAPER_METRICS))
 # The element <-> metric table, read from the records.  The reverse, a metric's natural
 # element, adds the l1 ball, a diamond, which is drawn as a square turned by 45°.
@@ -298,7 +307,7 @@ def polygon_shape(name: str) -> Shape:
     JSON list of [x, y]), read once and kept by its name; its metric has the same name."""
     if name in SHAPES:
         return SHAPES[name]
-    path = name[len(POLYGON_PREFIX):]
+    path = name[len(POLYGON_PREFIX) :]
     vertices = convex_unit_ball(read_vertices(path), f"polygon {path}")
     k = len(vertices)
     _USER_VERTICES[name] = vertices
@@ -313,8 +322,11 @@ def read_vertices(path: str) -> np.ndarray:
     import os
 
     if not os.path.isfile(path):
-        raise InputError(f"polygon file {path} does not exist" if not os.path.exists(path)
-                         else f"polygon file {path} is not a file")
+        raise InputError(
+            f"polygon file {path} does not exist"
+            if not os.path.exists(path)
+            else f"polygon file {path} is not a file"
+        )
     if os.path.getsize(path) > 1 << 20:
         raise InputError(f"polygon file {path} is over 1 MiB: no polygon of an element needs that")
     try:
@@ -331,7 +343,9 @@ def read_vertices(path: str) -> np.ndarray:
     rows = [line.split(",") for line in text.splitlines() if line.strip()]
     head = [c.strip() for c in rows[0]] if rows else []
     if "x" not in head or "y" not in head:
-        raise InputError(f"polygon file {path} needs columns x and y (or a JSON list of [x, y]), found {head}")
+        raise InputError(
+            f"polygon file {path} needs columns x and y (or a JSON list of [x, y]), found {head}"
+        )
     ix, iy = head.index("x"), head.index("y")
     try:
         return [[float(r[ix]), float(r[iy])] for r in rows[1:]]
@@ -408,3 +422,26 @@ def _rotate_scale(nk: np.ndarray, c: np.ndarray, si: np.ndarray, s: np.ndarray) 
     fx = c[:, None] * nk[None, :, 0] - si[:, None] * nk[None, :, 1]
     fy = si[:, None] * nk[None, :, 0] + c[:, None] * nk[None, :, 1]
     return np.stack([fx, fy], axis=-1) / s[:, None, None]
+
+
+__all__ = [
+    "PAPER_METRICS",
+    "AXIAL_METRICS",
+    "DEFAULT_ASPECT",
+    "ASPECT_RANGE",
+    "Shape",
+    "SHAPES",
+    "METRIC_NAMES",
+    "ELEMENT_METRIC",
+    "NATURAL_ELEMENT",
+    "Metric",
+    "make_metric",
+    "polygon_metric",
+    "shape_vertices",
+    "POLYGON_PREFIX",
+    "convex_unit_ball",
+    "polygon_shape",
+    "read_vertices",
+    "SiteCoefficients",
+    "compile_sites",
+]

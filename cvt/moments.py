@@ -74,3 +74,6 @@ def moments_from_labels(labels: np.ndarray, n_elements: int, weights: np.ndarray
         return np.rint(np.bincount(flat, weights=values, minlength=n_elements)).astype(np.int64)
 
     return Moments(total(None), total(cols), total(rows), total(cols * cols), total(rows * rows))
+
+
+__all__ = ["Moments", "moments_from_labels"]

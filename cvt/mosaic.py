@@ -76,8 +76,10 @@ EDGE_MIN_LENGTH = 2.0
 
 # --------------------------------------------------------------------------- picture
 
-def picture_array(image, at_least: tuple[int, int] | None = None, memory_limit=None,
-                  name: str = "image") -> tuple[np.ndarray, str]:
+
+def picture_array(
+    image, at_least: tuple[int, int] | None = None, memory_limit=None, name: str = "image"
+) -> tuple[np.ndarray, str]:
     """(H, W, 3) float64 RGB in 0..1 and a short description of where it came from.
 
     A file is read by :func:`cvt.images.read_picture` (EXIF orientation applied, bombs
@@ -156,6 +158,7 @@ def resample(rgb: np.ndarray, width: int, height: int) -> np.ndarray:
 
 # --------------------------------------------------------------------------- walls
 
+
 def split_cells(labels: np.ndarray, sites) -> np.ndarray:
     """``labels`` with each cell cut down to one 4-connected piece (other pixels -1).
 
@@ -219,6 +222,7 @@ class WalledBackend:
 
 
 # --------------------------------------------------------------------------- colours
+
 
 def tile_colours(lab: np.ndarray, polygons, sites, tiles: np.ndarray, pixels: np.ndarray):
     """Fill of every tile: (N, 3) sRGB in 0..1 (8-bit values, as written) and their Lab.
@@ -292,6 +296,7 @@ def ellipse_rows(polygons, element: str, aspect: float) -> np.ndarray | None:
 
 # --------------------------------------------------------------------------- result
 
+
 @dataclass
 class MosaicResult:
     """A picture turned into a mosaic: one tile per site (``polygons[k]`` is None where
@@ -347,15 +352,30 @@ class MosaicResult:
     def svg_lines(self, grout=None, precision: int = 2):
         """:meth:`svg` line by line (to write a large mosaic without holding its text)."""
         grout = self.grout if grout is None else parse_colour(grout, "grout")
-        return svg_lines(self.polygons, self.width, self.height, self.colours, background=grout,
-                         region_colour=None, stroke=None, digits=precision,
-                         ellipses=ellipse_rows(self.polygons, self.element, self.aspect))
+        return svg_lines(
+            self.polygons,
+            self.width,
+            self.height,
+            self.colours,
+            background=grout,
+            region_colour=None,
+            stroke=None,
+            digits=precision,
+            ellipses=ellipse_rows(self.polygons, self.element, self.aspect),
+        )
 
     def render(self, scale: float = 1.0, grout=None, supersample: int = 3):
         """The mosaic as a PIL RGB image ``scale`` times the raster size (antialiased)."""
         grout = self.grout if grout is None else parse_colour(grout, "grout")
-        return draw_elements(self.polygons, self.width, self.height, self.colours, background=grout,
-                             scale=scale, supersample=supersample)
+        return draw_elements(
+            self.polygons,
+            self.width,
+            self.height,
+            self.colours,
+            background=grout,
+            scale=scale,
+            supersample=supersample,
+        )
 
     def to_distribution(self) -> Distribution:
         """The run as the :class:`cvt.distribution.Distribution` the method returned."""
@@ -363,6 +383,7 @@ class MosaicResult:
 
 
 # --------------------------------------------------------------------------- the API
+
 
 def resolve_method(method) -> Method:
     """The method record of ``method``: a registered name (:mod:`cvt.registry`: ours, its
@@ -375,13 +396,30 @@ def resolve_method(method) -> Method:
     raise InputError(f"method must be a method name, a method record or a callable, got {method!r}")
 
 
-def make_mosaic(image, backend, *, n_elements: int = DEFAULT_ELEMENTS, metric: str | None = None,
-                element: str | None = None, size=None, gap: float | None = None,
-                use_field: bool = True, use_density: bool = True, iterations: int = 20,
-                seed: int = 0, aspect: float | None = None, contrast: float = DEFAULT_CONTRAST,
-                grout=DEFAULT_GROUT, method=DEFAULT_METHOD, edges: bool = True,
-                edge_threshold: float = DEFAULT_EDGE_THRESHOLD, method_options: dict | None = None,
-                cut: bool | None = None, progress=None, memory_limit=None) -> MosaicResult:
+def make_mosaic(
+    image,
+    backend,
+    *,
+    n_elements: int = DEFAULT_ELEMENTS,
+    metric: str | None = None,
+    element: str | None = None,
+    size=None,
+    gap: float | None = None,
+    use_field: bool = True,
+    use_density: bool = True,
+    iterations: int = 20,
+    seed: int = 0,
+    aspect: float | None = None,
+    contrast: float = DEFAULT_CONTRAST,
+    grout=DEFAULT_GROUT,
+    method=DEFAULT_METHOD,
+    edges: bool = True,
+    edge_threshold: float = DEFAULT_EDGE_THRESHOLD,
+    method_options: dict | None = None,
+    cut: bool | None = None,
+    progress=None,
+    memory_limit=None,
+) -> MosaicResult:
     """Turn ``image`` (a file path or a numpy array) into a mosaic of ``n_elements``.
 
     ``metric``/``element``: the Lloyd distance and the tile shape; give either (the
@@ -433,11 +471,14 @@ def make_mosaic(image, backend, *, n_elements: int = DEFAULT_ELEMENTS, metric: s
         ph, pw = rgb.shape[:2]
     w, h = raster_size(pw, ph, size)
     if n_elements > w * h:
-        raise InputError(f"{n_elements} elements do not fit in a {w}x{h} raster "
-                         f"(from a {pw}x{ph} picture); "
-                         f"use fewer elements or a larger size (--size)")
+        raise InputError(
+            f"{n_elements} elements do not fit in a {w}x{h} raster "
+            f"(from a {pw}x{ph} picture); "
+            f"use fewer elements or a larger size (--size)"
+        )
     mosaic_estimate(w, h, n_elements, type(backend), element=element).check(
-        memory_limit, lower="use a smaller size or fewer elements", name="memory_limit")
+        memory_limit, lower="use a smaller size or fewer elements", name="memory_limit"
+    )
     if rgb is None:
         rgb, source = picture_array(image, at_least=(w, h), memory_limit=memory_limit)
     picture = resample(rgb, w, h)
@@ -449,13 +490,25 @@ def make_mosaic(image, backend, *, n_elements: int = DEFAULT_ELEMENTS, metric: s
     # the edge map is made in any case: the straddling measure reads it
     edge_map = strong_edges(lab, edge_threshold, min_length=EDGE_MIN_LENGTH * spacing)
     walls = bool(edges) and bool(edge_map.any())
-    problem = Problem(Grid(w, h, ~edge_map if walls else None), n_elements, metric_obj,
-                      density=fields.density if use_density else None,
-                      field=fields.field if use_field else None, seed=seed,
-                      walls=edge_map if walls else None)
+    problem = Problem(
+        Grid(w, h, ~edge_map if walls else None),
+        n_elements,
+        metric_obj,
+        density=fields.density if use_density else None,
+        field=fields.field if use_field else None,
+        seed=seed,
+        walls=edge_map if walls else None,
+    )
 
-    dist = record(problem, WalledBackend(backend) if walls else backend, iterations=iterations,
-                  progress=progress, element=element, gap=gap, **method_options)
+    dist = record(
+        problem,
+        WalledBackend(backend) if walls else backend,
+        iterations=iterations,
+        progress=progress,
+        element=element,
+        gap=gap,
+        **method_options,
+    )
     polygons = [None if p is None or p.is_empty else p for p in dist.elements]
     cut = record.tight if cut is None else bool(cut)
     cut_count = 0
@@ -472,20 +525,57 @@ def make_mosaic(image, backend, *, n_elements: int = DEFAULT_ELEMENTS, metric: s
     error = colour_error(lab, fills_lab, tiles, pixels)
     t3 = time.perf_counter()
     stages = {"cutting_seconds": t1 - t0, "fills_seconds": t2 - t1, "evaluation_seconds": t3 - t2}
-    dist = dataclasses.replace(dist, elements=polygons,
-                               extra={**dist.extra, **({"cut_tiles": cut_count} if walls and cut else {}), **stages})
+    dist = dataclasses.replace(
+        dist,
+        elements=polygons,
+        extra={**dist.extra, **({"cut_tiles": cut_count} if walls and cut else {}), **stages},
+    )
     placed = sum(p is not None for p in polygons)
     return MosaicResult(
-        sites=dist.sites, angles=dist.angles, scales=dist.scales, polygons=polygons, colours=colours,
-        coverage=ev.coverage, overlap=ev.overlap, colour_error=error,
+        sites=dist.sites,
+        angles=dist.angles,
+        scales=dist.scales,
+        polygons=polygons,
+        colours=colours,
+        coverage=ev.coverage,
+        overlap=ev.overlap,
+        colour_error=error,
         straddling=float(straddles.sum() / placed) if placed else 0.0,
-        width=w, height=h, metric=metric_name, element=element, aspect=metric_obj.aspect, gap=gap,
-        method=dist.method or record.name, method_options=given_options, contrast=contrast, grout=grout, edge_threshold=edge_threshold,
-        walls=walls, cut_tiles=cut_count, picture=picture, edges=edge_map, straddles=straddles, fields=fields, problem=problem,
-        distribution=dist, backend=backend.variant, device=backend.device(), source=source,
+        width=w,
+        height=h,
+        metric=metric_name,
+        element=element,
+        aspect=metric_obj.aspect,
+        gap=gap,
+        method=dist.method or record.name,
+        method_options=given_options,
+        contrast=contrast,
+        grout=grout,
+        edge_threshold=edge_threshold,
+        walls=walls,
+        cut_tiles=cut_count,
+        picture=picture,
+        edges=edge_map,
+        straddles=straddles,
+        fields=fields,
+        problem=problem,
+        distribution=dist,
+        backend=backend.variant,
+        device=backend.device(),
+        source=source,
         method_seconds=time.perf_counter() - t_start,
     )
 
 
-__all__ = ["make_mosaic", "MosaicResult", "picture_array", "raster_size", "resample",
-           "resolve_shapes", "resolve_method", "tile_colours", "DEFAULT_METHOD", "ELEMENT_SHAPES"]
+__all__ = [
+    "make_mosaic",
+    "MosaicResult",
+    "picture_array",
+    "raster_size",
+    "resample",
+    "resolve_shapes",
+    "resolve_method",
+    "tile_colours",
+    "DEFAULT_METHOD",
+    "ELEMENT_SHAPES",
+]

@@ -161,8 +161,9 @@ def placement_sizes(labels, sites, angles, shape: str, aspect, gap: float = 0.0)
 
 FITS = ("site", "centre")
 _FIT_STEPS = (0.3, 0.15, 0.075, 0.0375)  # pattern-search steps, as fractions of the size
-_FIT_MOVES = np.array([[1, 0], [-1, 0], [0, 1], [0, -1], [1, 1], [1, -1], [-1, 1], [-1, -1]],
-                      dtype=np.float64)
+_FIT_MOVES = np.array(
+    [[1, 0], [-1, 0], [0, 1], [0, -1], [1, 1], [1, -1], [-1, 1], [-1, -1]], dtype=np.float64
+)
 
 
 def _inscribed_centres(labels, shape: str, aspect, n: int) -> np.ndarray:
@@ -174,8 +175,13 @@ def _inscribed_centres(labels, shape: str, aspect, n: int) -> np.ndarray:
 
     h, w = labels.shape
     pad = np.pad(labels, 1, constant_values=-1)
-    inner = ((labels >= 0) & (pad[:-2, 1:-1] == labels) & (pad[2:, 1:-1] == labels)
-             & (pad[1:-1, :-2] == labels) & (pad[1:-1, 2:] == labels))
+    inner = (
+        (labels >= 0)
+        & (pad[:-2, 1:-1] == labels)
+        & (pad[2:, 1:-1] == labels)
+        & (pad[1:-1, :-2] == labels)
+        & (pad[1:-1, 2:] == labels)
+    )
     kind = shape_record(shape).distance
     if kind == "chessboard":
         dt = ndimage.distance_transform_cdt(inner, metric="chessboard").astype(np.float64)
@@ -272,8 +278,9 @@ def fit_centres(labels, sites, angles, shape: str, aspect, gap: float = 0.0):
     return out_c, out_s
 
 
-def place_elements(labels, sites, angles, shape: str, aspect, grid: Grid,
-                   gap: float = 0.0, fit: str = "site") -> list:
+def place_elements(
+    labels, sites, angles, shape: str, aspect, grid: Grid, gap: float = 0.0, fit: str = "site"
+) -> list:
     """One shapely Polygon per site (``None`` where the cell is empty or too small):
     the ``shape`` element, rotated by the site's angle, centred at the site, at the
     largest size that keeps it in its cell (see the module docstring for the rule).
@@ -284,8 +291,9 @@ def place_elements(labels, sites, angles, shape: str, aspect, grid: Grid,
     one_of(fit, "fit", FITS)
     labels = np.asarray(labels)
     if labels.shape != grid.shape:
-        raise InputError(f"label raster is {labels.shape[1]}x{labels.shape[0]}, "
-                         f"grid is {grid.width}x{grid.height}")
+        raise InputError(
+            f"label raster is {labels.shape[1]}x{labels.shape[0]}, grid is {grid.width}x{grid.height}"
+        )
     sites = np.asarray(sites, dtype=np.float64).reshape(-1, 2)
     n = len(sites)
     angles = np.zeros(n) if angles is None else np.broadcast_to(np.asarray(angles, np.float64), (n,))
@@ -298,3 +306,14 @@ def place_elements(labels, sites, angles, shape: str, aspect, grid: Grid,
     if len(placed):
         out[placed] = element_polygons(shape, aspect, centres[placed], angles[placed], sizes[placed])
     return out.tolist()
+
+
+__all__ = [
+    "parse_gap",
+    "element_for",
+    "contour_samples",
+    "placement_sizes",
+    "FITS",
+    "fit_centres",
+    "place_elements",
+]

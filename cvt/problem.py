@@ -56,8 +56,10 @@ class Grid:
             except (ValueError, TypeError) as exc:
                 raise InputError(f"mask is not an array of booleans: {exc}") from None
             if m.shape != (self.height, self.width):
-                raise InputError(f"mask (the region) has shape {m.shape}, the raster is {self.width}x{self.height}: "
-                                 f"it must be ({self.height}, {self.width})")
+                raise InputError(
+                    f"mask (the region) has shape {m.shape}, the raster is {self.width}x{self.height}: "
+                    f"it must be ({self.height}, {self.width})"
+                )
             if not m.any():
                 raise InputError("mask (the region) is empty: no pixel is inside the region")
             object.__setattr__(self, "mask", m)
@@ -98,15 +100,20 @@ class Problem:
             raise InputError(f"grid must be a Grid, got {self.grid!r}")
         if not isinstance(self.metric, Metric):
             raise InputError(f"metric must be a Metric (cvt.metrics.make_metric), got {self.metric!r}")
-        for name, value, kind in (("density", self.density, DensityMap), ("field", self.field, DirectionField)):
+        for name, value, kind in (
+            ("density", self.density, DensityMap),
+            ("field", self.field, DirectionField),
+        ):
             if value is not None and not isinstance(value, kind):
                 raise InputError(f"{name} must be a {kind.__name__} or None, got {value!r}")
         self.seed = whole_number(self.seed, "seed", minimum=0, maximum=MAX_SEED)
         if self.walls is not None:
             walls = np.ascontiguousarray(self.walls, dtype=bool)
             if walls.shape != self.grid.shape:
-                raise InputError(f"walls are {walls.shape[1]}x{walls.shape[0]}, raster is "
-                                 f"{self.grid.width}x{self.grid.height}")
+                raise InputError(
+                    f"walls are {walls.shape[1]}x{walls.shape[0]}, raster is "
+                    f"{self.grid.width}x{self.grid.height}"
+                )
             if (walls & self.grid.inside()).any():
                 raise InputError("walls must lie outside the region")
             self.walls = walls
@@ -150,7 +157,7 @@ def in_own_cell(labels: np.ndarray, points) -> np.ndarray:
     """(N,) True where point k lies on the raster in a pixel labelled k."""
     h, w = labels.shape
     points = np.asarray(points, dtype=np.float64).reshape(-1, 2)
-    on_raster = ((points[:, 0] >= 0) & (points[:, 0] < w) & (points[:, 1] >= 0) & (points[:, 1] < h))
+    on_raster = (points[:, 0] >= 0) & (points[:, 0] < w) & (points[:, 1] >= 0) & (points[:, 1] < h)
     i, j = pixel_index(points, w, h)
     return on_raster & (labels[i, j] == np.arange(len(points)))
 
@@ -161,3 +168,6 @@ def lattice_sites(width: int, height: int, k: int) -> np.ndarray:
     ys = (np.arange(k) + 0.5) * (height / k)
     gx, gy = np.meshgrid(xs, ys)
     return np.stack([gx.ravel(), gy.ravel()], axis=1)
+
+
+__all__ = ["MAX_SIDE", "MAX_SEED", "parse_size", "Grid", "Problem", "in_own_cell", "lattice_sites"]

@@ -14,8 +14,20 @@ import sys
 import warnings
 
 # the loggers of the libraries the suite drives: their records are for their developers
-THIRD_PARTY_LOGGERS = ("distributed", "dask", "tornado", "asyncio", "matplotlib", "PIL", "pyopencl", "pytools",
-                       "moderngl", "numexpr", "fsspec", "bokeh")
+THIRD_PARTY_LOGGERS = (
+    "distributed",
+    "dask",
+    "tornado",
+    "asyncio",
+    "matplotlib",
+    "PIL",
+    "pyopencl",
+    "pytools",
+    "moderngl",
+    "numexpr",
+    "fsspec",
+    "bokeh",
+)
 
 
 def configure(verbose: bool = False) -> None:
@@ -29,8 +41,20 @@ def configure(verbose: bool = False) -> None:
         logging.basicConfig(level=logging.INFO, format="%(name)s: %(message)s", stream=sys.stderr)
         warnings.simplefilter("default")
     else:
-        for module in ("numpy", "scipy", "shapely", "matplotlib", "PIL", "pyopencl", "pytools", "moderngl",
-                       "pandas", "distributed", "dask", "highspy"):
+        for module in (
+            "numpy",
+            "scipy",
+            "shapely",
+            "matplotlib",
+            "PIL",
+            "pyopencl",
+            "pytools",
+            "moderngl",
+            "pandas",
+            "distributed",
+            "dask",
+            "highspy",
+        ):
             warnings.filterwarnings("ignore", module=module)
         warnings.filterwarnings("ignore", category=RuntimeWarning)
         warnings.filterwarnings("ignore", category=FutureWarning)

@@ -38,7 +38,9 @@ def records_of(obj, name: str) -> list[Method]:
         return list(obj)
     if callable(obj):
         return [Method(name, obj, summary=(getattr(obj, "__doc__", None) or "").strip().split("\n")[0])]
-    raise InputError(f"entry point {name!r} is neither a method record, a list of them nor a callable: {obj!r}")
+    raise InputError(
+        f"entry point {name!r} is neither a method record, a list of them nor a callable: {obj!r}"
+    )
 
 
 @lru_cache(maxsize=1)
@@ -91,5 +93,13 @@ def reload() -> None:
     _load.cache_clear()
 
 
-__all__ = ["METHOD_GROUP", "methods", "method_names", "get_method", "unavailable_methods",
-           "group_entry_points", "records_of", "reload"]
+__all__ = [
+    "METHOD_GROUP",
+    "methods",
+    "method_names",
+    "get_method",
+    "unavailable_methods",
+    "group_entry_points",
+    "records_of",
+    "reload",
+]

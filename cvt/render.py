@@ -37,7 +37,13 @@ def parse_colour(value, name: str = "colour") -> tuple[float, float, float]:
             vals = np.asarray(value, dtype=np.float64)
         except (TypeError, ValueError):
             vals = None
-        if vals is None or vals.shape != (3,) or not np.isfinite(vals).all() or vals.min() < 0 or vals.max() > 1:
+        if (
+            vals is None
+            or vals.shape != (3,)
+            or not np.isfinite(vals).all()
+            or vals.min() < 0
+            or vals.max() > 1
+        ):
             raise InputError(f"{name} must be three numbers in 0..1, got {value!r}")
         return tuple(float(v) for v in vals)
     from PIL import ImageColor
@@ -91,9 +97,20 @@ def cells_image(labels: np.ndarray, n_elements: int, sites=None):
     return Image.fromarray(rgb, mode="RGB")
 
 
-def draw_elements(elements, width: int, height: int, fills=None, *, background=DARK,
-                  region_colour=None, region_mask=None, scale: float = 1.0, supersample: int = 3,
-                  window=None, outline=None):
+def draw_elements(
+    elements,
+    width: int,
+    height: int,
+    fills=None,
+    *,
+    background=DARK,
+    region_colour=None,
+    region_mask=None,
+    scale: float = 1.0,
+    supersample: int = 3,
+    window=None,
+    outline=None,
+):
     """The elements as a PIL RGB image of ``scale`` times the raster's size.
 
     ``fills``: one colour per element (default :func:`label_colours`).  ``background``
@@ -113,7 +130,8 @@ def draw_elements(elements, width: int, height: int, fills=None, *, background=D
         m = np.asarray(region_mask, dtype=bool)
         rgb = np.where(m[..., None], np.array(inside, np.uint8), np.array(rgb8(background), np.uint8))
         full = Image.fromarray(rgb.astype(np.uint8), "RGB").resize(
-            (max(1, round(width * k)), max(1, round(height * k))), Image.NEAREST)
+            (max(1, round(width * k)), max(1, round(height * k))), Image.NEAREST
+        )
         img = full.crop((round(x0 * k), round(y0 * k), round(x0 * k) + big[0], round(y0 * k) + big[1]))
     if fills is None:
         fills = label_colours(len(elements))
@@ -161,9 +179,20 @@ def svg_document(elements, width: int, height: int, fills=None, **options) -> st
     return "".join(svg_lines(elements, width, height, fills, **options))
 
 
-def svg_lines(elements, width: int, height: int, fills=None, *, background=DARK,
-              region_colour=PAPER, region=None, stroke=OUTLINE, stroke_width: float = 0.25,
-              ellipses=None, digits: int = 3):
+def svg_lines(
+    elements,
+    width: int,
+    height: int,
+    fills=None,
+    *,
+    background=DARK,
+    region_colour=PAPER,
+    region=None,
+    stroke=OUTLINE,
+    stroke_width: float = 0.25,
+    ellipses=None,
+    digits: int = 3,
+):
     """The SVG document of ``elements`` line by line (each ending in a newline), so that
     a large one can be written without being held whole.
 
@@ -181,10 +210,16 @@ def svg_lines(elements, width: int, height: int, fills=None, *, background=DARK,
     ]
     if region_colour is not None:
         if region is None:
-            out.append(f'<rect x="0" y="0" width="{width}" height="{height}" fill="{hex_colour(region_colour)}"/>')
+            out.append(
+                f'<rect x="0" y="0" width="{width}" height="{height}" fill="{hex_colour(region_colour)}"/>'
+            )
         else:
-            out.append(f'<path d="{_path_data(region)}" fill="{hex_colour(region_colour)}" fill-rule="evenodd"/>')
-    stroke_attr = ' stroke="none"' if stroke is None else f' stroke="{stroke}" stroke-width="{stroke_width:g}"'
+            out.append(
+                f'<path d="{_path_data(region)}" fill="{hex_colour(region_colour)}" fill-rule="evenodd"/>'
+            )
+    stroke_attr = (
+        ' stroke="none"' if stroke is None else f' stroke="{stroke}" stroke-width="{stroke_width:g}"'
+    )
     out.append(f'<g id="elements"{stroke_attr} stroke-linejoin="round">')
     yield from (line + "\n" for line in out)
     fmt = f"{{:.{digits}f}}"
@@ -194,8 +229,10 @@ def svg_lines(elements, width: int, height: int, fills=None, *, background=DARK,
         fill = quoteattr(hex_colour(fills[k]))
         if ellipses is not None and np.isfinite(ellipses[k]).all():
             cx, cy, rx, ry, deg = (fmt.format(v) for v in ellipses[k])
-            yield (f'<ellipse id="e{k}" cx="{cx}" cy="{cy}" rx="{rx}" ry="{ry}" '
-                   f'transform="rotate({deg} {cx} {cy})" fill={fill}/>\n')
+            yield (
+                f'<ellipse id="e{k}" cx="{cx}" cy="{cy}" rx="{rx}" ry="{ry}" '
+                f'transform="rotate({deg} {cx} {cy})" fill={fill}/>\n'
+            )
         else:
             yield f'<path id="e{k}" d="{_path_data(geom, digits)}" fill={fill}/>\n'
     yield "</g>\n</svg>\n"
@@ -223,5 +260,15 @@ def element_coordinates(elements, digits: int = 3) -> list:
     return out
 
 
-__all__ = ["parse_colour", "rgb8", "hex_colour", "label_colours", "cells_image", "draw_elements",
-           "svg_document", "svg_lines", "ellipse_parameters", "element_coordinates"]
+__all__ = [
+    "parse_colour",
+    "rgb8",
+    "hex_colour",
+    "label_colours",
+    "cells_image",
+    "draw_elements",
+    "svg_document",
+    "svg_lines",
+    "ellipse_parameters",
+    "element_coordinates",
+]

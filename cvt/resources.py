@@ -77,9 +77,10 @@ def _read_int(path: str) -> int | None:
 
 def _cgroup_left() -> int | None:
     """What the memory cgroup of this process still allows (v2, then v1), if it limits."""
-    for limit_file, usage_file in (("/sys/fs/cgroup/memory.max", "/sys/fs/cgroup/memory.current"),
-                                   ("/sys/fs/cgroup/memory/memory.limit_in_bytes",
-                                    "/sys/fs/cgroup/memory/memory.usage_in_bytes")):
+    for limit_file, usage_file in (
+        ("/sys/fs/cgroup/memory.max", "/sys/fs/cgroup/memory.current"),
+        ("/sys/fs/cgroup/memory/memory.limit_in_bytes", "/sys/fs/cgroup/memory/memory.usage_in_bytes"),
+    ):
         limit, usage = _read_int(limit_file), _read_int(usage_file)
         if limit is not None and limit < 2**60:  # v1 says "no limit" with a huge number
             return max(0, limit - (usage or 0))
@@ -139,7 +140,8 @@ class Estimate:
             raise ResourceError(
                 f"{self.what} needs about {format_bytes(self.total)} of memory (of which {top} "
                 f"{format_bytes(self.parts.get(top, PROGRAM))}), more than {source} "
-                f"({format_bytes(allowed)}); {lower}, or set {name} higher if the memory is there")
+                f"({format_bytes(allowed)}); {lower}, or set {name} higher if the memory is there"
+            )
         return self
 
 
@@ -159,9 +161,20 @@ def canvas_bytes(width: int, height: int, scale: float = 1.0, supersample: int =
     return 4.0 * big + 12.0 * small
 
 
-def run_estimate(width: int, height: int, n_elements: int, backend_class, *, element: str | None = None,
-                 density: bool = False, field: bool = False, region: bool = False, placement: bool = True,
-                 pictures: bool = True, what: str = "this run") -> Estimate:
+def run_estimate(
+    width: int,
+    height: int,
+    n_elements: int,
+    backend_class,
+    *,
+    element: str | None = None,
+    density: bool = False,
+    field: bool = False,
+    region: bool = False,
+    placement: bool = True,
+    pictures: bool = True,
+    what: str = "this run",
+) -> Estimate:
     """The peak memory of one run of a method on ``backend_class``: the problem's
     images at raster size, the backend's labels and moments, with ``placement`` the
     elements placed and evaluated and, with ``pictures``, the pictures of
@@ -169,8 +182,10 @@ def run_estimate(width: int, height: int, n_elements: int, backend_class, *, ele
     pixels = width * height
     est = Estimate(what)
     backend_bytes = getattr(backend_class, "memory_estimate", None)
-    est.add("the backend's labels and moments", backend_bytes(width, height, n_elements) if backend_bytes
-            else PER_PIXEL["labels"] * pixels)
+    est.add(
+        "the backend's labels and moments",
+        backend_bytes(width, height, n_elements) if backend_bytes else PER_PIXEL["labels"] * pixels,
+    )
     est.add("seeding", PER_PIXEL["seeding"] * pixels)
     for name, used in (("density", density), ("field", field), ("region", region)):
         if used:
@@ -182,14 +197,32 @@ def run_estimate(width: int, height: int, n_elements: int, backend_class, *, ele
     return est
 
 
-def mosaic_estimate(width: int, height: int, n_elements: int, backend_class, *, element: str | None = None,
-                    png_scale: float | None = None, compare: bool = False, what: str = "the mosaic") -> Estimate:
+def mosaic_estimate(
+    width: int,
+    height: int,
+    n_elements: int,
+    backend_class,
+    *,
+    element: str | None = None,
+    png_scale: float | None = None,
+    compare: bool = False,
+    what: str = "the mosaic",
+) -> Estimate:
     """The peak memory of a mosaic: the picture and its fields at raster size, a run
     with density and field, the colours and, with ``png_scale``, mosaic.png; a
     comparison (``compare``) runs a second mosaic while the first is kept."""
     pixels = width * height
-    est = run_estimate(width, height, n_elements, backend_class, element=element, density=True, field=True,
-                       pictures=False, what=what)
+    est = run_estimate(
+        width,
+        height,
+        n_elements,
+        backend_class,
+        element=element,
+        density=True,
+        field=True,
+        pictures=False,
+        what=what,
+    )
     est.add("the picture and its fields", PER_PIXEL["picture"] * pixels)
     est.add("the colours", PER_PIXEL["colours"] * pixels)
     if compare:
@@ -200,5 +233,15 @@ def mosaic_estimate(width: int, height: int, n_elements: int, backend_class, *, 
     return est
 
 
-__all__ = ["mosaic_estimate", "Estimate", "ResourceError", "available_memory", "memory_limit", "run_estimate",
-           "placement_bytes", "canvas_bytes", "format_bytes", "PROGRAM"]
+__all__ = [
+    "mosaic_estimate",
+    "Estimate",
+    "ResourceError",
+    "available_memory",
+    "memory_limit",
+    "run_estimate",
+    "placement_bytes",
+    "canvas_bytes",
+    "format_bytes",
+    "PROGRAM",
+]

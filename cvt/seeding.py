@@ -48,3 +48,6 @@ def initial_sites(problem: Problem) -> np.ndarray:
         rest = np.setdiff1d(np.arange(len(inside)), chosen)
         chosen = np.concatenate([chosen, rng.permutation(rest)])
     return _pixels_to_points(inside[chosen[:n]], grid.width, rng)
+
+
+__all__ = ["initial_sites"]

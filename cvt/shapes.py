@@ -68,14 +68,21 @@ def check_shape(shape) -> str:
     return shape_record(shape).name
 
 
-def resolve_shapes(metric: str | None, element: str | None, default: str = "square",
-                   names: tuple[str, str] = ("metric", "element")) -> tuple[str, str]:
+def resolve_shapes(
+    metric: str | None,
+    element: str | None,
+    default: str = "square",
+    names: tuple[str, str] = ("metric", "element"),
+) -> tuple[str, str]:
     """(metric, element): either one implies the other (an element's metric is the one
     whose unit ball it is; a metric's element is its own ball); neither means the element
     ``default``.  ``names`` name the two in messages (``--metric``, ``--element``)."""
     if element is not None:
-        element = shape_record(element).name if not isinstance(element, str) or element in SHAPES or \
-            element.startswith(POLYGON_PREFIX) else one_of(element, names[1], list(SHAPES))
+        element = (
+            shape_record(element).name
+            if not isinstance(element, str) or element in SHAPES or element.startswith(POLYGON_PREFIX)
+            else one_of(element, names[1], list(SHAPES))
+        )
     if metric is not None and not str(metric).startswith(POLYGON_PREFIX):
         one_of(metric, names[0], [*METRIC_NAMES, *(s.metric for s in SHAPES.values())])
     if metric is None and element is None:
@@ -121,3 +128,20 @@ def element_polygons(shape: str, aspect: float, centres, angles, sizes) -> np.nd
         b = min(n, a + CHUNK)
         out[a:b] = shapely.polygons(transform(outline, centres[a:b], angles[a:b], sizes[a:b]))
     return out
+
+
+__all__ = [
+    "ELEMENT_SHAPES",
+    "PAPER_SHAPES",
+    "CURVE_SEGMENTS",
+    "shape_record",
+    "packing_density",
+    "rotational_symmetry",
+    "unit_outline",
+    "check_shape",
+    "resolve_shapes",
+    "element_ball",
+    "transform",
+    "CHUNK",
+    "element_polygons",
+]

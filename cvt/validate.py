@@ -41,8 +41,14 @@ def whole_number(value, name: str, minimum: int | None = 0, maximum: int | None 
     return k
 
 
-def real_number(value, name: str, minimum: float | None = None, maximum: float | None = None,
-                above: float | None = None, below: float | None = None) -> float:
+def real_number(
+    value,
+    name: str,
+    minimum: float | None = None,
+    maximum: float | None = None,
+    above: float | None = None,
+    below: float | None = None,
+) -> float:
     """A finite float in [minimum, maximum] (and > ``above``, < ``below`` when given)."""
     limits = _range_text(minimum, maximum)
     if above is not None:
@@ -135,8 +141,10 @@ def json_object(path, what: str, max_bytes: int = JSON_MAX_BYTES) -> dict:
     except OSError:
         size = 0  # missing or unreadable: said below
     if size > max_bytes:
-        raise InputError(f"{what} {path} holds {size / 2**20:.0f} MiB, more than the {max_bytes / 2**20:.0f} MiB "
-                         "such a file can hold; it is not read")
+        raise InputError(
+            f"{what} {path} holds {size / 2**20:.0f} MiB, more than the {max_bytes / 2**20:.0f} MiB "
+            "such a file can hold; it is not read"
+        )
     try:
         with open(path, encoding="utf-8-sig") as fh:
             data = json.load(fh)
@@ -163,3 +171,15 @@ def _range_text(minimum, maximum) -> str:
     if maximum is not None:
         return f" <= {_number_text(maximum)}"
     return ""
+
+
+__all__ = [
+    "whole_number",
+    "real_number",
+    "one_of",
+    "name_list",
+    "live_backend",
+    "byte_size",
+    "JSON_MAX_BYTES",
+    "json_object",
+]

@@ -35,22 +35,29 @@ def shapes(w: int = 480, h: int = 360) -> Image.Image:
     # a square tilted by 20 degrees
     cx, cy, r = W * 0.30, H * 0.52, H * 0.19
     a = math.radians(20)
-    corners = [(cx + r * math.sqrt(2) * math.cos(a + math.pi / 4 + k * math.pi / 2),
-                cy + r * math.sqrt(2) * math.sin(a + math.pi / 4 + k * math.pi / 2)) for k in range(4)]
+    corners = [
+        (
+            cx + r * math.sqrt(2) * math.cos(a + math.pi / 4 + k * math.pi / 2),
+            cy + r * math.sqrt(2) * math.sin(a + math.pi / 4 + k * math.pi / 2),
+        )
+        for k in range(4)
+    ]
     d.polygon(corners, fill=(200, 60, 50))
     d.polygon([(W * 0.50, H * 0.70), (W * 0.66, H * 0.40), (W * 0.82, H * 0.70)], fill=(240, 240, 235))
     # slanted stripes across the ground
     for k in range(-4, 14):
         x0 = k * W * 0.09
-        d.polygon([(x0, H), (x0 + W * 0.045, H), (x0 + W * 0.045 + H * 0.2, H * 0.80),
-                   (x0 + H * 0.2, H * 0.80)], fill=(60, 110, 50))
+        d.polygon(
+            [(x0, H), (x0 + W * 0.045, H), (x0 + W * 0.045 + H * 0.2, H * 0.80), (x0 + H * 0.2, H * 0.80)],
+            fill=(60, 110, 50),
+        )
     return _finish(img, w, h)
 
 
 def rings(w: int = 400, h: int = 400) -> Image.Image:
     """Concentric rings of four flat colours off-centre, on a plain background: curved
     edges everywhere on one side, a flat area on the other."""
-    y, x = np.mgrid[0:h * SS, 0:w * SS] / SS
+    y, x = np.mgrid[0 : h * SS, 0 : w * SS] / SS
     r = np.hypot(x - w * 0.38, y - h * 0.45)
     palette = np.array([(30, 60, 120), (240, 180, 40), (200, 70, 60), (250, 245, 230)], np.uint8)
     band = (r // (w * 0.045)).astype(int) % 4
@@ -75,8 +82,11 @@ def leaf(w: int = 440, h: int = 330) -> Image.Image:
         x0 = W * (0.1 + 0.1 * k)
         reach = H * 0.30 * math.sin(math.pi * (x0 - W * 0.1) / (W * 0.8))
         for sgn in (-1, 1):
-            d.line([(x0, H * 0.5), (x0 + reach * 0.8, H * 0.5 + sgn * reach * 0.8)],
-                   fill=(230, 220, 120), width=lw)
+            d.line(
+                [(x0, H * 0.5), (x0 + reach * 0.8, H * 0.5 + sgn * reach * 0.8)],
+                fill=(230, 220, 120),
+                width=lw,
+            )
     return _finish(img, w, h)
 
 
@@ -86,15 +96,19 @@ def scene(w: int = 512, h: int = 512, seed: int = 7) -> Image.Image:
     shadow, then lens blur and sensor noise: smooth gradients everywhere, hard edges
     between objects of clearly different colour, and soft ones (the shadow, the glow)."""
     rng = np.random.default_rng(seed)
-    y, x = (np.mgrid[0:h * SS, 0:w * SS] + 0.5) / SS
+    y, x = (np.mgrid[0 : h * SS, 0 : w * SS] + 0.5) / SS
     u, v = x / w, y / h
     sky = np.stack([60 + 140 * v, 110 + 110 * v, 200 + 45 * v], axis=-1)
     glow = np.exp(-((u - 0.78) ** 2 + (v - 0.18) ** 2) / 0.02)[..., None]
     rgb = sky * (1 - 0.6 * glow) + np.array([255, 240, 200]) * 0.6 * glow
     hill_far = v > 0.55 + 0.06 * np.sin(2 * math.pi * (u * 1.3 + 0.1))
-    rgb[hill_far] = (np.stack([70 + 40 * u, 120 + 30 * u, 60 + 0 * u], -1) * (1.1 - 0.4 * v)[..., None])[hill_far]
+    rgb[hill_far] = (np.stack([70 + 40 * u, 120 + 30 * u, 60 + 0 * u], -1) * (1.1 - 0.4 * v)[..., None])[
+        hill_far
+    ]
     hill_near = v > 0.70 + 0.05 * np.sin(2 * math.pi * (u * 0.8 + 0.55))
-    rgb[hill_near] = (np.stack([90 + 30 * u, 160 - 20 * u, 50 + 20 * u], -1) * (1.25 - 0.5 * v)[..., None])[hill_near]
+    rgb[hill_near] = (np.stack([90 + 30 * u, 160 - 20 * u, 50 + 20 * u], -1) * (1.25 - 0.5 * v)[..., None])[
+        hill_near
+    ]
     # the post's shadow on the near hill: soft, a darker band
     shadow = hill_near & (np.abs((u - 0.22) + 0.6 * (v - 0.80)) < 0.02 + 0.05 * (v - 0.7))
     rgb[shadow] *= 0.65

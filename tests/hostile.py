@@ -18,7 +18,9 @@ CAP = 4 * 2**30  # address space of a child: a regression fails the test, not th
 
 
 def _chunk(kind: bytes, data: bytes) -> bytes:
-    return struct.pack(">I", len(data)) + kind + data + struct.pack(">I", zlib.crc32(kind + data) & 0xFFFFFFFF)
+    return (
+        struct.pack(">I", len(data)) + kind + data + struct.pack(">I", zlib.crc32(kind + data) & 0xFFFFFFFF)
+    )
 
 
 def blank_png(path: Path, width: int, height: int, rgb: bool = False) -> Path:
@@ -28,7 +30,9 @@ def blank_png(path: Path, width: int, height: int, rgb: bool = False) -> Path:
     row = b"\0" + bytes(width * (3 if rgb else 1))
     idat = b"".join(comp.compress(row) for _ in range(height)) + comp.flush()
     header = struct.pack(">IIBBBBB", width, height, 8, 2 if rgb else 0, 0, 0, 0)
-    path.write_bytes(b"\x89PNG\r\n\x1a\n" + _chunk(b"IHDR", header) + _chunk(b"IDAT", idat) + _chunk(b"IEND", b""))
+    path.write_bytes(
+        b"\x89PNG\r\n\x1a\n" + _chunk(b"IHDR", header) + _chunk(b"IDAT", idat) + _chunk(b"IEND", b"")
+    )
     return path
 
 
@@ -40,8 +44,14 @@ def run_measured(argv, cwd=None, env=None, timeout=300):
     """(exit status, stderr, peak resident MB, seconds) of ``cvtbench ARGV`` in a child
     process with capped address space; the peak is the child's own (wait4)."""
     t0 = time.perf_counter()
-    proc = subprocess.Popen(CLI + [str(a) for a in argv], cwd=cwd, env={**os.environ, **(env or {})},
-                            stdout=subprocess.DEVNULL, stderr=subprocess.PIPE, preexec_fn=_cap)
+    proc = subprocess.Popen(
+        CLI + [str(a) for a in argv],
+        cwd=cwd,
+        env={**os.environ, **(env or {})},
+        stdout=subprocess.DEVNULL,
+        stderr=subprocess.PIPE,
+        preexec_fn=_cap,
+    )
     err = []
     reader = threading.Thread(target=lambda: err.append(proc.stderr.read()))
     reader.start()
@@ -58,4 +68,9 @@ def run_measured(argv, cwd=None, env=None, timeout=300):
     reader.join()
     proc.stderr.close()
     proc.returncode = os.waitstatus_to_exitcode(status)  # reaped here, not by Popen
-    return proc.returncode, b"".join(err).decode(errors="replace"), usage.ru_maxrss / 1024, time.perf_counter() - t0
+    return (
+        proc.returncode,
+        b"".join(err).decode(errors="replace"),
+        usage.ru_maxrss / 1024,
+        time.perf_counter() - t0,
+    )

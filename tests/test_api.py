@@ -58,8 +58,12 @@ def test_mosaic_by_name():
 
 
 def cvtbench(*args):
-    return subprocess.run([sys.executable, "-m", "compact_distributions.bench.cli", *args],
-                          capture_output=True, text=True, timeout=300)
+    return subprocess.run(
+        [sys.executable, "-m", "compact_distributions.bench.cli", *args],
+        capture_output=True,
+        text=True,
+        timeout=300,
+    )
 
 
 def test_version():
@@ -69,8 +73,22 @@ def test_version():
 
 
 def test_compaction_prints_nothing_of_its_solver(tmp_path):
-    done = cvtbench("run", "--method", "ours-compact", "--element", "square", "--elements", "80", "--size", "96",
-                    "--iterations", "3", "--quiet", "--out", str(tmp_path / "r"))
+    done = cvtbench(
+        "run",
+        "--method",
+        "ours-compact",
+        "--element",
+        "square",
+        "--elements",
+        "80",
+        "--size",
+        "96",
+        "--iterations",
+        "3",
+        "--quiet",
+        "--out",
+        str(tmp_path / "r"),
+    )
     assert done.returncode == 0, done.stderr
     assert done.stdout == "" and "HiGHS" not in done.stderr  # the solver's banner was printed on stdout
     assert (tmp_path / "r" / "result.json").exists()

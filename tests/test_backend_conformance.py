@@ -66,8 +66,9 @@ def assert_same_up_to_ties(got, want, sites, angles, scales, metric, grid, slack
     d_got = coef.distance(got[i, j], x, y)
     d_want = coef.distance(want[i, j], x, y)
     excess = d_got - d_want
-    assert excess.max() <= slack + 1e-5 * max(1.0, float(d_want.max())), \
+    assert excess.max() <= slack + 1e-5 * max(1.0, float(d_want.max())), (
         f"{len(i)} pixels differ, up to {excess.max():.3g} farther than the nearest site"
+    )
     assert len(i) <= 0.005 * want.size
 
 
@@ -126,18 +127,29 @@ def test_calls_are_keyword_only(backend):
         backend.moments(sites, angles, scales, metric, grid)
 
 
-@pytest.mark.parametrize("change,needle", [
-    (dict(sites=np.zeros((0, 2))), "sites"),
-    (dict(sites=np.array([[1.0, np.nan], [3.0, 4.0]])), "NaN"),
-    (dict(angles=np.array([0.0, np.inf])), "angles"),
-    (dict(scales=np.array([1.0, -1.0])), "scales"),
-    (dict(scales=np.ones(3)), "shape"),
-    (dict(metric="l2"), "metric"),
-    (dict(grid=(10, 10)), "grid"),
-])
+@pytest.mark.parametrize(
+    "change,needle",
+    [
+        (dict(sites=np.zeros((0, 2))), "sites"),
+        (dict(sites=np.array([[1.0, np.nan], [3.0, 4.0]])), "NaN"),
+        (dict(angles=np.array([0.0, np.inf])), "angles"),
+        (dict(scales=np.array([1.0, -1.0])), "scales"),
+        (dict(scales=np.ones(3)), "shape"),
+        (dict(metric="l2"), "metric"),
+        (dict(grid=(10, 10)), "grid"),
+    ],
+)
 def test_inputs_are_checked_once_for_every_backend(backend, change, needle):
-    args = {**dict(sites=np.array([[2.0, 3.0], [7.0, 5.0]]), angles=np.zeros(2), scales=np.ones(2),
-                   metric=make_metric("l2"), grid=Grid(10, 10)), **change}
+    args = {
+        **dict(
+            sites=np.array([[2.0, 3.0], [7.0, 5.0]]),
+            angles=np.zeros(2),
+            scales=np.ones(2),
+            metric=make_metric("l2"),
+            grid=Grid(10, 10),
+        ),
+        **change,
+    }
     sites = args.pop("sites")
     with pytest.raises(InputError, match=needle):
         backend.label(sites, **args)

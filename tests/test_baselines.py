@@ -74,7 +74,7 @@ def test_valid_distribution(name):
 @pytest.mark.parametrize("name", NAMES)
 def test_masked_region_keeps_elements_inside(name):
     yy, xx = np.mgrid[0:SIZE, 0:SIZE] + 0.5
-    disc = (xx - 64) ** 2 + (yy - 64) ** 2 < 56 ** 2
+    disc = (xx - 64) ** 2 + (yy - 64) ** 2 < 56**2
     problem = square_problem(seed=1, n=40, mask=disc)
     dist = run(name, problem, iterations=4)
     region = region_polygon(problem.grid)
@@ -171,8 +171,9 @@ def test_tile_voronoi_is_distance_to_the_tile_not_its_centre():
     # nearer to the rectangle than to the square although nearer to the square's centre
     grid = Grid(100, 40)
     shape = tile_shape(square_problem(metric="linf-axial"), "rectangle")  # aspect 0.5: 4 x 1
-    tiles = rasterize_tiles(shape, np.array([[30.0, 20.0], [80.0, 20.0]]), np.zeros(2),
-                            np.array([10.0, 1.0]), grid)
+    tiles = rasterize_tiles(
+        shape, np.array([[30.0, 20.0], [80.0, 20.0]]), np.zeros(2), np.array([10.0, 1.0]), grid
+    )
     labels, dist = tile_voronoi(tiles, grid.inside())
     assert labels[20, 62] == 0  # 12 px from the rectangle's end (x=50), 18 from the square
     assert abs(62.5 - 30) > abs(62.5 - 80)  # while the square's centre is nearer
@@ -188,8 +189,10 @@ def _pixel_centres_inside(poly, height, width):
     return inside
 
 
-@pytest.mark.parametrize("element,metric", [("square", "linf"), ("triangle", "triangle"),
-                                            ("ellipse", "l2-axial"), ("rectangle", "linf-axial")])
+@pytest.mark.parametrize(
+    "element,metric",
+    [("square", "linf"), ("triangle", "triangle"), ("ellipse", "l2-axial"), ("rectangle", "linf-axial")],
+)
 def test_tile_pixels_are_the_pixel_centres_inside_the_outline(element, metric):
     grid = Grid(60, 50)
     shape = tile_shape(square_problem(metric=metric), element)
@@ -284,8 +287,9 @@ def test_fixed_size_budget_is_the_same_for_every_fixed_tile_method():
     assert want == pytest.approx(0.95 * math.sqrt(SIZE * SIZE / N) / 2)
     for mod in (hausner2001, fritzsche2005, smith2005):
         dist = mod.run(problem, NumpyBackend(), iterations=2)
-        inner = [e for e in dist.elements if e is not None
-                 and min(e.bounds) > 1e-6 and max(e.bounds) < SIZE - 1e-6]  # not clipped
+        inner = [
+            e for e in dist.elements if e is not None and min(e.bounds) > 1e-6 and max(e.bounds) < SIZE - 1e-6
+        ]  # not clipped
         assert len(inner) > N // 2
         assert np.allclose([e.area for e in inner], (2 * want) ** 2)
 
@@ -304,8 +308,24 @@ def test_cli_runs_a_baseline(tmp_path, capsys):
     from compact_distributions.bench.cli import main
 
     out = tmp_path / "run"
-    code = main(["run", "--method", "smith2005", "--metric", "linf", "--size", "96",
-                 "--elements", "30", "--iterations", "3", "--out", str(out), "--quiet"])
+    code = main(
+        [
+            "run",
+            "--method",
+            "smith2005",
+            "--metric",
+            "linf",
+            "--size",
+            "96",
+            "--elements",
+            "30",
+            "--iterations",
+            "3",
+            "--out",
+            str(out),
+            "--quiet",
+        ]
+    )
     assert code == 0
     result = json.loads((out / "result.json").read_text())
     assert result["method"] == "smith2005" and result["iterations"] == 3

@@ -118,21 +118,52 @@ def _committed(name):
 def test_table2_aggregates_seeds_by_hand(tmp_path):
     from compact_distributions.bench.table2 import aggregate
 
-    rows = [{**tiny(seed).params(), "key": tiny(seed).key, "status": "ok", "reason": "", "device": "cpu",
-             "coverage": c, "overlap": o, "method_seconds": t, "lloyd_seconds": t / 2, "ms_per_iteration": 1.0, "placed": 20,
-             "empty_cells": 0} for seed, (c, o, t) in enumerate([(0.70, 0.0, 1.0), (0.80, 0.02, 3.0)])]
+    rows = [
+        {
+            **tiny(seed).params(),
+            "key": tiny(seed).key,
+            "status": "ok",
+            "reason": "",
+            "device": "cpu",
+            "coverage": c,
+            "overlap": o,
+            "method_seconds": t,
+            "lloyd_seconds": t / 2,
+            "ms_per_iteration": 1.0,
+            "placed": 20,
+            "empty_cells": 0,
+        }
+        for seed, (c, o, t) in enumerate([(0.70, 0.0, 1.0), (0.80, 0.02, 3.0)])
+    ]
     rows.append({**tiny(2).params(), "key": tiny(2).key, "status": "failed", "reason": "boom"})
     (line,) = aggregate(rows).to_dict("records")
     assert line["coverage_mean"] == pytest.approx(0.75) and line["overlap_mean"] == pytest.approx(0.01)
     assert line["coverage_sd"] == pytest.approx(np.sqrt(0.005))  # sample sd of 0.70, 0.80
     assert line["method_seconds_mean"] == pytest.approx(2.0)
     assert line["lloyd_seconds_mean"] == pytest.approx(1.0)
-    assert line["runs"] == 2 and line["seeds"] == 3 and line["status"] == "partial" and "boom" in line["reason"]
+    assert (
+        line["runs"] == 2 and line["seeds"] == 3 and line["status"] == "partial" and "boom" in line["reason"]
+    )
 
 
 def test_table2_quick_writes_its_report(tmp_path):
-    code = main(["table2", "--quick", "--methods", "ours", "--backends", "numpy", "--shapes",
-                 "square,circle", "--seeds", "1", "--out", str(tmp_path), "--quiet"])
+    code = main(
+        [
+            "table2",
+            "--quick",
+            "--methods",
+            "ours",
+            "--backends",
+            "numpy",
+            "--shapes",
+            "square,circle",
+            "--seeds",
+            "1",
+            "--out",
+            str(tmp_path),
+            "--quiet",
+        ]
+    )
     assert code == 0
     new = pd.read_csv(tmp_path / "table2.csv")
     assert list(new.columns) == list(_committed("quick/table2.csv").columns)
@@ -147,8 +178,12 @@ def test_committed_table2_covers_every_method_and_backend():
     variants, unavailable = sweep_backends(None)
     for name, quick in (("table2.csv", False), ("quick/table2.csv", True)):
         table = _committed(name)
-        expected = {(s.label, s.backend, s.element)
-                    for s in problem_set(quick, 1, method_names(), variants, variant_backend=variant_backend(unavailable))}
+        expected = {
+            (s.label, s.backend, s.element)
+            for s in problem_set(
+                quick, 1, method_names(), variants, variant_backend=variant_backend(unavailable)
+            )
+        }
         have = set(zip(table.method, table.backend, table.element, strict=True))
         assert expected <= have, f"reports/{name} lacks {sorted(expected - have)}: regenerate it"
         ok = table[table.status == "ok"]
@@ -156,8 +191,25 @@ def test_committed_table2_covers_every_method_and_backend():
 
 
 def test_backends_quick_rerun_matches_committed_columns(tmp_path):
-    code = main(["backends", "--quick", "--backends", "numpy,ckdtree", "--metrics", "l2", "--elements", "300",
-                 "--sizes", "96", "--repeats", "1", "--out", str(tmp_path), "--quiet"])
+    code = main(
+        [
+            "backends",
+            "--quick",
+            "--backends",
+            "numpy,ckdtree",
+            "--metrics",
+            "l2",
+            "--elements",
+            "300",
+            "--sizes",
+            "96",
+            "--repeats",
+            "1",
+            "--out",
+            str(tmp_path),
+            "--quiet",
+        ]
+    )
     assert code == 0
     new = pd.read_csv(tmp_path / "backends.csv")
     assert list(new.columns) == list(_committed("quick/backends.csv").columns)
@@ -172,8 +224,10 @@ def test_backends_quick_rerun_matches_committed_columns(tmp_path):
 # regression: logic on fabricated figures
 
 
-BASE = {"coverage": {"ours/numpy/square": {"mean": 0.800}, "ours/gl/square": {"mean": 0.8}},
-        "speed": {"opencl vs numpy, l2": {"ratio": 0.10}}}
+BASE = {
+    "coverage": {"ours/numpy/square": {"mean": 0.800}, "ours/gl/square": {"mean": 0.8}},
+    "speed": {"opencl vs numpy, l2": {"ratio": 0.10}},
+}
 
 
 def test_compare_fails_on_a_coverage_drop_over_half_a_point():
@@ -186,7 +240,10 @@ def test_compare_fails_on_a_coverage_drop_over_half_a_point():
 
 def test_compare_speed_uses_ratios_only():
     # 10x slower machine, same ratio: no regression
-    cur = {"coverage": {}, "speed": {"opencl vs numpy, l2": {"ratio": 0.10, "ms": 500.0, "reference_ms": 5000}}}
+    cur = {
+        "coverage": {},
+        "speed": {"opencl vs numpy, l2": {"ratio": 0.10, "ms": 500.0, "reference_ms": 5000}},
+    }
     assert regress_cmd.compare(BASE, cur)[0] == []
     cur["speed"]["opencl vs numpy, l2"]["ratio"] = 0.21  # 2.1x slower relative to numpy
     failures, _ = regress_cmd.compare(BASE, cur)
@@ -194,8 +251,11 @@ def test_compare_speed_uses_ratios_only():
 
 
 def test_compare_reports_missing_and_new_entries_without_failing():
-    cur = {"coverage": {"ours/numpy/square": {"mean": 0.8}, "ours/new/square": {"mean": 0.5}},
-           "speed": {}, "unavailable": {"ours/gl/square": "no EGL"}}
+    cur = {
+        "coverage": {"ours/numpy/square": {"mean": 0.8}, "ours/new/square": {"mean": 0.5}},
+        "speed": {},
+        "unavailable": {"ours/gl/square": "no EGL"},
+    }
     failures, notes = regress_cmd.compare(BASE, cur)
     assert failures == []
     text = "\n".join(notes)
@@ -225,7 +285,10 @@ def _baseline_of_today(tmp_path, argv, coverage_shift=0.0, speed_ratio=None):
     assert main(argv + ["--update", "--baseline", str(path)]) == 0
     quick = json.loads(path.read_text())["quick"]
     cov = {k: dict(v, mean=v["mean"] + coverage_shift) for k, v in quick["coverage"].items()}
-    speed = {k: dict(v, ratio=v["ratio"] if speed_ratio is None else speed_ratio) for k, v in quick["speed"].items()}
+    speed = {
+        k: dict(v, ratio=v["ratio"] if speed_ratio is None else speed_ratio)
+        for k, v in quick["speed"].items()
+    }
     path.write_text(json.dumps({"quick": {"coverage": cov, "speed": speed}}))
     return path
 
@@ -253,8 +316,10 @@ def test_the_committed_baseline_names_every_check_of_the_quick_set():
     quick = json.loads(regress_cmd.BASELINE_FILE.read_text())["quick"]
     from compact_distributions.baselines import method_names
 
-    keys = {regress_cmd.coverage_key(s.method, s.backend, s.element)
-            for s in regress_cmd.coverage_specs(regress_cmd.SETS["quick"], method_names(), ["numpy"])}
+    keys = {
+        regress_cmd.coverage_key(s.method, s.backend, s.element)
+        for s in regress_cmd.coverage_specs(regress_cmd.SETS["quick"], method_names(), ["numpy"])
+    }
     assert keys <= set(quick["coverage"])
 
 
@@ -263,13 +328,16 @@ def test_regress_without_baseline_is_an_input_error(tmp_path, capsys):
     assert "regress --update" in capsys.readouterr().err
 
 
-@pytest.mark.parametrize("argv, text", [
-    (["table2", "--seeds", "0"], "--seeds"),
-    (["table2", "--backends", "cuda"], "cuda"),
-    (["table2", "--shapes", "heptagon"], "heptagon"),
-    (["backends", "--sizes", "big"], "--sizes"),
-    (["regress", "--quick", "--methods", "magic"], "magic"),
-])
+@pytest.mark.parametrize(
+    "argv, text",
+    [
+        (["table2", "--seeds", "0"], "--seeds"),
+        (["table2", "--backends", "cuda"], "cuda"),
+        (["table2", "--shapes", "heptagon"], "heptagon"),
+        (["backends", "--sizes", "big"], "--sizes"),
+        (["regress", "--quick", "--methods", "magic"], "magic"),
+    ],
+)
 def test_bad_bench_options_are_one_line_errors(argv, text, capsys, tmp_path):
     assert main(argv + ["--out", str(tmp_path)] if argv[0] != "regress" else argv) == 2
     err = capsys.readouterr().err.strip()
@@ -286,15 +354,27 @@ def test_reproduce_hands_each_part_a_typed_request(tmp_path):
     from compact_distributions.bench.table2 import Table2Request, table2
     from compact_distributions.bench.table3 import Table3Request
 
-    args = argparse.Namespace(quick=True, force=False, quiet=True, memory_limit="2G", seeds="3", exclusive=True)
+    args = argparse.Namespace(
+        quick=True, force=False, quiet=True, memory_limit="2G", seeds="3", exclusive=True
+    )
     parts = requests(args, tmp_path, "tcp://127.0.0.1:1")
     assert [(name, type(req)) for name, _, req in parts] == [
-        ("table2", Table2Request), ("table3", Table3Request), ("backends", BackendsRequest),
-        ("pipeline", PipelineRequest), ("figures", FiguresRequest)]
+        ("table2", Table2Request),
+        ("table3", Table3Request),
+        ("backends", BackendsRequest),
+        ("pipeline", PipelineRequest),
+        ("figures", FiguresRequest),
+    ]
     t2, t3, bk, _, fig = (req for _, _, req in parts)
     assert (t3.seeds, t3.quick, t3.scheduler) == (3, True, "tcp://127.0.0.1:1")
-    assert parts[0][1] is table2 and parts[1][1] is backends
-    assert (t2.out, t2.seeds, t2.exclusive, t2.scheduler, t2.memory_limit) == (tmp_path, 3, True, "tcp://127.0.0.1:1", "2G")
+    assert parts[0][1] is table2 and parts[2][1] is backends
+    assert (t2.out, t2.seeds, t2.exclusive, t2.scheduler, t2.memory_limit) == (
+        tmp_path,
+        3,
+        True,
+        "tcp://127.0.0.1:1",
+        "2G",
+    )
     assert (bk.out, bk.quick, bk.exclusive, bk.scheduler) == (tmp_path, True, False, "tcp://127.0.0.1:1")
     assert fig.out == tmp_path / "figures" and fig.quick
     assert t2.command == f"cvtbench table2 --quick --out {tmp_path}"
@@ -308,11 +388,22 @@ def test_a_typed_request_is_checked_like_the_command_line(tmp_path):
         prepare(Table2Request(out=tmp_path, quick=True, methods=("nosuch",)))
     with pytest.raises(InputError, match="--delta is an option of none of --methods ours"):
         prepare(Table2Request(out=tmp_path, quick=True, methods=("ours",), method_options={"delta": 0.9}))
-    plan = prepare(Table2Request(out=tmp_path, quick=True, seeds=1, methods=("ours", "hausner2001"),
-                                 backends=("numpy",), shapes=("square",)))
+    plan = prepare(
+        Table2Request(
+            out=tmp_path,
+            quick=True,
+            seeds=1,
+            methods=("ours", "hausner2001"),
+            backends=("numpy",),
+            shapes=("square",),
+        )
+    )
     assert [(s.label, s.backend, s.element) for s in plan["specs"]] == [
-        ("ours", "numpy", "square"), ("hausner2001", "numpy", "square"),
-        ("hausner2001 δ=0.85", "numpy", "square"), ("hausner2001 δ=0.8", "numpy", "square")]
+        ("ours", "numpy", "square"),
+        ("hausner2001", "numpy", "square"),
+        ("hausner2001 δ=0.85", "numpy", "square"),
+        ("hausner2001 δ=0.8", "numpy", "square"),
+    ]
 
 
 def test_effect_picture_draws_elements():

@@ -27,7 +27,7 @@ def images(tmp_path):
     d["zero"] = tmp_path / "zero.png"
     disc = np.zeros((80, 80), np.uint8)
     yy, xx = np.mgrid[0:80, 0:80]
-    disc[(xx - 40) ** 2 + (yy - 40) ** 2 < 30 ** 2] = 255
+    disc[(xx - 40) ** 2 + (yy - 40) ** 2 < 30**2] = 255
     Image.fromarray(disc).save(tmp_path / "disc.png")
     d["disc"] = tmp_path / "disc.png"
     d["text"] = tmp_path / "notes.png"
@@ -42,13 +42,45 @@ def images(tmp_path):
 
 def test_run_writes_result_sites_and_cells(tmp_path, capsys):
     out = tmp_path / "run"
-    code, _, err = run_cli(["run", "--elements", "60", "--size", "96x64", "--iterations", "3",
-                            "--metric", "linf-axial", "--aspect", "0.7", "--seed", "4",
-                            "--field", "constant:30", "--out", str(out)], capsys)
+    code, _, err = run_cli(
+        [
+            "run",
+            "--elements",
+            "60",
+            "--size",
+            "96x64",
+            "--iterations",
+            "3",
+            "--metric",
+            "linf-axial",
+            "--aspect",
+            "0.7",
+            "--seed",
+            "4",
+            "--field",
+            "constant:30",
+            "--out",
+            str(out),
+        ],
+        capsys,
+    )
     assert code == 0, err
     r = json.loads((out / "result.json").read_text())
-    for key in ("backend", "device", "metric", "aspect", "size", "sites", "angles", "scales",
-                "iterations", "energy", "seconds", "versions", "command"):
+    for key in (
+        "backend",
+        "device",
+        "metric",
+        "aspect",
+        "size",
+        "sites",
+        "angles",
+        "scales",
+        "iterations",
+        "energy",
+        "seconds",
+        "versions",
+        "command",
+    ):
         assert key in r, key
     assert r["backend"] == "numpy" and r["metric"] == "linf-axial" and r["aspect"] == 0.7
     assert r["size"] == [96, 64] and r["iterations"] == 3
@@ -65,8 +97,10 @@ def test_run_writes_result_sites_and_cells(tmp_path, capsys):
 def test_init_csv_round_trip_and_zero_iterations(tmp_path, capsys):
     init = tmp_path / "init.csv"
     init.write_text("x,y\n10.5,20.25\n40,30\n70.125,5\n")
-    code, _, err = run_cli(["run", "--init", str(init), "--size", "80x40", "--iterations", "0",
-                            "--out", str(tmp_path / "o")], capsys)
+    code, _, err = run_cli(
+        ["run", "--init", str(init), "--size", "80x40", "--iterations", "0", "--out", str(tmp_path / "o")],
+        capsys,
+    )
     assert code == 0, err
     r = json.loads((tmp_path / "o" / "result.json").read_text())
     assert r["sites"] == [[10.5, 20.25], [40.0, 30.0], [70.125, 5.0]]
@@ -74,9 +108,26 @@ def test_init_csv_round_trip_and_zero_iterations(tmp_path, capsys):
 
 
 def test_density_region_and_image_field(tmp_path, images, capsys):
-    code, _, err = run_cli(["run", "--elements", "40", "--size", "80", "--iterations", "2",
-                            "--density", str(images["density"]), "--region", str(images["disc"]),
-                            "--field", str(images["density"]), "--out", str(tmp_path / "o")], capsys)
+    code, _, err = run_cli(
+        [
+            "run",
+            "--elements",
+            "40",
+            "--size",
+            "80",
+            "--iterations",
+            "2",
+            "--density",
+            str(images["density"]),
+            "--region",
+            str(images["disc"]),
+            "--field",
+            str(images["density"]),
+            "--out",
+            str(tmp_path / "o"),
+        ],
+        capsys,
+    )
     assert code == 0, err  # density of another size is resampled, as documented
     r = json.loads((tmp_path / "o" / "result.json").read_text())
     sites = np.array(r["sites"])
@@ -113,30 +164,37 @@ def test_bad_arguments(extra, message, tmp_path, capsys):
     assert not out.exists()
 
 
-@pytest.mark.parametrize("option,which,message", [
-    ("--density", "zero", "all zero"),
-    ("--density", "text", "not an image file"),
-    ("--density", "trunc", "cannot read image"),
-    ("--density", "missing", "image file not found"),
-    ("--region", "zero", "is empty"),
-    ("--region", "text", "not an image file"),
-])
+@pytest.mark.parametrize(
+    "option,which,message",
+    [
+        ("--density", "zero", "all zero"),
+        ("--density", "text", "not an image file"),
+        ("--density", "trunc", "cannot read image"),
+        ("--density", "missing", "image file not found"),
+        ("--region", "zero", "is empty"),
+        ("--region", "text", "not an image file"),
+    ],
+)
 def test_bad_images(option, which, message, images, tmp_path, capsys):
     path = images.get(which, tmp_path / "nope.png")
     out = tmp_path / "out"
-    code, _, err = run_cli(["run", "--elements", "10", "--size", "48", option, str(path),
-                            "--out", str(out)], capsys)
+    code, _, err = run_cli(
+        ["run", "--elements", "10", "--size", "48", option, str(path), "--out", str(out)], capsys
+    )
     assert code == 2 and message in err and len(err.strip().splitlines()) == 1
     assert not out.exists()
 
 
-@pytest.mark.parametrize("content,message", [
-    ("a,b\n1,2\n", "needs columns x and y"),
-    ("x,y\n1,nan\n", "NaN or infinite"),
-    ("x,y\n1,oops\n", "must be numbers"),
-    ("x,y\n10,10\n100,5\n", "outside the 64x64 raster"),
-    ("x,y\n", "has no sites"),
-])
+@pytest.mark.parametrize(
+    "content,message",
+    [
+        ("a,b\n1,2\n", "needs columns x and y"),
+        ("x,y\n1,nan\n", "NaN or infinite"),
+        ("x,y\n1,oops\n", "must be numbers"),
+        ("x,y\n10,10\n100,5\n", "outside the 64x64 raster"),
+        ("x,y\n", "has no sites"),
+    ],
+)
 def test_bad_init_csv(content, message, tmp_path, capsys):
     init = tmp_path / "init.csv"
     init.write_text(content)
@@ -157,8 +215,11 @@ def test_info_lists_every_backend(capsys):
 def test_console_script_end_to_end(tmp_path):
     """The installed entry point, as a user runs it (subprocess, real exit status)."""
     exe = [sys.executable, "-m", "compact_distributions.bench.cli"]
-    ok = subprocess.run(exe + ["run", "--elements", "30", "--size", "64", "--iterations", "2",
-                               "--out", str(tmp_path / "o")], capture_output=True, text=True)
+    ok = subprocess.run(
+        exe + ["run", "--elements", "30", "--size", "64", "--iterations", "2", "--out", str(tmp_path / "o")],
+        capture_output=True,
+        text=True,
+    )
     assert ok.returncode == 0, ok.stderr
     assert (tmp_path / "o" / "result.json").exists()
     bad = subprocess.run(exe + ["run", "--metric", "nope"], capture_output=True, text=True)

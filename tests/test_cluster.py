@@ -31,8 +31,10 @@ from compact_distributions.bench.cli import main
 from compact_distributions.bench.sweep import made_by, run_sweep
 
 ROOT = Path(__file__).resolve().parent.parent
-needs_dask = pytest.mark.skipif(importlib.util.find_spec("distributed") is None,
-                                reason=f"dask.distributed is not installed ({cluster.EXTRA})")
+needs_dask = pytest.mark.skipif(
+    importlib.util.find_spec("distributed") is None,
+    reason=f"dask.distributed is not installed ({cluster.EXTRA})",
+)
 
 # ours and a fixed-size baseline (with its smaller tile budgets) on squares, NumPy: 8 runs
 METHODS, SHAPES, BACKENDS = "ours,fritzsche2005", "square", "numpy"
@@ -54,7 +56,9 @@ def results(out: Path):
     """(per run: key -> (coverage, overlap), the csv's coverage and overlap columns)."""
     runs = {k: (r["row"]["coverage"], r["row"]["overlap"]) for k, r in stored(out).items()}
     csv = pd.read_csv(out / "table2.csv")
-    return runs, csv[["method", "backend", "element", "coverage_mean", "coverage_sd", "overlap_mean", "overlap_sd"]]
+    return runs, csv[
+        ["method", "backend", "element", "coverage_mean", "coverage_sd", "overlap_mean", "overlap_sd"]
+    ]
 
 
 def assert_same_results(out: Path, truth):
@@ -79,9 +83,27 @@ def truth(tmp_path_factory):
 def start_scheduler(folder: Path):
     """`dask scheduler` on 127.0.0.1, a free port; (process, address)."""
     file = folder / "scheduler.json"
-    proc = subprocess.Popen([sys.executable, "-m", "dask", "scheduler", "--host", "127.0.0.1", "--port", "0",
-                             "--dashboard-address", "127.0.0.1:0", "--no-dashboard", "--scheduler-file", str(file), "--idle-timeout", "300"],
-                            stdout=subprocess.DEVNULL, stderr=open(folder / "scheduler.log", "w"))
+    proc = subprocess.Popen(
+        [
+            sys.executable,
+            "-m",
+            "dask",
+            "scheduler",
+            "--host",
+            "127.0.0.1",
+            "--port",
+            "0",
+            "--dashboard-address",
+            "127.0.0.1:0",
+            "--no-dashboard",
+            "--scheduler-file",
+            str(file),
+            "--idle-timeout",
+            "300",
+        ],
+        stdout=subprocess.DEVNULL,
+        stderr=open(folder / "scheduler.log", "w"),
+    )
     deadline = time.monotonic() + 60
     while not file.exists() or not file.read_text().strip():
         if proc.poll() is not None or time.monotonic() > deadline:
@@ -96,10 +118,29 @@ def start_workers(address: str, folder: Path, n: int, env: dict | None = None):
     from distributed import Client
 
     env = {**os.environ, "DASK_CONFIG": str(cluster.CONFIG_FILE), **(env or {})}
-    proc = subprocess.Popen([sys.executable, "-m", "dask", "worker", address, "--nworkers", str(n),
-                             "--nthreads", "1", "--host", "127.0.0.1", "--dashboard-address", "127.0.0.1:0", "--no-dashboard",
-                             "--death-timeout", "30"],
-                            stdout=subprocess.DEVNULL, stderr=open(folder / "workers.log", "w"), env=env)
+    proc = subprocess.Popen(
+        [
+            sys.executable,
+            "-m",
+            "dask",
+            "worker",
+            address,
+            "--nworkers",
+            str(n),
+            "--nthreads",
+            "1",
+            "--host",
+            "127.0.0.1",
+            "--dashboard-address",
+            "127.0.0.1:0",
+            "--no-dashboard",
+            "--death-timeout",
+            "30",
+        ],
+        stdout=subprocess.DEVNULL,
+        stderr=open(folder / "workers.log", "w"),
+        env=env,
+    )
     with Client(address, timeout=10) as client:
         try:
             client.wait_for_workers(n, timeout=90)
@@ -202,8 +243,23 @@ def test_killed_worker_costs_a_retry_not_the_sweep(truth, dask_cluster, tmp_path
 @needs_dask
 @pytest.mark.slow
 def test_backend_timings_on_the_cluster(dask_cluster, tmp_path):
-    argv = ["backends", "--quick", "--backends", "numpy,ckdtree", "--metrics", "l2", "--elements", "100",
-            "--sizes", "64", "--quiet", "--out", str(tmp_path), "--scheduler", dask_cluster]
+    argv = [
+        "backends",
+        "--quick",
+        "--backends",
+        "numpy,ckdtree",
+        "--metrics",
+        "l2",
+        "--elements",
+        "100",
+        "--sizes",
+        "64",
+        "--quiet",
+        "--out",
+        str(tmp_path),
+        "--scheduler",
+        dask_cluster,
+    ]
     assert main(argv) == 0
     df = pd.read_csv(tmp_path / "backends.csv")
     assert list(df["status"]) == ["ok", "ok"] and df["host"].nunique() == 1
@@ -238,7 +294,10 @@ def test_worker_with_other_code_is_refused(tmp_path, capsys):
         stop(scheduler)
     err = capsys.readouterr().err.strip().splitlines()
     assert len(err) == 1, err
-    assert err[0].startswith("cvtbench: error: worker tcp://127.0.0.1:") and "differs from this process: code " in err[0]
+    assert (
+        err[0].startswith("cvtbench: error: worker tcp://127.0.0.1:")
+        and "differs from this process: code " in err[0]
+    )
     assert f"(here {made_by()['code']})" in err[0]
     assert not (tmp_path / "out" / "raw").exists()  # refused before any run
 
@@ -247,8 +306,11 @@ def test_differences_name_code_and_versions():
     mine = {"code": "aaaa", "versions": {"numpy": "2.0.0", "scipy": "1.13.0"}}
     assert cluster.differences(mine, mine) == []
     theirs = {"code": "bbbb", "versions": {"numpy": "1.26.4"}}
-    assert cluster.differences(mine, theirs) == ["code bbbb (here aaaa)", "numpy 1.26.4 (here 2.0.0)",
-                                                 "scipy missing (here 1.13.0)"]
+    assert cluster.differences(mine, theirs) == [
+        "code bbbb (here aaaa)",
+        "numpy 1.26.4 (here 2.0.0)",
+        "scipy missing (here 1.13.0)",
+    ]
 
 
 def free_port() -> int:
@@ -264,7 +326,9 @@ def test_unreachable_scheduler_is_one_line_and_exit_2(tmp_path, capsys):
     assert main(SWEEP + ["--out", str(tmp_path), "--scheduler", address]) == 2
     assert time.monotonic() - t0 < cluster.CONNECT_TIMEOUT_S + 10
     err = capsys.readouterr().err.strip().splitlines()
-    assert len(err) == 1 and err[0].startswith(f"cvtbench: error: cannot reach the Dask scheduler at {address}")
+    assert len(err) == 1 and err[0].startswith(
+        f"cvtbench: error: cannot reach the Dask scheduler at {address}"
+    )
 
 
 @pytest.mark.parametrize("option", [["--scheduler", "tcp://127.0.0.1:8786"], ["--workers", "2"]])
@@ -273,8 +337,10 @@ def test_without_the_extra_one_line_names_it(option, tmp_path, capsys, monkeypat
     for command in (SWEEP, ["backends", "--quick", "--quiet"], ["reproduce", "--quick", "--quiet"]):
         assert main(command + ["--out", str(tmp_path)] + option) == 2
         err = capsys.readouterr().err.strip().splitlines()
-        assert err == ["cvtbench: error: --scheduler and --workers need dask.distributed: "
-                       "pip install 'compact-distributions[cluster]'"]
+        assert err == [
+            "cvtbench: error: --scheduler and --workers need dask.distributed: "
+            "pip install 'compact-distributions[cluster]'"
+        ]
     assert not any(tmp_path.iterdir())
 
 
@@ -308,7 +374,9 @@ class StampSpec:
     def execute(self, backend) -> dict:
         start = time.time()
         time.sleep(0.4)
-        return {"row": {"key": self.key, "status": "ok", "start": start, "end": time.time(), "pid": os.getpid()}}
+        return {
+            "row": {"key": self.key, "status": "ok", "start": start, "end": time.time(), "pid": os.getpid()}
+        }
 
 
 def overlapping(rows) -> int:
@@ -324,8 +392,9 @@ def test_exclusive_runs_never_share_a_host(tmp_path):
     specs = [StampSpec(i) for i in range(6)]
     with cluster.local_cluster(2) as local, Client(local) as client:
         shared = run_sweep(specs, tmp_path, store=False, quiet=True, executor=cluster.DaskExecutor(client))
-        alone = run_sweep(specs, tmp_path, store=False, quiet=True,
-                          executor=cluster.DaskExecutor(client, exclusive=True))
+        alone = run_sweep(
+            specs, tmp_path, store=False, quiet=True, executor=cluster.DaskExecutor(client, exclusive=True)
+        )
     for rows in (shared, alone):
         assert [r["status"] for r in rows] == ["ok"] * 6 and len({r["pid"] for r in rows}) == 2
     assert overlapping(shared) > 0  # two worker processes on one host: runs overlap
@@ -336,18 +405,51 @@ def test_exclusive_runs_never_share_a_host(tmp_path):
 def test_reports_name_hosts_when_rows_come_from_several():
     from compact_distributions.bench.backends_cmd import with_ratios
 
-    rows = [{"backend": b, "metric": "l2", "n_elements": 100, "size": 64, "ms_per_iteration": ms, "status": "ok", "host": h}
-            for b, ms, h in [("numpy", 10.0, "a"), ("opencl", 2.0, "a"), ("numpy", 20.0, "b"), ("ckdtree", 5.0, "c")]]
+    rows = [
+        {
+            "backend": b,
+            "metric": "l2",
+            "n_elements": 100,
+            "size": 64,
+            "ms_per_iteration": ms,
+            "status": "ok",
+            "host": h,
+        }
+        for b, ms, h in [
+            ("numpy", 10.0, "a"),
+            ("opencl", 2.0, "a"),
+            ("numpy", 20.0, "b"),
+            ("ckdtree", 5.0, "c"),
+        ]
+    ]
     df = with_ratios(rows)
     # NumPy on the same host is the unit; none on host c: no ratio across machines
     assert list(df["x_numpy"].round(6).fillna(-1)) == [1.0, 5.0, 1.0, -1]
 
-    base = {"method": "ours", "backend": "numpy", "element": "square", "metric": "linf", "width": 64, "height": 64,
-            "n_elements": 20, "iterations": 3, "label": "ours", "status": "ok", "reason": "", "device": "cpu",
-            "coverage": 0.7, "overlap": 0.0, "method_seconds": 1.0, "lloyd_seconds": 0.5, "ms_per_iteration": 3.0, "placed": 20,
-            "empty_cells": 0}
-    table = table2.aggregate([{**base, "seed": 0, "host": "a", "host_slots": 1},
-                              {**base, "seed": 1, "host": "b", "host_slots": 1}])
+    base = {
+        "method": "ours",
+        "backend": "numpy",
+        "element": "square",
+        "metric": "linf",
+        "width": 64,
+        "height": 64,
+        "n_elements": 20,
+        "iterations": 3,
+        "label": "ours",
+        "status": "ok",
+        "reason": "",
+        "device": "cpu",
+        "coverage": 0.7,
+        "overlap": 0.0,
+        "method_seconds": 1.0,
+        "lloyd_seconds": 0.5,
+        "ms_per_iteration": 3.0,
+        "placed": 20,
+        "empty_cells": 0,
+    }
+    table = table2.aggregate(
+        [{**base, "seed": 0, "host": "a", "host_slots": 1}, {**base, "seed": 1, "host": "b", "host_slots": 1}]
+    )
     assert table.loc[0, "hosts"] == "a, b" and table.loc[0, "host_slots"] == 1
     prov = {"machine": {}, "devices": {}, "versions": {}, "commit": "x", "date": "today"}
     md = table2.render_markdown(table, prov, "cvtbench table2", True, table2.QUICK, 2, 1.0, 0, 2)

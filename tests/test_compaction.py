@@ -32,7 +32,7 @@ SIZE = 96
 # ------------------------------------------------------------------ helpers
 def l_mask(size=SIZE):
     m = np.ones((size, size), dtype=bool)
-    m[: size // 2, size // 2:] = False  # an L: one reflex corner
+    m[: size // 2, size // 2 :] = False  # an L: one reflex corner
     return m
 
 
@@ -96,17 +96,32 @@ def assert_separated(shape, c, a, s, grid, gap, aspect=0.5):
 
 # ------------------------------------------------------------------ the guarantee
 @settings(max_examples=60, deadline=None, suppress_health_check=[HealthCheck.too_slow])
-@given(shape=st.sampled_from(ELEMENT_SHAPES), seed=st.integers(0, 10_000),
-       n=st.integers(3, 30), region=st.sampled_from(sorted(REGIONS)),
-       gap=st.sampled_from([0.0, 0.0, 0.7, 2.0]), tiles=st.sampled_from([4, 12, 64]),
-       field=st.booleans())
+@given(
+    shape=st.sampled_from(ELEMENT_SHAPES),
+    seed=st.integers(0, 10_000),
+    n=st.integers(3, 30),
+    region=st.sampled_from(sorted(REGIONS)),
+    gap=st.sampled_from([0.0, 0.0, 0.7, 2.0]),
+    tiles=st.sampled_from([4, 12, 64]),
+    field=st.booleans(),
+)
 def test_every_round_is_overlap_free_and_inside(shape, seed, n, region, gap, tiles, field):
     grid, sites, angles, sizes = random_layout(shape, seed, n, region, gap, field)
     if not (sizes > 0).any() or gap >= 2 * min(element_ball(shape, 0.5).inradius, 1) * sizes.max():
         return
     states = []
-    res = compact(sites, angles, sizes, shape, 0.5, grid, gap=gap, rounds=3, tile_elements=tiles,
-                  on_round=lambda k, c, s: states.append((c, s)))
+    res = compact(
+        sites,
+        angles,
+        sizes,
+        shape,
+        0.5,
+        grid,
+        gap=gap,
+        rounds=3,
+        tile_elements=tiles,
+        on_round=lambda k, c, s: states.append((c, s)),
+    )
     assert len(states) == res.rounds >= 1
     for c, s in states:
         assert_separated(shape, c, angles, s, grid, gap)
@@ -165,18 +180,19 @@ def test_circle_lattice_reaches_pi_over_4():
     further, circles of unequal sizes pack more densely than the lattice."""
     grid = Grid(128, 128)
     c = lattice_sites(128, 128, 8)
-    res = compact(c, np.zeros(64), np.full(64, 5.0), "circle", 1.0, grid, rounds=8, max_growth=0.6,
-                  move_cost=1e-3)
+    res = compact(
+        c, np.zeros(64), np.full(64, 5.0), "circle", 1.0, grid, rounds=8, max_growth=0.6, move_cost=1e-3
+    )
     assert_separated("circle", res.centres, np.zeros(64), res.sizes, grid, 0.0)
     assert res.sizes == pytest.approx(np.full(64, 8.0), abs=1e-6)
-    assert float(np.sum(math.pi * res.sizes ** 2)) / 128 ** 2 == pytest.approx(math.pi / 4, abs=1e-6)
+    assert float(np.sum(math.pi * res.sizes**2)) / 128**2 == pytest.approx(math.pi / 4, abs=1e-6)
     drift = compact(c, np.zeros(64), np.full(64, 5.0), "circle", 1.0, grid, rounds=8, max_growth=0.6)
     assert_separated("circle", drift.centres, np.zeros(64), drift.sizes, grid, 0.0)
-    cov = float(np.sum(math.pi * drift.sizes ** 2)) / 128 ** 2
+    cov = float(np.sum(math.pi * drift.sizes**2)) / 128**2
     assert math.pi / 4 * 0.99 < cov <= math.pi / 4 + 1e-9
     free = compact(c, np.zeros(64), np.full(64, 5.0), "circle", 1.0, grid, rounds=8)
     assert_separated("circle", free.centres, np.zeros(64), free.sizes, grid, 0.0)
-    assert float(np.sum(math.pi * free.sizes ** 2)) / 128 ** 2 > math.pi / 4
+    assert float(np.sum(math.pi * free.sizes**2)) / 128**2 > math.pi / 4
 
 
 def triangle_tiling(width, side):
@@ -215,8 +231,13 @@ def test_alternating_triangles_follow_a_triangle_tiling():
     grid = Grid(200, height)
     n = len(centres)
     own = np.bincount(labels.ravel(), minlength=n)
-    inner = ((centres[:, 0] > 30) & (centres[:, 0] < 170) & (centres[:, 1] > 30)
-             & (centres[:, 1] < height - 30) & (own > 0))
+    inner = (
+        (centres[:, 0] > 30)
+        & (centres[:, 0] < 170)
+        & (centres[:, 1] > 30)
+        & (centres[:, 1] < height - 30)
+        & (own > 0)
+    )
     angles, c, s = alternate_triangles(labels, centres, np.zeros(n), fit="site")
     turned = np.abs(np.angle(np.exp(1j * angles))) > 1  # π, not 0
     assert np.array_equal(turned[inner], down[inner])
@@ -254,7 +275,7 @@ def test_density_contrast_survives():
 
     assert ratio(c0, s0) > 1.6
     assert ratio(res.centres, res.sizes) == pytest.approx(ratio(c0, s0), rel=0.1)
-    assert np.sum(res.sizes ** 2) > 1.1 * np.sum(s0 ** 2)
+    assert np.sum(res.sizes**2) > 1.1 * np.sum(s0**2)
 
 
 def test_max_growth_caps_each_size():
@@ -279,8 +300,7 @@ def test_overlapping_start_is_repaired():
     pixel over its contour) come out apart; a centre closer than the gap is dropped."""
     grid = Grid(40, 40)
     c = np.array([[10.0, 10.0], [19.5, 10.0], [30.0, 30.0], [30.3, 30.0]])
-    res = compact(c, np.zeros(4), np.array([5.0, 5.0, 3.0, 3.0]), "square", 1.0, grid, gap=1.0,
-                  rounds=0)
+    res = compact(c, np.zeros(4), np.array([5.0, 5.0, 3.0, 3.0]), "square", 1.0, grid, gap=1.0, rounds=0)
     assert res.dropped == 1 and (res.sizes > 0).sum() == 3
     assert_separated("square", res.centres, np.zeros(4), res.sizes, grid, 1.0)
 
@@ -342,8 +362,9 @@ def test_lloyd_turns_act_like_a_turned_field():
 
     grid = Grid(64, 64)
     base = Problem(grid, 12, make_metric("triangle"), seed=5)
-    turned = Problem(grid, 12, make_metric("triangle"), field=DirectionField.named("constant:180", 64, 64),
-                     seed=5)
+    turned = Problem(
+        grid, 12, make_metric("triangle"), field=DirectionField.named("constant:180", 64, 64), seed=5
+    )
     a = lloyd(base, BACKEND, 4, setup=LloydSetup.of(base, angles_at=lambda p: base.angles_at(p) + math.pi))
     b = lloyd(turned, BACKEND, 4)
     assert np.allclose(a.sites, b.sites) and np.allclose(a.angles, b.angles)

@@ -120,7 +120,8 @@ def test_geometric_median_minimises_the_mean_distance():
         def cost(m, pts=pts):
             return np.sqrt(((pts - m) ** 2).sum(axis=1)).mean()
 
-        best = minimize(cost, means[g], method="Nelder-Mead",
-                        options={"xatol": 1e-8, "fatol": 1e-10, "maxiter": 20000}).fun
+        best = minimize(
+            cost, means[g], method="Nelder-Mead", options={"xatol": 1e-8, "fatol": 1e-10, "maxiter": 20000}
+        ).fun
         assert cost(got[g]) <= best + 1e-3
         assert cost(got[g]) <= cost(means[g]) + 1e-12  # never worse than the mean

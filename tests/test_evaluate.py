@@ -81,15 +81,25 @@ def test_empty_cells_and_nothing_placed():
     ev = evaluate([None, None, None, None], Grid(3, 2), labels=labels)
     assert (ev.coverage, ev.overlap, ev.elements, ev.skipped, ev.empty_cells) == (0.0, 0.0, 0, 4, 2)
     d = ev.as_dict()
-    assert {"coverage", "overlap", "placed", "skipped", "empty_cells",
-            "min_element_area", "max_element_area"} <= set(d)
+    assert {
+        "coverage",
+        "overlap",
+        "placed",
+        "skipped",
+        "empty_cells",
+        "min_element_area",
+        "max_element_area",
+    } <= set(d)
 
 
 # ------------------------------------------------------------------ drawing
 def sample_elements():
-    return [shapely.box(2, 2, 10, 8), None,
-            shapely.Polygon([(20, 5), (30, 5), (25, 15)]),
-            shapely.Point(40, 20).buffer(5)]
+    return [
+        shapely.box(2, 2, 10, 8),
+        None,
+        shapely.Polygon([(20, 5), (30, 5), (25, 15)]),
+        shapely.Point(40, 20).buffer(5),
+    ]
 
 
 def test_svg_is_valid_xml_with_one_closed_path_per_element():
@@ -112,8 +122,11 @@ def test_svg_of_a_masked_region_draws_the_region():
     mask = np.zeros((30, 50), dtype=bool)
     mask[5:25, 5:45] = True
     region = region_polygon(Grid(50, 30, mask))
-    root = ET.fromstring(svg_document(sample_elements(), 50, 30, region=region,
-                                      fills=["#ff0000", "#00ff00", "#0000ff", (1, 2, 3)]))
+    root = ET.fromstring(
+        svg_document(
+            sample_elements(), 50, 30, region=region, fills=["#ff0000", "#00ff00", "#0000ff", (1, 2, 3)]
+        )
+    )
     top = root.findall(f"{SVG}path")
     assert len(top) == 1 and "5,5" in top[0].get("d")
     fills = [p.get("fill") for p in root.findall(f"{SVG}g/{SVG}path")]
@@ -139,7 +152,7 @@ def test_coordinates_are_json_ready():
 def test_region_of_a_mask_is_one_valid_polygon():
     yy, xx = np.mgrid[0:64, 0:64]
     r2 = (xx - 32) ** 2 + (yy - 32) ** 2
-    mask = (r2 < 28 ** 2) & (r2 > 8 ** 2)  # a ring: one polygon with a hole
+    mask = (r2 < 28**2) & (r2 > 8**2)  # a ring: one polygon with a hole
     region = region_polygon(Grid(64, 64, mask))
     assert shapely.is_valid(region) and region.geom_type == "Polygon"
     assert len(region.interiors) == 1 and region.area == mask.sum()

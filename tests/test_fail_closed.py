@@ -20,7 +20,12 @@ def _mutations(baseline: dict):
     for mode in ("quick", "full"):
         for kind, figure in (("coverage", "mean"), ("speed", "ratio")):
             for key in baseline[mode][kind]:
-                for label, value in (("nan", math.nan), ("inf", math.inf), ("string", "0.9"), ("missing", None)):
+                for label, value in (
+                    ("nan", math.nan),
+                    ("inf", math.inf),
+                    ("string", "0.9"),
+                    ("missing", None),
+                ):
                     b = copy.deepcopy(baseline)
                     if value is None:
                         del b[mode][kind][key][figure]
@@ -81,9 +86,20 @@ def test_table2_never_makes_a_row_of_a_nan_coverage():
     from compact_distributions.bench.table2 import aggregate
 
     spec = RunSpec("t", "ours", "numpy", "square", 32, 32, 8, 1, 0)
-    ok = {"key": spec.key, **spec.params(), "status": "ok", "reason": "", "device": "cpu", "coverage": 0.8,
-          "overlap": 0.0, "method_seconds": 1.0, "lloyd_seconds": 0.5, "ms_per_iteration": 1.0, "placed": 8,
-          "empty_cells": 0}
+    ok = {
+        "key": spec.key,
+        **spec.params(),
+        "status": "ok",
+        "reason": "",
+        "device": "cpu",
+        "coverage": 0.8,
+        "overlap": 0.0,
+        "method_seconds": 1.0,
+        "lloyd_seconds": 0.5,
+        "ms_per_iteration": 1.0,
+        "placed": 8,
+        "empty_cells": 0,
+    }
     line = aggregate([ok, {**ok, "seed": 1, "coverage": np.nan}]).iloc[0]
     assert line["coverage_mean"] == pytest.approx(0.8) and line["runs"] == 1 and line["status"] == "partial"
     assert "not a finite number" in line["reason"]
@@ -105,8 +121,21 @@ def test_an_oversized_init_file_is_refused_in_seconds_and_little_memory(tmp_path
         for _ in range(rows // 100_000):
             fh.write(block)
     out = tmp_path / "o"
-    code, err, seconds, peak = run_measured(["-m", "compact_distributions.bench.cli", "run", "--size", "4096",
-                                             "--init", str(path), "--memory-limit", "3G", "--out", str(out)])
+    code, err, seconds, peak = run_measured(
+        [
+            "-m",
+            "compact_distributions.bench.cli",
+            "run",
+            "--size",
+            "4096",
+            "--init",
+            str(path),
+            "--memory-limit",
+            "3G",
+            "--out",
+            str(out),
+        ]
+    )
     lines = err.strip().splitlines()
     assert code == 2 and len(lines) == 1 and "Traceback" not in err, err
     assert "more than the limit --memory-limit sets (3 GiB)" in lines[0], lines[0]

@@ -17,12 +17,25 @@ import compact_distributions as cd
 from compact_distributions.cvt.mosaic import make_mosaic
 
 # anything: numbers of every kind, text, containers (ragged ones too), None, objects
-scalars = st.one_of(st.none(), st.booleans(), st.integers(-10**12, 10**12), st.floats(allow_nan=True),
-                    st.text(max_size=6), st.just(object()), st.just(math.inf), st.just(-0.0))
-anything = st.recursive(scalars, lambda inner: st.one_of(st.lists(inner, max_size=3),
-                                                         st.tuples(inner, inner),
-                                                         st.dictionaries(st.text(max_size=2), inner, max_size=2)),
-                        max_leaves=6)
+scalars = st.one_of(
+    st.none(),
+    st.booleans(),
+    st.integers(-(10**12), 10**12),
+    st.floats(allow_nan=True),
+    st.text(max_size=6),
+    st.just(object()),
+    st.just(math.inf),
+    st.just(-0.0),
+)
+anything = st.recursive(
+    scalars,
+    lambda inner: st.one_of(
+        st.lists(inner, max_size=3),
+        st.tuples(inner, inner),
+        st.dictionaries(st.text(max_size=2), inner, max_size=2),
+    ),
+    max_leaves=6,
+)
 SETTINGS = settings(max_examples=60, deadline=None, suppress_health_check=[HealthCheck.too_slow])
 
 
@@ -45,7 +58,10 @@ def problem():
 
 
 @SETTINGS
-@given(value=anything, which=st.sampled_from(["n_elements", "size", "element", "metric", "aspect", "seed", "mask"]))
+@given(
+    value=anything,
+    which=st.sampled_from(["n_elements", "size", "element", "metric", "aspect", "seed", "mask"]),
+)
 def test_problem(value, which):
     base = dict(n_elements=8, size=24)
     if which == "size" and isinstance(value, int) and not isinstance(value, bool) and value > 64:
@@ -67,27 +83,42 @@ def test_run(problem, value, which):
 
 
 @SETTINGS
-@given(value=st.one_of(anything, st.lists(st.lists(st.floats(0, 1), min_size=1, max_size=6), min_size=1, max_size=6)))
+@given(
+    value=st.one_of(
+        anything, st.lists(st.lists(st.floats(0, 1), min_size=1, max_size=6), min_size=1, max_size=6)
+    )
+)
 def test_mosaic_image(reference, value):
     _answers(lambda: make_mosaic(value, reference, n_elements=4, iterations=1, size=(12, 12)), "image")
 
 
 @SETTINGS
-@given(value=anything, which=st.sampled_from(["n_elements", "iterations", "seed", "contrast", "gap", "grout",
-                                              "edge_threshold", "method_options"]))
+@given(
+    value=anything,
+    which=st.sampled_from(
+        ["n_elements", "iterations", "seed", "contrast", "gap", "grout", "edge_threshold", "method_options"]
+    ),
+)
 def test_mosaic_arguments(reference, value, which):
     picture = np.linspace(0, 1, 12 * 12 * 3).reshape(12, 12, 3)
     if which in ("n_elements", "iterations") and isinstance(value, int) and not isinstance(value, bool):
         value = min(value, 3)
-    _answers(lambda: make_mosaic(picture, reference, **{"n_elements": 4, "iterations": 1, which: value}), which,
-             also=("method",) if which == "method_options" else ())
+    _answers(
+        lambda: make_mosaic(picture, reference, **{"n_elements": 4, "iterations": 1, which: value}),
+        which,
+        also=("method",) if which == "method_options" else (),
+    )
 
 
 @SETTINGS
 @given(width=anything, height=anything, mask=anything)
 def test_grid(width, height, mask):
     for name, args in (("width", (width, 8)), ("height", (8, height)), ("mask", (8, 8, mask))):
-        if name != "mask" and isinstance(args[name == "height"], int) and not isinstance(args[name == "height"], bool):
+        if (
+            name != "mask"
+            and isinstance(args[name == "height"], int)
+            and not isinstance(args[name == "height"], bool)
+        ):
             continue  # a valid side allocates nothing; ranges are checked elsewhere
         _answers(lambda a=args: cd.Grid(*a), name)
 

@@ -27,8 +27,20 @@ def test_a_scheduler_killed_mid_sweep_is_one_line_and_resumable(tmp_path):
     try:
         workers = start_workers(address, tmp_path, 1)
         out = tmp_path / "report"
-        proc = subprocess.Popen([sys.executable, "-m", "compact_distributions.bench.cli", *ARGV, "--out", str(out),
-                                 "--scheduler", address], stdout=subprocess.PIPE, stderr=subprocess.PIPE)
+        proc = subprocess.Popen(
+            [
+                sys.executable,
+                "-m",
+                "compact_distributions.bench.cli",
+                *ARGV,
+                "--out",
+                str(out),
+                "--scheduler",
+                address,
+            ],
+            stdout=subprocess.PIPE,
+            stderr=subprocess.PIPE,
+        )
         raw = out / "raw" / "table2-quick"
         deadline = time.monotonic() + 240
         while len(list(raw.glob("*.json"))) < 2:  # a few runs stored: the sweep is under way
@@ -53,10 +65,17 @@ def test_a_scheduler_killed_mid_sweep_is_one_line_and_resumable(tmp_path):
     assert log.exists() and log.stat().st_size > 0
     # the same command in-process resumes: it reads the stored runs back and runs the rest
     env = {**os.environ}
-    done = subprocess.run([sys.executable, "-m", "compact_distributions.bench.cli", *ARGV, "--out", str(out)],
-                          capture_output=True, text=True, timeout=600, env=env)
+    done = subprocess.run(
+        [sys.executable, "-m", "compact_distributions.bench.cli", *ARGV, "--out", str(out)],
+        capture_output=True,
+        text=True,
+        timeout=600,
+        env=env,
+    )
     assert done.returncode == 0, done.stderr
-    assert f"{stored} of" in (out / "table2.md").read_text().split("runs were read back")[0].rsplit(";", 1)[-1]
+    assert (
+        f"{stored} of" in (out / "table2.md").read_text().split("runs were read back")[0].rsplit(";", 1)[-1]
+    )
 
 
 def test_a_local_cluster_that_cannot_start_is_one_line(tmp_path, monkeypatch, capsys):

@@ -140,14 +140,14 @@ def test_measures_lists_every_measure_once_and_skips_missing_elements():
     els[3] = None
     out = measures(els, problem, "square")
     assert list(out) == list(MEASURES)
-    assert out["coverage"] == pytest.approx(35 * 256 / 120 ** 2)
+    assert out["coverage"] == pytest.approx(35 * 256 / 120**2)
     assert out["overlap"] == 0.0 and out["direction_fidelity"] == pytest.approx(0.0, abs=1e-9)
     assert out["size_fidelity"] == pytest.approx(0.0, abs=1e-12)
     # the elements beside the hole at 3 (40 px apart) are the longest edge of their triangle
     # with the one below: no joint across the hole, every other joint is 4 px
     assert out["grout_mean"] == pytest.approx(4.0) and out["grout_cv"] == pytest.approx(0.0, abs=1e-9)
     # scaled by 1.2 the squares (19.2 px, pitch 20) still do not overlap: the curve's best
-    assert out["coverage_at_1pct_overlap"] == pytest.approx(35 * 19.2 ** 2 / 120 ** 2)
+    assert out["coverage_at_1pct_overlap"] == pytest.approx(35 * 19.2**2 / 120**2)
 
 
 def test_coverage_at_the_overlap_limit_stops_early_with_the_full_curves_answer():

@@ -111,7 +111,9 @@ def test_cone_twenty_iterations_energy_and_coverage(name, cone, reference):
         labels = final_labels(problem, backend, res)
         check_region(labels, problem.grid)
         shape, turn = element_for(problem.metric)
-        elements = place_elements(labels, res.sites, res.angles + turn, shape, problem.metric.aspect, problem.grid)
+        elements = place_elements(
+            labels, res.sites, res.angles + turn, shape, problem.metric.aspect, problem.grid
+        )
         runs[label] = (res.energy[-1], evaluate(elements, problem.grid).coverage)
     (e_gl, c_gl), (e_ref, c_ref) = runs["gl"], runs["ref"]
     assert abs(e_gl - e_ref) <= 0.01 * e_ref, (e_gl, e_ref)
@@ -124,9 +126,16 @@ def test_ties_go_to_the_lower_index(mode, cone, exact):
     # sites 1 and 2 coincide with equal angle and scale: they tie on every pixel
     sites = np.array([[10.0, 12.0], [30.5, 20.25], [30.5, 20.25], [50.0, 40.0]])
     for name in ("l1", "l2", "triangle"):
-        lab = backend.label(sites, angles=np.full(4, 0.3), scales=np.ones(4), metric=make_metric(name), grid=Grid(64, 48))
+        lab = backend.label(
+            sites, angles=np.full(4, 0.3), scales=np.ones(4), metric=make_metric(name), grid=Grid(64, 48)
+        )
         assert (lab == 1).any() and not (lab == 2).any(), name
-        assert backend.moments(sites, angles=np.full(4, 0.3), scales=np.ones(4), metric=make_metric(name), grid=Grid(64, 48)).count[2] == 0
+        assert (
+            backend.moments(
+                sites, angles=np.full(4, 0.3), scales=np.ones(4), metric=make_metric(name), grid=Grid(64, 48)
+            ).count[2]
+            == 0
+        )
 
 
 @pytest.mark.parametrize("mode", ["cone", "exact"])
@@ -145,7 +154,10 @@ def test_every_region_pixel_is_reached_by_clustered_sites(mode, cone, exact, ref
         check_region(got, grid)
         want = reference.label(sites, angles=angles, scales=scales, metric=metric, grid=grid)
         assert (got == want).mean() >= 0.99
-        assert backend.moments(sites, angles=angles, scales=scales, metric=metric, grid=grid).count.sum() == grid.pixel_count
+        assert (
+            backend.moments(sites, angles=angles, scales=scales, metric=metric, grid=grid).count.sum()
+            == grid.pixel_count
+        )
 
 
 def test_cone_heights_bound_every_cell(cone, reference):
@@ -192,7 +204,9 @@ def test_deterministic(mode, cone, exact):
     metric = make_metric("l2", 1.0)
     a = backend.label(sites, angles=angles, scales=scales, metric=metric, grid=grid)
     m1 = backend.moments(sites, angles=angles, scales=scales, metric=metric, grid=grid)
-    backend.label(sites[:50], angles=angles[:50], scales=scales[:50], metric=make_metric("triangle"), grid=Grid(100, 70))
+    backend.label(
+        sites[:50], angles=angles[:50], scales=scales[:50], metric=make_metric("triangle"), grid=Grid(100, 70)
+    )
     b = backend.label(sites, angles=angles, scales=scales, metric=metric, grid=grid)
     m2 = backend.moments(sites, angles=angles, scales=scales, metric=metric, grid=grid)
     np.testing.assert_array_equal(a, b)
@@ -231,7 +245,9 @@ def test_bad_inputs(exact):
     with pytest.raises(InputError, match="sites"):
         exact.label(np.zeros((0, 2)), metric=make_metric("l2"), grid=grid)
     with pytest.raises(InputError, match="scales"):
-        exact.label(np.ones((2, 2)), angles=None, scales=np.array([1.0, -1.0]), metric=make_metric("l2"), grid=grid)
+        exact.label(
+            np.ones((2, 2)), angles=None, scales=np.array([1.0, -1.0]), metric=make_metric("l2"), grid=grid
+        )
 
 
 def test_missing_moderngl_is_one_clear_error(monkeypatch):

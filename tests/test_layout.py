@@ -47,7 +47,11 @@ def imported_layers(source: str, layer: str, module_path: list[str]) -> list[tup
                 names = [node.module or ""]
                 if node.module == PACKAGE:
                     names = [f"{PACKAGE}.{a.name}" for a in node.names]
-        elif isinstance(node, ast.Constant) and isinstance(node.value, str) and node.value.startswith(PACKAGE + "."):
+        elif (
+            isinstance(node, ast.Constant)
+            and isinstance(node.value, str)
+            and node.value.startswith(PACKAGE + ".")
+        ):
             names = [node.value.split(":")[0]]  # "package.module:attr" in a lazy registry
         for name in names:
             target = _layer_of(name)
@@ -72,29 +76,39 @@ def modules():
             yield layer, list(rel), path
 
 
-@pytest.mark.parametrize("layer,module_path,path", list(modules()),
-                         ids=[str(p.relative_to(ROOT)) for _, _, p in modules()])
+@pytest.mark.parametrize(
+    "layer,module_path,path", list(modules()), ids=[str(p.relative_to(ROOT)) for _, _, p in modules()]
+)
 def test_no_upward_import(layer, module_path, path):
     assert upward_imports(path.read_text(), layer, module_path) == []
 
 
-@pytest.mark.parametrize("layer,snippet", [
-    ("cvt", "from compact_distributions.bench.report import provenance\n"),
-    ("cvt", "from ..backends import create_backend\n"),
-    ("backends", "import compact_distributions.baselines.hu2016\n"),
-    ("backends", "from compact_distributions import bench\n"),
-    ("baselines", "REGISTRY = {'x': 'compact_distributions.bench.cli:main'}\n"),
-    ("bench", "from bench import runner\n"),  # the old top-level package
-])
+@pytest.mark.parametrize(
+    "layer,snippet",
+    [
+        ("cvt", "from compact_distributions.bench.report import provenance\n"),
+        ("cvt", "from ..backends import create_backend\n"),
+        ("backends", "import compact_distributions.baselines.hu2016\n"),
+        ("backends", "from compact_distributions import bench\n"),
+        ("baselines", "REGISTRY = {'x': 'compact_distributions.bench.cli:main'}\n"),
+        ("bench", "from bench import runner\n"),  # the old top-level package
+    ],
+)
 def test_the_check_catches_an_upward_import(layer, snippet):
     assert upward_imports(snippet, layer, ["some_module"]), snippet
 
 
-@pytest.mark.parametrize("layer,snippet", [
-    ("bench", "from compact_distributions.cvt.problem import Grid\nfrom ..baselines import REGISTRY\n"),
-    ("baselines", "from .common import tile_shape\nfrom compact_distributions.backends import REFERENCE\n"),
-    ("cvt", "from .metrics import make_metric\nimport numpy\n"),
-])
+@pytest.mark.parametrize(
+    "layer,snippet",
+    [
+        ("bench", "from compact_distributions.cvt.problem import Grid\nfrom ..baselines import REGISTRY\n"),
+        (
+            "baselines",
+            "from .common import tile_shape\nfrom compact_distributions.backends import REFERENCE\n",
+        ),
+        ("cvt", "from .metrics import make_metric\nimport numpy\n"),
+    ],
+)
 def test_the_check_allows_imports_to_the_left(layer, snippet):
     assert upward_imports(snippet, layer, ["some_module"]) == []
 
@@ -185,15 +199,21 @@ def cycles(graph: dict[str, set[str]]) -> list[list[str]]:
 
 
 def test_no_import_cycle():
-    sources = {module_name(layer, rel): (path.read_text(), path.name == "__init__.py")
-               for layer, rel, path in modules()}
+    sources = {
+        module_name(layer, rel): (path.read_text(), path.name == "__init__.py")
+        for layer, rel, path in modules()
+    }
     assert cycles(import_graph(sources)) == []
 
 
 def test_the_check_catches_a_cycle():
     pkg = f"{PACKAGE}.cvt"
-    sources = {f"{pkg}.a": ("from .b import x\n", False), f"{pkg}.b": ("def f():\n    from .c import y\n", False),
-               f"{pkg}.c": (f"import {pkg}.a\n", False), f"{pkg}.d": ("from .a import z\n", False)}
+    sources = {
+        f"{pkg}.a": ("from .b import x\n", False),
+        f"{pkg}.b": ("def f():\n    from .c import y\n", False),
+        f"{pkg}.c": (f"import {pkg}.a\n", False),
+        f"{pkg}.d": ("from .a import z\n", False),
+    }
     assert cycles(import_graph(sources)) == [[f"{pkg}.a", f"{pkg}.b", f"{pkg}.c"]]
     sources[f"{pkg}.c"] = ("import numpy\n", False)
     assert cycles(import_graph(sources)) == []
@@ -212,11 +232,20 @@ def method_name_comparisons(source: str, names: set[str]) -> list[int]:
                     texts.append(side.value)
                 elif isinstance(side, (ast.Tuple, ast.List, ast.Set)):
                     texts += [e.value for e in side.elts if isinstance(e, ast.Constant)]
-        elif isinstance(node, ast.Call) and isinstance(node.func, ast.Attribute) and \
-                node.func.attr in ("startswith", "endswith") and node.args and isinstance(node.args[0], ast.Constant):
+        elif (
+            isinstance(node, ast.Call)
+            and isinstance(node.func, ast.Attribute)
+            and node.func.attr in ("startswith", "endswith")
+            and node.args
+            and isinstance(node.args[0], ast.Constant)
+        ):
             texts.append(node.args[0].value)
             if node.func.attr == "startswith":
-                texts += [n for n in names if isinstance(node.args[0].value, str) and n.startswith(node.args[0].value)]
+                texts += [
+                    n
+                    for n in names
+                    if isinstance(node.args[0].value, str) and n.startswith(node.args[0].value)
+                ]
         if any(isinstance(t, str) and t in names for t in texts):
             found.append(node.lineno)
     return found
@@ -226,8 +255,11 @@ def test_bench_never_compares_a_method_name():
     from compact_distributions.cvt.registry import method_names
 
     names = set(method_names())
-    bad = {str(p.relative_to(ROOT)): lines for p in sorted((ROOT / "bench").rglob("*.py"))
-           if (lines := method_name_comparisons(p.read_text(), names))}
+    bad = {
+        str(p.relative_to(ROOT)): lines
+        for p in sorted((ROOT / "bench").rglob("*.py"))
+        if (lines := method_name_comparisons(p.read_text(), names))
+    }
     assert bad == {}
 
 
@@ -237,3 +269,29 @@ def test_the_name_check_catches_a_comparison():
     assert method_name_comparisons("x = m in ('hu2016', 'a')\n", names) == [1]
     assert method_name_comparisons("y = m.startswith('ours')\n", names) == [1]
     assert method_name_comparisons("z = record.role == 'paper'\nw = m == other\n", names) == []
+
+
+@pytest.mark.parametrize(
+    "layer,module_path,path", list(modules()), ids=[str(p.relative_to(ROOT)) for _, _, p in modules()]
+)
+def test_every_module_declares_its_public_names(layer, module_path, path):
+    """``__all__`` in every module (a package's too, where it defines anything), and each
+    name in it defined there."""
+    import importlib
+
+    tree = ast.parse(path.read_text())
+    declared = [
+        n
+        for n in tree.body
+        if isinstance(n, ast.Assign) and any(isinstance(t, ast.Name) and t.id == "__all__" for t in n.targets)
+    ]
+    defines = any(isinstance(n, (ast.FunctionDef, ast.ClassDef)) for n in tree.body)
+    if module_path[-1] == "__init__" and not defines and not declared:
+        return
+    assert declared, f"{path.relative_to(ROOT)} has no __all__"
+    if layer == "bench" and module_path[0] == "toplevel":
+        return  # the top-level package, whose names load on first use
+    name = ".".join([PACKAGE, layer, *module_path]).removesuffix(".__init__")
+    module = importlib.import_module(name)
+    missing = [n for n in module.__all__ if not hasattr(module, n)]
+    assert missing == []

@@ -40,6 +40,7 @@ def angle_error_deg(angles, truth_deg, period_deg):
 
 # ----------------------------------------------------------------------- fields
 
+
 @pytest.mark.parametrize("deg", [30.0, -20.0])
 def test_field_runs_along_the_edges_in_the_raster_frame(deg):
     f = picture_fields(stripes(deg=deg), spacing=10.0, element="rectangle")
@@ -56,6 +57,7 @@ def test_flat_picture_gives_uniform_density_and_zero_field():
 
 # ----------------------------------------------------------------------- the API
 
+
 @pytest.mark.parametrize("deg,element,period", [(30.0, "square", 90.0), (-20.0, "rectangle", 180.0)])
 def test_elements_follow_the_edges(deg, element, period):
     m = make_mosaic(stripes(deg=deg), NUMPY, n_elements=200, element=element, iterations=6, use_density=False)
@@ -71,7 +73,9 @@ def test_elements_follow_the_edges(deg, element, period):
 
 
 def test_without_field_every_element_is_upright():
-    m = make_mosaic(stripes(deg=30.0), NUMPY, n_elements=120, iterations=2, use_field=False, use_density=False)
+    m = make_mosaic(
+        stripes(deg=30.0), NUMPY, n_elements=120, iterations=2, use_field=False, use_density=False
+    )
     assert np.all(m.angles == 0)
 
 
@@ -107,9 +111,14 @@ def test_colours_match_a_flat_colour_picture():
     assert err.mean() < 0.03, err.mean()
     # an element wholly inside one quadrant has that quadrant's colour, to the 8 bits of
     # the '#rrggbb' fill
-    inner = [k for k, p in enumerate(m.polygons)
-             if p is not None and shapely.box(*(np.array([0, 0, 80, 80]) + 80 * np.array(
-                 [i[k] % 2, i[k] // 2, i[k] % 2, i[k] // 2]))).contains(p)]
+    inner = [
+        k
+        for k, p in enumerate(m.polygons)
+        if p is not None
+        and shapely.box(
+            *(np.array([0, 0, 80, 80]) + 80 * np.array([i[k] % 2, i[k] // 2, i[k] % 2, i[k] // 2]))
+        ).contains(p)
+    ]
     assert len(inner) > 100
     assert np.abs(m.colours[inner] - quads[i[inner]]).max() <= 0.5 / 255 + 1e-12
     # coverage against an independent estimate: the share of a fine point lattice that
@@ -141,32 +150,39 @@ def test_raster_size_and_resampling():
     assert small.shape == (128, 256, 3) and np.allclose(small, 0.25, atol=1e-6)
 
 
-@pytest.mark.parametrize("bad,match", [
-    (np.full((20, 20), 1.5), "0..1"),
-    (np.zeros((20, 20, 2)), "shape"),
-    (np.zeros((0, 5)), "shape|no pixels"),
-    (np.full((20, 20), np.nan), "NaN"),
-])
+@pytest.mark.parametrize(
+    "bad,match",
+    [
+        (np.full((20, 20), 1.5), "0..1"),
+        (np.zeros((20, 20, 2)), "shape"),
+        (np.zeros((0, 5)), "shape|no pixels"),
+        (np.full((20, 20), np.nan), "NaN"),
+    ],
+)
 def test_bad_arrays_raise_input_error(bad, match):
     with pytest.raises(InputError, match=match):
         picture_array(bad)
 
 
-@pytest.mark.parametrize("kwargs,match", [
-    (dict(n_elements=0), "elements"),
-    (dict(n_elements=5000), "do not fit"),
-    (dict(element="heptagon"), "heptagon"),
-    (dict(metric="l3"), "l3"),
-    (dict(gap=-1), "gap"),
-    (dict(grout="not-a-colour"), "colour"),
-    (dict(contrast=0.5), "contrast"),
-])
+@pytest.mark.parametrize(
+    "kwargs,match",
+    [
+        (dict(n_elements=0), "elements"),
+        (dict(n_elements=5000), "do not fit"),
+        (dict(element="heptagon"), "heptagon"),
+        (dict(metric="l3"), "l3"),
+        (dict(gap=-1), "gap"),
+        (dict(grout="not-a-colour"), "colour"),
+        (dict(contrast=0.5), "contrast"),
+    ],
+)
 def test_bad_options_raise_input_error(kwargs, match):
     with pytest.raises(InputError, match=match):
         make_mosaic(np.zeros((40, 40)), NUMPY, **{"n_elements": 20, "iterations": 1, **kwargs})
 
 
 # ----------------------------------------------------------------------- the CLI
+
 
 def _run(argv, capsys):
     code = main(argv)
@@ -188,8 +204,23 @@ def picture_file(tmp_path):
 @pytest.mark.parametrize("element,tag", [("square", "path"), ("ellipse", "ellipse")])
 def test_cli_writes_svg_png_and_result(picture_file, tmp_path, capsys, element, tag):
     out = tmp_path / "out"
-    code, err = _run(["mosaic", str(picture_file), "--out", str(out), "--elements", "150",
-                      "--iterations", "3", "--element", element, "--grout", "#101010"], capsys)
+    code, err = _run(
+        [
+            "mosaic",
+            str(picture_file),
+            "--out",
+            str(out),
+            "--elements",
+            "150",
+            "--iterations",
+            "3",
+            "--element",
+            element,
+            "--grout",
+            "#101010",
+        ],
+        capsys,
+    )
     assert code == 0, err
     assert "iteration 3/3" in err  # progress on stderr
     root = ET.parse(out / "mosaic.svg").getroot()
@@ -197,13 +228,30 @@ def test_cli_writes_svg_png_and_result(picture_file, tmp_path, capsys, element, 
     res = json.loads((out / "result.json").read_text())
     # whole ellipses are <ellipse>s; those cut to fit a wall are paths
     cut = res["extra"].get("cut_tiles", 0)
-    assert len(elements) == res["placed"] - (cut if tag == "ellipse" else 0) == 150 - res["skipped"] - (
-        cut if tag == "ellipse" else 0)
+    assert (
+        len(elements)
+        == res["placed"] - (cut if tag == "ellipse" else 0)
+        == 150 - res["skipped"] - (cut if tag == "ellipse" else 0)
+    )
     assert len(root.findall(f".//{SVG}path")) + len(root.findall(f".//{SVG}ellipse")) == res["placed"]
     assert res["skipped"] <= 3
     assert root.find(f"{SVG}rect").get("fill") == "#101010"
-    for key in ("backend", "device", "metric", "aspect", "size", "sites", "angles", "scales",
-                "iterations", "energy", "seconds", "coverage", "image", "colours"):
+    for key in (
+        "backend",
+        "device",
+        "metric",
+        "aspect",
+        "size",
+        "sites",
+        "angles",
+        "scales",
+        "iterations",
+        "energy",
+        "seconds",
+        "coverage",
+        "image",
+        "colours",
+    ):
         assert key in res, key
     assert res["size"] == [150, 120] and res["iterations"] == 3 and len(res["sites"]) == 150
     assert res["metric"] == ("linf" if element == "square" else "l2-axial")
@@ -217,7 +265,7 @@ def test_cli_writes_svg_png_and_result(picture_file, tmp_path, capsys, element, 
         rgb = np.asarray(png.convert("RGB"), dtype=int)
     sites = np.array(res["sites"])
     centre = rgb[sites[:, 1].astype(int), sites[:, 0].astype(int)]
-    want = np.array([[int(c[k:k + 2], 16) for k in (1, 3, 5)] for c in res["colours"]])
+    want = np.array([[int(c[k : k + 2], 16) for k in (1, 3, 5)] for c in res["colours"]])
     assert np.median(np.abs(centre - want).max(axis=1)) <= 2
 
 
@@ -237,9 +285,15 @@ def bad_pictures(tmp_path):
     return d
 
 
-@pytest.mark.parametrize("name,match", [("truncated", "cannot read image|truncated"),
-                                        ("text", "not an image"), ("missing", "not found"),
-                                        ("one", "1x1")])
+@pytest.mark.parametrize(
+    "name,match",
+    [
+        ("truncated", "cannot read image|truncated"),
+        ("text", "not an image"),
+        ("missing", "not found"),
+        ("one", "1x1"),
+    ],
+)
 def test_cli_bad_pictures_exit_2_with_one_line(bad_pictures, tmp_path, capsys, name, match):
     out = tmp_path / "out"
     code, err = _run(["mosaic", str(bad_pictures[name]), "--out", str(out), "--elements", "50"], capsys)
@@ -254,8 +308,22 @@ def test_cli_bad_pictures_exit_2_with_one_line(bad_pictures, tmp_path, capsys, n
 
 def test_cli_one_pixel_picture_works_when_enlarged(bad_pictures, tmp_path, capsys):
     out = tmp_path / "out"
-    code, err = _run(["mosaic", str(bad_pictures["one"]), "--out", str(out), "--size", "32",
-                      "--elements", "12", "--iterations", "2", "--quiet"], capsys)
+    code, err = _run(
+        [
+            "mosaic",
+            str(bad_pictures["one"]),
+            "--out",
+            str(out),
+            "--size",
+            "32",
+            "--elements",
+            "12",
+            "--iterations",
+            "2",
+            "--quiet",
+        ],
+        capsys,
+    )
     assert code == 0, err
     res = json.loads((out / "result.json").read_text())
     assert res["size"] == [32, 32] and set(res["colours"]) == {"#0ac81e"}
@@ -293,17 +361,20 @@ def _save_grey_jpeg(path):
     return [40 / 255, 220 / 255]
 
 
-@pytest.mark.parametrize("maker,suffix", [(_save_16bit, ".png"), (_save_palette, ".png"),
-                                          (_save_rgba, ".png"), (_save_grey_jpeg, ".jpg")])
+@pytest.mark.parametrize(
+    "maker,suffix",
+    [(_save_16bit, ".png"), (_save_palette, ".png"), (_save_rgba, ".png"), (_save_grey_jpeg, ".jpg")],
+)
 def test_cli_other_formats_give_correct_colours(tmp_path, capsys, maker, suffix):
     path = tmp_path / f"pic{suffix}"
     left, right = (np.broadcast_to(np.asarray(c, float), (3,)) for c in maker(path))
     out = tmp_path / "out"
-    code, err = _run(["mosaic", str(path), "--out", str(out), "--elements", "60", "--iterations", "3",
-                      "--quiet"], capsys)
+    code, err = _run(
+        ["mosaic", str(path), "--out", str(out), "--elements", "60", "--iterations", "3", "--quiet"], capsys
+    )
     assert code == 0, err
     res = json.loads((out / "result.json").read_text())
-    cols = np.array([[int(c[k:k + 2], 16) / 255 for k in (1, 3, 5)] for c in res["colours"]])
+    cols = np.array([[int(c[k : k + 2], 16) / 255 for k in (1, 3, 5)] for c in res["colours"]])
     x = np.array(res["sites"])[:, 0]
     far_left, far_right = x < 30, x > 50
     assert far_left.any() and far_right.any()
@@ -312,14 +383,17 @@ def test_cli_other_formats_give_correct_colours(tmp_path, capsys, maker, suffix)
     assert np.abs(cols[far_right] - right).max() < tol
 
 
-@pytest.mark.parametrize("argv,match", [
-    (["--elements", "many"], "--elements"),
-    (["--gap", "-2"], "--gap"),
-    (["--iterations", "-1"], "--iterations"),
-    (["--metric", "l7"], "l7"),
-    (["--backend", "quantum"], "quantum"),
-    (["--size", "0"], "size"),
-])
+@pytest.mark.parametrize(
+    "argv,match",
+    [
+        (["--elements", "many"], "--elements"),
+        (["--gap", "-2"], "--gap"),
+        (["--iterations", "-1"], "--iterations"),
+        (["--metric", "l7"], "l7"),
+        (["--backend", "quantum"], "quantum"),
+        (["--size", "0"], "size"),
+    ],
+)
 def test_cli_bad_options_exit_2(picture_file, tmp_path, capsys, argv, match):
     out = tmp_path / "out"
     code, err = _run(["mosaic", str(picture_file), "--out", str(out), *argv], capsys)
@@ -329,8 +403,24 @@ def test_cli_bad_options_exit_2(picture_file, tmp_path, capsys, argv, match):
 
 def test_cli_compare_writes_three_panels(picture_file, tmp_path, capsys):
     out = tmp_path / "out"
-    code, err = _run(["mosaic", str(picture_file), "--out", str(out), "--elements", "80",
-                      "--iterations", "2", "--element", "triangle", "--compare", "density", "--quiet"], capsys)
+    code, err = _run(
+        [
+            "mosaic",
+            str(picture_file),
+            "--out",
+            str(out),
+            "--elements",
+            "80",
+            "--iterations",
+            "2",
+            "--element",
+            "triangle",
+            "--compare",
+            "density",
+            "--quiet",
+        ],
+        capsys,
+    )
     assert code == 0, err
     with Image.open(out / "compare_density.png") as img:
         assert img.width > 3 * 150 and img.height > 120

@@ -28,14 +28,18 @@ NUMPY = NumpyBackend()
 
 # ----------------------------------------------------------------------- colour
 
-@pytest.mark.parametrize("rgb,lab", [
-    ((1, 1, 1), (100, 0, 0)),
-    ((0, 0, 0), (0, 0, 0)),
-    ((1, 0, 0), (53.2408, 80.0925, 67.2032)),  # sRGB primaries, D65 (published values)
-    ((0, 1, 0), (87.7347, -86.1827, 83.1793)),
-    ((0, 0, 1), (32.2970, 79.1875, -107.8602)),
-    ((0.5, 0.5, 0.5), (53.3889, 0, 0)),
-])
+
+@pytest.mark.parametrize(
+    "rgb,lab",
+    [
+        ((1, 1, 1), (100, 0, 0)),
+        ((0, 0, 0), (0, 0, 0)),
+        ((1, 0, 0), (53.2408, 80.0925, 67.2032)),  # sRGB primaries, D65 (published values)
+        ((0, 1, 0), (87.7347, -86.1827, 83.1793)),
+        ((0, 0, 1), (32.2970, 79.1875, -107.8602)),
+        ((0.5, 0.5, 0.5), (53.3889, 0, 0)),
+    ],
+)
 def test_lab_matches_published_values(rgb, lab):
     np.testing.assert_allclose(srgb_to_lab(np.array(rgb, float)), lab, atol=2e-3)
 
@@ -46,6 +50,7 @@ def test_lab_round_trip():
 
 
 # ----------------------------------------------------------------------- edges
+
 
 def test_edge_contrast_of_a_step_is_its_colour_difference():
     """A pixel-aligned step between two colours scores their ΔE*ab at the step."""
@@ -71,7 +76,7 @@ def test_edges_of_a_disc_are_a_closed_4_connected_line():
     edges = strong_edges(srgb_to_lab(pic))
     parts, n = ndimage.label(~edges)  # 4-connectivity: the line must separate in and out
     assert n == 2
-    yy, xx = np.mgrid[0:pic.shape[0], 0:pic.shape[1]] + 0.5
+    yy, xx = np.mgrid[0 : pic.shape[0], 0 : pic.shape[1]] + 0.5
     r = np.hypot(xx - DISC[0], yy - DISC[1])
     assert np.abs(r[edges] - DISC[2]).max() < 1.5  # the line follows the circle
 
@@ -134,13 +139,16 @@ def hex_of(rgb):
     return "#" + "".join(f"{round(c * 255):02x}" for c in rgb)
 
 
-@pytest.mark.parametrize("kind,element", [("line", "square"), ("disc", "square"), ("line", "triangle"),
-                                          ("disc", "circle")])
+@pytest.mark.parametrize(
+    "kind,element", [("line", "square"), ("disc", "square"), ("line", "triangle"), ("disc", "circle")]
+)
 def test_no_tile_crosses_a_known_edge_and_fills_match_their_side(kind, element):
     pic = line_picture() if kind == "line" else disc_picture()
     m = make_mosaic(pic, NUMPY, n_elements=160, element=element, iterations=8, seed=2)
     assert m.walls and m.placed >= 150
-    depths = [side_depths_line(p) if kind == "line" else side_depths_disc(p) for p in m.polygons if p is not None]
+    depths = [
+        side_depths_line(p) if kind == "line" else side_depths_disc(p) for p in m.polygons if p is not None
+    ]
     minority = np.array([min(a, b) for a, b in depths])
     # the edge is known only to the pixel: a tile keeps G/2 off the line through the
     # wall pixels' centres (carried on to the picture's border), so it reaches past the
@@ -148,8 +156,12 @@ def test_no_tile_crosses_a_known_edge_and_fills_match_their_side(kind, element):
     i, j = np.nonzero(m.edges)
     x, y = j + 0.5, i + 0.5
     h, w = m.edges.shape
-    x = np.concatenate([x, x[i == 0], x[i == h - 1], np.zeros((j == 0).sum()), np.full((j == w - 1).sum(), w)])
-    y = np.concatenate([y, np.zeros((i == 0).sum()), np.full((i == h - 1).sum(), h), y[j == 0], y[j == w - 1]])
+    x = np.concatenate(
+        [x, x[i == 0], x[i == h - 1], np.zeros((j == 0).sum()), np.full((j == w - 1).sum(), w)]
+    )
+    y = np.concatenate(
+        [y, np.zeros((i == 0).sum()), np.full((i == h - 1).sum(), h), y[j == 0], y[j == w - 1]]
+    )
     if kind == "line":
         off = np.abs((np.stack([x, y], axis=1) - [80, 70]) @ np.array([1.0, -SLOPE]) / math.hypot(1.0, SLOPE))
     else:
@@ -196,8 +208,9 @@ def test_method_is_any_registered_name_a_record_or_a_callable():
     m = make_mosaic(pic, NUMPY, n_elements=100, iterations=3, method=get_method("hausner2001"))
     assert m.method == "hausner2001" and m.placed > 90
     # a baseline by name: the one registry serves the API as it serves the command line
-    by_name = make_mosaic(pic, NUMPY, n_elements=100, iterations=3, method="hausner2001",
-                          method_options={"delta": 0.8})
+    by_name = make_mosaic(
+        pic, NUMPY, n_elements=100, iterations=3, method="hausner2001", method_options={"delta": 0.8}
+    )
     assert by_name.method == "hausner2001" and by_name.method_options == {"delta": 0.8}
     assert by_name.distribution.extra["delta"] == 0.8
     assert make_mosaic(pic, NUMPY, n_elements=100, iterations=3, method="ours-fit").method == "ours-fit"
@@ -205,13 +218,15 @@ def test_method_is_any_registered_name_a_record_or_a_callable():
     with pytest.raises(InputError, match="method"):
         make_mosaic(pic, NUMPY, n_elements=100, iterations=3, method="hausner2002")
     with pytest.raises(InputError, match="has no option 'alternate'"):
-        make_mosaic(pic, NUMPY, n_elements=100, iterations=3, method="hausner2001",
-                    method_options={"alternate": True})
+        make_mosaic(
+            pic, NUMPY, n_elements=100, iterations=3, method="hausner2001", method_options={"alternate": True}
+        )
     with pytest.raises(InputError, match="edge_threshold"):
         make_mosaic(pic, NUMPY, n_elements=100, iterations=3, edge_threshold=0)
 
 
 # ----------------------------------------------------------------------- result.json by hand
+
 
 def test_result_json_measures_match_a_hand_computation(tmp_path, capsys):
     """A 24x16 picture, black left of x = 12 and white right of it, 6 upright squares of
@@ -222,8 +237,26 @@ def test_result_json_measures_match_a_hand_computation(tmp_path, capsys):
     pic[:, 12:] = 255
     Image.fromarray(pic).save(tmp_path / "half.png")
     out = tmp_path / "out"
-    code = main(["mosaic", str(tmp_path / "half.png"), "--out", str(out), "--elements", "6", "--iterations", "3",
-                 "--no-field", "--no-density", "--no-edges", "--method", "ours", "--seed", "3", "--quiet"])
+    code = main(
+        [
+            "mosaic",
+            str(tmp_path / "half.png"),
+            "--out",
+            str(out),
+            "--elements",
+            "6",
+            "--iterations",
+            "3",
+            "--no-field",
+            "--no-density",
+            "--no-edges",
+            "--method",
+            "ours",
+            "--seed",
+            "3",
+            "--quiet",
+        ]
+    )
     assert code == 0, capsys.readouterr().err
     res = json.loads((out / "result.json").read_text())
     assert res["walls"] is False and res["edge_threshold"] == DEFAULT_EDGE_THRESHOLD
@@ -271,6 +304,7 @@ def test_result_json_measures_match_a_hand_computation(tmp_path, capsys):
 
 # ----------------------------------------------------------------------- the CLI
 
+
 @pytest.fixture
 def two_colours(tmp_path):
     path = tmp_path / "two.png"
@@ -278,12 +312,15 @@ def two_colours(tmp_path):
     return path
 
 
-@pytest.mark.parametrize("argv,match", [
-    (["--edge-threshold", "0"], "--edge-threshold"),
-    (["--edge-threshold", "lots"], "--edge-threshold"),
-    (["--edge-threshold", "nan"], "--edge-threshold"),
-    (["--method", "magic"], "magic"),
-])
+@pytest.mark.parametrize(
+    "argv,match",
+    [
+        (["--edge-threshold", "0"], "--edge-threshold"),
+        (["--edge-threshold", "lots"], "--edge-threshold"),
+        (["--edge-threshold", "nan"], "--edge-threshold"),
+        (["--method", "magic"], "magic"),
+    ],
+)
 def test_cli_bad_edge_and_method_options_exit_2(two_colours, tmp_path, capsys, argv, match):
     out = tmp_path / "out"
     assert match in one_error(["mosaic", two_colours, "--out", out, *argv], capsys)
@@ -295,8 +332,21 @@ def test_cli_compare_writes_one_panel_each(two_colours, tmp_path, capsys, what, 
     """method: original, ours, ours-compact (or its stand-in), hausner2001; edges:
     original, without and with walls."""
     out = tmp_path / "out"
-    code = main(["mosaic", str(two_colours), "--out", str(out), "--elements", "60", "--iterations", "2",
-                 "--compare", what, "--quiet"])
+    code = main(
+        [
+            "mosaic",
+            str(two_colours),
+            "--out",
+            str(out),
+            "--elements",
+            "60",
+            "--iterations",
+            "2",
+            "--compare",
+            what,
+            "--quiet",
+        ]
+    )
     assert code == 0, capsys.readouterr().err
     with Image.open(out / f"compare_{what}.png") as img:
         assert panels * 96 < img.width < (panels + 1) * 96 and img.height > 80

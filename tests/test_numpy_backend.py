@@ -14,7 +14,7 @@ from compact_distributions.cvt.problem import Grid, Problem
 
 def brute_force(sites, angles, scales, metric, grid):
     co = compile_sites(metric, sites, angles, scales)
-    ys, xs = np.mgrid[0:grid.height, 0:grid.width] + 0.5
+    ys, xs = np.mgrid[0 : grid.height, 0 : grid.width] + 0.5
     d = co.distance(np.arange(len(sites))[None, None, :], xs[..., None], ys[..., None])
     lab = d.argmin(axis=2).astype(np.int32)  # first minimum: ties to the lower index
     if grid.mask is not None:
@@ -62,8 +62,10 @@ def test_ties_go_to_the_lower_index():
     # but diagonal ties exist; compare to the brute force rule on them
     sites = np.array([[10.0, 20.0], [30.0, 20.0], [20.0, 10.0]])
     g = Grid(41, 41)
-    np.testing.assert_array_equal(NumpyBackend().label(sites, metric=make_metric("linf"), grid=g),
-                                  brute_force(sites, None, None, make_metric("linf"), g))
+    np.testing.assert_array_equal(
+        NumpyBackend().label(sites, metric=make_metric("linf"), grid=g),
+        brute_force(sites, None, None, make_metric("linf"), g),
+    )
 
 
 def exact_voronoi_centroids(sites, w, h):

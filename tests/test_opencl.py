@@ -179,7 +179,11 @@ def test_moment_sums_past_32_bits(split):
 @pytest.mark.parametrize("name", METRIC_NAMES)
 def test_one_lloyd_step_lands_where_the_reference_does(backends, reference, name, varied):
     sites, angles, scales, metric, grid = random_case(name, varied, seed=20 + METRIC_NAMES.index(name))
-    got = backends["blocks"].moments(sites, angles=angles, scales=scales, metric=metric, grid=grid).centroids(sites)
+    got = (
+        backends["blocks"]
+        .moments(sites, angles=angles, scales=scales, metric=metric, grid=grid)
+        .centroids(sites)
+    )
     ref_labels = reference.label(sites, angles=angles, scales=scales, metric=metric, grid=grid)
     want = moments_from_labels(ref_labels, len(sites)).centroids(sites)
     moved = np.hypot(*(got - want).T)
@@ -241,13 +245,25 @@ def test_device_option_and_pyopencl_ctx_pick_the_same_device(monkeypatch):
         ocl.close()
 
 
-@pytest.mark.parametrize("bad", [dict(scales=np.zeros(3)), dict(angles=np.array([0.0, np.nan, 0.0])),
-                                 dict(sites=np.array([[1.0, np.inf], [2, 2], [3, 3]]))])
+@pytest.mark.parametrize(
+    "bad",
+    [
+        dict(scales=np.zeros(3)),
+        dict(angles=np.array([0.0, np.nan, 0.0])),
+        dict(sites=np.array([[1.0, np.inf], [2, 2], [3, 3]])),
+    ],
+)
 def test_bad_site_data_is_an_input_error(backends, bad):
     args = dict(sites=np.array([[1.0, 1.0], [2, 2], [3, 3]]), scales=None, angles=None)
     args.update(bad)
     with pytest.raises(InputError):
-        backends["blocks"].label(args["sites"], angles=args["angles"], scales=args["scales"], metric=make_metric("l2"), grid=Grid(8, 8))
+        backends["blocks"].label(
+            args["sites"],
+            angles=args["angles"],
+            scales=args["scales"],
+            metric=make_metric("l2"),
+            grid=Grid(8, 8),
+        )
 
 
 @pytest.mark.parametrize("spec", ["99", "0:99", "no-such-platform", "0:0:0"])
@@ -296,8 +312,24 @@ def test_cli_run_and_info(tmp_path, capsys):
     from compact_distributions.bench.cli import main
 
     out = tmp_path / "run"
-    code = main(["run", "--backend", "opencl", "--device", "0:0", "--elements", "150", "--size", "96",
-                 "--iterations", "3", "--out", str(out), "--quiet"])
+    code = main(
+        [
+            "run",
+            "--backend",
+            "opencl",
+            "--device",
+            "0:0",
+            "--elements",
+            "150",
+            "--size",
+            "96",
+            "--iterations",
+            "3",
+            "--out",
+            str(out),
+            "--quiet",
+        ]
+    )
     assert code == 0
     result = json.loads((out / "result.json").read_text())
     assert result["backend"] == "opencl" and " / " in result["device"]

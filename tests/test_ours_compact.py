@@ -24,8 +24,14 @@ def annulus_problem(element: str, seed: int = 2, n: int = 70) -> Problem:
     r = np.hypot(xx - SIZE / 2, yy - SIZE / 2)
     mask = (r < 0.47 * SIZE) & (r > 0.15 * SIZE)
     density = DensityMap(1.0 + (xx / SIZE) ** 2)
-    return Problem(Grid(SIZE, SIZE, mask), n, make_metric(ELEMENT_METRIC[element]), density,
-                   DirectionField.named("radial", SIZE, SIZE), seed)
+    return Problem(
+        Grid(SIZE, SIZE, mask),
+        n,
+        make_metric(ELEMENT_METRIC[element]),
+        density,
+        DirectionField.named("radial", SIZE, SIZE),
+        seed,
+    )
 
 
 @pytest.mark.parametrize("element", ["square", "rectangle", "ellipse", "circle", "triangle"])
@@ -65,12 +71,15 @@ def test_alternating_triangles_point_both_ways_and_fill_more():
         run_ours_compact(Problem(Grid(32, 32), 4, make_metric("linf")), backend, iterations=1, alternate=True)
 
 
-@pytest.mark.parametrize("argv,needle", [
-    (["--method", "ours-compacted"], "unknown method"),
-    (["--method", "ours-compact", "--metric", "linf", "--alternate"], "triangles only"),
-    (["--method", "ours", "--metric", "triangle", "--alternate"], "--alternate"),
-    (["--method", "ours-compact", "--gap", "30"], "not smaller than the elements"),
-])
+@pytest.mark.parametrize(
+    "argv,needle",
+    [
+        (["--method", "ours-compacted"], "unknown method"),
+        (["--method", "ours-compact", "--metric", "linf", "--alternate"], "triangles only"),
+        (["--method", "ours", "--metric", "triangle", "--alternate"], "--alternate"),
+        (["--method", "ours-compact", "--gap", "30"], "not smaller than the elements"),
+    ],
+)
 def test_bad_input_is_one_line_and_writes_nothing(tmp_path, capsys, argv, needle):
     out = tmp_path / "out"
     code = main(["run", "--elements", "20", "--size", "64", "--iterations", "1", "--out", str(out), *argv])
@@ -90,8 +99,9 @@ def staircase_walls(size: int) -> np.ndarray:
 
 def test_thin_walls_keep_elements_off_their_centre_line_and_cover_more():
     walls = staircase_walls(SIZE)
-    centre_line = shapely.LineString(np.stack([np.repeat(np.arange(SIZE), 2)[1:] + 0.5,
-                                               np.repeat(np.arange(SIZE), 2)[:-1] + 0.5], axis=1))
+    centre_line = shapely.LineString(
+        np.stack([np.repeat(np.arange(SIZE), 2)[1:] + 0.5, np.repeat(np.arange(SIZE), 2)[:-1] + 0.5], axis=1)
+    )
     backend, gap = NumpyBackend(), 0.6
     thin = Problem(Grid(SIZE, SIZE, ~walls), 60, make_metric("linf"), seed=3, walls=walls)
     thick = Problem(Grid(SIZE, SIZE, ~walls), 60, make_metric("linf"), seed=3)
@@ -134,8 +144,10 @@ def test_density_caps_keep_the_sizes_the_density_asks_for():
 
     assert size_error(free) > 1.1 * size_error(ours)
     assert size_error(capped) <= 1.1 * size_error(ours)
-    cov = {name: evaluate(d.elements, problem.grid).coverage for name, d in
-           (("ours", ours), ("capped", capped), ("free", free))}
+    cov = {
+        name: evaluate(d.elements, problem.grid).coverage
+        for name, d in (("ours", ours), ("capped", capped), ("free", free))
+    }
     assert cov["capped"] > cov["ours"] + 0.15 and cov["capped"] > cov["free"] - 0.06
     # caps: 2 % above the sizes that would cover the region exactly at the density's sizes
     polys = [p for p in capped.elements if p is not None]

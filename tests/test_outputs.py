@@ -40,8 +40,10 @@ def names(folder: Path) -> list[str]:
 
 def hold_lock(path: Path):
     """A child process that holds an flock on ``path`` until killed: a live writer."""
-    code = ("import fcntl, os, sys, time; fd = os.open(sys.argv[1], os.O_RDONLY); "
-            "fcntl.flock(fd, fcntl.LOCK_EX); print('locked', flush=True); time.sleep(60)")
+    code = (
+        "import fcntl, os, sys, time; fd = os.open(sys.argv[1], os.O_RDONLY); "
+        "fcntl.flock(fd, fcntl.LOCK_EX); print('locked', flush=True); time.sleep(60)"
+    )
     proc = subprocess.Popen([sys.executable, "-c", code, str(path)], stdout=subprocess.PIPE)
     assert proc.stdout.readline().strip() == b"locked"
     return proc
@@ -73,13 +75,16 @@ def test_a_failing_command_leaves_the_previous_output(tmp_path, capsys, monkeypa
     assert names(tmp_path) == ["out"]
 
 
-@pytest.mark.parametrize("where,message", [
-    ("file", "is a file, not a folder"),
-    ("/dev/null", "is a character device, not a folder"),
-    ("under-file", "is a file, so no folder can be made in it"),
-    ("/proc/cvtbench-test-out", "cannot write in /proc"),
-    ("foreign", "holds files that are not the output of a cvtbench command (notes.txt)"),
-])
+@pytest.mark.parametrize(
+    "where,message",
+    [
+        ("file", "is a file, not a folder"),
+        ("/dev/null", "is a character device, not a folder"),
+        ("under-file", "is a file, so no folder can be made in it"),
+        ("/proc/cvtbench-test-out", "cannot write in /proc"),
+        ("foreign", "holds files that are not the output of a cvtbench command (notes.txt)"),
+    ],
+)
 def test_bad_destinations_are_refused_before_any_work(where, message, tmp_path, capsys, monkeypatch):
     afile = tmp_path / "afile"
     afile.write_text("keep me")
@@ -97,7 +102,9 @@ def test_bad_destinations_are_refused_before_any_work(where, message, tmp_path, 
     assert afile.read_text() == "keep me"
     if where == "foreign":
         assert names(out) == ["notes.txt", "result.json"]
-    assert sorted(p.name for p in tmp_path.iterdir()) == sorted(["afile"] + (["mine"] if where == "foreign" else []))
+    assert sorted(p.name for p in tmp_path.iterdir()) == sorted(
+        ["afile"] + (["mine"] if where == "foreign" else [])
+    )
 
 
 def test_parents_made_for_a_failed_command_are_removed(tmp_path, capsys):
@@ -184,7 +191,19 @@ def test_a_swap_cut_between_its_renames_is_undone(tmp_path):
 @pytest.mark.slow
 def test_killed_runs_leave_the_previous_or_the_new_output_and_no_temporaries(tmp_path):
     out = tmp_path / "out"
-    base = [*CLI, "run", "--size", "200", "--elements", "1500", "--iterations", "3", "--quiet", "--out", str(out)]
+    base = [
+        *CLI,
+        "run",
+        "--size",
+        "200",
+        "--elements",
+        "1500",
+        "--iterations",
+        "3",
+        "--quiet",
+        "--out",
+        str(out),
+    ]
     assert subprocess.run(base, capture_output=True).returncode == 0
     for seed, delay in enumerate((0.8, 1.3, 1.8, 2.3, 2.8), start=1):
         proc = subprocess.Popen(base + ["--seed", str(seed)], stderr=subprocess.DEVNULL)
@@ -234,14 +253,34 @@ def test_a_file_writer_removes_what_a_killed_writer_of_that_file_left(tmp_path):
 
 # ---------------------------------------------------------------- sweeps
 def test_a_second_command_into_a_locked_folder_exits_2_naming_the_holder(tmp_path, capsys):
-    code = ("import sys, time; from compact_distributions.bench.outputs import report_folder\n"
-            "with report_folder(sys.argv[1], command='cvtbench table2 --quick'):\n"
-            "    print('locked', flush=True); time.sleep(60)\n")
+    code = (
+        "import sys, time; from compact_distributions.bench.outputs import report_folder\n"
+        "with report_folder(sys.argv[1], command='cvtbench table2 --quick'):\n"
+        "    print('locked', flush=True); time.sleep(60)\n"
+    )
     holder = subprocess.Popen([sys.executable, "-c", code, str(tmp_path)], stdout=subprocess.PIPE)
     try:
         assert holder.stdout.readline().strip() == b"locked"
-        assert main(["table2", "--quick", "--methods", "ours", "--backends", "numpy", "--shapes", "square",
-                     "--seeds", "1", "--quiet", "--out", str(tmp_path)]) == 2
+        assert (
+            main(
+                [
+                    "table2",
+                    "--quick",
+                    "--methods",
+                    "ours",
+                    "--backends",
+                    "numpy",
+                    "--shapes",
+                    "square",
+                    "--seeds",
+                    "1",
+                    "--quiet",
+                    "--out",
+                    str(tmp_path),
+                ]
+            )
+            == 2
+        )
         err = capsys.readouterr().err.strip().splitlines()
         assert len(err) == 1 and f"pid {holder.pid}" in err[0] and "cvtbench table2 --quick" in err[0], err
         assert not (tmp_path / "raw").exists() and not (tmp_path / "table2.md").exists()
@@ -256,8 +295,15 @@ def test_the_lock_is_reentrant_in_one_process_and_released(tmp_path):
             pass
         assert "outer" in (tmp_path / outputs.LOCK_NAME).read_text()
     assert not (tmp_path / outputs.LOCK_NAME).exists()  # given up, and gone
-    probe = subprocess.run([sys.executable, "-c", "import sys; from compact_distributions.bench.outputs import "
-                            "report_folder\nwith report_folder(sys.argv[1]): pass", str(tmp_path)])
+    probe = subprocess.run(
+        [
+            sys.executable,
+            "-c",
+            "import sys; from compact_distributions.bench.outputs import "
+            "report_folder\nwith report_folder(sys.argv[1]): pass",
+            str(tmp_path),
+        ]
+    )
     assert probe.returncode == 0
 
 
@@ -267,10 +313,46 @@ def test_reports_name_only_the_files_that_exist(tmp_path, capsys, monkeypatch):
     monkeypatch.setenv("PYOPENCL_CTX", "99")  # no such platform: every opencl run is skipped
     (tmp_path / "table2.png").write_bytes(b"an older sweep's picture")
     (tmp_path / "backends.png").write_bytes(b"an older sweep's plot")
-    assert main(["table2", "--quick", "--methods", "ours", "--backends", "opencl", "--shapes", "square",
-                 "--seeds", "1", "--quiet", "--out", str(tmp_path)]) == 0
-    assert main(["backends", "--quick", "--backends", "opencl", "--metrics", "l2", "--elements", "100",
-                 "--sizes", "64", "--quiet", "--out", str(tmp_path)]) == 0
+    assert (
+        main(
+            [
+                "table2",
+                "--quick",
+                "--methods",
+                "ours",
+                "--backends",
+                "opencl",
+                "--shapes",
+                "square",
+                "--seeds",
+                "1",
+                "--quiet",
+                "--out",
+                str(tmp_path),
+            ]
+        )
+        == 0
+    )
+    assert (
+        main(
+            [
+                "backends",
+                "--quick",
+                "--backends",
+                "opencl",
+                "--metrics",
+                "l2",
+                "--elements",
+                "100",
+                "--sizes",
+                "64",
+                "--quiet",
+                "--out",
+                str(tmp_path),
+            ]
+        )
+        == 0
+    )
     err = capsys.readouterr().err
     assert "table2.png" not in err and "backends.png" not in err
     assert not (tmp_path / "table2.png").exists() and not (tmp_path / "backends.png").exists()

@@ -45,8 +45,10 @@ def test_exif_orientation_is_applied(sideways):
 
 
 def test_a_mosaic_of_a_phone_photo_is_upright(sideways, tmp_path, capsys):
-    code, err = run_cli(["mosaic", sideways, "--elements", "30", "--iterations", "1", "--quiet",
-                         "--out", tmp_path / "o"], capsys)
+    code, err = run_cli(
+        ["mosaic", sideways, "--elements", "30", "--iterations", "1", "--quiet", "--out", tmp_path / "o"],
+        capsys,
+    )
     assert code == 0, err
     result = json.loads((tmp_path / "o" / "result.json").read_text())
     assert result["size"] == [32, 64]
@@ -77,7 +79,9 @@ def test_sixteen_bit_pictures_keep_their_full_scale_when_reduced(tmp_path):
 @pytest.mark.parametrize("option", ["--density", "--region", "--field", "mosaic"])
 def test_decompression_bombs_are_refused_with_one_line(option, tmp_path, capsys):
     bomb = blank_png(tmp_path / "bomb.png", 20000, 20000)  # 400 Mpx in a few hundred kB
-    argv = (["mosaic", bomb] if option == "mosaic" else ["run", "--size", "64", "--elements", "10", option, bomb])
+    argv = (
+        ["mosaic", bomb] if option == "mosaic" else ["run", "--size", "64", "--elements", "10", option, bomb]
+    )
     line = one_error(argv + ["--out", tmp_path / "o"], capsys)
     assert "declares 400 Mpx, more than the 179 Mpx Pillow decodes" in line
     assert not (tmp_path / "o").exists()
@@ -86,8 +90,9 @@ def test_decompression_bombs_are_refused_with_one_line(option, tmp_path, capsys)
 @pytest.mark.slow
 def test_a_picture_declaring_144_mpx_makes_a_mosaic_in_bounded_memory(tmp_path):
     big = blank_png(tmp_path / "big.png", 12000, 12000, rgb=True)  # 170 kB on disk
-    code, err, peak, _ = run_measured(["mosaic", big, "--elements", "100", "--iterations", "1", "--quiet",
-                                       "--out", tmp_path / "o"])
+    code, err, peak, _ = run_measured(
+        ["mosaic", big, "--elements", "100", "--iterations", "1", "--quiet", "--out", tmp_path / "o"]
+    )
     assert code == 0, err
     assert peak < 1000, peak  # the pixels once at 4 bytes, never as float64 at full size
     assert json.loads((tmp_path / "o" / "result.json").read_text())["size"] == [1024, 1024]
@@ -95,13 +100,21 @@ def test_a_picture_declaring_144_mpx_makes_a_mosaic_in_bounded_memory(tmp_path):
 
 def test_a_picture_larger_than_the_memory_limit_is_refused(tmp_path, capsys):
     big = blank_png(tmp_path / "big.png", 6000, 6000, rgb=True)
-    assert "--memory-limit" in one_error(["mosaic", big, "--memory-limit", "150M", "--out", tmp_path / "o"], capsys)
+    assert "--memory-limit" in one_error(
+        ["mosaic", big, "--memory-limit", "150M", "--out", tmp_path / "o"], capsys
+    )
     with pytest.raises(InputError, match="reading image .* needs about"):
         read_picture(big, memory_limit="150M")
 
 
-@pytest.mark.parametrize("content,name", [
-    (b"GIF89a", "truncated.gif"), (b"\x89PNG\r\n\x1a\n" + b"\0" * 40, "broken.png"), (b"hello\n", "text.png")])
+@pytest.mark.parametrize(
+    "content,name",
+    [
+        (b"GIF89a", "truncated.gif"),
+        (b"\x89PNG\r\n\x1a\n" + b"\0" * 40, "broken.png"),
+        (b"hello\n", "text.png"),
+    ],
+)
 def test_unreadable_pictures_are_one_line(content, name, tmp_path, capsys):
     path = tmp_path / name
     path.write_bytes(content)
@@ -113,8 +126,10 @@ def test_unreadable_pictures_are_one_line(content, name, tmp_path, capsys):
 def test_site_csvs_with_a_byte_order_mark_are_read(tmp_path, capsys):
     init = tmp_path / "sites.csv"
     init.write_bytes("\ufeffx,y\r\n10,10\r\n20,30\r\n40,5\r\n".encode())  # as a spreadsheet saves it
-    code, err = run_cli(["run", "--init", init, "--size", "64", "--iterations", "0", "--quiet",
-                         "--out", tmp_path / "o"], capsys)
+    code, err = run_cli(
+        ["run", "--init", init, "--size", "64", "--iterations", "0", "--quiet", "--out", tmp_path / "o"],
+        capsys,
+    )
     assert code == 0, err
     assert json.loads((tmp_path / "o" / "result.json").read_text())["sites"] == [[10, 10], [20, 30], [40, 5]]
 
@@ -138,19 +153,24 @@ def test_named_fields_win_over_files_and_a_path_reads_the_file(tmp_path, capsys,
     assert np.allclose(image["angles"], 64 / 255 * np.pi)  # the grey image: 64 -> 45.2°
 
 
-@pytest.mark.parametrize("spec,message", [
-    ("radial:5", "radial takes no argument"),
-    ("circular:", "circular takes no argument"),
-    ("constant:nan", "constant needs an angle in degrees between -360 and 360"),
-    ("constant:inf", "constant needs an angle"),
-    ("constant:1e308", "constant needs an angle"),
-    ("constant:", "constant needs an angle"),
-    ("wave:0", "wave needs a period in pixels between 1 and 1e+06"),
-    ("wave:inf", "wave needs a period"),
-    ("spiral", "neither a field nor an image file"),
-])
+@pytest.mark.parametrize(
+    "spec,message",
+    [
+        ("radial:5", "radial takes no argument"),
+        ("circular:", "circular takes no argument"),
+        ("constant:nan", "constant needs an angle in degrees between -360 and 360"),
+        ("constant:inf", "constant needs an angle"),
+        ("constant:1e308", "constant needs an angle"),
+        ("constant:", "constant needs an angle"),
+        ("wave:0", "wave needs a period in pixels between 1 and 1e+06"),
+        ("wave:inf", "wave needs a period"),
+        ("spiral", "neither a field nor an image file"),
+    ],
+)
 def test_bad_field_specs(spec, message, tmp_path, capsys):
-    line = one_error(["run", "--size", "32", "--elements", "4", "--field", spec, "--out", tmp_path / "o"], capsys)
+    line = one_error(
+        ["run", "--size", "32", "--elements", "4", "--field", spec, "--out", tmp_path / "o"], capsys
+    )
     assert message in line and "--field" in line
 
 
@@ -162,22 +182,42 @@ def test_field_specs_in_python():
         DirectionField.named("radial:1", 10, 10)
 
 
-@pytest.mark.parametrize("values,message", [
-    (np.full((16, 16), 1e38, np.float32), "values must lie in 0..1"),
-    (np.where(np.eye(16) > 0, np.inf, 0.5).astype(np.float32), "NaN or infinite"),
-])
+@pytest.mark.parametrize(
+    "values,message",
+    [
+        (np.full((16, 16), 1e38, np.float32), "values must lie in 0..1"),
+        (np.where(np.eye(16) > 0, np.inf, 0.5).astype(np.float32), "NaN or infinite"),
+    ],
+)
 def test_float_field_images_out_of_range(values, message, tmp_path, capsys):
     Image.fromarray(values, mode="F").save(tmp_path / "f.tif")
-    assert message in one_error(["run", "--size", "32", "--elements", "4", "--field", tmp_path / "f.tif",
-                                 "--out", tmp_path / "o"], capsys)
+    assert message in one_error(
+        ["run", "--size", "32", "--elements", "4", "--field", tmp_path / "f.tif", "--out", tmp_path / "o"],
+        capsys,
+    )
 
 
 def test_a_density_of_huge_values_is_used_by_its_ratios(tmp_path, capsys):
     values = np.full((32, 32), 1e38, np.float32)
     values[:, 16:] = 3e38
     Image.fromarray(values, mode="F").save(tmp_path / "d.tif")
-    code, err = run_cli(["run", "--size", "32", "--elements", "40", "--iterations", "2", "--quiet",
-                         "--density", tmp_path / "d.tif", "--out", tmp_path / "o"], capsys)
+    code, err = run_cli(
+        [
+            "run",
+            "--size",
+            "32",
+            "--elements",
+            "40",
+            "--iterations",
+            "2",
+            "--quiet",
+            "--density",
+            tmp_path / "d.tif",
+            "--out",
+            tmp_path / "o",
+        ],
+        capsys,
+    )
     assert code == 0, err
     scales = np.array(json.loads((tmp_path / "o" / "result.json").read_text())["scales"])
     assert np.isfinite(scales).all() and scales.max() / scales.min() == pytest.approx(np.sqrt(3), rel=1e-6)

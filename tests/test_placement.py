@@ -33,8 +33,9 @@ def hex_sites(width, height, d):
     """Sites of a hexagonal lattice with spacing d (rows d·√3/2 apart, odd rows shifted)."""
     dy = d * math.sqrt(3) / 2
     rows = int(height / dy)
-    pts = [((c + 0.25 + 0.5 * (r % 2)) * d, (r + 0.5) * dy)
-           for r in range(rows) for c in range(int(width / d))]
+    pts = [
+        ((c + 0.25 + 0.5 * (r % 2)) * d, (r + 0.5) * dy) for r in range(rows) for c in range(int(width / d))
+    ]
     return np.array(pts)
 
 
@@ -162,7 +163,13 @@ def test_gap_shrinks_elements(backend):
         assert ev.coverage == pytest.approx(((24 - g) / 24) ** 2, abs=1e-9)  # joint of g px
     problem = random_problem("l2-axial", 5)
     dist = run_ours(problem, backend, iterations=6)
-    covs = [evaluate(place_elements(dist.labels, dist.sites, dist.angles, "ellipse", 0.5, problem.grid, gap=g), problem.grid).coverage for g in (0, 1, 2)]
+    covs = [
+        evaluate(
+            place_elements(dist.labels, dist.sites, dist.angles, "ellipse", 0.5, problem.grid, gap=g),
+            problem.grid,
+        ).coverage
+        for g in (0, 1, 2)
+    ]
     assert covs[0] > covs[1] > covs[2] > 0
 
 
@@ -260,8 +267,26 @@ def test_run_ours_returns_elements_and_labels(backend):
 # ------------------------------------------------------------------ CLI
 def test_cli_run_with_element_writes_svg_png_and_coverage(tmp_path, capsys):
     out = tmp_path / "run"
-    code = main(["run", "--elements", "40", "--size", "80x64", "--iterations", "3", "--metric", "linf",
-                 "--element", "circle", "--gap", "1", "--quiet", "--out", str(out)])
+    code = main(
+        [
+            "run",
+            "--elements",
+            "40",
+            "--size",
+            "80x64",
+            "--iterations",
+            "3",
+            "--metric",
+            "linf",
+            "--element",
+            "circle",
+            "--gap",
+            "1",
+            "--quiet",
+            "--out",
+            str(out),
+        ]
+    )
     err = capsys.readouterr().err
     assert code == 0, err
     r = json.loads((out / "result.json").read_text())
@@ -281,15 +306,19 @@ def test_cli_run_with_element_writes_svg_png_and_coverage(tmp_path, capsys):
         assert im.size == (80, 64)
 
 
-@pytest.mark.parametrize("argv,needle", [
-    (["--element", "heptagon"], "heptagon"),
-    (["--gap", "-1"], "-1"),
-    (["--gap", "nan"], "nan"),
-])
+@pytest.mark.parametrize(
+    "argv,needle",
+    [
+        (["--element", "heptagon"], "heptagon"),
+        (["--gap", "-1"], "-1"),
+        (["--gap", "nan"], "nan"),
+    ],
+)
 def test_cli_bad_element_or_gap_exits_2(tmp_path, capsys, argv, needle):
     out = tmp_path / "bad"
-    assert needle in one_error(["run", "--elements", "10", "--size", "32", "--iterations", "1", "--out", out, *argv],
-                               capsys)
+    assert needle in one_error(
+        ["run", "--elements", "10", "--size", "32", "--iterations", "1", "--out", out, *argv], capsys
+    )
     assert not out.exists()
 
 
@@ -297,19 +326,31 @@ def test_figures_quick(tmp_path, capsys):
     code = main(["figures", "--quick", "--quiet", "--out", str(tmp_path)])
     assert code == 0, capsys.readouterr().err
     names = sorted(p.name for p in tmp_path.iterdir())
-    assert names == ["fig03_metrics.png", "fig14_elements.png", "fig15_regions.png", "fig18_field_leaf.png",
-                     "fig18_field_shapes.png", "fig19_density_rings.png", "fig19_density_shapes.png",
-                     "mosaic_scene.png", "mosaic_scene_edges.png", "mosaic_scene_methods.png"]
+    assert names == [
+        "fig03_metrics.png",
+        "fig14_elements.png",
+        "fig15_regions.png",
+        "fig18_field_leaf.png",
+        "fig18_field_shapes.png",
+        "fig19_density_rings.png",
+        "fig19_density_shapes.png",
+        "mosaic_scene.png",
+        "mosaic_scene_edges.png",
+        "mosaic_scene_methods.png",
+    ]
     for name in names:
         assert (tmp_path / name).stat().st_size < 300_000
         with Image.open(tmp_path / name) as im:
             im.load()
-            assert im.size[0] > 200 and len(np.unique(np.asarray(im.convert("RGB")).reshape(-1, 3), axis=0)) > 20
+            assert (
+                im.size[0] > 200 and len(np.unique(np.asarray(im.convert("RGB")).reshape(-1, 3), axis=0)) > 20
+            )
 
 
 # --- fit="centre": the element's centre moves inside its cell ------------------------------
-@pytest.mark.parametrize("metric,shape", [("linf", "square"), ("l2", "circle"),
-                                          ("l2-axial", "ellipse"), ("triangle", "triangle")])
+@pytest.mark.parametrize(
+    "metric,shape", [("linf", "square"), ("l2", "circle"), ("l2-axial", "ellipse"), ("triangle", "triangle")]
+)
 def test_centre_fit_grows_elements_and_stays_in_cell(metric, shape):
     from compact_distributions.cvt.lloyd import final_labels, lloyd
     from compact_distributions.cvt.placement import fit_centres
@@ -324,7 +365,9 @@ def test_centre_fit_grows_elements_and_stays_in_cell(metric, shape):
     j, i = np.floor(centres[sizes > 0]).astype(int).T
     assert (lab[i, j] == np.flatnonzero(sizes > 0)).all()  # centre in a pixel of its own cell
     site = evaluate(place_elements(lab, r.sites, r.angles, shape, p.metric.aspect, p.grid), p.grid)
-    fit = evaluate(place_elements(lab, r.sites, r.angles, shape, p.metric.aspect, p.grid, fit="centre"), p.grid)
+    fit = evaluate(
+        place_elements(lab, r.sites, r.angles, shape, p.metric.aspect, p.grid, fit="centre"), p.grid
+    )
     assert fit.coverage > site.coverage and fit.overlap < 0.005
 
 

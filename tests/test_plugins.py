@@ -100,8 +100,12 @@ def plugin_env(tmp_path_factory):
     (src / "pyproject.toml").write_text(textwrap.dedent(PYPROJECT))
     (src / "cvt_plugin_example.py").write_text(textwrap.dedent(MODULE))
     target = tmp_path_factory.mktemp("plugin-site")
-    done = subprocess.run([sys.executable, "-m", "pip", "install", "-q", "--no-deps", "--target", str(target),
-                           str(src)], capture_output=True, text=True, timeout=600)
+    done = subprocess.run(
+        [sys.executable, "-m", "pip", "install", "-q", "--no-deps", "--target", str(target), str(src)],
+        capture_output=True,
+        text=True,
+        timeout=600,
+    )
     if done.returncode != 0:
         pytest.fail(f"pip could not install the example plug-in: {done.stderr[-2000:]}")
     env = dict(os.environ)
@@ -110,8 +114,14 @@ def plugin_env(tmp_path_factory):
 
 
 def cvtbench(env, *args, timeout=600):
-    return subprocess.run([sys.executable, "-m", "compact_distributions.bench.cli", *args], env=env,
-                          capture_output=True, text=True, timeout=timeout, cwd=ROOT)
+    return subprocess.run(
+        [sys.executable, "-m", "compact_distributions.bench.cli", *args],
+        env=env,
+        capture_output=True,
+        text=True,
+        timeout=timeout,
+        cwd=ROOT,
+    )
 
 
 def test_info_lists_the_plugins_and_the_broken_one(plugin_env):
@@ -127,8 +137,22 @@ def test_info_lists_the_plugins_and_the_broken_one(plugin_env):
 
 
 def test_run_records_the_option_and_the_option_acts(plugin_env, tmp_path):
-    common = ["run", "--method", "shrunk", "--element", "square", "--elements", "64", "--size", "96",
-              "--iterations", "5", "--backend", "brute", "--quiet"]
+    common = [
+        "run",
+        "--method",
+        "shrunk",
+        "--element",
+        "square",
+        "--elements",
+        "64",
+        "--size",
+        "96",
+        "--iterations",
+        "5",
+        "--backend",
+        "brute",
+        "--quiet",
+    ]
     whole = cvtbench(plugin_env, *common, "--out", str(tmp_path / "a"))
     half = cvtbench(plugin_env, *common, "--shrink", "0.5", "--out", str(tmp_path / "b"))
     assert whole.returncode == 0 and half.returncode == 0, whole.stderr + half.stderr
@@ -160,8 +184,24 @@ def test_bad_option_value_and_option_of_another_method(plugin_env, tmp_path):
 
 
 def test_table2_runs_the_plugin_with_its_option(plugin_env, tmp_path):
-    done = cvtbench(plugin_env, "table2", "--quick", "--methods", "shrunk,plain-ours", "--shapes", "square",
-                    "--backends", "numpy", "--seeds", "1", "--shrink", "0.5", "--quiet", "--out", str(tmp_path))
+    done = cvtbench(
+        plugin_env,
+        "table2",
+        "--quick",
+        "--methods",
+        "shrunk,plain-ours",
+        "--shapes",
+        "square",
+        "--backends",
+        "numpy",
+        "--seeds",
+        "1",
+        "--shrink",
+        "0.5",
+        "--quiet",
+        "--out",
+        str(tmp_path),
+    )
     assert done.returncode == 0, done.stderr
     import pandas as pd
 
@@ -174,9 +214,24 @@ def test_table2_runs_the_plugin_with_its_option(plugin_env, tmp_path):
 
 
 def test_the_conformance_suite_runs_the_plugin_backend(plugin_env):
-    done = subprocess.run([sys.executable, "-m", "pytest", "-q", "-p", "no:cacheprovider",
-                           str(ROOT / "tests" / "test_backend_conformance.py"), "-k", "brute"],
-                          env=plugin_env, capture_output=True, text=True, timeout=600, cwd=ROOT)
+    done = subprocess.run(
+        [
+            sys.executable,
+            "-m",
+            "pytest",
+            "-q",
+            "-p",
+            "no:cacheprovider",
+            str(ROOT / "tests" / "test_backend_conformance.py"),
+            "-k",
+            "brute",
+        ],
+        env=plugin_env,
+        capture_output=True,
+        text=True,
+        timeout=600,
+        cwd=ROOT,
+    )
     assert done.returncode == 0, done.stdout[-3000:]
     summary = done.stdout.strip().splitlines()[-1]
     passed = int(summary.split(" passed")[0].split()[-1])

@@ -21,17 +21,47 @@ from compact_distributions.bench.outputs import TEMP_MARK
 RUN_FILES = {"result.json", "sites.csv", "cells.png", "elements.svg", "elements.png"}
 MOSAIC_FILES = {"result.json", "sites.csv", "mosaic.svg", "mosaic.png"}
 # generous deadlines: a loaded 2-core machine must not turn a slow example into a failure
-SETTINGS = settings(max_examples=40, deadline=None, derandomize=True, database=None,
-                    suppress_health_check=[HealthCheck.too_slow, HealthCheck.data_too_large])
+SETTINGS = settings(
+    max_examples=40,
+    deadline=None,
+    derandomize=True,
+    database=None,
+    suppress_health_check=[HealthCheck.too_slow, HealthCheck.data_too_large],
+)
 
-weird_text = st.sampled_from(["", "x", "nan", "inf", "-inf", "-1", "0", "1e308", "1e-300", "1e9", "0x10",
-                              "3.5", " 7 ", "१२", "--", "2,3"])
+weird_text = st.sampled_from(
+    [
+        "",
+        "x",
+        "nan",
+        "inf",
+        "-inf",
+        "-1",
+        "0",
+        "1e308",
+        "1e-300",
+        "1e9",
+        "0x10",
+        "3.5",
+        " 7 ",
+        "१२",
+        "--",
+        "2,3",
+    ]
+)
 
 
-hostile_number = st.one_of(weird_text, st.floats(allow_nan=True, allow_infinity=True).map(repr),
-                           st.integers(-2**80, 2**80).map(str))
-image_file = st.tuples(st.sampled_from(["L", "RGB", "RGBA", "P", "I;16", "1", "F"]), st.integers(1, 40),
-                       st.integers(1, 40), st.integers(0, 2**31 - 1))
+hostile_number = st.one_of(
+    weird_text,
+    st.floats(allow_nan=True, allow_infinity=True).map(repr),
+    st.integers(-(2**80), 2**80).map(str),
+)
+image_file = st.tuples(
+    st.sampled_from(["L", "RGB", "RGBA", "P", "I;16", "1", "F"]),
+    st.integers(1, 40),
+    st.integers(1, 40),
+    st.integers(0, 2**31 - 1),
+)
 bad_file = st.sampled_from(["garbage", "empty", "truncated", "folder", "missing"])
 
 
@@ -56,7 +86,9 @@ def make_picture(spec, folder: Path, name: str) -> Path:
     elif spec == "garbage":
         path.write_bytes(b"not a picture at all\n" * 3)
     elif spec == "truncated":
-        Image.fromarray(np.random.default_rng(1).integers(0, 255, (30, 30, 3), dtype=np.uint8)).save(path, "PNG")
+        Image.fromarray(np.random.default_rng(1).integers(0, 255, (30, 30, 3), dtype=np.uint8)).save(
+            path, "PNG"
+        )
         path.write_bytes(path.read_bytes()[:200])
     elif spec != "missing":
         mode, w, h, seed = spec
@@ -91,23 +123,39 @@ def check(argv, out: Path, folder: Path, files: set[str]) -> None:
 
 
 RUN_VALID = {
-    "size": st.one_of(st.integers(8, 40).map(str), st.tuples(st.integers(8, 40), st.integers(8, 40)).map(
-        lambda t: f"{t[0]}x{t[1]}")),
-    "sites": st.integers(1, 60).map(str), "iterations": st.integers(0, 3).map(str),
+    "size": st.one_of(
+        st.integers(8, 40).map(str),
+        st.tuples(st.integers(8, 40), st.integers(8, 40)).map(lambda t: f"{t[0]}x{t[1]}"),
+    ),
+    "sites": st.integers(1, 60).map(str),
+    "iterations": st.integers(0, 3).map(str),
     "seed": st.integers(0, 10**6).map(str),
     "metric": st.sampled_from(["l2", "l1", "linf", "linf-axial", "l2-axial", "triangle"]),
-    "aspect": st.one_of(st.none(), st.floats(0.05, 20).map(str)), "gap": st.one_of(st.none(), st.floats(0, 4).map(str)),
-    "element": st.one_of(st.none(), st.sampled_from(["square", "circle", "rectangle", "ellipse", "triangle"])),
-    "field": st.one_of(st.none(), st.sampled_from(["radial", "circular", "constant:30", "wave:9"]), image_file),
-    "density": st.one_of(st.none(), image_file), "region": st.one_of(st.none(), image_file),
+    "aspect": st.one_of(st.none(), st.floats(0.05, 20).map(str)),
+    "gap": st.one_of(st.none(), st.floats(0, 4).map(str)),
+    "element": st.one_of(
+        st.none(), st.sampled_from(["square", "circle", "rectangle", "ellipse", "triangle"])
+    ),
+    "field": st.one_of(
+        st.none(), st.sampled_from(["radial", "circular", "constant:30", "wave:9"]), image_file
+    ),
+    "density": st.one_of(st.none(), image_file),
+    "region": st.one_of(st.none(), image_file),
 }
 RUN_HOSTILE = {
     "size": st.one_of(weird_text, st.sampled_from(["40000", "0x5", "5x", "x5", "3x4x5"])),
-    "sites": st.one_of(hostile_number, st.just("100000")), "iterations": hostile_number, "seed": hostile_number,
-    "metric": st.sampled_from(["l3", "L2", ""]), "aspect": hostile_number, "gap": hostile_number,
+    "sites": st.one_of(hostile_number, st.just("100000")),
+    "iterations": hostile_number,
+    "seed": hostile_number,
+    "metric": st.sampled_from(["l3", "L2", ""]),
+    "aspect": hostile_number,
+    "gap": hostile_number,
     "element": st.sampled_from(["hexagon", "", "Square"]),
-    "field": st.one_of(st.sampled_from(["radial:5", "constant:nan", "wave:0", "constant:", "spiral"]), bad_file),
-    "density": bad_file, "region": bad_file,
+    "field": st.one_of(
+        st.sampled_from(["radial:5", "constant:nan", "wave:0", "constant:", "spiral"]), bad_file
+    ),
+    "density": bad_file,
+    "region": bad_file,
 }
 
 
@@ -142,22 +190,36 @@ def test_run_succeeds_completely_or_fails_in_one_line(opts):
 
 
 MOSAIC_VALID = {
-    "image": image_file, "elements": st.integers(1, 300).map(str),
+    "image": image_file,
+    "elements": st.integers(1, 300).map(str),
     "size": st.one_of(st.none(), st.integers(16, 48).map(str)),
-    "element": st.one_of(st.none(), st.sampled_from(["square", "circle", "rectangle", "ellipse", "triangle"])),
+    "element": st.one_of(
+        st.none(), st.sampled_from(["square", "circle", "rectangle", "ellipse", "triangle"])
+    ),
     "aspect": st.one_of(st.none(), st.floats(0.05, 20).map(str)),
     "contrast": st.one_of(st.none(), st.floats(1, 100).map(str)),
-    "png-scale": st.one_of(st.none(), st.floats(0.05, 3).map(str)), "gap": st.one_of(st.none(), st.floats(0, 3).map(str)),
-    "grout": st.sampled_from(["#383838", "white", "navy"]), "iterations": st.integers(0, 2).map(str),
+    "png-scale": st.one_of(st.none(), st.floats(0.05, 3).map(str)),
+    "gap": st.one_of(st.none(), st.floats(0, 3).map(str)),
+    "grout": st.sampled_from(["#383838", "white", "navy"]),
+    "iterations": st.integers(0, 2).map(str),
     "compare": st.sampled_from([None, "field", "density"]),
-    "no-field": st.booleans(), "no-density": st.booleans(),
+    "no-field": st.booleans(),
+    "no-density": st.booleans(),
 }
 MOSAIC_HOSTILE = {
-    "image": bad_file, "elements": st.one_of(hostile_number, st.just("5000")),
-    "size": st.one_of(weird_text, st.just("40000")), "element": st.sampled_from(["hexagon", ""]),
-    "aspect": hostile_number, "contrast": hostile_number, "png-scale": st.one_of(hostile_number, st.just("100")),
-    "gap": hostile_number, "grout": st.sampled_from(["nope", "#12345", ""]), "iterations": hostile_number,
-    "compare": st.sampled_from(["both", ""]), "no-field": st.booleans(), "no-density": st.booleans(),
+    "image": bad_file,
+    "elements": st.one_of(hostile_number, st.just("5000")),
+    "size": st.one_of(weird_text, st.just("40000")),
+    "element": st.sampled_from(["hexagon", ""]),
+    "aspect": hostile_number,
+    "contrast": hostile_number,
+    "png-scale": st.one_of(hostile_number, st.just("100")),
+    "gap": hostile_number,
+    "grout": st.sampled_from(["nope", "#12345", ""]),
+    "iterations": hostile_number,
+    "compare": st.sampled_from(["both", ""]),
+    "no-field": st.booleans(),
+    "no-density": st.booleans(),
 }
 
 

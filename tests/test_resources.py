@@ -47,24 +47,48 @@ def test_estimates_grow_with_raster_sites_and_canvas():
     numpy = backend_class("numpy")
     small = run_estimate(512, 512, 1000, numpy).total
     assert run_estimate(1024, 1024, 1000, numpy).total > small
-    assert run_estimate(512, 512, 100_000, numpy, element="circle").total > \
-        run_estimate(512, 512, 100_000, numpy, element="square").total > small
-    assert mosaic_estimate(512, 512, 1000, numpy, png_scale=8).total > mosaic_estimate(512, 512, 1000, numpy).total
+    assert (
+        run_estimate(512, 512, 100_000, numpy, element="circle").total
+        > run_estimate(512, 512, 100_000, numpy, element="square").total
+        > small
+    )
+    assert (
+        mosaic_estimate(512, 512, 1000, numpy, png_scale=8).total
+        > mosaic_estimate(512, 512, 1000, numpy).total
+    )
 
 
 def test_a_huge_run_is_refused_at_once_and_small(tmp_path):
-    code, err, peak, secs = run_measured(["run", "--size", "32768", "--elements", "1", "--out", tmp_path / "o"])
+    code, err, peak, secs = run_measured(
+        ["run", "--size", "32768", "--elements", "1", "--out", tmp_path / "o"]
+    )
     lines = err.strip().splitlines()
     assert code == 2 and len(lines) == 1 and "needs about" in lines[0] and "--memory-limit" in lines[0], err
     assert peak < 1024 and secs < 30, (peak, secs)
     assert not (tmp_path / "o").exists()
 
 
-@pytest.mark.parametrize("argv,what", [
-    (["backends", "--quick", "--sizes", "32768", "--elements", "1000", "--backends", "numpy", "--metrics", "l2"],
-     "timing numpy l2 N=1000 32768²"),
-    (["mosaic", "IMAGE", "--size", "1024", "--png-scale", "60"], "mosaic.png"),
-])
+@pytest.mark.parametrize(
+    "argv,what",
+    [
+        (
+            [
+                "backends",
+                "--quick",
+                "--sizes",
+                "32768",
+                "--elements",
+                "1000",
+                "--backends",
+                "numpy",
+                "--metrics",
+                "l2",
+            ],
+            "timing numpy l2 N=1000 32768²",
+        ),
+        (["mosaic", "IMAGE", "--size", "1024", "--png-scale", "60"], "mosaic.png"),
+    ],
+)
 def test_sweeps_and_canvases_are_refused_before_they_start(argv, what, tmp_path):
     from PIL import Image
 
@@ -79,7 +103,18 @@ def test_sweeps_and_canvases_are_refused_before_they_start(argv, what, tmp_path)
 def test_the_limit_option_lowers_and_raises_the_bar(tmp_path, capsys):
     from compact_distributions.bench.cli import main
 
-    argv = ["run", "--size", "256", "--elements", "50", "--iterations", "1", "--quiet", "--out", str(tmp_path / "o")]
+    argv = [
+        "run",
+        "--size",
+        "256",
+        "--elements",
+        "50",
+        "--iterations",
+        "1",
+        "--quiet",
+        "--out",
+        str(tmp_path / "o"),
+    ]
     assert main(argv + ["--memory-limit", "100M"]) == 2
     err = capsys.readouterr().err
     assert "more than the limit --memory-limit sets (100 MiB)" in err
@@ -91,12 +126,18 @@ def test_the_limit_option_lowers_and_raises_the_bar(tmp_path, capsys):
 # (argv, estimate) pairs: the estimate must cover the measured peak and stay within 2.5x
 # of it (one process per configuration; ru_maxrss of the child)
 MEASURED = [
-    (["run", "--size", "1536", "--elements", "4000", "--metric", "linf", "--iterations", "2"],
-     lambda: run_estimate(1536, 1536, 4000, backend_class("numpy"), element="square")),
-    (["run", "--size", "384", "--elements", str(384 * 384 // 2), "--metric", "l2", "--iterations", "1"],
-     lambda: run_estimate(384, 384, 384 * 384 // 2, backend_class("numpy"), element="circle")),
-    (["mosaic", "PICTURE", "--size", "1024", "--elements", "3000", "--iterations", "2"],
-     lambda: mosaic_estimate(1024, 1024, 3000, backend_class("numpy"), element="square", png_scale=1.0)),
+    (
+        ["run", "--size", "1536", "--elements", "4000", "--metric", "linf", "--iterations", "2"],
+        lambda: run_estimate(1536, 1536, 4000, backend_class("numpy"), element="square"),
+    ),
+    (
+        ["run", "--size", "384", "--elements", str(384 * 384 // 2), "--metric", "l2", "--iterations", "1"],
+        lambda: run_estimate(384, 384, 384 * 384 // 2, backend_class("numpy"), element="circle"),
+    ),
+    (
+        ["mosaic", "PICTURE", "--size", "1024", "--elements", "3000", "--iterations", "2"],
+        lambda: mosaic_estimate(1024, 1024, 3000, backend_class("numpy"), element="square", png_scale=1.0),
+    ),
 ]
 
 
@@ -118,7 +159,20 @@ def test_estimates_cover_measured_peaks(argv, estimate, tmp_path):
 @pytest.mark.slow
 def test_placement_memory_is_linear_when_sites_fill_the_raster(tmp_path):
     """Every pixel a site, circles (128-gons): a few kB per site, not tens."""
-    code, err, peak, _ = run_measured(["run", "--size", "256", "--elements", str(256 * 256), "--iterations", "1",
-                                       "--quiet", "--out", tmp_path / "o"], timeout=600)
+    code, err, peak, _ = run_measured(
+        [
+            "run",
+            "--size",
+            "256",
+            "--elements",
+            str(256 * 256),
+            "--iterations",
+            "1",
+            "--quiet",
+            "--out",
+            tmp_path / "o",
+        ],
+        timeout=600,
+    )
     assert code == 0, err
     assert peak < 150 + 256 * 256 * 6 / 1024, peak  # program + 6 kB per site

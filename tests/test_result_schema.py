@@ -24,10 +24,41 @@ def outputs(tmp_path_factory):
     rgb = np.zeros((60, 80, 3), np.uint8)
     rgb[:, 40:] = (200, 30, 30)
     Image.fromarray(rgb).save(d / "pic.png")
-    assert main(["run", "--elements", "30", "--size", "64", "--iterations", "2", "--metric", "linf",
-                 "--out", str(d / "run"), "--quiet"]) == 0
-    assert main(["mosaic", str(d / "pic.png"), "--elements", "40", "--iterations", "2",
-                 "--out", str(d / "mosaic"), "--quiet"]) == 0
+    assert (
+        main(
+            [
+                "run",
+                "--elements",
+                "30",
+                "--size",
+                "64",
+                "--iterations",
+                "2",
+                "--metric",
+                "linf",
+                "--out",
+                str(d / "run"),
+                "--quiet",
+            ]
+        )
+        == 0
+    )
+    assert (
+        main(
+            [
+                "mosaic",
+                str(d / "pic.png"),
+                "--elements",
+                "40",
+                "--iterations",
+                "2",
+                "--out",
+                str(d / "mosaic"),
+                "--quiet",
+            ]
+        )
+        == 0
+    )
     return {k: json.loads((d / k / "result.json").read_text()) for k in ("run", "mosaic")}
 
 
@@ -46,12 +77,15 @@ def test_both_commands_write_the_one_schema(outputs, kind):
     assert record["placed"] == sum(e is not None for e in record["elements"])
 
 
-@pytest.mark.parametrize("change", [
-    {"elements": 40},  # a count where outlines belong
-    {"kind": "table"},
-    {"coverage": 1.5},
-    {"size": [64]},
-])
+@pytest.mark.parametrize(
+    "change",
+    [
+        {"elements": 40},  # a count where outlines belong
+        {"kind": "table"},
+        {"coverage": 1.5},
+        {"size": [64]},
+    ],
+)
 def test_a_record_that_breaks_the_schema_is_refused(outputs, change):
     with pytest.raises(jsonschema.ValidationError):
         jsonschema.validate({**outputs["run"], **change}, schema())
@@ -66,7 +100,7 @@ def test_mosaic_fields_are_required_for_a_mosaic(outputs):
 
 def test_the_readme_documents_every_field():
     readme = (ROOT / "README.md").read_text()
-    section = readme[readme.index("### result.json"):]
+    section = readme[readme.index("### result.json") :]
     section = section[: section.index("\n## ")]
     missing = [name for name in schema()["properties"] if f"`{name}`" not in section]
     assert missing == []

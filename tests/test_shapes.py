@@ -95,30 +95,37 @@ def test_opencl_labels_the_users_polygon_as_numpy(tmp_path, reference, ocl):
     assert (got != ref).mean() < 1e-3  # float32 ties at most
 
 
-@pytest.mark.parametrize("points,text", [
-    ([[0, 0], [4, 0], [1, 1], [0, 4]], "not convex"),
-    ([[0, 0], [1, 1], [2, 2]], "degenerate"),
-    ([[0, 0], [1, 1], [0, 0], [1, 1]], "2 distinct vertices"),
-    ([[0, 0], [1, "a"]], "vertices"),
-])
+@pytest.mark.parametrize(
+    "points,text",
+    [
+        ([[0, 0], [4, 0], [1, 1], [0, 4]], "not convex"),
+        ([[0, 0], [1, 1], [2, 2]], "degenerate"),
+        ([[0, 0], [1, 1], [0, 0], [1, 1]], "2 distinct vertices"),
+        ([[0, 0], [1, "a"]], "vertices"),
+    ],
+)
 def test_bad_polygons_are_refused(points, text):
     with pytest.raises(InputError, match=text):
         convex_unit_ball(points)
 
 
-@pytest.mark.parametrize("content,text", [
-    ("[[0,0],[4,0],[1,1],[0,4]]", "not convex"),
-    ("[[0,0],[1,1]]", "2 distinct vertices"),
-    ("x,y\n0,0\n1,1\n2,2\n", "degenerate"),
-    ("a,b\n0,0\n", "needs columns x and y"),
-    ("[[0,0],", "not valid json"),
-])
+@pytest.mark.parametrize(
+    "content,text",
+    [
+        ("[[0,0],[4,0],[1,1],[0,4]]", "not convex"),
+        ("[[0,0],[1,1]]", "2 distinct vertices"),
+        ("x,y\n0,0\n1,1\n2,2\n", "degenerate"),
+        ("a,b\n0,0\n", "needs columns x and y"),
+        ("[[0,0],", "not valid json"),
+    ],
+)
 def test_bad_polygon_files_are_one_line_and_write_nothing(tmp_path, capsys, content, text):
     path = tmp_path / "bad.txt"
     path.write_text(content)
     out = tmp_path / "o"
-    line = one_error(["run", "--element", f"polygon:{path}", "--elements", "20", "--size", "64",
-                      "--out", out], capsys)
+    line = one_error(
+        ["run", "--element", f"polygon:{path}", "--elements", "20", "--size", "64", "--out", out], capsys
+    )
     assert text in line and not out.exists()
 
 
@@ -142,8 +149,27 @@ def test_a_new_shape_is_one_record(monkeypatch, tmp_path, reference, ocl):
         assert (a == b).all()  # no two overlap (exact shapely)
         assert r.coverage > 0.8
     assert np.abs(on_numpy.distribution.sites - on_opencl.distribution.sites).max() < 0.5
-    assert main(["run", "--method", "ours-compact", "--element", "heptagon", "--elements", "60", "--size", "96",
-                 "--iterations", "4", "--quiet", "--out", str(tmp_path / "r")]) == 0
+    assert (
+        main(
+            [
+                "run",
+                "--method",
+                "ours-compact",
+                "--element",
+                "heptagon",
+                "--elements",
+                "60",
+                "--size",
+                "96",
+                "--iterations",
+                "4",
+                "--quiet",
+                "--out",
+                str(tmp_path / "r"),
+            ]
+        )
+        == 0
+    )
     svg = (tmp_path / "r" / "elements.svg").read_text()
     assert svg.count("<path") + svg.count("<polygon") == 60
     assert json.loads((tmp_path / "r" / "result.json").read_text())["metric"] == "heptagon"

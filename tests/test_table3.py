@@ -20,7 +20,7 @@ from compact_distributions.bench.table3 import (
 from compact_distributions.cvt.errors import InputError
 from compact_distributions.cvt.evaluate import MEASURES
 from compact_distributions.cvt.metrics import make_metric
-from compact_distributions.cvt.shapes import ELEMENT_SHAPES
+from compact_distributions.cvt.shapes import ELEMENT_SHAPES, PAPER_SHAPES
 
 from .cli_errors import one_error
 
@@ -32,7 +32,7 @@ def test_the_density_has_the_contrast_it_says_and_regions_hold_their_share():
     raw = d.values  # normalised to a maximum of 1
     assert raw.max() / raw.min() == pytest.approx(3.0, rel=0.02)
     star = scene_problem("region", 200, 400, make_metric("linf"), 0)
-    assert star.n_elements == round(400 * star.grid.pixel_count / 200 ** 2) < 400
+    assert star.n_elements == round(400 * star.grid.pixel_count / 200**2) < 400
     both = scene_problem("combined", 200, 400, make_metric("linf"), 0)
     assert both.density is not None and both.field is not None and both.grid.mask is not None
 
@@ -57,20 +57,40 @@ def test_aggregate_by_hand():
     specs = problem_set(True, 3, ["ours"], ["square"], ["density"], "numpy")
     rows = []
     for spec, size_err in zip(specs[:2], (0.2, 0.4), strict=True):
-        rows.append({"key": spec.key, **spec.params(), "status": "ok", "reason": "", "device": "cpu",
-                     "method_seconds": 1.0, "n_elements": 150, **{m: 0.5 for m in MEASURES},
-                     "size_fidelity": size_err, "direction_fidelity": None})
+        rows.append(
+            {
+                "key": spec.key,
+                **spec.params(),
+                "status": "ok",
+                "reason": "",
+                "device": "cpu",
+                "method_seconds": 1.0,
+                "n_elements": 150,
+                **{m: 0.5 for m in MEASURES},
+                "size_fidelity": size_err,
+                "direction_fidelity": None,
+            }
+        )
     rows.append({"key": specs[2].key, **specs[2].params(), "status": "failed", "reason": "boom"})
     (line,) = aggregate(rows).to_dict("records")
     assert line["size_fidelity_mean"] == pytest.approx(0.3)
     assert line["size_fidelity_sd"] == pytest.approx(np.sqrt(0.02))  # sample sd of 0.2, 0.4
     assert np.isnan(line["direction_fidelity_mean"])  # circles' null stays missing, not 0
-    assert line["runs"] == 2 and line["seeds"] == 3 and line["status"] == "partial" and "boom" in line["reason"]
+    assert (
+        line["runs"] == 2 and line["seeds"] == 3 and line["status"] == "partial" and "boom" in line["reason"]
+    )
 
 
 def test_a_small_table3_end_to_end(tmp_path):
-    table = run_table3(tmp_path, quick=True, seeds=1, methods=["ours", "ours-compact"], shapes=["square"],
-                       scenes=["density", "field"], quiet=True)
+    table = run_table3(
+        tmp_path,
+        quick=True,
+        seeds=1,
+        methods=["ours", "ours-compact"],
+        shapes=["square"],
+        scenes=["density", "field"],
+        quiet=True,
+    )
     assert len(table) == 4 and (table.status == "ok").all()
     csv = pd.read_csv(tmp_path / "table3.csv")
     assert list(csv.columns) == COLUMNS
@@ -89,8 +109,10 @@ def test_committed_table3_holds_every_run_and_the_compaction_targets():
         if not path.exists():
             pytest.fail(f"{path} is not committed; run `cvtbench table3` (and --quick)")
         table = pd.read_csv(path)
-        expected = {(s.scene, s.method, s.element)
-                    for s in problem_set(quick, 1, method_names(), list(ELEMENT_SHAPES), list(SCENES), "numpy")}
+        expected = {
+            (s.scene, s.method, s.element)
+            for s in problem_set(quick, 1, method_names(), list(PAPER_SHAPES), list(SCENES), "numpy")
+        }
         assert expected <= set(zip(table.scene, table.method, table.element, strict=True))
         assert (table.status == "ok").all()
     full = pd.read_csv(REPORTS / "table3.csv")
@@ -102,16 +124,19 @@ def test_committed_table3_holds_every_run_and_the_compaction_targets():
     assert (full[full.method == "ours-compact"].direction_fidelity_mean.dropna() < 2.0).all()
 
 
-@pytest.mark.parametrize("argv, text", [
-    (["--seeds", "0"], "--seeds"),
-    (["--seeds", "many"], "--seeds"),
-    (["--methods", "magic"], "magic"),
-    (["--shapes", "hexagon"], "hexagon"),
-    (["--scenes", "moon"], "moon"),
-    (["--scenes", ","], "--scenes"),
-    (["--memory-limit", "1K"], "memory"),
-    (["--workers", "0"], "--workers"),
-])
+@pytest.mark.parametrize(
+    "argv, text",
+    [
+        (["--seeds", "0"], "--seeds"),
+        (["--seeds", "many"], "--seeds"),
+        (["--methods", "magic"], "magic"),
+        (["--shapes", "heptagon"], "heptagon"),
+        (["--scenes", "moon"], "moon"),
+        (["--scenes", ","], "--scenes"),
+        (["--memory-limit", "1K"], "memory"),
+        (["--workers", "0"], "--workers"),
+    ],
+)
 def test_bad_input_is_one_line_and_writes_nothing(argv, text, capsys, tmp_path):
     out = tmp_path / "out"
     line = one_error(["table3", "--quick", "--out", out, *argv], capsys)
@@ -127,15 +152,21 @@ def test_an_output_that_is_a_file_is_refused(capsys, tmp_path):
 
 
 def test_the_typed_function_checks_its_arguments(tmp_path):
-    with pytest.raises(InputError, match="hexagon"):
-        run_table3(tmp_path / "t", quick=True, shapes=["hexagon"])
+    with pytest.raises(InputError, match="heptagon"):
+        run_table3(tmp_path / "t", quick=True, shapes=["heptagon"])
     assert not (tmp_path / "t").exists()
 
 
 def test_a_dask_sweep_gives_the_same_table(tmp_path):
     pytest.importorskip("distributed")
-    subset = {"quick": True, "seeds": 1, "methods": ["ours", "hausner2001"], "shapes": ["square"],
-              "scenes": ["combined"], "quiet": True}
+    subset = {
+        "quick": True,
+        "seeds": 1,
+        "methods": ["ours", "hausner2001"],
+        "shapes": ["square"],
+        "scenes": ["combined"],
+        "quiet": True,
+    }
     here = run_table3(tmp_path / "here", **subset)
     there = run_table3(tmp_path / "there", workers=1, **subset)
     cols = [f"{m}_mean" for m in MEASURES]

@@ -26,7 +26,10 @@ from .hostile import CLI
 
 RUN_BAD = [
     (["--field", "constant:nan"], "--field 'constant:nan'"),
-    (["--metric", "linf-axial", "--aspect", "1e-300"], "--aspect must be a finite number between 0.01 and 100"),
+    (
+        ["--metric", "linf-axial", "--aspect", "1e-300"],
+        "--aspect must be a finite number between 0.01 and 100",
+    ),
     (["--metric", "l2-axial", "--aspect", "1e300"], "--aspect must be a finite number between 0.01 and 100"),
     (["--seed", "-5"], "--seed must be a whole number between 0 and"),
     (["--seed=-5"], "--seed must be a whole number between 0 and"),
@@ -55,7 +58,10 @@ MOSAIC_BAD = [
     (["--contrast", "nan"], "--contrast must be a finite number between 1 and 100"),
     (["--png-scale", "1e9"], "--png-scale must be a finite number between 0.01 and 100"),
     (["--png-scale", "0"], "--png-scale must be a finite number between 0.01 and 100"),
-    (["--element", "rectangle", "--aspect", "1e-300"], "--aspect must be a finite number between 0.01 and 100"),
+    (
+        ["--element", "rectangle", "--aspect", "1e-300"],
+        "--aspect must be a finite number between 0.01 and 100",
+    ),
     (["--elements", "inf"], "--elements must be a whole number"),
     (["--elements", "100000"], "--elements 100000 do not fit in a 64x48 raster"),
     (["--seed", "-5"], "--seed must be a whole number between 0 and"),
@@ -82,28 +88,40 @@ def numpy_backend():
 PICTURE = np.zeros((20, 30, 3))
 
 
-@pytest.mark.parametrize("call,message", [
-    (lambda b: make_mosaic(PICTURE, b, n_elements=float("inf")), "n_elements must be a whole number"),
-    (lambda b: make_mosaic(PICTURE, 42), "backend must be a live backend"),
-    (lambda b: make_mosaic(PICTURE, b, contrast=1e308), "contrast must be a finite number between 1 and 100"),
-    (lambda b: make_mosaic(PICTURE, b, size=10**9), "size 1000000000: each side"),
-    (lambda b: make_mosaic(PICTURE, b, aspect=float("nan")), "aspect must be a finite number"),
-    (lambda b: make_mosaic(PICTURE, b, grout=(2, 0, 0)), "grout must be three numbers in 0..1"),
-    (lambda b: make_mosaic(PICTURE, b, n_elements=10, memory_limit="1M"), "set memory_limit higher"),
-    (lambda b: create_backend(42), "backend must be a backend name or a Backend"),
-    (lambda b: get_method("ours")(Problem(Grid(32, 32), 4), 42), "backend must be a live backend"),
-    (lambda b: get_method("ours")(Problem(Grid(32, 32), 4), b, iterations=float("inf")), "iterations must be"),
-    (lambda b: get_method("ours")(Problem(Grid(32, 32), 4), b, gap=float("nan")), "gap must be a finite number"),
-    (lambda b: get_method(42), "unknown method 42"),
-    (lambda b: Problem(Grid(float("inf"), 32), 4), "width must be a whole number between 1 and 32768"),
-    (lambda b: Problem(Grid(32, 32), 4, seed=-5), "seed must be a whole number between 0 and"),
-    (lambda b: Problem(Grid(32, 32), 4, metric="l2"), "metric must be a Metric"),
-    (lambda b: Problem(Grid(32, 32), 4, field="radial"), "field must be a DirectionField or None"),
-    (lambda b: make_metric("linf-axial", 1e-300), "aspect must be a finite number between 0.01 and 100"),
-    (lambda b: DirectionField.named("constant:nan", 8, 8), "constant needs an angle"),
-    (lambda b: DirectionField.from_angles(np.full((4, 4), 1e300)), "finite angles"),
-    (lambda b: DensityMap(np.full((4, 4), np.nan)), "density must be finite"),
-])
+@pytest.mark.parametrize(
+    "call,message",
+    [
+        (lambda b: make_mosaic(PICTURE, b, n_elements=float("inf")), "n_elements must be a whole number"),
+        (lambda b: make_mosaic(PICTURE, 42), "backend must be a live backend"),
+        (
+            lambda b: make_mosaic(PICTURE, b, contrast=1e308),
+            "contrast must be a finite number between 1 and 100",
+        ),
+        (lambda b: make_mosaic(PICTURE, b, size=10**9), "size 1000000000: each side"),
+        (lambda b: make_mosaic(PICTURE, b, aspect=float("nan")), "aspect must be a finite number"),
+        (lambda b: make_mosaic(PICTURE, b, grout=(2, 0, 0)), "grout must be three numbers in 0..1"),
+        (lambda b: make_mosaic(PICTURE, b, n_elements=10, memory_limit="1M"), "set memory_limit higher"),
+        (lambda b: create_backend(42), "backend must be a backend name or a Backend"),
+        (lambda b: get_method("ours")(Problem(Grid(32, 32), 4), 42), "backend must be a live backend"),
+        (
+            lambda b: get_method("ours")(Problem(Grid(32, 32), 4), b, iterations=float("inf")),
+            "iterations must be",
+        ),
+        (
+            lambda b: get_method("ours")(Problem(Grid(32, 32), 4), b, gap=float("nan")),
+            "gap must be a finite number",
+        ),
+        (lambda b: get_method(42), "unknown method 42"),
+        (lambda b: Problem(Grid(float("inf"), 32), 4), "width must be a whole number between 1 and 32768"),
+        (lambda b: Problem(Grid(32, 32), 4, seed=-5), "seed must be a whole number between 0 and"),
+        (lambda b: Problem(Grid(32, 32), 4, metric="l2"), "metric must be a Metric"),
+        (lambda b: Problem(Grid(32, 32), 4, field="radial"), "field must be a DirectionField or None"),
+        (lambda b: make_metric("linf-axial", 1e-300), "aspect must be a finite number between 0.01 and 100"),
+        (lambda b: DirectionField.named("constant:nan", 8, 8), "constant needs an angle"),
+        (lambda b: DirectionField.from_angles(np.full((4, 4), 1e300)), "finite angles"),
+        (lambda b: DensityMap(np.full((4, 4), np.nan)), "density must be finite"),
+    ],
+)
 def test_python_api_arguments(call, message, numpy_backend):
     with pytest.raises(InputError, match=message.replace("(", r"\(").replace(")", r"\)")):
         call(numpy_backend)
@@ -115,12 +133,15 @@ def test_density_values_may_be_huge():
 
 
 # ---------------------------------------------------------------- reproduce and sweeps
-@pytest.mark.parametrize("extra,message", [
-    (["--seeds", "0"], "--seeds must be a whole number between 1 and 1000"),
-    (["--seeds", "1e9"], "--seeds must be a whole number between 1 and 1000"),
-    (["--out", "/dev/null"], "--out /dev/null is a character device, not a folder"),
-    (["--memory-limit", "50M"], "more than the limit --memory-limit sets (50 MiB)"),
-])
+@pytest.mark.parametrize(
+    "extra,message",
+    [
+        (["--seeds", "0"], "--seeds must be a whole number between 1 and 1000"),
+        (["--seeds", "1e9"], "--seeds must be a whole number between 1 and 1000"),
+        (["--out", "/dev/null"], "--out /dev/null is a character device, not a folder"),
+        (["--memory-limit", "50M"], "more than the limit --memory-limit sets (50 MiB)"),
+    ],
+)
 def test_reproduce_checks_every_part_before_starting(extra, message, tmp_path, capsys, monkeypatch):
     monkeypatch.chdir(tmp_path)
     t0 = time.perf_counter()
@@ -129,13 +150,19 @@ def test_reproduce_checks_every_part_before_starting(extra, message, tmp_path, c
     assert list(tmp_path.iterdir()) == []  # nothing ran, nothing was written
 
 
-@pytest.mark.parametrize("argv,message", [
-    (["backends", "--sizes", "40000"], "--sizes must be a whole number between 1 and 32768"),
-    (["backends", "--quick", "--sizes", "64", "--elements", "5000"], "--elements must be a whole number between 1 and 4096"),
-    (["backends", "--repeats", "0"], "--repeats must be a whole number between 1 and 1000"),
-    (["table2", "--seeds", "2000"], "--seeds must be a whole number between 1 and 1000"),
-    (["table2", "--methods", "ours,nope"], "unknown --methods 'nope'"),
-])
+@pytest.mark.parametrize(
+    "argv,message",
+    [
+        (["backends", "--sizes", "40000"], "--sizes must be a whole number between 1 and 32768"),
+        (
+            ["backends", "--quick", "--sizes", "64", "--elements", "5000"],
+            "--elements must be a whole number between 1 and 4096",
+        ),
+        (["backends", "--repeats", "0"], "--repeats must be a whole number between 1 and 1000"),
+        (["table2", "--seeds", "2000"], "--seeds must be a whole number between 1 and 1000"),
+        (["table2", "--methods", "ours,nope"], "unknown --methods 'nope'"),
+    ],
+)
 def test_sweep_options(argv, message, tmp_path, capsys):
     assert message in one_error(argv + ["--out", tmp_path / "o"], capsys)
     assert not (tmp_path / "o").exists()
@@ -170,8 +197,9 @@ def test_a_stored_run_that_is_not_an_object_is_run_again(tmp_path):
 # ---------------------------------------------------------------- streams
 def shell(cmd: str) -> subprocess.CompletedProcess:
     exe = " ".join(CLI)
-    return subprocess.run(["bash", "-c", cmd.replace("CVTBENCH", exe)], capture_output=True, text=True,
-                          timeout=120)
+    return subprocess.run(
+        ["bash", "-c", cmd.replace("CVTBENCH", exe)], capture_output=True, text=True, timeout=120
+    )
 
 
 def test_a_reader_that_leaves_ends_the_command_quietly():
@@ -182,13 +210,17 @@ def test_a_reader_that_leaves_ends_the_command_quietly():
 def test_closed_streams_end_quietly(tmp_path):
     r = shell("CVTBENCH info >&-; echo status $?")
     assert r.stdout.strip() == "status 0" and r.stderr == ""
-    r = shell(f"CVTBENCH run --size 32 --elements 4 --iterations 1 --out {tmp_path / 'o'} 2>&-; echo status $?")
+    r = shell(
+        f"CVTBENCH run --size 32 --elements 4 --iterations 1 --out {tmp_path / 'o'} 2>&-; echo status $?"
+    )
     assert r.stdout.strip() == "status 0" and (tmp_path / "o" / "result.json").exists()
     r = shell("CVTBENCH run --elements nope 2>&-; echo status $?")
     assert r.stdout.strip() == "status 2"
     r = shell("CVTBENCH info > /dev/full; echo status $?")
-    assert r.stdout.strip() == "status 1" and r.stderr.strip() == \
-        "cvtbench: error: cannot write the output (No space left on device)"
+    assert (
+        r.stdout.strip() == "status 1"
+        and r.stderr.strip() == "cvtbench: error: cannot write the output (No space left on device)"
+    )
 
 
 def test_opencl_names_an_unwritable_cache_instead_of_no_device(tmp_path):

@@ -51,24 +51,35 @@ def main() -> int:
             out = Path(tmp) / name.strip("-").replace(" ", "")
             argv = base + ["--out", str(out)] + extra
             wall, load = timed([exe] + argv)
-            results.append((name, command_line(argv[:-2 - len(extra)] + extra), wall, load))
+            results.append((name, command_line(argv[: -2 - len(extra)] + extra), wall, load))
             tables.append(pd.read_csv(out / "table2.csv")[COLUMNS])
             print(f"{name}: {wall:.1f} s (load {load[0]:.2f})", file=sys.stderr)
     same = tables[0].equals(tables[1])
     ratio = results[0][2] / results[1][2]
     text = header_markdown(
-        "Sweeps on a local Dask cluster: table2 --quick", provenance(),
-        "python tests/benchmarks/cluster_speedup.py" + (f" --workers {args.workers}" if args.workers != 2 else ""),
-        [f"each command cold, in a fresh process, with --force (every run recomputed), into a temporary folder; "
-         f"the --workers time includes starting the cluster and the imports in its {args.workers} worker processes",
-         f"{os.cpu_count()} CPUs; load average (1, 5, 15 min) just before each command as shown: the machine is "
-         "shared with other work, so the ratio holds for that load only",
-         f"coverage and overlap columns of the two table2.csv: {'identical' if same else 'DIFFERENT'}"])
+        "Sweeps on a local Dask cluster: table2 --quick",
+        provenance(),
+        "python tests/benchmarks/cluster_speedup.py"
+        + (f" --workers {args.workers}" if args.workers != 2 else ""),
+        [
+            f"each command cold, in a fresh process, with --force (every run recomputed), into a temporary folder; "
+            f"the --workers time includes starting the cluster and the imports in its {args.workers} worker processes",
+            f"{os.cpu_count()} CPUs; load average (1, 5, 15 min) just before each command as shown: the machine is "
+            "shared with other work, so the ratio holds for that load only",
+            f"coverage and overlap columns of the two table2.csv: {'identical' if same else 'DIFFERENT'}",
+        ],
+    )
     text += "\n" + markdown_table(
         ["mode", "command", "wall time", "load before"],
-        [[name, f"`{cmd}`", f"{wall:.1f} s", ", ".join(f"{x:.2f}" for x in load)] for name, cmd, wall, load in results])
-    text += (f"\nSpeed-up of `--workers {args.workers}` over in-process: **{ratio:.2f}x** "
-             f"(in-process wall time / cluster wall time).\n")
+        [
+            [name, f"`{cmd}`", f"{wall:.1f} s", ", ".join(f"{x:.2f}" for x in load)]
+            for name, cmd, wall, load in results
+        ],
+    )
+    text += (
+        f"\nSpeed-up of `--workers {args.workers}` over in-process: **{ratio:.2f}x** "
+        f"(in-process wall time / cluster wall time).\n"
+    )
     write_markdown(args.out, text)
     print(f"speed-up {ratio:.2f}x; wrote {args.out}", file=sys.stderr)
     return 0 if same else 1

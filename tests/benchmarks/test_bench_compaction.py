@@ -28,7 +28,9 @@ LIMIT_S = 3.0
 
 
 def _enabled(config) -> bool:
-    return bool(config.getoption("benchmark_enable", False)) or not config.getoption("benchmark_disable", True)
+    return bool(config.getoption("benchmark_enable", False)) or not config.getoption(
+        "benchmark_disable", True
+    )
 
 
 @pytest.fixture(scope="module")
@@ -48,10 +50,14 @@ def test_bench_compaction_squares(benchmark, squares, request):
     centres, sizes, grid, n = squares
     benchmark.group = f"compaction square N={n} {grid.width}²"
     benchmark.extra_info.update(kind="compaction", shape="square", n_elements=n, size=grid.width)
-    res = benchmark.pedantic(compact, args=(centres, np.zeros(n), sizes, "square", 1.0, grid),
-                             rounds=5 if _enabled(request.config) else 1, iterations=1)
-    before = 4 * float(np.sum(sizes ** 2)) / grid.pixel_count
-    after = 4 * float(np.sum(res.sizes ** 2)) / grid.pixel_count  # disjoint squares: area = coverage
+    res = benchmark.pedantic(
+        compact,
+        args=(centres, np.zeros(n), sizes, "square", 1.0, grid),
+        rounds=5 if _enabled(request.config) else 1,
+        iterations=1,
+    )
+    before = 4 * float(np.sum(sizes**2)) / grid.pixel_count
+    after = 4 * float(np.sum(res.sizes**2)) / grid.pixel_count  # disjoint squares: area = coverage
     benchmark.extra_info.update(coverage_before=before, coverage_after=after, rounds=res.rounds)
     assert before > 0.7 and after > before + 0.1
     ok = res.sizes > 0

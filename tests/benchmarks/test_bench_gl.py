@@ -49,7 +49,9 @@ def relaxed_sites(n, side, steps=10):
     """Sites after a few Lloyd steps: cells close to a CVT, as in most iterations."""
     sites = uniform_sites(n, side)
     for _ in range(steps):
-        sites = CKDTreeBackend().moments(sites, metric=make_metric("l2"), grid=Grid(side, side)).centroids(sites)
+        sites = (
+            CKDTreeBackend().moments(sites, metric=make_metric("l2"), grid=Grid(side, side)).centroids(sites)
+        )
     return sites
 
 
@@ -65,8 +67,7 @@ def test_bench_gl_step(benchmark, backends, mode, name):
     backend, metric, grid = backends[mode], make_metric(name), Grid(side, side)
     sites = uniform_sites(n, side)
     step(backend, sites, metric, grid)  # shaders compiled outside the timing
-    benchmark.extra_info.update(backend="gl", mode=mode, metric=name, n=n, size=side,
-                                device=backend.device())
+    benchmark.extra_info.update(backend="gl", mode=mode, metric=name, n=n, size=side, device=backend.device())
     moved = benchmark(step, backend, sites, metric, grid)
     assert moved.shape == sites.shape and np.isfinite(moved).all()
     assert backend.moments(sites, metric=metric, grid=grid).count.sum() == side * side
@@ -77,8 +78,9 @@ def test_bench_ckdtree_step(benchmark, name):
     side, n = size_and_n(benchmark)
     benchmark.group = f"lloyd step {name} N={n}, {side}x{side}, uniform sites"
     benchmark.extra_info.update(backend="ckdtree", metric=name, n=n, size=side)
-    mom = benchmark(CKDTreeBackend().moments, uniform_sites(n, side), metric=make_metric(name),
-                    grid=Grid(side, side))
+    mom = benchmark(
+        CKDTreeBackend().moments, uniform_sites(n, side), metric=make_metric(name), grid=Grid(side, side)
+    )
     assert mom.count.sum() == side * side
 
 
@@ -93,7 +95,9 @@ def test_speedup_over_ckdtree(benchmark, backends):
     for label, sites in (("uniform", uniform_sites(n, side)), ("relaxed", relaxed_sites(n, side))):
         for name in ("l2", "linf"):
             metric = make_metric(name)
-            calls = {"ckdtree": lambda s=sites, m=metric, t=CKDTreeBackend(): t.moments(s, metric=m, grid=grid)}
+            calls = {
+                "ckdtree": lambda s=sites, m=metric, t=CKDTreeBackend(): t.moments(s, metric=m, grid=grid)
+            }
             for mode, b in backends.items():
                 calls[mode] = lambda s=sites, m=metric, b=b: b.moments(s, metric=m, grid=grid)
             times = {k: [] for k in calls}

@@ -45,9 +45,14 @@ def _grid_of_cases(config) -> list:
     else:
         cfg = SMALL
     # backend-major order: consecutive cases share one backend instance (see _cache)
-    return [pytest.param(v, m, n, s, id=f"{v}-{m}-N{n}-{s}")
-            for v in VARIANTS for m in cfg["metrics"] for n in cfg["sites"] for s in cfg["sizes"]
-            if variant_metrics(v) is None or m in variant_metrics(v)]
+    return [
+        pytest.param(v, m, n, s, id=f"{v}-{m}-N{n}-{s}")
+        for v in VARIANTS
+        for m in cfg["metrics"]
+        for n in cfg["sites"]
+        for s in cfg["sizes"]
+        if variant_metrics(v) is None or m in variant_metrics(v)
+    ]
 
 
 def pytest_generate_tests(metafunc):
@@ -87,10 +92,18 @@ def _reference(metric_name, n, size):
 
 def test_bench_label(benchmark, backend, variant, metric, n_elements, size):
     sites, scales, angles, metric_obj, grid = _problem(metric, n_elements, size)
-    backend.label(sites, angles=angles, scales=scales, metric=metric_obj, grid=grid)  # warm-up: kernel builds, buffers
+    backend.label(
+        sites, angles=angles, scales=scales, metric=metric_obj, grid=grid
+    )  # warm-up: kernel builds, buffers
     benchmark.group = f"label {metric} N={n_elements} {size}²"
-    benchmark.extra_info.update(kind="label", backend=variant, metric=metric, n_elements=n_elements,
-                                size=size, device=backend.device())
+    benchmark.extra_info.update(
+        kind="label",
+        backend=variant,
+        metric=metric,
+        n_elements=n_elements,
+        size=size,
+        device=backend.device(),
+    )
     labels = benchmark(backend.label, sites, angles=angles, scales=scales, metric=metric_obj, grid=grid)
     assert labels.shape == (size, size) and labels.dtype == np.int32
     assert labels.min() >= 0 and labels.max() < n_elements
@@ -103,11 +116,19 @@ def test_bench_lloyd_step(benchmark, backend, variant, metric, n_elements, size)
     sites, scales, angles, metric_obj, grid = _problem(metric, n_elements, size)
     _step(backend, sites, scales, angles, metric_obj, grid)  # warm-up
     benchmark.group = f"lloyd-step {metric} N={n_elements} {size}²"
-    benchmark.extra_info.update(kind="lloyd-step", backend=variant, metric=metric, n_elements=n_elements,
-                                size=size, device=backend.device())
+    benchmark.extra_info.update(
+        kind="lloyd-step",
+        backend=variant,
+        metric=metric,
+        n_elements=n_elements,
+        size=size,
+        device=backend.device(),
+    )
     mom, moved = benchmark(_step, backend, sites, scales, angles, metric_obj, grid)
     assert int(mom.count.sum()) == size * size  # every pixel belongs to exactly one cell
     assert np.isfinite(moved).all() and (moved >= 0).all() and (moved <= size).all()
     _, ref = _step(NumpyBackend(), sites, scales, angles, metric_obj, grid)
     shift = np.hypot(*(moved - ref).T)
-    assert float(np.mean(shift)) < 0.1, f"{variant} {metric}: centroids {np.mean(shift):.3f} px off numpy on average"
+    assert float(np.mean(shift)) < 0.1, (
+        f"{variant} {metric}: centroids {np.mean(shift):.3f} px off numpy on average"
+    )

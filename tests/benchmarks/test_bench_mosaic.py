@@ -34,10 +34,16 @@ def test_bench_mosaic_2000_tiles_512(benchmark, warm_ocl, edges):
     ocl = warm_ocl
     benchmark.group = "mosaic, 2000 tiles, 512x512 photograph"
     benchmark.extra_info.update(backend="opencl", device=ocl.device(), method=DEFAULT_METHOD, walls=edges)
-    m = benchmark.pedantic(make_mosaic, args=(SCENE, ocl), kwargs=dict(n_elements=2000, edges=edges),
-                           rounds=1, iterations=1)
-    benchmark.extra_info.update(coverage=m.coverage, colour_error=m.colour_error, straddling=m.straddling,
-                                placed=m.placed, seconds=m.method_seconds)
+    m = benchmark.pedantic(
+        make_mosaic, args=(SCENE, ocl), kwargs=dict(n_elements=2000, edges=edges), rounds=1, iterations=1
+    )
+    benchmark.extra_info.update(
+        coverage=m.coverage,
+        colour_error=m.colour_error,
+        straddling=m.straddling,
+        placed=m.placed,
+        seconds=m.method_seconds,
+    )
     assert (m.width, m.height) == (512, 512)
     assert m.placed >= 1950 and m.overlap < 1e-4  # the suite's bar for "no overlap": < 0.01 %
     assert m.straddling == 0.0 if edges else m.straddling > 0.0
