@@ -32,6 +32,7 @@ import os
 import platform
 import sys
 import tempfile
+import time
 import uuid
 from collections import deque
 from contextlib import contextmanager
@@ -169,9 +170,10 @@ def run_spec(spec, expected: dict):
 class DaskExecutor:
     """Runs specs on the workers of a ``distributed.Client`` (see the module docstring)."""
 
-    def __init__(self, client, exclusive: bool = False):
+    def __init__(self, client, exclusive: bool = False, worker_wait_s: float = WORKER_WAIT_S):
         self.client = client
         self.exclusive = exclusive
+        self.worker_wait_s = worker_wait_s  # how long the sweep waits for a worker when none is left
         self.slots: dict[str, int] = {}  # host -> most worker processes seen on it
 
     def hosts(self) -> dict[str, int]:
@@ -223,6 +225,20 @@ class DaskExecutor:
             if pending and not self.lost():
                 self.client.cancel(list(pending))
 
+    def check_workers_left(self) -> None:
+        """RunAborted once the cluster has had no worker for WORKER_WAIT_S: the runs left
+        would wait for ever."""
+        if self.client.scheduler_info()["workers"]:
+            self._no_worker_since = None
+            return
+        now = time.monotonic()
+        self._no_worker_since = getattr(self, "_no_worker_since", None) or now
+        if now - self._no_worker_since > self.worker_wait_s:
+            raise RunAborted(
+                f"every Dask worker of the cluster at {self.address} is gone (none for "
+                f"{self.worker_wait_s:g} s; Dask's log: {log_file()})"
+            )
+
     def lost(self) -> bool:
         """Whether the scheduler is gone (the client no longer runs, or cannot reach it)."""
         if self.client.status != "running":
@@ -252,10 +268,9 @@ class DaskExecutor:
             if on_start is not None:  # the oldest run not finished: most likely one in hand
                 on_start(next(iter(pending.values()))[1])
             try:
-                done, _ = wait(
-                    list(pending), timeout=POLL_S if self.exclusive else None, return_when="FIRST_COMPLETED"
-                )
+                done, _ = wait(list(pending), timeout=POLL_S, return_when="FIRST_COMPLETED")
             except TimeoutError:
+                self.check_workers_left()
                 continue
             for future in done:
                 i, spec, _ = pending.pop(future)

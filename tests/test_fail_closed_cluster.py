@@ -91,3 +91,41 @@ def test_a_local_cluster_that_cannot_start_is_one_line(tmp_path, monkeypatch, ca
     err = capsys.readouterr().err.strip().splitlines()
     assert code == 1 and len(err) == 1, err
     assert "could not start a local Dask cluster of 2 workers (OSError: no more processes" in err[0]
+
+
+@pytest.mark.slow
+def test_every_worker_gone_is_one_outcome(tmp_path):
+    import threading
+
+    from distributed import Client
+
+    from compact_distributions.bench import table2
+    from compact_distributions.bench.cluster import DaskExecutor
+    from compact_distributions.bench.sweep import run_sweep
+    from compact_distributions.cvt.errors import RunAborted
+
+    scheduler, address = start_scheduler(tmp_path)
+    workers = None
+    try:
+        workers = start_workers(address, tmp_path, 1)
+        specs = table2.problem_set(True, 2, ["ours", "hu2016", "smith2005"], ["numpy"], ["square"])
+        raw = tmp_path / "out" / "raw" / "table2-quick"
+
+        def kill_workers_once_runs_are_stored():
+            deadline = time.monotonic() + 120
+            while len(list(raw.glob("*.json"))) < 1 and time.monotonic() < deadline:
+                time.sleep(0.1)
+            workers.kill()
+
+        killer = threading.Thread(target=kill_workers_once_runs_are_stored)
+        killer.start()
+        with Client(address, timeout=10) as client, pytest.raises(RunAborted) as err:
+            run_sweep(specs, tmp_path / "out", quiet=True, executor=DaskExecutor(client, worker_wait_s=3))
+        killer.join()
+    finally:
+        if workers is not None:
+            stop(workers)
+        stop(scheduler)
+    text = str(err.value)
+    assert "every Dask worker of the cluster at" in text and "none for 3 s" in text
+    assert f"{len(list(raw.glob('*.json')))} of {len(specs)} runs are stored" in text
