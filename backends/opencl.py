@@ -177,6 +177,7 @@ class OpenCLBackend(Backend):
         cell_factor: float = 1.0,
         local_size: tuple[int, int] | None = None,
         block: int | None = None,
+        seed: bool = True,
     ):
         cl = self._cl = _import_pyopencl()
         self._device = choose_device(cl, device)
@@ -198,6 +199,9 @@ class OpenCLBackend(Backend):
         self._buffers: dict[str, object] = {}
         self._mask_source = None  # the mask array last uploaded (grids are immutable)
         self._mask_pixels = 0
+        self.seed = bool(seed)
+        self._labels_buf = None  # the buffer the last labels went to, and their (w, h)
+        self._labels_raster = None
 
     # ------------------------------------------------------------------ device
     @classmethod
@@ -217,6 +221,7 @@ class OpenCLBackend(Backend):
         self._buffers.clear()
         self._programs.clear()
         self._mask_source = None
+        self._labels_buf = self._labels_raster = None
         self._queue = self._context = None
 
     # ---------------------------------------------------------------- programs
@@ -359,8 +364,16 @@ class OpenCLBackend(Backend):
         reach_buf = self._upload("cell_reach", cell_reach.astype(np.float32))
         records_buf = self._upload("records", records[order])
         index_buf = self._upload("site_index", order.astype(np.int32))
+        rank = np.empty(n, dtype=np.int32)
+        rank[order] = np.arange(n, dtype=np.int32)
+        rank_buf = self._upload("site_rank", rank)
         mask_buf = self._buffer("mask", 4)
+        # the last call's labels seed the block search when they are of this raster
+        # (seeds only speed the search: any index below n gives the same labels)
+        seed = self._labels_raster == (w, h)
         labels_buf = self._buffer("labels", 4 * w * h)
+        seed = seed and labels_buf is self._labels_buf
+        self._labels_buf, self._labels_raster = labels_buf, (w, h)
         slack = 1e-3 + 4 * max(w, h) * 2.0**-24  # px: float32 rounding of far cell edges
         label_kernel.set_args(
             np.int32(w),
@@ -377,6 +390,9 @@ class OpenCLBackend(Backend):
             mask_buf,
             np.int32(use_mask),
             labels_buf,
+            rank_buf,
+            np.int32(n),
+            np.int32(seed and self.seed),
         )
         local = self.local_size
         if self.block > 0:

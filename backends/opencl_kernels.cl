@@ -67,8 +67,11 @@ __kernel void label_pixels(const int width, const int height,
                            __global const float *records,
                            __global const int *site_index,
                            __global const uchar *mask, const int use_mask,
-                           __global int *labels)
+                           __global int *labels,
+                           __global const int *site_rank, const int n, const int seed)
 {
+    /* site_rank, n, seed: label_blocks' seeds (not used here: one pixel's search is
+       already short, and a GPU runs it one lane per pixel) */
     const int j = get_global_id(0);
     const int i = get_global_id(1);
     if (j >= width || i >= height)
@@ -150,12 +153,54 @@ __kernel void label_pixels(const int width, const int height,
 }
 
 /* The same search for CPUs: one work-item per BW x BH block of pixels.  Every pixel of
-   the block visits the same cells (those under the block, then rings around them), so
-   the innermost loop runs over the block's pixels for one site with a fixed trip count
-   and no dependence between iterations: the compiler vectorises it (a per-pixel loop
-   over sites, as in label_pixels, is a serial argmin that CPUs run one lane wide).
+   the block visits the same sites, so the innermost loop runs over the block's pixels for
+   one site with a fixed trip count and no dependence between iterations: the compiler
+   vectorises it (a per-pixel loop over sites, as in label_pixels, is a serial argmin that
+   CPUs run one lane wide).
+
+   The search is the ring search above, with two cuts that leave the result unchanged
+   (the nearest site under (d, index) does not depend on the order sites are tried, and
+   a site is skipped only where the bound proves it cannot win or tie any pixel):
+   - seeds: the sites that owned the block's four corner pixels in the previous call
+     (the `labels` buffer still holds them; `seed` = 1 when they are labels of these
+     sites) are tried first, so the bound is tight from the start; a Lloyd step moves
+     sites little, and those sites are usually the owners again;
+   - every site is tested on its own against the block's box (its distance to the box
+     of pixel centres against its cell's reach times the largest best d of the block),
+     not only its cell.
    The block stops after the first ring at which every pixel inside the region is done
    by the bound above. */
+
+/* Try one site on every pixel of the block (the vectorised loop). */
+#define TRY_SITE(REC, IDX)                                                              \
+    for (int yy = 0; yy < BH; ++yy) {                                                   \
+        const float py = (float)(y0 + yy) + 0.5f;                                       \
+        for (int xx = 0; xx < BW; ++xx) {                                               \
+            const float px = (float)(x0 + xx) + 0.5f;                                   \
+            const float d = site_distance((REC), px, py);                               \
+            const float b = best[yy][xx];                                               \
+            const int better = d < b || (d == b && (IDX) < best_idx[yy][xx]);           \
+            best[yy][xx] = better ? d : b;                                              \
+            best_idx[yy][xx] = better ? (IDX) : best_idx[yy][xx];                       \
+        }                                                                               \
+    }
+
+/* The largest best d over the block's live pixels, as a distance (sqrt for ellipses). */
+inline float worst_of(const float best[BH][BW], const int live[BH][BW])
+{
+    float worst = 0.0f;
+    for (int yy = 0; yy < BH; ++yy)
+        for (int xx = 0; xx < BW; ++xx) {
+            const float b = live[yy][xx] ? best[yy][xx] : 0.0f;
+            worst = b > worst ? b : worst;
+        }
+#ifdef METRIC_ELLIPSE
+    return sqrt(worst);
+#else
+    return worst > 0.0f ? worst : 0.0f;
+#endif
+}
+
 __kernel void label_blocks(const int width, const int height,
                            const int ncx, const int ncy, const float cell,
                            const float reach, const float slack,
@@ -164,7 +209,8 @@ __kernel void label_blocks(const int width, const int height,
                            __global const float *records,
                            __global const int *site_index,
                            __global const uchar *mask, const int use_mask,
-                           __global int *labels)
+                           __global int *labels,
+                           __global const int *site_rank, const int n, const int seed)
 {
     const int x0 = get_global_id(0) * BW;
     const int y0 = get_global_id(1) * BH;
@@ -206,76 +252,95 @@ __kernel void label_blocks(const int width, const int height,
             best_idx[yy][xx] = 0x7fffffff;
         }
 
-    /* the box of the block's pixel centres, and the largest best d over its live pixels
-       after the last ring (a cell farther than its reach times that cannot win) */
+    /* the box of the block's pixel centres */
     const float box_x0 = (float)x0 + 0.5f, box_x1 = (float)(x0 + xn - 1) + 0.5f;
     const float box_y0 = (float)y0 + 0.5f, box_y1 = (float)(y0 + yn - 1) + 0.5f;
-    float worst_dist = INFINITY;
 
-    for (int r = 0;; ++r) {
+    /* 1. the previous owners of the corners (any valid index is a safe seed) */
+    int seeds[4] = {-1, -1, -1, -1};
+    int tried = 0;
+    if (seed) {
+        const int corner[4] = {y0 * width + x0, y0 * width + x0 + xn - 1,
+                               (y0 + yn - 1) * width + x0, (y0 + yn - 1) * width + x0 + xn - 1};
+        for (int q = 0; q < 4; ++q) {
+            const int l = labels[corner[q]];
+            int fresh = l >= 0 && l < n;
+            for (int p = 0; p < q; ++p)
+                fresh = fresh && seeds[p] != l;
+            if (fresh) {
+                seeds[q] = l;
+                tried = 1;
+                __global const float *rec = records + site_rank[l] * STRIDE;
+                TRY_SITE(rec, l)
+            }
+        }
+    }
+    /* 2. without seeds: every site of the rings of cells around the block, until one
+       ring held a site (then every pixel has a finite best) */
+    int rings = -1; /* rings 0..rings are searched whole */
+    for (int r = 0; !tried; ++r) {
         const int bx0 = cx0 - r, bx1 = cx1 + r, by0 = cy0 - r, by1 = cy1 + r;
-        const int inner = bx1 - bx0; /* step from the left to the right column */
-        const int gy_end = by1 < ncy - 1 ? by1 : ncy - 1;
-        for (int gy = by0 > 0 ? by0 : 0; gy <= gy_end; ++gy) {
+        const int inner = bx1 - bx0;
+        for (int gy = by0 > 0 ? by0 : 0; gy <= (by1 < ncy - 1 ? by1 : ncy - 1); ++gy) {
             const int step = (r == 0 || gy == by0 || gy == by1) ? 1 : inner;
-            const float top = gy * cell, bottom = (gy + 1) * cell;
-            const float gapy = box_y1 < top ? top - box_y1 : (box_y0 > bottom ? box_y0 - bottom : 0.0f);
             for (int gx = bx0; gx <= bx1; gx += step) {
                 if (gx < 0 || gx >= ncx)
                     continue;
                 const int c = gy * ncx + gx;
-                const float left = gx * cell, right = (gx + 1) * cell;
-                const float gapx = box_x1 < left ? left - box_x1 : (box_x0 > right ? box_x0 - right : 0.0f);
-                const float cell_lim = cell_reach[c] * worst_dist + slack;
-                if (gapx * gapx + gapy * gapy > cell_lim * cell_lim)
-                    continue;
                 const int s1 = cell_start[c + 1];
                 for (int s = cell_start[c]; s < s1; ++s) {
                     __global const float *rec = records + s * STRIDE;
                     const int idx = site_index[s];
-                    for (int yy = 0; yy < BH; ++yy) {
-                        const float py = (float)(y0 + yy) + 0.5f;
-                        for (int xx = 0; xx < BW; ++xx) {
-                            const float px = (float)(x0 + xx) + 0.5f;
-                            const float d = site_distance(rec, px, py);
-                            const float b = best[yy][xx];
-                            const int better = d < b || (d == b && idx < best_idx[yy][xx]);
-                            best[yy][xx] = better ? d : b;
-                            best_idx[yy][xx] = better ? idx : best_idx[yy][xx];
-                        }
-                    }
+                    TRY_SITE(rec, idx)
+                    tried = 1;
                 }
             }
         }
-        /* done when, for every live pixel, the pixel's distance to the edge of the
-           searched block (edges on the raster border excluded) exceeds its reach */
-        const float left = bx0 > 0 ? bx0 * cell : -INFINITY;
-        const float right = bx1 < ncx - 1 ? (bx1 + 1) * cell : INFINITY;
-        const float top = by0 > 0 ? by0 * cell : -INFINITY;
-        const float bottom = by1 < ncy - 1 ? (by1 + 1) * cell : INFINITY;
-        if (left == -INFINITY && right == INFINITY && top == -INFINITY && bottom == INFINITY)
-            break; /* the whole grid has been searched */
-        int pending = 0;
-        worst_dist = 0.0f;
-        for (int yy = 0; yy < BH; ++yy) {
-            const float py = (float)(y0 + yy) + 0.5f;
-            for (int xx = 0; xx < BW; ++xx) {
-                const float px = (float)(x0 + xx) + 0.5f;
-                const float b = best[yy][xx];
-#ifdef METRIC_ELLIPSE
-                const float dist = sqrt(b);
-#else
-                const float dist = b > 0.0f ? b : 0.0f;
-#endif
-                const float lim = reach * dist + slack;
-                const int done = px - left > lim && right - px > lim
-                                 && py - top > lim && bottom - py > lim;
-                pending |= live[yy][xx] && !done;
-                worst_dist = live[yy][xx] && dist > worst_dist ? dist : worst_dist;
+        rings = r;
+        if (bx0 <= 0 && by0 <= 0 && bx1 >= ncx - 1 && by1 >= ncy - 1)
+            break; /* the whole grid */
+    }
+    /* 3. every site that can win or tie at a pixel x lies within reach * d(x) <=
+       reach * worst of it, so within `ext` of the box: the cells under the box grown by
+       `ext` hold them all.  Each cell, then each site, is tested against the block's
+       current worst best (which only falls as sites are tried). */
+    float worst_dist = worst_of(best, live);
+    const float ext = reach * worst_dist + 2.0f * slack;
+    int gx0 = (int)floor((box_x0 - ext) / cell), gx1 = (int)floor((box_x1 + ext) / cell);
+    int gy0 = (int)floor((box_y0 - ext) / cell), gy1 = (int)floor((box_y1 + ext) / cell);
+    gx0 = gx0 > 0 ? gx0 : 0;
+    gy0 = gy0 > 0 ? gy0 : 0;
+    gx1 = gx1 < ncx - 1 ? gx1 : ncx - 1;
+    gy1 = gy1 < ncy - 1 ? gy1 : ncy - 1;
+    for (int gy = gy0; gy <= gy1; ++gy) {
+        const float top = gy * cell, bottom = (gy + 1) * cell;
+        const float gapy = box_y1 < top ? top - box_y1 : (box_y0 > bottom ? box_y0 - bottom : 0.0f);
+        const int in_rows = gy >= cy0 - rings && gy <= cy1 + rings;
+        for (int gx = gx0; gx <= gx1; ++gx) {
+            if (in_rows && gx >= cx0 - rings && gx <= cx1 + rings)
+                continue; /* searched whole in step 2 */
+            const int c = gy * ncx + gx;
+            const float left = gx * cell, right = (gx + 1) * cell;
+            const float gapx = box_x1 < left ? left - box_x1 : (box_x0 > right ? box_x0 - right : 0.0f);
+            const float cell_lim = cell_reach[c] * worst_dist + slack;
+            if (gapx * gapx + gapy * gapy > cell_lim * cell_lim)
+                continue;
+            const int s1 = cell_start[c + 1];
+            for (int s = cell_start[c]; s < s1; ++s) {
+                __global const float *rec = records + s * STRIDE;
+                const int idx = site_index[s];
+                if (idx == seeds[0] || idx == seeds[1] || idx == seeds[2] || idx == seeds[3])
+                    continue; /* tried in step 1 */
+                const float sx = rec[0], sy = rec[1];
+                const float gx_s = sx < box_x0 ? box_x0 - sx : (sx > box_x1 ? sx - box_x1 : 0.0f);
+                const float gy_s = sy < box_y0 ? box_y0 - sy : (sy > box_y1 ? sy - box_y1 : 0.0f);
+                const float lim = cell_reach[c] * worst_dist + slack;
+                if (gx_s * gx_s + gy_s * gy_s > lim * lim)
+                    continue;
+                TRY_SITE(rec, idx)
+                worst_dist = worst_of(best, live);
             }
         }
-        if (!pending)
-            break;
     }
     for (int yy = 0; yy < yn; ++yy)
         for (int xx = 0; xx < xn; ++xx)
