@@ -105,6 +105,55 @@ def save_figure(fig, path) -> None:
         fig.savefig(tmp, dpi=fig.dpi)
 
 
+def sample_sd(frame, column: str) -> float:
+    """Sample standard deviation over seeds (NaN with a single seed)."""
+    import numpy as np
+
+    return float(frame[column].astype(float).std(ddof=1)) if len(frame) > 1 else np.nan
+
+
+def fail_closed(df, judged: tuple[str, ...]):
+    """Fail closed before a sweep's rows are aggregated: a run whose figures ``judged``
+    are missing or not finite is a failed run (with the reason), never part of a mean."""
+    import numpy as np
+    import pandas as pd
+
+    ok = df["status"] == "ok"
+    for column in judged:
+        values = (
+            pd.to_numeric(df[column], errors="coerce") if column in df else pd.Series(np.nan, index=df.index)
+        )
+        broken = ok & ~np.isfinite(values)
+        df.loc[broken, "status"] = "failed"
+        df.loc[broken, "reason"] = f"{column} is not a finite number"
+        ok &= ~broken
+    return df
+
+
+def group_status(group, ok) -> dict:
+    """The status columns of one aggregated line: ok, partial (some seeds failed, the
+    reasons joined) or the first run's status, the device and the hosts."""
+    if not len(ok):
+        first = group.iloc[0]
+        return {"status": str(first["status"]), "reason": str(first["reason"]), "device": ""}
+    return {
+        "status": "ok" if len(ok) == len(group) else "partial",
+        "reason": "; ".join(sorted(set(group.loc[group["status"] != "ok", "reason"].astype(str)))),
+        "device": str(ok.iloc[0]["device"]),
+        "hosts": hosts_of(ok),
+    }
+
+
+def with_columns(table, columns: list[str]):
+    """``table`` with exactly ``columns`` in that order (missing ones NaN)."""
+    import numpy as np
+
+    for c in columns:
+        if c not in table:
+            table[c] = np.nan
+    return table[columns]
+
+
 def hosts_of(rows) -> str:
     """The hosts a group of rows ran on, comma-separated ('' where rows do not say)."""
     return ", ".join(sorted(set(rows["host"].dropna().astype(str)))) if "host" in rows else ""
@@ -147,6 +196,10 @@ def fmt_seconds(s) -> str:
 
 
 __all__ = [
+    "sample_sd",
+    "fail_closed",
+    "group_status",
+    "with_columns",
     "git_commit",
     "provenance",
     "header_markdown",

@@ -149,30 +149,18 @@ def problem_set(
     return specs
 
 
-def _sd(frame, column: str) -> float:
-    """Sample standard deviation over seeds (NaN with a single seed)."""
-    return float(frame[column].std(ddof=1)) if len(frame) > 1 else np.nan
-
-
 def aggregate(rows: list[dict]):
     """One line per (method, backend, element): mean ± sd over the seeds that ran."""
     import pandas as pd
 
-    from .report import host_slots_of, hosts_of
+    from .report import fail_closed, group_status, host_slots_of, sample_sd, with_columns
 
     df = pd.DataFrame(rows)
     df["base"] = df["method"]
     if "label" in df:  # a run with another tile budget or option is a line of its own
         df["method"] = df["label"].fillna(df["method"])
     out = []
-    # fail closed: a run whose coverage or overlap is missing or not finite is a failed run
-    judged = [
-        pd.to_numeric(df[c], errors="coerce") if c in df else pd.Series(np.nan, index=df.index)
-        for c in ("coverage", "overlap")
-    ]
-    broken = (df["status"] == "ok") & ~(np.isfinite(judged[0]) & np.isfinite(judged[1]))
-    df.loc[broken, "status"] = "failed"
-    df.loc[broken, "reason"] = "coverage or overlap is not a finite number"
+    fail_closed(df, ("coverage", "overlap"))
     for (method, backend, element), g in df.groupby(["method", "backend", "element"], sort=False):
         ok = g[g["status"] == "ok"]
         first = g.iloc[0]
@@ -199,11 +187,11 @@ def aggregate(rows: list[dict]):
         if len(ok):
             rec.update(
                 coverage_mean=float(ok["coverage"].mean()),
-                coverage_sd=_sd(ok, "coverage"),
+                coverage_sd=sample_sd(ok, "coverage"),
                 overlap_mean=float(ok["overlap"].mean()),
-                overlap_sd=_sd(ok, "overlap"),
+                overlap_sd=sample_sd(ok, "overlap"),
                 method_seconds_mean=float(ok["method_seconds"].mean()),
-                method_seconds_sd=_sd(ok, "method_seconds"),
+                method_seconds_sd=sample_sd(ok, "method_seconds"),
                 lloyd_seconds_mean=float(ok["lloyd_seconds"].mean()),
                 ms_per_iteration=float(ok["ms_per_iteration"].median()),
                 placed_mean=float(ok["placed"].mean()),
@@ -213,20 +201,11 @@ def aggregate(rows: list[dict]):
                     if "coverage_at_1pct_overlap" in ok
                     else np.nan
                 ),
-                status="ok" if len(ok) == len(g) else "partial",
-                reason="; ".join(sorted(set(g.loc[g["status"] != "ok", "reason"].astype(str)))),
-                device=str(ok.iloc[0]["device"]),
-                hosts=hosts_of(ok),
                 host_slots=host_slots_of(ok),
             )
-        else:
-            rec.update(status=str(first["status"]), reason=str(first["reason"]), device="")
+        rec.update(group_status(g, ok))
         out.append(rec)
-    table = pd.DataFrame(out)
-    for c in COLUMNS:
-        if c not in table:
-            table[c] = np.nan
-    return table[COLUMNS]
+    return with_columns(pd.DataFrame(out), COLUMNS)
 
 
 def _record(label: str):

@@ -33,8 +33,6 @@ from dataclasses import dataclass
 from pathlib import Path
 from types import SimpleNamespace
 
-import numpy as np
-
 from compact_distributions.backends import REFERENCE as REFERENCE_BACKEND
 from compact_distributions.cvt.evaluate import MEASURES
 from compact_distributions.cvt.registry import get_method, method_names
@@ -112,10 +110,9 @@ def aggregate(rows: list[dict]):
     seeds that ran."""
     import pandas as pd
 
-    from .report import hosts_of
-    from .table2 import _sd
+    from .report import fail_closed, group_status, sample_sd, with_columns
 
-    df = pd.DataFrame(rows)
+    df = fail_closed(pd.DataFrame(rows), ("coverage", "overlap"))
     out = []
     for (scene, method, backend, element), g in df.groupby(
         ["scene", "method", "backend", "element"], sort=False
@@ -138,23 +135,14 @@ def aggregate(rows: list[dict]):
             for m in MEASURES:
                 values = ok[m].astype(float)
                 rec[f"{m}_mean"] = float(values.mean())
-                rec[f"{m}_sd"] = _sd(ok.assign(**{m: values}), m)
+                rec[f"{m}_sd"] = sample_sd(ok.assign(**{m: values}), m)
             rec.update(
                 n_elements=int(ok["n_elements"].iloc[0]),
                 method_seconds_mean=float(ok["method_seconds"].mean()),
-                status="ok" if len(ok) == len(g) else "partial",
-                reason="; ".join(sorted(set(g.loc[g["status"] != "ok", "reason"].astype(str)))),
-                device=str(ok.iloc[0]["device"]),
-                hosts=hosts_of(ok),
             )
-        else:
-            rec.update(status=str(first["status"]), reason=str(first["reason"]), device="")
+        rec.update(group_status(g, ok))
         out.append(rec)
-    table = pd.DataFrame(out)
-    for c in COLUMNS:
-        if c not in table:
-            table[c] = np.nan
-    return table[COLUMNS]
+    return with_columns(pd.DataFrame(out), COLUMNS)
 
 
 def _fmt(measure: str, mean, sd) -> str:

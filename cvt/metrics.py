@@ -74,6 +74,8 @@ class Shape:
     distance : str
         The distance transform that starts the fit's search in its cells:
         ``chessboard``, ``scaled`` (Euclidean with the axes scaled by β) or ``euclidean``.
+    vertices : tuple of (x, y) or None
+        The unit ball of any other convex polygon (the user's), counter-clockwise.
     """
 
     name: str
@@ -86,6 +88,7 @@ class Shape:
     sides: int = 0
     phase: float = 0.0
     distance: str = "euclidean"
+    vertices: tuple[tuple[float, float], ...] | None = None  # any convex polygon's unit ball
 
 
 _HEX = math.pi / math.sqrt(12.0)  # circles' densest packing (hexagonal)
@@ -252,15 +255,14 @@ def polygon_metric(name: str, shape: Shape) -> Metric:
 
 def shape_vertices(shape: Shape) -> np.ndarray:
     """(K, 2) counter-clockwise vertices of a polygonal record's unit ball."""
-    if shape.name in _USER_VERTICES:
-        return _USER_VERTICES[shape.name]
+    if shape.vertices is not None:
+        return np.array(shape.vertices, dtype=np.float64)
     t = np.radians(shape.phase + 360.0 * np.arange(shape.sides) / shape.sides)
     return np.stack([np.cos(t), np.sin(t)], axis=1)
 
 
 # ------------------------------------------------------------------ the user's polygon
 POLYGON_PREFIX = "polygon:"
-_USER_VERTICES: dict[str, np.ndarray] = {}
 
 
 def convex_unit_ball(points, name: str = "polygon") -> np.ndarray:
@@ -310,8 +312,7 @@ def polygon_shape(name: str) -> Shape:
     path = name[len(POLYGON_PREFIX) :]
     vertices = convex_unit_ball(read_vertices(path), f"polygon {path}")
     k = len(vertices)
-    _USER_VERTICES[name] = vertices
-    shape = Shape(name, name, 1, math.pi, 1.0, sides=k)
+    shape = Shape(name, name, 1, math.pi, 1.0, sides=k, vertices=tuple(map(tuple, vertices.tolist())))
     SHAPES[name] = shape
     return shape
 

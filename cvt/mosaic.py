@@ -50,13 +50,12 @@ from .image_fields import (
     picture_fields,
     strong_edges,
 )
-from .methods import Method
 from .metrics import make_metric
 from .moments import moments_from_labels
 from .pixels import pixel_index
 from .placement import parse_gap
 from .problem import Grid, Problem, parse_size
-from .registry import get_method
+from .registry import resolve_method
 from .render import draw_elements, ellipse_parameters, parse_colour, svg_lines
 from .resources import mosaic_estimate
 from .shapes import ELEMENT_SHAPES, element_ball, resolve_shapes, shape_record, unit_outline
@@ -383,17 +382,6 @@ class MosaicResult:
 
 
 # --------------------------------------------------------------------------- the API
-
-
-def resolve_method(method) -> Method:
-    """The method record of ``method``: a registered name (:mod:`cvt.registry`: ours, its
-    variants, the baselines, plug-ins), a record, or a plain callable with the method
-    signature (then a record named after it, with no options)."""
-    if isinstance(method, str) or isinstance(method, Method):
-        return get_method(method)
-    if callable(method):
-        return Method(getattr(method, "__name__", "method"), method)
-    raise InputError(f"method must be a method name, a method record or a callable, got {method!r}")
 
 
 def make_mosaic(

@@ -88,6 +88,17 @@ def get_method(name) -> Method:
     return found[one_of(name, "method", list(found))]
 
 
+def resolve_method(method) -> Method:
+    """The method record of ``method``: a registered name (ours, its variants, the
+    baselines, plug-ins), a record, or a plain callable with the method signature (then a
+    record named after it, with no options, as an entry point's callable)."""
+    if isinstance(method, (str, Method)):
+        return get_method(method)
+    if callable(method):
+        return records_of(method, getattr(method, "__name__", "method"))[0]
+    raise InputError(f"method must be a method name, a method record or a callable, got {method!r}")
+
+
 def reload() -> None:
     """Forget what was found (after installing a distribution in a running process)."""
     _load.cache_clear()
@@ -101,5 +112,6 @@ __all__ = [
     "unavailable_methods",
     "group_entry_points",
     "records_of",
+    "resolve_method",
     "reload",
 ]
