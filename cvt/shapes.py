@@ -32,13 +32,14 @@ PAPER_SHAPES = tuple(s.name for s in SHAPES.values() if s.metric in PAPER_METRIC
 CURVE_SEGMENTS = 128  # inscribed 128-gon: area within 0.04 % of the ellipse
 
 
-def shape_record(shape) -> Shape:
-    """The record of element ``shape`` (a name, ``polygon:FILE``, or a record)."""
+def shape_record(shape, name: str = "element") -> Shape:
+    """The record of element ``shape`` (a name, ``polygon:FILE``, or a record); an
+    unknown name is InputError naming ``name``."""
     if isinstance(shape, Shape):
         return shape
     if isinstance(shape, str) and shape.startswith(POLYGON_PREFIX):
         return polygon_shape(shape)
-    return SHAPES[one_of(shape, "element", list(SHAPES))]
+    return SHAPES[one_of(shape, name, list(SHAPES))]
 
 
 def packing_density(shape: str) -> float:
@@ -78,11 +79,7 @@ def resolve_shapes(
     whose unit ball it is; a metric's element is its own ball); neither means the element
     ``default``.  ``names`` name the two in messages (``--metric``, ``--element``)."""
     if element is not None:
-        element = (
-            shape_record(element).name
-            if not isinstance(element, str) or element in SHAPES or element.startswith(POLYGON_PREFIX)
-            else one_of(element, names[1], list(SHAPES))
-        )
+        element = shape_record(element, names[1]).name
     if metric is not None and not str(metric).startswith(POLYGON_PREFIX):
         one_of(metric, names[0], [*METRIC_NAMES, *(s.metric for s in SHAPES.values())])
     if metric is None and element is None:
