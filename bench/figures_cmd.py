@@ -4,6 +4,8 @@ fig03_metrics.png   the six metrics' CVTs side by side, cells coloured (paper Fi
 fig14_elements.png  squares, rectangles, ellipses, triangles, elements of varying size
                     (a radial density) and of varying direction (a circular field)
                     (paper Figure 14 a-f), each panel captioned with its coverage
+fig14_more_shapes.png  beyond the paper's shapes: hexagons and octagons under a radial
+                    density and a circular field (as Figure 14 e-f)
 fig15_regions.png   elements in regions that are not rectangles: a star and a ring
                     (paper Figure 15)
 fig18_*.png, fig19_*.png  mosaics of the sample pictures without and with the direction
@@ -167,6 +169,22 @@ def figure_elements(backend, st: Settings):
     return panel_grid(panels, caps, 3, title)
 
 
+def figure_more_shapes(backend, st: Settings):
+    """Hexagons and octagons, each with the radial density and the circular field."""
+    runs = [
+        (f"({chr(97 + k)}) {shape}s: radial density, circular field", shape)
+        for k, shape in enumerate(("hexagon", "octagon"))
+    ]
+    panels, caps = [], []
+    for cap, shape in runs:
+        problem = panel_problem(st, shape, density=radial_density(st.size), field="circular")
+        img, ev, _ = _elements_panel(problem, backend, st)
+        panels.append(img)
+        caps.append(f"{cap}: coverage {ev.coverage:.1%}")
+    title = f"Beyond the paper's shapes ({st.sites} sites, {st.iterations} iterations)"
+    return panel_grid(panels, caps, 2, title)
+
+
 def figure_regions(backend, st: Settings):
     runs = [
         ("(a) squares in a star", panel_problem(st, "linf", mask=star_mask(st.size))),
@@ -190,6 +208,7 @@ def figure_regions(backend, st: Settings):
 FIGURES = {
     "fig03_metrics.png": figure_metrics,
     "fig14_elements.png": figure_elements,
+    "fig14_more_shapes.png": figure_more_shapes,
     "fig15_regions.png": figure_regions,
 }
 
@@ -274,6 +293,7 @@ __all__ = [
     "panel_problem",
     "figure_metrics",
     "figure_elements",
+    "figure_more_shapes",
     "figure_regions",
     "FIGURES",
     "FiguresRequest",

@@ -11,7 +11,9 @@ The problem set (also written into the report):
 * one row group per other element shape (rectangle β = 0.5, ellipse β = 0.5, triangle,
   circle) for our method on every available backend, each under the metric whose unit
   ball is that shape; variants of ours (``ours-fit``: the same cells, each element moved
-  inside its cell to grow it) on every shape on the reference backend.
+  inside its cell to grow it) on every shape on the reference backend;
+* beyond the paper's five shapes, the shapes a method's record names in
+  ``beyond_paper`` (``ours-compact``: hexagon, octagon), for that method only.
 
 Coverage and overlap are those of :func:`compact_distributions.cvt.evaluate.evaluate`; time is the
 whole method's wall time (``Distribution.method_seconds``: problem to placed elements,
@@ -98,7 +100,10 @@ def problem_set(
     cfg = QUICK if quick else FULL
     k = cfg["seeds"] if seeds is None else seeds
     suite = "table2-quick" if quick else "table2"
-    elements = elements or ELEMENTS
+    records = [get_method(m) for m in methods]
+    chosen = elements is not None
+    if not chosen:  # the paper's shapes, then those some method is also compared on
+        elements = list(dict.fromkeys([*ELEMENTS, *(s for rec in records for s in rec.beyond_paper)]))
     specs = []
 
     def add(method, backend, element, picture_first, options, curve=True):
@@ -120,11 +125,12 @@ def problem_set(
                 )
             )
 
-    records = [get_method(m) for m in methods]
     for element in elements:
         for rec in records:
-            if (rec.compared_on is not None and element not in rec.compared_on) or (
-                rec.elements is not None and element not in rec.elements
+            if (
+                (rec.compared_on is not None and element not in rec.compared_on)
+                or (rec.elements is not None and element not in rec.elements)
+                or (not chosen and element not in ELEMENTS and element not in rec.beyond_paper)
             ):
                 continue
             given = rec.parse_options(
@@ -337,6 +343,8 @@ def _problem_notes(methods: list[str]) -> list[str]:
             notes.append(f"{', '.join(names)}: on {text}")
     for r in records:
         shapes = "every element shape" if r.compared_on is None else ", ".join(r.compared_on)
+        if r.beyond_paper:
+            shapes += f" (by default the paper's five and {', '.join(r.beyond_paper)})"
         extra = (
             "; also "
             + "; ".join(

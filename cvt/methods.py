@@ -29,9 +29,10 @@ from .compaction import compact
 from .distribution import Distribution
 from .errors import InputError
 from .lloyd import LloydSetup, final_labels, lloyd
+from .metrics import SHAPES
 from .placement import element_for, fit_centres, parse_gap, place_elements
 from .problem import Problem
-from .shapes import element_polygons, packing_density
+from .shapes import element_polygons, packing_density, shape_record
 from .validate import whole_number
 
 # --------------------------------------------------------------------------- records
@@ -135,6 +136,9 @@ class Method:
         ``reference`` only.
     compared_on : tuple of str or None
         The element shapes Table 2 and the regression checks run it on (None: every shape).
+    beyond_paper : tuple of str
+        Shapes beyond the paper's five that Table 2 also runs it on by default (rows of
+        their own, without the paper's figures).
     sweep_variants : tuple of SweepVariant
         More option sets the sweeps run it with.
     tight : bool
@@ -156,6 +160,7 @@ class Method:
     elements: tuple[str, ...] | None = None
     sweep_backends: str = "reference"
     compared_on: tuple[str, ...] | None = ("square",)
+    beyond_paper: tuple[str, ...] = ()
     sweep_variants: tuple[SweepVariant, ...] = ()
     tight: bool = False
     mosaic_options: Mapping = field(default_factory=lambda: MappingProxyType({}))
@@ -314,7 +319,7 @@ def run_ours_compact(
     element: str | None = None,
     gap: float = 0.0,
     alternate: bool = False,
-    rounds: int = 4,
+    rounds: int | None = None,
     density_slack: float | None = DENSITY_CAP_SLACK,
     turn_to_field: bool = True,
 ) -> Distribution:
@@ -342,6 +347,8 @@ def run_ours_compact(
     shape, turn = element_for(problem.metric, element)
     check_alternate(shape, alternate)
     gap = parse_gap(gap)
+    if rounds is None:
+        rounds = shape_record(shape).compaction_rounds
     spacing = float(np.sqrt(problem.grid.pixel_count / problem.n_elements))
     if gap >= spacing:
         raise InputError(
@@ -480,14 +487,17 @@ OURS_COMPACT = Method(
         MethodOption(
             "rounds",
             int,
-            4,
-            "compaction rounds at most (0 to 1000; default 4)",
+            None,
+            "compaction rounds at most (0 to 1000; default: the element's own, "
+            + ", ".join(f"{s.name}s {s.compaction_rounds}" for s in SHAPES.values())
+            + ")",
             check=_rounds,
             tag="r",
             label="rounds={}",
         ),
     ),
     sweep_variants=(SweepVariant({"alternate": True}, ("triangle",), pictured=True),),
+    beyond_paper=("hexagon", "octagon"),
     # mosaics keep compaction without density caps and field turn: their measured coverage,
     # figures and tests predate them
     mosaic_options=MappingProxyType(

@@ -76,6 +76,10 @@ class Shape:
         ``chessboard``, ``scaled`` (Euclidean with the axes scaled by β) or ``euclidean``.
     vertices : tuple of (x, y) or None
         The unit ball of any other convex polygon (the user's), counter-clockwise.
+    compaction_rounds : int
+        How many rounds ``ours-compact`` compacts by default.  Hexagons start further
+        from their lattice than squares (fitted coverage 0.72 against 0.78, 1024²,
+        N = 4000) and gain about a point per two rounds after the fourth: they take 12.
     """
 
     name: str
@@ -89,6 +93,7 @@ class Shape:
     phase: float = 0.0
     distance: str = "euclidean"
     vertices: tuple[tuple[float, float], ...] | None = None  # any convex polygon's unit ball
+    compaction_rounds: int = 4
 
 
 _HEX = math.pi / math.sqrt(12.0)  # circles' densest packing (hexagonal)
@@ -103,7 +108,7 @@ SHAPES: dict[str, Shape] = {
         Shape("ellipse", "l2-axial", 2, math.pi, _HEX, curved=True, axial=True, distance="scaled"),
         Shape("triangle", "triangle", 3, math.pi / 3, 2.0 / 3.0),
         Shape("circle", "l2", 0, math.pi / 2, _HEX, curved=True),
-        Shape("hexagon", "hexagon", 6, math.pi / 3, 1.0, sides=6, phase=90.0),
+        Shape("hexagon", "hexagon", 6, math.pi / 3, 1.0, sides=6, phase=90.0, compaction_rounds=12),
         Shape(
             "octagon",
             "octagon",

@@ -12,8 +12,11 @@ reason the backend gives.
 
 from __future__ import annotations
 
+import json
+
 import numpy as np
 import pytest
+import shapely
 
 from compact_distributions.backends import REFERENCE, create_backend, variant_names, variant_status
 from compact_distributions.cvt.errors import InputError
@@ -79,6 +82,29 @@ KINDS = ["plain", "angles", "scales", "angles+scales+mask"]
 @pytest.mark.parametrize("kind", KINDS)
 def test_labels_match_the_reference(backend, reference, metric_name, kind):
     sites, angles, scales, metric, grid = case(metric_name, kind)
+    supported_or_skip(backend, metric, angles, scales)
+    got = backend.label(sites, angles=angles, scales=scales, metric=metric, grid=grid)
+    want = reference.label(sites, angles=angles, scales=scales, metric=metric, grid=grid)
+    assert_same_up_to_ties(got, want, sites, angles, scales, metric, grid, SLACK.get(backend.variant, 0.0))
+
+
+@pytest.fixture(scope="module")
+def users_polygon(tmp_path_factory):
+    """A generated irregular convex polygon, given as a user gives one: the hull of seeded
+    random points, written as a JSON list of vertices (``--element polygon:FILE``)."""
+    rng = np.random.default_rng(11)
+    ring = np.asarray(shapely.MultiPoint(rng.normal(size=(12, 2)) * [3.0, 1.7]).convex_hull.exterior.coords)
+    ring = ring[:-1]
+    assert len(ring) >= 5  # a polygon of its own, not a triangle or a square
+    path = tmp_path_factory.mktemp("polygon") / "hull.json"
+    path.write_text(json.dumps(ring.tolist()))
+    return f"polygon:{path}"
+
+
+@pytest.mark.parametrize("kind", KINDS)
+def test_labels_match_the_reference_on_a_users_polygon(backend, reference, users_polygon, kind):
+    sites, angles, scales, metric, grid = case(users_polygon, kind)
+    assert metric.kind == "polygon" and len(metric.normals) >= 5
     supported_or_skip(backend, metric, angles, scales)
     got = backend.label(sites, angles=angles, scales=scales, metric=metric, grid=grid)
     want = reference.label(sites, angles=angles, scales=scales, metric=metric, grid=grid)

@@ -329,6 +329,7 @@ def test_figures_quick(tmp_path, capsys):
     assert names == [
         "fig03_metrics.png",
         "fig14_elements.png",
+        "fig14_more_shapes.png",
         "fig15_regions.png",
         "fig18_field_leaf.png",
         "fig18_field_shapes.png",
