@@ -24,10 +24,12 @@ How one iteration runs
    polygon); ``exact`` mode evaluates d_i(x) per fragment from
    :func:`cvt.metrics.compile_sites` (the max over a polygon's K facets, or the quadratic
    form) and writes ``gl_FragDepth``.  A polygon's (N, K, 2) facets go to a storage
-   buffer; the vertex stage hands each site's K facets to its fragments as flat
-   varyings, or, where K exceeds what the varyings hold, each fragment reads them from
-   the buffer (measured several times slower on llvmpipe).  The depth attachment is 32-bit float (moderngl's own is
-   24-bit; see :func:`_depth32f_texture`) and holds linear distance times a power of two,
+   buffer, in the order of the pyramid's faces; the vertex stage hands each site's K
+   facets to its fragments as flat varyings, or, where K exceeds what the varyings hold,
+   the facets of the face drawn and of its two neighbours (exact up to the rasteriser's
+   rounding at the faces' shared edges; see the fragment shader).  The depth attachment
+   is 32-bit float (moderngl's own is 24-bit; see :func:`_depth32f_texture`) and holds
+   linear distance times a power of two,
    so float order is kept exactly.  Depth test LESS with instances drawn in index order
    keeps the first drawn on equal depth: ties go to the lower index.  The colour
    attachment is R32UI holding id + 1, cleared to 0 (clearing an integer attachment in
@@ -188,11 +190,16 @@ uniform vec2 u_raster;
 flat out uint v_id;
 flat out vec2 v_site;
 flat out vec4 v_c0;
-#ifdef FACET_VARYINGS
-// exact mode, polygons: the site's K facets, two to a vec4 (an odd K repeats facet 0,
-// which leaves the max unchanged), handed to the fragments as flat varyings
+#if defined(FACET_VARYINGS) || defined(FACE_FACETS)
+// exact mode, polygons: the K facets of each site, site-major, in the order of the faces
 layout(std430, binding = 2) readonly buffer Facets { vec2 facets[]; };
+#endif
+#if defined(FACET_VARYINGS)
+// all K facets, two to a vec4 (an odd K repeats facet 0, which leaves the max unchanged)
 flat out vec4 v_f[(FACETS + 1) / 2];
+#elif defined(FACE_FACETS)
+// the facet of this face (three vertices per face) and those of the faces either side
+flat out vec4 v_f[2];
 #endif
 void main() {
     vec2 r = in_vert.xy * in_size.x;
@@ -202,12 +209,18 @@ void main() {
     v_id = uint(gl_InstanceID) + 1u;                     // 0 is "no site"
     v_site = in_site;
     v_c0 = in_c0;
-#ifdef FACET_VARYINGS
+#if defined(FACET_VARYINGS)
     int base = gl_InstanceID * FACETS;
     for (int k = 0; k < (FACETS + 1) / 2; ++k) {
         int second = 2 * k + 1 < FACETS ? 2 * k + 1 : 0;
         v_f[k] = vec4(facets[base + 2 * k], facets[base + second]);
     }
+#elif defined(FACE_FACETS)
+    int base = gl_InstanceID * FACETS;
+    int face = gl_VertexID / 3;
+    vec2 own = facets[base + face];
+    v_f[0] = vec4(facets[base + (face + FACETS - 1) % FACETS], own);
+    v_f[1] = vec4(facets[base + (face + 1) % FACETS], own);
 #endif
 }
 """
@@ -222,8 +235,12 @@ void main() { out_id = v_id; }
 """
 
 # d_i(x) per fragment.  ELLIPSE: the quadratic form; FACET_VARYINGS: max over the K
-# facets from flat varyings; otherwise (more facets than varyings hold) read from the
-# storage buffer per fragment, several times slower on llvmpipe.
+# facets from flat varyings; FACE_FACETS (more facets than the varyings hold): max over
+# the facet of the pyramid face drawn and those of its two neighbours.  Inside face k's
+# wedge the gauge is facet k exactly; a pixel centre that float32 geometry puts in a face
+# not its own lies within the rounding ε of that face, so the facets left out exceed the
+# max by at most 2·|f|·ε, a float tie.  (Reading all K facets per fragment from the
+# buffer instead cost several times the whole draw.)
 _EXACT_FRAGMENT_SHADER = """
 #version 430
 flat in uint v_id;
@@ -232,8 +249,8 @@ flat in vec4 v_c0;
 uniform float u_depth_scale;
 #if defined(FACET_VARYINGS)
 flat in vec4 v_f[(FACETS + 1) / 2];
-#elif !defined(ELLIPSE)
-layout(std430, binding = 2) readonly buffer Facets { vec2 facets[]; };
+#elif defined(FACE_FACETS)
+flat in vec4 v_f[2];
 #endif
 layout(location = 0) out uint out_id;
 void main() {
@@ -244,9 +261,7 @@ void main() {
     float d = max(dot(v_f[0].xy, v), dot(v_f[0].zw, v));
     for (int k = 1; k < (FACETS + 1) / 2; ++k) d = max(d, max(dot(v_f[k].xy, v), dot(v_f[k].zw, v)));
 #else
-    uint base = (v_id - 1u) * uint(FACETS);
-    float d = dot(facets[base], v);
-    for (uint k = 1u; k < uint(FACETS); ++k) d = max(d, dot(facets[base + k], v));
+    float d = max(max(dot(v_f[0].xy, v), dot(v_f[0].zw, v)), dot(v_f[1].xy, v));
 #endif
     gl_FragDepth = d * u_depth_scale;
     out_id = v_id;
@@ -350,6 +365,14 @@ def cone_vertices(metric: Metric, segments: int) -> tuple[np.ndarray, float]:
     tris[:, 1, :2], tris[:, 1, 2] = ring, height
     tris[:, 2, :2], tris[:, 2, 2] = nxt, height
     return tris.reshape(-1, 3), reach
+
+
+def face_facets(metric: Metric) -> np.ndarray:
+    """(K,) for a polygonal ball: the facet on which face k of :func:`cone_vertices` lies
+    (the one whose gauge term is largest at the middle of the face's outer edge)."""
+    ring = metric.outline()
+    middle = (ring + np.roll(ring, -1, axis=0)) / 2
+    return np.argmax(middle @ metric.normals.T / metric.offsets, axis=1)
 
 
 class _Blocks:
@@ -479,6 +502,18 @@ class GLBackend(Backend):
     )
     bytes_per_site = 8000
 
+    def supports(self, metric, angles, scales) -> str | None:
+        """Any convex polygon in both modes; exact mode reads a polygon's facets in the
+        vertex stage, which OpenGL 4.3 lets a driver refuse (none of Mesa's or the GPU
+        vendors' do)."""
+        if (
+            self.mode == "exact"
+            and metric.kind == "polygon"
+            and self.ctx.info.get("GL_MAX_VERTEX_SHADER_STORAGE_BLOCKS", 0) < 1
+        ):
+            return "exact mode needs storage buffers in the vertex stage, which this GL driver lacks (use cone mode)"
+        return super().supports(metric, angles, scales)
+
     def __init__(self, mode: str = "cone", max_error_px: float = 0.1, block: int = 8):
         self.mode = one_of(mode, "gl mode", MODES)
         self.max_error_px = real_number(max_error_px, "max_error_px", above=0.0)
@@ -592,7 +627,11 @@ class GLBackend(Backend):
         varyings = 0 < facets <= self._varying_facets()
         prog = self._program(metric.kind, facets, varyings)
         # keyed by the ball itself: a user's polygon file may be rewritten under one name
-        ball = metric.semi_axes if metric.kind == "ellipse" else (metric.normals.tobytes(), metric.offsets.tobytes())
+        ball = (
+            metric.semi_axes
+            if metric.kind == "ellipse"
+            else (metric.normals.tobytes(), metric.offsets.tobytes())
+        )
         vao_key = (metric.kind, ball, segments, facets, varyings)
         reach = self._vertex_array(vao_key, metric, segments, prog)
 
@@ -608,7 +647,8 @@ class GLBackend(Backend):
             data[:, 6:9] = coeffs.quad
         self._upload_instances(np.ascontiguousarray(data))
         if self.mode == "exact" and coeffs.kind == "polygon":
-            self._upload_facets(coeffs.facets.astype(np.float32))
+            # in the order of the faces: the face-local path reads a face's neighbours
+            self._upload_facets(coeffs.facets[:, face_facets(metric)].astype(np.float32))
 
         fbo = self._framebuffer(grid.width, grid.height)
         ctx = self.ctx
@@ -639,8 +679,8 @@ class GLBackend(Backend):
                 frag, vert = _CONE_FRAGMENT_SHADER, _VERTEX_SHADER
             else:
                 define = "#define ELLIPSE\n" if kind == "ellipse" else f"#define FACETS {facets}\n"
-                if varyings:
-                    define += "#define FACET_VARYINGS\n"
+                if kind != "ellipse":
+                    define += "#define FACET_VARYINGS\n" if varyings else "#define FACE_FACETS\n"
                 frag = _EXACT_FRAGMENT_SHADER.replace("#version 430\n", "#version 430\n" + define, 1)
                 vert = _VERTEX_SHADER.replace("#version 430\n", "#version 430\n" + define, 1)
             self._programs[key] = self.ctx.program(vertex_shader=vert, fragment_shader=frag)
@@ -648,12 +688,11 @@ class GLBackend(Backend):
 
     def _varying_facets(self) -> int:
         """How many facets the flat varyings carry: two per vec4 slot, less the slots of
-        v_id, v_site, v_c0 and one for gl_Position; 0 where the vertex stage cannot read
-        a storage buffer."""
+        v_id, v_site, v_c0 and one for gl_Position."""
         info = self.ctx.info
-        if info.get("GL_MAX_VERTEX_SHADER_STORAGE_BLOCKS", 0) < 1:
-            return 0
-        slots = min(info.get("GL_MAX_VERTEX_OUTPUT_COMPONENTS", 64), info.get("GL_MAX_FRAGMENT_INPUT_COMPONENTS", 64))
+        slots = min(
+            info.get("GL_MAX_VERTEX_OUTPUT_COMPONENTS", 64), info.get("GL_MAX_FRAGMENT_INPUT_COMPONENTS", 64)
+        )
         return 2 * max(slots // 4 - 4, 0)
 
     def _sums_program(self):
@@ -766,6 +805,7 @@ __all__ = [
     "ellipse_height_error",
     "ellipse_segments",
     "cone_vertices",
+    "face_facets",
     "box_max_distance",
     "cone_heights",
     "GLBackend",
