@@ -19,11 +19,17 @@ How one iteration runs
    never a silent -1).
 2. **Draw (one instanced call).**  Each site is the fan of triangles over its unit ball
    from :mod:`cvt.metrics`, rotated by θ_i, scaled by ``s_i·r_i`` and raised to height r_i:
-   ``cone`` mode lets the rasteriser interpolate the depth (pyramids over polygonal balls
-   are exact: each face is one linear facet of the gauge); ``exact`` mode evaluates
-   d_i(x) per fragment from :func:`cvt.metrics.compile_sites` (facets or quadratic form)
-   and writes ``gl_FragDepth``.  The depth attachment is 32-bit float (moderngl's own is
-   24-bit; see :func:`_depth32f_texture`) and holds linear distance times a power of two,
+   ``cone`` mode lets the rasteriser interpolate the depth (the pyramid over a K-gon ball
+   has K faces, each one linear facet of the gauge, so it is exact for any convex
+   polygon); ``exact`` mode evaluates d_i(x) per fragment from
+   :func:`cvt.metrics.compile_sites` (the max over a polygon's K facets, or the quadratic
+   form) and writes ``gl_FragDepth``.  A polygon's (N, K, 2) facets go to a storage
+   buffer, in the order of the pyramid's faces; the vertex stage hands each site's K
+   facets to its fragments as flat varyings, or, where K exceeds what the varyings hold,
+   the facets of the face drawn and of its two neighbours (exact up to the rasteriser's
+   rounding at the faces' shared edges; see the fragment shader).  The depth attachment
+   is 32-bit float (moderngl's own is 24-bit; see :func:`_depth32f_texture`) and holds
+   linear distance times a power of two,
    so float order is kept exactly.  Depth test LESS with instances drawn in index order
    keeps the first drawn on equal depth: ties go to the lower index.  The colour
    attachment is R32UI holding id + 1, cleared to 0 (clearing an integer attachment in
@@ -179,13 +185,22 @@ in vec3 in_vert;      // unit-ball frame: x, y, height (the gauge this vertex st
 in vec2 in_site;      // p_i, pixels
 in vec2 in_rot;       // cos θ_i, sin θ_i
 in vec2 in_size;      // s_i·r_i (pixels per unit of the ball), r_i·depth_scale
-in vec4 in_c0;        // exact mode: facets 0, 1 or the quadratic form (qxx, qxy, qyy, -)
-in vec4 in_c1;        // exact mode: facets 2, 3
+in vec4 in_c0;        // exact mode, ellipses: the quadratic form (qxx, qxy, qyy, -)
 uniform vec2 u_raster;
 flat out uint v_id;
 flat out vec2 v_site;
 flat out vec4 v_c0;
-flat out vec4 v_c1;
+#if defined(FACET_VARYINGS) || defined(FACE_FACETS)
+// exact mode, polygons: the K facets of each site, site-major, in the order of the faces
+layout(std430, binding = 2) readonly buffer Facets { vec2 facets[]; };
+#endif
+#if defined(FACET_VARYINGS)
+// all K facets, two to a vec4 (an odd K repeats facet 0, which leaves the max unchanged)
+flat out vec4 v_f[(FACETS + 1) / 2];
+#elif defined(FACE_FACETS)
+// the facet of this face (three vertices per face) and those of the faces either side
+flat out vec4 v_f[2];
+#endif
 void main() {
     vec2 r = in_vert.xy * in_size.x;
     vec2 pos = in_site + vec2(in_rot.x * r.x - in_rot.y * r.y, in_rot.y * r.x + in_rot.x * r.y);
@@ -194,7 +209,19 @@ void main() {
     v_id = uint(gl_InstanceID) + 1u;                     // 0 is "no site"
     v_site = in_site;
     v_c0 = in_c0;
-    v_c1 = in_c1;
+#if defined(FACET_VARYINGS)
+    int base = gl_InstanceID * FACETS;
+    for (int k = 0; k < (FACETS + 1) / 2; ++k) {
+        int second = 2 * k + 1 < FACETS ? 2 * k + 1 : 0;
+        v_f[k] = vec4(facets[base + 2 * k], facets[base + second]);
+    }
+#elif defined(FACE_FACETS)
+    int base = gl_InstanceID * FACETS;
+    int face = gl_VertexID / 3;
+    vec2 own = facets[base + face];
+    v_f[0] = vec4(facets[base + (face + FACETS - 1) % FACETS], own);
+    v_f[1] = vec4(facets[base + (face + 1) % FACETS], own);
+#endif
 }
 """
 
@@ -203,25 +230,38 @@ _CONE_FRAGMENT_SHADER = """
 flat in uint v_id;
 flat in vec2 v_site;
 flat in vec4 v_c0;
-flat in vec4 v_c1;
 layout(location = 0) out uint out_id;
 void main() { out_id = v_id; }
 """
 
+# d_i(x) per fragment.  ELLIPSE: the quadratic form; FACET_VARYINGS: max over the K
+# facets from flat varyings; FACE_FACETS (more facets than the varyings hold): max over
+# the facet of the pyramid face drawn and those of its two neighbours.  Inside face k's
+# wedge the gauge is facet k exactly; a pixel centre that float32 geometry puts in a face
+# not its own lies within the rounding ε of that face, so the facets left out exceed the
+# max by at most 2·|f|·ε, a float tie.  (Reading all K facets per fragment from the
+# buffer instead cost several times the whole draw.)
 _EXACT_FRAGMENT_SHADER = """
 #version 430
 flat in uint v_id;
 flat in vec2 v_site;
 flat in vec4 v_c0;
-flat in vec4 v_c1;
 uniform float u_depth_scale;
+#if defined(FACET_VARYINGS)
+flat in vec4 v_f[(FACETS + 1) / 2];
+#elif defined(FACE_FACETS)
+flat in vec4 v_f[2];
+#endif
 layout(location = 0) out uint out_id;
 void main() {
     vec2 v = gl_FragCoord.xy - v_site;                   // pixel centre (j + 0.5, i + 0.5)
-#ifdef ELLIPSE
+#if defined(ELLIPSE)
     float d = sqrt(max(v_c0.x * v.x * v.x + 2.0 * v_c0.y * v.x * v.y + v_c0.z * v.y * v.y, 0.0));
+#elif defined(FACET_VARYINGS)
+    float d = max(dot(v_f[0].xy, v), dot(v_f[0].zw, v));
+    for (int k = 1; k < (FACETS + 1) / 2; ++k) d = max(d, max(dot(v_f[k].xy, v), dot(v_f[k].zw, v)));
 #else
-    float d = max(max(dot(v_c0.xy, v), dot(v_c0.zw, v)), max(dot(v_c1.xy, v), dot(v_c1.zw, v)));
+    float d = max(max(dot(v_f[0].xy, v), dot(v_f[0].zw, v)), dot(v_f[1].xy, v));
 #endif
     gl_FragDepth = d * u_depth_scale;
     out_id = v_id;
@@ -325,6 +365,14 @@ def cone_vertices(metric: Metric, segments: int) -> tuple[np.ndarray, float]:
     tris[:, 1, :2], tris[:, 1, 2] = ring, height
     tris[:, 2, :2], tris[:, 2, 2] = nxt, height
     return tris.reshape(-1, 3), reach
+
+
+def face_facets(metric: Metric) -> np.ndarray:
+    """(K,) for a polygonal ball: the facet on which face k of :func:`cone_vertices` lies
+    (the one whose gauge term is largest at the middle of the face's outer edge)."""
+    ring = metric.outline()
+    middle = (ring + np.roll(ring, -1, axis=0)) / 2
+    return np.argmax(middle @ metric.normals.T / metric.offsets, axis=1)
 
 
 class _Blocks:
@@ -454,16 +502,16 @@ class GLBackend(Backend):
     )
     bytes_per_site = 8000
 
-    MAX_FACETS = 4  # a polygon's facets travel in one vec4 pair per site
-
     def supports(self, metric, angles, scales) -> str | None:
-        """Polygons of more than MAX_FACETS facets (hexagons, octagons, most of the
-        user's polygons) do not fit the per-site data of the pyramids."""
-        if metric.kind == "polygon" and len(metric.normals) > self.MAX_FACETS:
-            return (
-                f"metric {metric.name!r} has {len(metric.normals)} facets; the gl backend's pyramids "
-                f"take at most {self.MAX_FACETS}"
-            )
+        """Any convex polygon in both modes; exact mode reads a polygon's facets in the
+        vertex stage, which OpenGL 4.3 lets a driver refuse (none of Mesa's or the GPU
+        vendors' do)."""
+        if (
+            self.mode == "exact"
+            and metric.kind == "polygon"
+            and self.ctx.info.get("GL_MAX_VERTEX_SHADER_STORAGE_BLOCKS", 0) < 1
+        ):
+            return "exact mode needs storage buffers in the vertex stage, which this GL driver lacks (use cone mode)"
         return super().supports(metric, angles, scales)
 
     def __init__(self, mode: str = "cone", max_error_px: float = 0.1, block: int = 8):
@@ -477,6 +525,7 @@ class GLBackend(Backend):
         self._mask = None  # (mask copy or None, texture or None)
         self._blocks = None  # (grid key, _Blocks)
         self._instances = None
+        self._facets = None  # exact mode, polygons: the (N, K, 2) facets as a storage buffer
         self._sums = None
         self._missing = None
         self._moments_program = None
@@ -542,7 +591,7 @@ class GLBackend(Backend):
 
     def close(self) -> None:
         """Release this backend's buffers and targets; the shared context stays."""
-        for obj in (self._instances, self._sums, self._missing):
+        for obj in (self._instances, self._facets, self._sums, self._missing):
             if obj is not None:
                 obj.release()
         if self._target is not None:
@@ -553,7 +602,7 @@ class GLBackend(Backend):
         for vao, vbo in self._geometry.values():
             vao.release()
             vbo.release()
-        self._instances = self._sums = self._missing = self._target = self._mask = None
+        self._instances = self._facets = self._sums = self._missing = self._target = self._mask = None
         self._geometry = {}
 
     # ------------------------------------------------------------------ drawing
@@ -574,27 +623,32 @@ class GLBackend(Backend):
         else:
             segments = 0
         self.last_segments = segments or None
-        prog = self._program(metric.kind)
-        vao_key = (metric.name, metric.aspect, segments, metric.kind)
+        facets = 0 if metric.kind == "ellipse" or self.mode == "cone" else len(metric.normals)
+        varyings = 0 < facets <= self._varying_facets()
+        prog = self._program(metric.kind, facets, varyings)
+        # keyed by the ball itself: a user's polygon file may be rewritten under one name
+        ball = (
+            metric.semi_axes
+            if metric.kind == "ellipse"
+            else (metric.normals.tobytes(), metric.offsets.tobytes())
+        )
+        vao_key = (metric.kind, ball, segments, facets, varyings)
         reach = self._vertex_array(vao_key, metric, segments, prog)
 
         # one power of two maps every depth into [0, 1): scaling by it is exact in float
         top = float(heights.max()) * reach * 1.001
         depth_scale = 2.0 ** -math.ceil(math.log2(top)) if top > 0 else 1.0
-        data = np.zeros((n, 14), dtype=np.float32)  # matches "2f 2f 2f 4f 4f/i"
+        data = np.zeros((n, 10), dtype=np.float32)  # matches "2f 2f 2f 4f/i"
         data[:, 0:2] = sites
         data[:, 2], data[:, 3] = np.cos(angles), np.sin(angles)
         data[:, 4] = scales * heights
         data[:, 5] = heights * depth_scale
         if coeffs.kind == "ellipse":
             data[:, 6:9] = coeffs.quad
-        else:  # up to 4 facets; a triangle repeats its first (max is unchanged)
-            f = coeffs.facets
-            if f.shape[1] > 4:
-                raise InputError(f"gl backend: metric {metric.name!r} has {f.shape[1]} facets, at most 4 fit")
-            pad = np.concatenate([f, np.repeat(f[:, :1], 4 - f.shape[1], axis=1)], axis=1)
-            data[:, 6:14] = pad.reshape(n, 8)
         self._upload_instances(np.ascontiguousarray(data))
+        if self.mode == "exact" and coeffs.kind == "polygon":
+            # in the order of the faces: the face-local path reads a face's neighbours
+            self._upload_facets(coeffs.facets[:, face_facets(metric)].astype(np.float32))
 
         fbo = self._framebuffer(grid.width, grid.height)
         ctx = self.ctx
@@ -615,16 +669,31 @@ class GLBackend(Backend):
 
         return moderngl
 
-    def _program(self, kind: str):
-        key = (self.mode, kind)
+    def _program(self, kind: str, facets: int, varyings: bool):
+        """The drawing program; in exact mode one per kind and, for polygons, per facet
+        count K (the loops' bound is a constant, so the compiler unrolls them) and per
+        path of the facets (flat varyings or the storage buffer per fragment)."""
+        key = (self.mode, kind, facets, varyings)
         if key not in self._programs:
             if self.mode == "cone":
-                frag = _CONE_FRAGMENT_SHADER
+                frag, vert = _CONE_FRAGMENT_SHADER, _VERTEX_SHADER
             else:
-                define = "#define ELLIPSE\n" if kind == "ellipse" else ""
+                define = "#define ELLIPSE\n" if kind == "ellipse" else f"#define FACETS {facets}\n"
+                if kind != "ellipse":
+                    define += "#define FACET_VARYINGS\n" if varyings else "#define FACE_FACETS\n"
                 frag = _EXACT_FRAGMENT_SHADER.replace("#version 430\n", "#version 430\n" + define, 1)
-            self._programs[key] = self.ctx.program(vertex_shader=_VERTEX_SHADER, fragment_shader=frag)
+                vert = _VERTEX_SHADER.replace("#version 430\n", "#version 430\n" + define, 1)
+            self._programs[key] = self.ctx.program(vertex_shader=vert, fragment_shader=frag)
         return self._programs[key]
+
+    def _varying_facets(self) -> int:
+        """How many facets the flat varyings carry: two per vec4 slot, less the slots of
+        v_id, v_site, v_c0 and one for gl_Position."""
+        info = self.ctx.info
+        slots = min(
+            info.get("GL_MAX_VERTEX_OUTPUT_COMPONENTS", 64), info.get("GL_MAX_FRAGMENT_INPUT_COMPONENTS", 64)
+        )
+        return 2 * max(slots // 4 - 4, 0)
 
     def _sums_program(self):
         if self._moments_program is None:
@@ -642,7 +711,7 @@ class GLBackend(Backend):
                 prog,
                 [
                     (vbo, "3f", "in_vert"),
-                    (self._instances, "2f 2f 2f 4f 4f/i", "in_site", "in_rot", "in_size", "in_c0", "in_c1"),
+                    (self._instances, "2f 2f 2f 4f/i", "in_site", "in_rot", "in_size", "in_c0"),
                 ],
                 skip_errors=True,
             )
@@ -660,6 +729,15 @@ class GLBackend(Backend):
             # orphaning keeps the buffer object, so the cached vertex arrays stay valid
             self._instances.orphan(max(data.nbytes, 2 * self._instances.size))
         self._instances.write(data.tobytes())
+
+    def _upload_facets(self, facets: np.ndarray):
+        """The (N, K, 2) float32 facets into the storage buffer at binding 2."""
+        if self._facets is None or self._facets.size < facets.nbytes:
+            if self._facets is not None:
+                self._facets.release()
+            self._facets = self.ctx.buffer(reserve=max(facets.nbytes, 1 << 16), dynamic=True)
+        self._facets.write(np.ascontiguousarray(facets).tobytes())
+        self._facets.bind_to_storage_buffer(2)
 
     def _framebuffer(self, w: int, h: int):
         if self._target is not None and self._target[:2] == (w, h):
@@ -727,6 +805,7 @@ __all__ = [
     "ellipse_height_error",
     "ellipse_segments",
     "cone_vertices",
+    "face_facets",
     "box_max_distance",
     "cone_heights",
     "GLBackend",

@@ -3,19 +3,21 @@ against the NumPy float64 reference, on llvmpipe in CI.
 
 Skipped, with the reason, where moderngl, EGL or an OpenGL 4.3 driver is missing."""
 
+import json
+
 import numpy as np
 import pytest
+from scipy.spatial import ConvexHull
 
 from compact_distributions.backends import create_backend
 from compact_distributions.cvt.errors import BackendUnavailable, InputError
 from compact_distributions.cvt.fields import DensityMap, DirectionField
 from compact_distributions.cvt.lloyd import final_labels, lloyd
-from compact_distributions.cvt.metrics import (
-    PAPER_METRICS as METRIC_NAMES,  # the gl pyramids take at most 4 facets
-)
-from compact_distributions.cvt.metrics import make_metric
+from compact_distributions.cvt.metrics import METRIC_NAMES, make_metric
 from compact_distributions.cvt.moments import moments_from_labels
 from compact_distributions.cvt.problem import Grid, Problem
+
+from .test_backend_conformance import SLACK, assert_same_up_to_ties
 
 gl = pytest.importorskip("compact_distributions.backends.gl")
 
@@ -262,10 +264,98 @@ def test_missing_moderngl_is_one_clear_error(monkeypatch):
         gl.GLBackend.probe()
 
 
-@pytest.mark.parametrize("name", ["hexagon", "octagon"])
-def test_polygons_of_more_facets_are_declined_with_the_reason(cone, name):
-    metric = make_metric(name)
-    reason = cone.supports(metric, np.zeros(3), np.ones(3))
-    assert reason and f"{len(metric.normals)} facets" in reason
-    with pytest.raises(InputError, match="at most 4"):
-        cone.label(np.array([[5.0, 5.0], [10.0, 12.0], [20.0, 3.0]]), metric=metric, grid=Grid(32, 32))
+def generated_polygon(tmp_path, corners, seed):
+    """An irregular convex polygon: random points on a random ellipse (so all are corners),
+    their convex hull written as the user would give it (a JSON list of [x, y], at an
+    arbitrary offset and scale)."""
+    rng = np.random.default_rng(seed)
+    t = (np.arange(corners) + rng.uniform(0.2, 0.8, corners)) * (2 * np.pi / corners)  # no two too close
+    a, b, turn = rng.uniform(1.0, 3.0), rng.uniform(1.0, 3.0), rng.uniform(0, np.pi)
+    x, y = a * np.cos(t), b * np.sin(t)
+    pts = np.stack([x * np.cos(turn) - y * np.sin(turn), x * np.sin(turn) + y * np.cos(turn)], axis=1)
+    hull = pts[ConvexHull(pts).vertices] * 7.0 + [40.0, -7.0]
+    path = tmp_path / f"poly{corners}.json"
+    path.write_text(json.dumps(hull.tolist()))
+    return make_metric(f"polygon:{path}")
+
+
+@pytest.mark.parametrize("mode", ["cone", "exact"])
+@pytest.mark.parametrize("corners", [7, 64])
+def test_the_users_polygon_matches_the_reference(tmp_path, mode, corners, cone, exact, reference):
+    """Any convex polygon: 7 corners (exact mode: all facets as flat varyings) and 64
+    (more than the varyings hold on llvmpipe: each face's own facet and its neighbours'),
+    with angles, scales and a region mask; labels equal to the reference's up to ties,
+    moments the sums of them."""
+    backend = exact if mode == "exact" else cone
+    metric = generated_polygon(tmp_path, corners, seed=corners)
+    assert len(metric.normals) == corners
+    sites, scales, angles, grid = random_case(corners, w=200, h=160, n=150, masked=True)
+    args = dict(angles=angles, scales=scales, metric=metric, grid=grid)
+    got = backend.label(sites, **args)
+    want = reference.label(sites, **args)
+    check_region(got, grid)
+    assert_same_up_to_ties(got, want, sites, angles, scales, metric, grid, SLACK.get(backend.variant, 0.0))
+    mom = backend.moments(sites, **args)
+    host = moments_from_labels(got, len(sites))
+    for field in ("count", "sx", "sy", "sxx", "syy"):
+        np.testing.assert_array_equal(getattr(mom, field), getattr(host, field), err_msg=field)
+    assert mom.count.sum() == grid.pixel_count
+
+
+def test_the_face_local_facets_give_the_labels_of_all_facets(tmp_path, reference):
+    """Exact mode with more facets than the varyings hold takes only the facets of the face
+    drawn and its neighbours: the same labels as the max over all K, up to float ties."""
+    metric = generated_polygon(tmp_path, 9, seed=4)
+    sites, scales, angles, grid = random_case(4, w=240, h=200, n=300)
+    args = dict(angles=angles, scales=scales, metric=metric, grid=grid)
+    every = _backend("exact")
+    local = _backend("exact")
+    local._varying_facets = lambda: 0  # as on a driver with too few varyings
+    try:
+        assert every._varying_facets() >= 9  # the default path does take every facet
+        a, b = every.label(sites, **args), local.label(sites, **args)
+    finally:
+        every.close()
+        local.close()
+    want = reference.label(sites, **args)
+    for got in (a, b):
+        assert_same_up_to_ties(got, want, sites, angles, scales, metric, grid, 0.0)
+    assert (a != b).mean() <= 1e-4
+
+
+def test_the_pyramid_has_one_face_per_facet(tmp_path):
+    """The pyramid over a K-gon ball has K faces, each a linear facet of the gauge: the
+    height over every face point equals the gauge there (so depth interpolation is exact),
+    and that facet is the one face_facets names (what exact mode's face-local path reads)."""
+    for metric in (
+        *(make_metric(n, 0.6) for n in ("hexagon", "octagon", "triangle", "linf-axial")),
+        generated_polygon(tmp_path, 11, seed=2),
+    ):
+        verts, reach = gl.cone_vertices(metric, 0)
+        tri = verts.reshape(-1, 3, 3).astype(np.float64)
+        assert len(tri) == len(metric.normals) and reach == 1.0
+        w = np.random.default_rng(1).dirichlet([1, 1, 1], size=100)
+        pts = np.einsum("sk,tkc->tsc", w, tri)
+        gauge = metric.gauge(pts[..., :2])
+        np.testing.assert_allclose(pts[..., 2], gauge, atol=1e-6)
+        own = metric.normals[gl.face_facets(metric)] / metric.offsets[gl.face_facets(metric), None]
+        np.testing.assert_allclose(np.einsum("tsc,tc->ts", pts[..., :2], own), gauge, atol=1e-9)
+
+
+def test_exact_mode_declines_polygons_where_the_vertex_stage_has_no_storage_buffers():
+    """OpenGL 4.3 lets a driver give the vertex stage no storage buffers; exact mode then
+    says so for polygons (cone mode and ellipses do not need them)."""
+    from types import SimpleNamespace
+
+    backend = _backend("exact")
+    real = backend.ctx
+    backend.ctx = SimpleNamespace(info={**real.info, "GL_MAX_VERTEX_SHADER_STORAGE_BLOCKS": 0})
+    try:
+        assert backend.supports(make_metric("l2"), np.zeros(2), np.ones(2)) is None
+        with pytest.raises(InputError, match="storage buffers in the vertex stage"):
+            backend.label(
+                np.array([[5.0, 5.0], [20.0, 9.0]]), metric=make_metric("hexagon"), grid=Grid(32, 32)
+            )
+    finally:
+        backend.ctx = real
+        backend.close()
