@@ -112,26 +112,54 @@ def contour_samples(labels: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndar
     return owner[keep], x[keep], y[keep]
 
 
-def _reach(coef, owner, vx, vy, half):
-    """Per contour sample, the element size at which the element (centred at its site,
-    grout ``half`` = G/2 kept clear) reaches the sample."""
-    if coef.kind == "polygon":
-        f = coef.facets  # (N, K, 2): f_k = R(θ) n_k / h_k, |f_k| = 1 / h_k
-        slack = half * np.hypot(f[0, :, 0], f[0, :, 1])  # same |f_k| for every site
-        out = None
-        for k in range(f.shape[1]):  # one facet at a time: no (S, K, 2) temporaries
-            v = f[:, k, 0][owner] * vx + f[:, k, 1][owner] * vy - slack[k]
-            out = v if out is None else np.maximum(out, v, out=out)
-        return out
-    q = coef.quad[owner]
-    gx = q[:, 0] * vx + q[:, 1] * vy  # Q v = ρ ∇ρ
-    gy = q[:, 1] * vx + q[:, 2] * vy
-    rho = np.sqrt(np.maximum(vx * gx + vy * gy, 0.0))
-    if half <= 0:
-        return rho
-    with np.errstate(divide="ignore", invalid="ignore"):
-        grad = np.where(rho > 0, np.hypot(gx, gy) / rho, 0.0)
-    return rho - half * grad
+class _Gauge:
+    """The reach of contour samples from element centres (the rule of this module), one
+    compiled ball per cell, and how far a move of the centre can change it.
+
+    ``lipschitz`` (per cell) bounds |reach(v) - reach(v')| by ``lipschitz``·|v - v'| +
+    ``drop``: a polygon's reach is a max of linear functions f_k·v - G/2·|f_k|, so its
+    constant is max_k |f_k|; an ellipse's ρ has the square root of Q's larger eigenvalue,
+    and its grout term G/2·|∇ρ| lies between 0 and G/2 times that (``drop``)."""
+
+    def __init__(self, coef, half: float):
+        self.kind, self.half = coef.kind, half
+        if coef.kind == "polygon":
+            f = coef.facets  # (N, K, 2): f_k = R(θ) n_k / h_k, |f_k| = 1 / h_k
+            self.fx = [np.ascontiguousarray(f[:, k, 0]) for k in range(f.shape[1])]
+            self.fy = [np.ascontiguousarray(f[:, k, 1]) for k in range(f.shape[1])]
+            self.slack = half * np.hypot(f[0, :, 0], f[0, :, 1])  # same |f_k| for every site
+            lip = np.hypot(f[..., 0], f[..., 1]).max(axis=1)
+            self.drop = np.zeros(len(lip))
+        else:
+            q = coef.quad
+            self.q = [np.ascontiguousarray(q[:, j]) for j in range(3)]
+            lip = np.sqrt(0.5 * (q[:, 0] + q[:, 2]) + np.hypot(0.5 * (q[:, 0] - q[:, 2]), q[:, 1]))
+            self.drop = half * lip * (1 + 1e-9)
+        self.lipschitz = lip * (1 + 1e-9)  # rounding of the bound itself
+
+    def reach(self, owner, vx, vy):
+        """Per sample (``owner`` its ball, v = sample - centre), the element size at which
+        the element (grout G/2 kept clear) reaches the sample."""
+        if self.kind == "polygon":
+            out = None
+            for fx, fy, s in zip(self.fx, self.fy, self.slack, strict=True):  # one facet at a time: no (S, K) temporaries
+                v = fx[owner]
+                v *= vx
+                t = fy[owner]
+                t *= vy
+                v += t
+                v -= s
+                out = v if out is None else np.maximum(out, v, out=out)
+            return out
+        q0, q1, q2 = (q[owner] for q in self.q)
+        gx = q0 * vx + q1 * vy  # Q v = ρ ∇ρ
+        gy = q1 * vx + q2 * vy
+        rho = np.sqrt(np.maximum(vx * gx + vy * gy, 0.0))
+        if self.half <= 0:
+            return rho
+        with np.errstate(divide="ignore", invalid="ignore"):
+            grad = np.where(rho > 0, np.hypot(gx, gy) / rho, 0.0)
+        return rho - self.half * grad
 
 
 def placement_sizes(labels, sites, angles, shape: str, aspect, gap: float = 0.0) -> np.ndarray:
@@ -150,7 +178,7 @@ def placement_sizes(labels, sites, angles, shape: str, aspect, gap: float = 0.0)
     ball = element_ball(shape, aspect)
     coef = compile_sites(ball, sites, angles, None)
     owner, qx, qy = contour_samples(labels)
-    reach = _reach(coef, owner, qx - sites[owner, 0], qy - sites[owner, 1], 0.5 * gap)
+    reach = _Gauge(coef, 0.5 * gap).reach(owner, qx - sites[owner, 0], qy - sites[owner, 1])
     sizes = np.full(n, np.inf)
     np.minimum.at(sizes, owner, reach)
 
@@ -164,6 +192,130 @@ _FIT_STEPS = (0.3, 0.15, 0.075, 0.0375)  # pattern-search steps, as fractions of
 _FIT_MOVES = np.array(
     [[1, 0], [-1, 0], [0, 1], [0, -1], [1, 1], [1, -1], [-1, 1], [-1, -1]], dtype=np.float64
 )
+_FIT_REPEATS = 3  # tries of the 8 moves per step, while the cell still grows
+# Which contour samples stay in play: those whose reach is within this many steps (times
+# the gauge's Lipschitz constant) of their cell's smallest, per step size and per repeat.
+# Only the speed depends on them: a trial that the samples in play cannot vouch for is
+# evaluated over all of its cell's samples.
+_KEEP_STEPS_LEVEL, _KEEP_STEPS_REPEAT = 6.0, 2.5
+
+
+class _SampleSet:
+    """Contour samples grouped by cell: coordinates ``x``, ``y``; ``cell``, the index of
+    the sample's cell in the fit's list of cells (non-decreasing); ``pos``, the index of
+    that cell in ``cells``, the cells the set serves (each holds at least one sample)."""
+
+    def __init__(self, x, y, cell, cells, pos=None):
+        self.x, self.y, self.cell, self.cells = x, y, cell, cells
+        self.pos = cell if pos is None else pos
+        self.counts = np.bincount(self.pos, minlength=len(cells))
+        self.offsets = np.cumsum(self.counts) - self.counts
+
+    def take(self, keep, cells=None) -> _SampleSet:
+        """The samples where ``keep``, serving ``cells`` (default: the same cells)."""
+        if cells is None:
+            return _SampleSet(self.x[keep], self.y[keep], self.cell[keep], self.cells, self.pos[keep])
+        rank = np.full(len(self.cells), -1)
+        rank[cells] = np.arange(len(cells))
+        cell = self.cell[keep]
+        return _SampleSet(self.x[keep], self.y[keep], cell, cells, rank[cell])
+
+    def cells_at(self, ids) -> _SampleSet:
+        """All samples of cells ``ids`` (indices into ``cells``), serving those."""
+        cnt = self.counts[ids]
+        offs = np.cumsum(cnt) - cnt
+        idx = np.repeat(self.offsets[ids] - offs, cnt) + np.arange(int(cnt.sum()))
+        pos = np.repeat(np.arange(len(ids)), cnt)
+        return _SampleSet(self.x[idx], self.y[idx], self.cell[idx], ids, pos)
+
+    def reach(self, gauge: _Gauge, centres):
+        """Per sample its reach from its cell's centre (``centres``: one per served cell),
+        and per served cell the smallest."""
+        r = gauge.reach(self.cell, self.x - centres[self.pos, 0], self.y - centres[self.pos, 1])
+        return np.minimum.reduceat(r, self.offsets), r
+
+    def prune(self, r, limit):
+        """The samples whose reach ``r`` is at most ``limit`` (per served cell) with their
+        reaches, and per served cell the smallest reach of those dropped (inf: none)."""
+        keep = r <= limit[self.pos]
+        dropped = np.minimum.reduceat(np.where(keep, np.inf, r), self.offsets)
+        return self.take(keep), r[keep], dropped
+
+
+def _fit_search(labels, cells, full: _SampleSet, gauge: _Gauge, centres):
+    """The pattern search of :func:`fit_centres` from ``centres`` (one per cell of
+    ``cells``, ``full`` their samples): the centres and sizes it ends at.
+
+    Each trial needs the smallest reach over its cell's samples, but far samples cannot
+    be the smallest: the reach changes by at most ``gauge.lipschitz``·|move| +
+    ``gauge.drop``, so a sample dropped at centre c with reach T reaches at least
+    T - L·|x - c| - drop from any x.  The search keeps in play the samples near the
+    smallest (chosen per step size, then per repeat) and, per cell, that bound on the
+    others.  A trial that would be accepted while the smallest reach in play is above the
+    bound is evaluated over all of its cell's samples; a rejected trial needs no check
+    (the smallest over all samples is no larger).  Sizes and centres are therefore those
+    of a search over all samples, bit for bit."""
+    h, w = labels.shape
+    every = np.arange(len(cells))
+    lip, drop = gauge.lipschitz, gauge.drop
+
+    def sizes(ids, points, least):
+        """Sizes at ``points`` in cells ``ids`` whose smallest reach there is ``least``."""
+        x, y = points[:, 0], points[:, 1]
+        own = (x >= 0) & (x < w) & (y >= 0) & (y < h) & (labels[pixel_index(points, w, h)] == cells[ids])
+        return np.where(own, np.maximum(least, 0.0), 0.0)
+
+    def bound(ids, points, floor_t, floor_c):
+        """Least reach from ``points`` of samples dropped where ``floor_t`` was the least."""
+        return floor_t - lip[ids] * np.hypot(points[:, 0] - floor_c[:, 0], points[:, 1] - floor_c[:, 1])
+
+    least, r = full.reach(gauge, centres)
+    best = sizes(every, centres, least)
+    level = full  # the samples in play for this step size
+    level_t, level_c = np.full(len(cells), np.inf), centres.copy()  # bound on the others
+    for frac in _FIT_STEPS:
+        active = every
+        for rep in range(_FIT_REPEATS):
+            if len(active) == 0:
+                break
+            step = frac * np.maximum(best[active], 1.0)
+            if rep == 0:  # every cell: choose this step size's samples
+                if level is not full:
+                    least, r = level.reach(gauge, centres)
+                outside = bound(every, centres, level_t, level_c)
+                level, r, dropped = level.prune(r, least + lip * (_KEEP_STEPS_LEVEL * step))
+                level_t, level_c = np.minimum(dropped, outside), centres.copy()
+                here = level
+            else:
+                on = np.zeros(len(cells), dtype=bool)
+                on[active] = True
+                here = level.take(on[level.cell], active)
+                least, r = here.reach(gauge, centres[active])
+            here, _, rep_t = here.prune(r, least + lip[active] * (_KEEP_STEPS_REPEAT * step))
+            rep_c = centres[active]
+            grew = np.zeros(len(active), dtype=bool)
+            for move in _FIT_MOVES:
+                trial = centres[active] + step[:, None] * move
+                least_t = here.reach(gauge, trial)[0]
+                size = sizes(active, trial, least_t)
+                better = size > best[active] * (1 + 1e-9)
+                if not better.any():
+                    continue
+                b = np.flatnonzero(better)
+                a, pts = active[b], trial[b]
+                vouched = np.minimum(
+                    bound(a, pts, level_t[a], level_c[a]), bound(a, pts, rep_t[b], rep_c[b])
+                ) - drop[a]
+                unsure = b[least_t[b] > vouched - 1e-9 * (1.0 + np.abs(least_t[b]))]
+                if len(unsure):
+                    ids = active[unsure]
+                    size[unsure] = sizes(ids, trial[unsure], full.cells_at(ids).reach(gauge, trial[unsure])[0])
+                    better[unsure] = size[unsure] > best[ids] * (1 + 1e-9)
+                a = active[better]
+                centres[a], best[a] = trial[better], size[better]
+                grew |= better
+            active = active[grew]
+    return centres, best
 
 
 def _inscribed_centres(labels, shape: str, aspect, n: int) -> np.ndarray:
@@ -226,48 +378,17 @@ def fit_centres(labels, sites, angles, shape: str, aspect, gap: float = 0.0):
     order = np.argsort(owner, kind="stable")
     owner, qx, qy = owner[order], qx[order], qy[order]
     counts = np.bincount(owner, minlength=n)[:n]
-    first = np.cumsum(counts) - counts
     cells = np.flatnonzero(counts > 0)
-    h, w = labels.shape
-
-    def sizes_of(sub, centres):
-        """Sizes of the elements of cells ``cells[sub]`` centred at ``centres``."""
-        ids = cells[sub]
-        cnt = counts[ids]
-        offs = np.cumsum(cnt) - cnt
-        idx = np.repeat(first[ids] - offs, cnt) + np.arange(int(cnt.sum()))
-        loc = np.repeat(np.arange(len(ids)), cnt)
-        coef = compile_sites(ball, centres, angles[ids], None)
-        reach = _reach(coef, loc, qx[idx] - centres[loc, 0], qy[idx] - centres[loc, 1], 0.5 * gap)
-        size = np.minimum.reduceat(reach, offs) if len(ids) else np.zeros(0)
-        x, y = centres[:, 0], centres[:, 1]
-        own = (x >= 0) & (x < w) & (y >= 0) & (y < h) & (labels[pixel_index(centres, w, h)] == ids)
-        return np.where(own, np.maximum(size, 0.0), 0.0)
-
-    def search(start):
-        centres = start[cells].copy()
-        best = sizes_of(np.arange(len(cells)), centres)
-        for frac in _FIT_STEPS:
-            active = np.arange(len(cells))
-            for _ in range(3):
-                if len(active) == 0:
-                    break
-                step = frac * np.maximum(best[active], 1.0)
-                grew = np.zeros(len(active), dtype=bool)
-                for move in _FIT_MOVES:
-                    trial = centres[active] + step[:, None] * move
-                    size = sizes_of(active, trial)
-                    better = size > best[active] * (1 + 1e-9)
-                    if better.any():
-                        a = active[better]
-                        centres[a], best[a] = trial[better], size[better]
-                        grew |= better
-                active = active[grew]
-        return centres, best
-
     out_c, out_s = sites.copy(), np.zeros(n)
     if len(cells) == 0:
         return out_c, out_s
+    full = _SampleSet(qx, qy, np.repeat(np.arange(len(cells)), counts[cells]), np.arange(len(cells)))
+    del owner, order
+    gauge = _Gauge(compile_sites(ball, sites[cells], angles[cells], None), 0.5 * gap)
+
+    def search(start):
+        return _fit_search(labels, cells, full, gauge, start[cells].copy())
+
     c1, s1 = search(sites)
     start2 = _inscribed_centres(labels, shape, aspect, n)
     start2[~np.isfinite(start2).all(axis=1)] = sites[~np.isfinite(start2).all(axis=1)]
