@@ -68,7 +68,6 @@ import numpy as np
 
 from .errors import InputError
 from .metrics import Metric, compile_sites
-from .pixels import pixel_index
 from .problem import MAX_SIDE, Grid, in_own_cell
 from .shapes import check_shape, element_ball, element_polygons, shape_record
 from .validate import one_of, real_number
@@ -112,54 +111,93 @@ def contour_samples(labels: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndar
     return owner[keep], x[keep], y[keep]
 
 
-class _Gauge:
-    """The reach of contour samples from element centres (the rule of this module), one
-    compiled ball per cell, and how far a move of the centre can change it.
+_BLOCK = 1 << 16  # contour samples handled at once: they stay in the cache, memory stays flat
 
-    ``lipschitz`` (per cell) bounds |reach(v) - reach(v')| by ``lipschitz``·|v - v'| +
-    ``drop``: a polygon's reach is a max of linear functions f_k·v - G/2·|f_k|, so its
-    constant is max_k |f_k|; an ellipse's ρ has the square root of Q's larger eigenvalue,
-    and its grout term G/2·|∇ρ| lies between 0 and G/2 times that (``drop``)."""
+
+class _Gauge:
+    """The reach of contour samples from element centres (the rule of this module) under
+    one compiled ball per cell (``coef``, grout ``half`` = G/2), for cells whose samples
+    lie in the rows of a rectangle (one row per cell: :meth:`_CellSamples.blocks`).
+
+    :meth:`prepare` folds into per-sample terms, once, what depends only on a sample and
+    its ball's ``anchor`` (a point near the cell: its site); :meth:`least` then costs, for
+    a polygon, one subtraction and one max per facet and sample: the facet term
+    f_k·(q - x) - G/2·|f_k| is computed as f_k·(q - a) - (f_k·(x - a) + G/2·|f_k|).  At
+    x = a this is f_k·(q - a) - G/2·|f_k| bit for bit; elsewhere the two differ by
+    rounding only (about 1e-14 px)."""
 
     def __init__(self, coef, half: float):
         self.kind, self.half = coef.kind, half
         if coef.kind == "polygon":
             f = coef.facets  # (N, K, 2): f_k = R(θ) n_k / h_k, |f_k| = 1 / h_k
-            self.fx = [np.ascontiguousarray(f[:, k, 0]) for k in range(f.shape[1])]
-            self.fy = [np.ascontiguousarray(f[:, k, 1]) for k in range(f.shape[1])]
+            self.fx = np.ascontiguousarray(f[:, :, 0].T)  # (K, N)
+            self.fy = np.ascontiguousarray(f[:, :, 1].T)
             self.slack = half * np.hypot(f[0, :, 0], f[0, :, 1])  # same |f_k| for every site
-            lip = np.hypot(f[..., 0], f[..., 1]).max(axis=1)
-            self.drop = np.zeros(len(lip))
         else:
-            q = coef.quad
-            self.q = [np.ascontiguousarray(q[:, j]) for j in range(3)]
-            lip = np.sqrt(0.5 * (q[:, 0] + q[:, 2]) + np.hypot(0.5 * (q[:, 0] - q[:, 2]), q[:, 1]))
-            self.drop = half * lip * (1 + 1e-9)
-        self.lipschitz = lip * (1 + 1e-9)  # rounding of the bound itself
+            self.q = np.ascontiguousarray(coef.quad.T)  # (3, N): qxx, qxy, qyy
 
-    def reach(self, owner, vx, vy):
-        """Per sample (``owner`` its ball, v = sample - centre), the element size at which
-        the element (grout G/2 kept clear) reaches the sample."""
+    def prepare(self, balls, qx, qy, anchor) -> list:
+        """Terms of the samples (``qx``, ``qy``: (M, W), row i in ball ``balls[i]``):
+        arrays whose next-to-last axis is the row; ``anchor`` (N, 2) per ball."""
         if self.kind == "polygon":
-            out = None
-            for fx, fy, s in zip(self.fx, self.fy, self.slack, strict=True):  # one facet at a time: no (S, K) temporaries
-                v = fx[owner]
-                v *= vx
-                t = fy[owner]
-                t *= vy
-                v += t
-                v -= s
-                out = v if out is None else np.maximum(out, v, out=out)
-            return out
-        q0, q1, q2 = (q[owner] for q in self.q)
+            ux, uy = qx - anchor[balls, 0][:, None], qy - anchor[balls, 1][:, None]
+            proj = np.empty((len(self.fx), *qx.shape))
+            for k in range(len(self.fx)):  # one facet at a time: no (K, M, W) temporaries
+                np.add(self.fx[k, balls][:, None] * ux, self.fy[k, balls][:, None] * uy, out=proj[k])
+            return [proj]
+        return [qx, qy, self.q[:, balls, None]]
+
+    def least(self, terms, balls, points, anchor) -> np.ndarray:
+        """(M,) per row, the smallest size at which the element centred at ``points[i]``
+        (ball ``balls[i]``) reaches one of the row's samples."""
+        if self.kind == "polygon":
+            (proj,) = terms
+            dx, dy = points[:, 0] - anchor[balls, 0], points[:, 1] - anchor[balls, 1]
+            shift = self.fx[:, balls] * dx + self.fy[:, balls] * dy + self.slack[:, None]  # (K, M)
+            out = proj[0] - shift[0][:, None]
+            for k in range(1, len(proj)):
+                np.maximum(out, proj[k] - shift[k][:, None], out=out)
+            return out.min(axis=1)
+        qx, qy, (q0, q1, q2) = terms
+        vx, vy = qx - points[:, 0, None], qy - points[:, 1, None]
         gx = q0 * vx + q1 * vy  # Q v = ρ ∇ρ
         gy = q1 * vx + q2 * vy
         rho = np.sqrt(np.maximum(vx * gx + vy * gy, 0.0))
         if self.half <= 0:
-            return rho
+            return rho.min(axis=1)
         with np.errstate(divide="ignore", invalid="ignore"):
             grad = np.where(rho > 0, np.hypot(gx, gy) / rho, 0.0)
-        return rho - self.half * grad
+        return (rho - self.half * grad).min(axis=1)
+
+
+class _CellSamples:
+    """The contour samples of a label raster (:func:`contour_samples`) grouped by cell:
+    ``cells`` (the labels that own samples), per cell its ``counts`` of samples."""
+
+    def __init__(self, labels, n: int):
+        owner, qx, qy = contour_samples(labels)
+        order = np.argsort(owner, kind="stable")
+        # half-integers: float32 holds them exactly, in half the memory
+        self.qx, self.qy = qx[order].astype(np.float32), qy[order].astype(np.float32)
+        counts = np.bincount(owner, minlength=n)[:n]
+        self.cells = np.flatnonzero(counts > 0)
+        self.counts = counts[self.cells]
+        self.first = np.cumsum(self.counts) - self.counts
+
+    def blocks(self, size: int = _BLOCK):
+        """Yield blocks of about ``size`` samples: the cells' indices (into ``cells``)
+        and their samples' x and y as (M, W) float64, one row per cell; cells of like
+        counts go together, and a row shorter than W repeats its last sample (which
+        changes no minimum)."""
+        by = np.argsort(self.counts, kind="stable")
+        ends = np.cumsum(self.counts[by])
+        cuts = np.searchsorted(ends, np.arange(size, ends[-1], size), side="right") if len(by) else []
+        edges = np.unique(np.concatenate([[0], cuts, [len(by)]])).astype(int)
+        for lo, hi in zip(edges[:-1], edges[1:], strict=True):
+            which = by[lo:hi]
+            cnt = self.counts[which]
+            idx = self.first[which, None] + np.minimum(np.arange(cnt.max()), cnt[:, None] - 1)
+            yield which, self.qx[idx].astype(np.float64), self.qy[idx].astype(np.float64)
 
 
 def placement_sizes(labels, sites, angles, shape: str, aspect, gap: float = 0.0) -> np.ndarray:
@@ -176,11 +214,12 @@ def placement_sizes(labels, sites, angles, shape: str, aspect, gap: float = 0.0)
     if n == 0:
         return np.zeros(0)
     ball = element_ball(shape, aspect)
-    coef = compile_sites(ball, sites, angles, None)
-    owner, qx, qy = contour_samples(labels)
-    reach = _Gauge(coef, 0.5 * gap).reach(owner, qx - sites[owner, 0], qy - sites[owner, 1])
+    gauge = _Gauge(compile_sites(ball, sites, angles, None), 0.5 * gap)
+    samples = _CellSamples(labels, n)
     sizes = np.full(n, np.inf)
-    np.minimum.at(sizes, owner, reach)
+    for which, x, y in samples.blocks():
+        ids = samples.cells[which]
+        sizes[ids] = gauge.least(gauge.prepare(ids, x, y, sites), ids, sites[ids], sites)
 
     # a site must sit in a pixel of its own cell, or its element would grow into another
     ok = in_own_cell(labels, sites) & np.isfinite(sizes) & (sizes > 0)
@@ -193,127 +232,41 @@ _FIT_MOVES = np.array(
     [[1, 0], [-1, 0], [0, 1], [0, -1], [1, 1], [1, -1], [-1, 1], [-1, -1]], dtype=np.float64
 )
 _FIT_REPEATS = 3  # tries of the 8 moves per step, while the cell still grows
-# Which contour samples stay in play: those whose reach is within this many steps (times
-# the gauge's Lipschitz constant) of their cell's smallest, per step size and per repeat.
-# Only the speed depends on them: a trial that the samples in play cannot vouch for is
-# evaluated over all of its cell's samples.
-_KEEP_STEPS_LEVEL, _KEEP_STEPS_REPEAT = 6.0, 2.5
 
 
-class _SampleSet:
-    """Contour samples grouped by cell: coordinates ``x``, ``y``; ``cell``, the index of
-    the sample's cell in the fit's list of cells (non-decreasing); ``pos``, the index of
-    that cell in ``cells``, the cells the set serves (each holds at least one sample)."""
-
-    def __init__(self, x, y, cell, cells, pos=None):
-        self.x, self.y, self.cell, self.cells = x, y, cell, cells
-        self.pos = cell if pos is None else pos
-        self.counts = np.bincount(self.pos, minlength=len(cells))
-        self.offsets = np.cumsum(self.counts) - self.counts
-
-    def take(self, keep, cells=None) -> _SampleSet:
-        """The samples where ``keep``, serving ``cells`` (default: the same cells)."""
-        if cells is None:
-            return _SampleSet(self.x[keep], self.y[keep], self.cell[keep], self.cells, self.pos[keep])
-        rank = np.full(len(self.cells), -1)
-        rank[cells] = np.arange(len(cells))
-        cell = self.cell[keep]
-        return _SampleSet(self.x[keep], self.y[keep], cell, cells, rank[cell])
-
-    def cells_at(self, ids) -> _SampleSet:
-        """All samples of cells ``ids`` (indices into ``cells``), serving those."""
-        cnt = self.counts[ids]
-        offs = np.cumsum(cnt) - cnt
-        idx = np.repeat(self.offsets[ids] - offs, cnt) + np.arange(int(cnt.sum()))
-        pos = np.repeat(np.arange(len(ids)), cnt)
-        return _SampleSet(self.x[idx], self.y[idx], self.cell[idx], ids, pos)
-
-    def reach(self, gauge: _Gauge, centres):
-        """Per sample its reach from its cell's centre (``centres``: one per served cell),
-        and per served cell the smallest."""
-        r = gauge.reach(self.cell, self.x - centres[self.pos, 0], self.y - centres[self.pos, 1])
-        return np.minimum.reduceat(r, self.offsets), r
-
-    def prune(self, r, limit):
-        """The samples whose reach ``r`` is at most ``limit`` (per served cell) with their
-        reaches, and per served cell the smallest reach of those dropped (inf: none)."""
-        keep = r <= limit[self.pos]
-        dropped = np.minimum.reduceat(np.where(keep, np.inf, r), self.offsets)
-        return self.take(keep), r[keep], dropped
-
-
-def _fit_search(labels, cells, full: _SampleSet, gauge: _Gauge, centres):
-    """The pattern search of :func:`fit_centres` from ``centres`` (one per cell of
-    ``cells``, ``full`` their samples): the centres and sizes it ends at.
-
-    Each trial needs the smallest reach over its cell's samples, but far samples cannot
-    be the smallest: the reach changes by at most ``gauge.lipschitz``·|move| +
-    ``gauge.drop``, so a sample dropped at centre c with reach T reaches at least
-    T - L·|x - c| - drop from any x.  The search keeps in play the samples near the
-    smallest (chosen per step size, then per repeat) and, per cell, that bound on the
-    others.  A trial that would be accepted while the smallest reach in play is above the
-    bound is evaluated over all of its cell's samples; a rejected trial needs no check
-    (the smallest over all samples is no larger).  Sizes and centres are therefore those
-    of a search over all samples, bit for bit."""
+def _fit_search(labels, ids, terms, gauge: _Gauge, centres, anchor):
+    """The pattern search of :func:`fit_centres` for the cells labelled ``ids`` (also
+    their balls; ``terms`` their samples' :meth:`_Gauge.prepare`) from ``centres``: the
+    centres and sizes it ends at."""
     h, w = labels.shape
-    every = np.arange(len(cells))
-    lip, drop = gauge.lipschitz, gauge.drop
+    flat = labels.ravel()
 
-    def sizes(ids, points, least):
-        """Sizes at ``points`` in cells ``ids`` whose smallest reach there is ``least``."""
+    def sizes(which, points, least):
         x, y = points[:, 0], points[:, 1]
-        own = (x >= 0) & (x < w) & (y >= 0) & (y < h) & (labels[pixel_index(points, w, h)] == cells[ids])
+        own = (x >= 0) & (x < w) & (y >= 0) & (y < h)
+        pixel = np.clip(y, 0, h - 1).astype(np.intp) * w + np.clip(x, 0, w - 1).astype(np.intp)
+        own &= flat[pixel] == ids[which]
         return np.where(own, np.maximum(least, 0.0), 0.0)
 
-    def bound(ids, points, floor_t, floor_c):
-        """Least reach from ``points`` of samples dropped where ``floor_t`` was the least."""
-        return floor_t - lip[ids] * np.hypot(points[:, 0] - floor_c[:, 0], points[:, 1] - floor_c[:, 1])
-
-    least, r = full.reach(gauge, centres)
-    best = sizes(every, centres, least)
-    level = full  # the samples in play for this step size
-    level_t, level_c = np.full(len(cells), np.inf), centres.copy()  # bound on the others
+    every = np.arange(len(ids))
+    best = sizes(every, centres, gauge.least(terms, ids, centres, anchor))
     for frac in _FIT_STEPS:
-        active = every
-        for rep in range(_FIT_REPEATS):
+        active, here, here_balls = every, terms, ids
+        for _ in range(_FIT_REPEATS):
             if len(active) == 0:
                 break
+            if len(active) < len(here_balls):
+                here, here_balls = [t[..., active, :] for t in terms], ids[active]
             step = frac * np.maximum(best[active], 1.0)
-            if rep == 0:  # every cell: choose this step size's samples
-                if level is not full:
-                    least, r = level.reach(gauge, centres)
-                outside = bound(every, centres, level_t, level_c)
-                level, r, dropped = level.prune(r, least + lip * (_KEEP_STEPS_LEVEL * step))
-                level_t, level_c = np.minimum(dropped, outside), centres.copy()
-                here = level
-            else:
-                on = np.zeros(len(cells), dtype=bool)
-                on[active] = True
-                here = level.take(on[level.cell], active)
-                least, r = here.reach(gauge, centres[active])
-            here, _, rep_t = here.prune(r, least + lip[active] * (_KEEP_STEPS_REPEAT * step))
-            rep_c = centres[active]
             grew = np.zeros(len(active), dtype=bool)
             for move in _FIT_MOVES:
                 trial = centres[active] + step[:, None] * move
-                least_t = here.reach(gauge, trial)[0]
-                size = sizes(active, trial, least_t)
+                size = sizes(active, trial, gauge.least(here, here_balls, trial, anchor))
                 better = size > best[active] * (1 + 1e-9)
-                if not better.any():
-                    continue
-                b = np.flatnonzero(better)
-                a, pts = active[b], trial[b]
-                vouched = np.minimum(
-                    bound(a, pts, level_t[a], level_c[a]), bound(a, pts, rep_t[b], rep_c[b])
-                ) - drop[a]
-                unsure = b[least_t[b] > vouched - 1e-9 * (1.0 + np.abs(least_t[b]))]
-                if len(unsure):
-                    ids = active[unsure]
-                    size[unsure] = sizes(ids, trial[unsure], full.cells_at(ids).reach(gauge, trial[unsure])[0])
-                    better[unsure] = size[unsure] > best[ids] * (1 + 1e-9)
-                a = active[better]
-                centres[a], best[a] = trial[better], size[better]
-                grew |= better
+                if better.any():
+                    a = active[better]
+                    centres[a], best[a] = trial[better], size[better]
+                    grew |= better
             active = active[grew]
     return centres, best
 
@@ -336,17 +289,19 @@ def _inscribed_centres(labels, shape: str, aspect, n: int) -> np.ndarray:
     )
     kind = shape_record(shape).distance
     if kind == "chessboard":
-        dt = ndimage.distance_transform_cdt(inner, metric="chessboard").astype(np.float64)
+        dt = ndimage.distance_transform_cdt(inner, metric="chessboard")
     elif kind == "scaled":
         beta = element_ball(shape, aspect).aspect  # gauge ~ hypot(β·dx, dy/β)
         dt = ndimage.distance_transform_edt(inner, sampling=(1.0 / beta, beta))
     else:
         dt = ndimage.distance_transform_edt(inner)
+    del inner, pad
     lab, d = labels.ravel(), dt.ravel()
-    inside = np.flatnonzero(lab >= 0)
-    best = np.full(n, -1.0)
-    np.maximum.at(best, lab[inside], d[inside])
-    top = inside[d[inside] == best[lab[inside]]]
+    key = np.where(lab >= 0, lab, n)  # pixels outside the region: one spare bin
+    best = np.full(n + 1, -1, dtype=d.dtype)
+    np.maximum.at(best, key, d)
+    top = np.flatnonzero(d == best[key])
+    top = top[lab[top] >= 0]
     cells, first = np.unique(lab[top], return_index=True)
     out = np.full((n, 2), np.nan)
     i, j = np.divmod(top[first], w)
@@ -373,29 +328,23 @@ def fit_centres(labels, sites, angles, shape: str, aspect, gap: float = 0.0):
     n = len(sites)
     angles = np.zeros(n) if angles is None else np.broadcast_to(np.asarray(angles, np.float64), (n,))
     gap = parse_gap(gap)
-    ball = element_ball(shape, aspect)
-    owner, qx, qy = contour_samples(labels)
-    order = np.argsort(owner, kind="stable")
-    owner, qx, qy = owner[order], qx[order], qy[order]
-    counts = np.bincount(owner, minlength=n)[:n]
-    cells = np.flatnonzero(counts > 0)
+    ball_metric = element_ball(shape, aspect)
+    samples = _CellSamples(labels, n)
     out_c, out_s = sites.copy(), np.zeros(n)
-    if len(cells) == 0:
+    if len(samples.cells) == 0:
         return out_c, out_s
-    full = _SampleSet(qx, qy, np.repeat(np.arange(len(cells)), counts[cells]), np.arange(len(cells)))
-    del owner, order
-    gauge = _Gauge(compile_sites(ball, sites[cells], angles[cells], None), 0.5 * gap)
-
-    def search(start):
-        return _fit_search(labels, cells, full, gauge, start[cells].copy())
-
-    c1, s1 = search(sites)
+    gauge = _Gauge(compile_sites(ball_metric, sites, angles, None), 0.5 * gap)
     start2 = _inscribed_centres(labels, shape, aspect, n)
-    start2[~np.isfinite(start2).all(axis=1)] = sites[~np.isfinite(start2).all(axis=1)]
-    c2, s2 = search(start2)
-    second = s2 > s1
-    out_c[cells] = np.where(second[:, None], c2, c1)
-    out_s[cells] = np.where(second, s2, s1)
+    missing = ~np.isfinite(start2).all(axis=1)
+    start2[missing] = sites[missing]
+    for which, x, y in samples.blocks():  # cells are independent: one block at a time
+        ids = samples.cells[which]
+        terms = gauge.prepare(ids, x, y, sites)
+        c_a, s_a = _fit_search(labels, ids, terms, gauge, sites[ids], sites)
+        c_b, s_b = _fit_search(labels, ids, terms, gauge, start2[ids], sites)
+        second = s_b > s_a
+        out_c[ids] = np.where(second[:, None], c_b, c_a)
+        out_s[ids] = np.where(second, s_b, s_a)
     return out_c, out_s
 
 
