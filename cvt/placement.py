@@ -92,23 +92,42 @@ def contour_samples(labels: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndar
 
     Every pair of 4-neighbour pixels with different labels shares a unit edge; its
     midpoint is a sample of the contour of each of the two cells (outside labels, -1,
-    own nothing).  The raster is padded with -1 so that its border is contour too."""
+    own nothing).  The raster's border is contour too (as if padded with -1).  Samples
+    come in four runs (the left and the right cell of each vertical edge, then the upper
+    and the lower cell of each horizontal edge), each in raster order."""
+    labels = np.asarray(labels)
     h, w = labels.shape
-    pad = np.full((h + 2, w + 2), -1, dtype=np.int32)
-    pad[1:-1, 1:-1] = labels
-    # horizontal pairs: pixels (r-1, c-1) | (r-1, c), shared edge x = c, y in [r-1, r]
-    r, c = np.nonzero(pad[:, :-1] != pad[:, 1:])
-    left, right = pad[r, c], pad[r, c + 1]
-    hx, hy = c.astype(np.float64), r - 0.5
-    # vertical pairs: pixels (r-1, c-1) over (r, c-1), shared edge y = r, x in [c-1, c]
-    r2, c2 = np.nonzero(pad[:-1, :] != pad[1:, :])
-    top, bottom = pad[r2, c2], pad[r2 + 1, c2]
-    vx, vy = c2 - 0.5, r2.astype(np.float64)
-    owner = np.concatenate([left, right, top, bottom])
-    x = np.concatenate([hx, hx, vx, vx])
-    y = np.concatenate([hy, hy, vy, vy])
-    keep = owner >= 0
-    return owner[keep], x[keep], y[keep]
+    flat = labels.ravel()
+    # vertical edges x = c (c = 0 .. w) of row r: pixel (r, c - 1) | pixel (r, c)
+    cut = np.empty((h, w + 1), dtype=bool)
+    cut[:, 0], cut[:, w] = labels[:, 0] != -1, labels[:, w - 1] != -1
+    np.not_equal(labels[:, :-1], labels[:, 1:], out=cut[:, 1:w])
+    r, c = np.divmod(np.flatnonzero(cut), w + 1)
+    del cut
+    at = r * w + c
+    left = np.where(c > 0, flat[np.maximum(at - 1, 0)], -1)
+    right = np.where(c < w, flat[np.minimum(at, flat.size - 1)], -1)
+    runs = [(left, c, r + 0.5), (right, c, r + 0.5)]
+    # horizontal edges y = r (r = 0 .. h) of column c: pixel (r - 1, c) over pixel (r, c)
+    cut = np.empty((h + 1, w), dtype=bool)
+    cut[0], cut[h] = labels[0] != -1, labels[h - 1] != -1
+    np.not_equal(labels[:-1], labels[1:], out=cut[1:h])
+    r2, c2 = np.divmod(np.flatnonzero(cut), w)
+    del cut
+    at = r2 * w + c2
+    top = np.where(r2 > 0, flat[np.maximum(at - w, 0)], -1)
+    bottom = np.where(r2 < h, flat[np.minimum(at, flat.size - 1)], -1)
+    runs += [(top, c2 + 0.5, r2), (bottom, c2 + 0.5, r2)]
+    keeps = [run[0] >= 0 for run in runs]
+    total = sum(int(k.sum()) for k in keeps)
+    owner = np.empty(total, dtype=np.int32)
+    x, y = np.empty(total), np.empty(total)
+    start = 0
+    for (who, xs, ys), keep in zip(runs, keeps, strict=True):  # four runs, written in place
+        end = start + int(keep.sum())
+        owner[start:end], x[start:end], y[start:end] = who[keep], xs[keep], ys[keep]
+        start = end
+    return owner, x, y
 
 
 _BLOCK = 1 << 16  # contour samples handled at once: they stay in the cache, memory stays flat
@@ -176,9 +195,11 @@ class _CellSamples:
 
     def __init__(self, labels, n: int):
         owner, qx, qy = contour_samples(labels)
-        order = np.argsort(owner, kind="stable")
         # half-integers: float32 holds them exactly, in half the memory
-        self.qx, self.qy = qx[order].astype(np.float32), qy[order].astype(np.float32)
+        qx, qy = qx.astype(np.float32), qy.astype(np.float32)
+        order = np.argsort(owner, kind="stable")
+        self.qx, self.qy = qx[order], qy[order]
+        del qx, qy, order
         counts = np.bincount(owner, minlength=n)[:n]
         self.cells = np.flatnonzero(counts > 0)
         self.counts = counts[self.cells]
@@ -279,14 +300,14 @@ def _inscribed_centres(labels, shape: str, aspect, n: int) -> np.ndarray:
     from scipy import ndimage
 
     h, w = labels.shape
-    pad = np.pad(labels, 1, constant_values=-1)
-    inner = (
-        (labels >= 0)
-        & (pad[:-2, 1:-1] == labels)
-        & (pad[2:, 1:-1] == labels)
-        & (pad[1:-1, :-2] == labels)
-        & (pad[1:-1, 2:] == labels)
-    )
+    # a pixel whose 4 neighbours are in its cell (none on the raster's border)
+    inner = labels >= 0
+    inner[1:] &= labels[1:] == labels[:-1]
+    inner[:-1] &= labels[:-1] == labels[1:]
+    inner[:, 1:] &= labels[:, 1:] == labels[:, :-1]
+    inner[:, :-1] &= labels[:, :-1] == labels[:, 1:]
+    inner[[0, -1]] = False
+    inner[:, [0, -1]] = False
     kind = shape_record(shape).distance
     if kind == "chessboard":
         dt = ndimage.distance_transform_cdt(inner, metric="chessboard")
@@ -295,13 +316,17 @@ def _inscribed_centres(labels, shape: str, aspect, n: int) -> np.ndarray:
         dt = ndimage.distance_transform_edt(inner, sampling=(1.0 / beta, beta))
     else:
         dt = ndimage.distance_transform_edt(inner)
-    del inner, pad
+    del inner
     lab, d = labels.ravel(), dt.ravel()
-    key = np.where(lab >= 0, lab, n)  # pixels outside the region: one spare bin
+    outside = lab < 0
+    key = np.where(outside, n, lab) if outside.any() else lab  # outside: one spare bin
     best = np.full(n + 1, -1, dtype=d.dtype)
     np.maximum.at(best, key, d)
-    top = np.flatnonzero(d == best[key])
-    top = top[lab[top] >= 0]
+    rows = max(1, (1 << 22) // max(w, 1)) * w  # compared a slice at a time: no raster-sized gather
+    top = np.concatenate(
+        [np.flatnonzero(d[i : i + rows] == best[key[i : i + rows]]) + i for i in range(0, len(d), rows)]
+    )
+    top = top[~outside[top]]
     cells, first = np.unique(lab[top], return_index=True)
     out = np.full((n, 2), np.nan)
     i, j = np.divmod(top[first], w)
