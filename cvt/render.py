@@ -179,7 +179,8 @@ def cells_image(labels: np.ndarray, n_elements: int, sites=None):
     h, w = labels.shape
     rgb = label_colours(n_elements).astype("<u4")
     packed = rgb[:, 0] | rgb[:, 1] << 8 | rgb[:, 2] << 16  # one 4-byte gather per pixel: R, G, B, pad
-    pixels = packed[np.where(labels >= 0, labels, n_elements)]
+    # label -1 (outside) takes the last colour by numpy's own negative indexing
+    pixels = packed[labels if labels.min(initial=0) >= -1 else np.where(labels >= 0, labels, n_elements)]
     if sites is not None:
         pixels[pixel_index(sites, w, h)] = 20 | 20 << 8 | 20 << 16
     return Image.frombuffer("RGBX", (w, h), np.ascontiguousarray(pixels), "raw", "RGBX", 0, 1).convert("RGB")
