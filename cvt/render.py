@@ -186,7 +186,7 @@ def cells_image(labels: np.ndarray, n_elements: int, sites=None):
     return Image.frombuffer("RGBX", (w, h), np.ascontiguousarray(pixels), "raw", "RGBX", 0, 1).convert("RGB")
 
 
-BAND_BYTES = 24 << 20  # a supersampled picture is drawn in bands of about this size
+BAND_BYTES = 8 << 20  # a supersampled picture is drawn in bands of about this size
 
 
 def draw_elements(
