@@ -489,7 +489,7 @@ def to_jsonable(obj):
 
 
 def _item_texts(value) -> list[str] | None:
-    """The JSON text of each item of a long list, built whole-array where the list is a
+    """The JSON text of each item of a list, built whole-array where the list is a
     finite float or an integer array (1-D or rows) or a list of shapely geometries and
     None (their outlines); None for anything else (converted item by item)."""
     from compact_distributions.cvt.render import element_coordinates_json, format_rows
@@ -517,13 +517,11 @@ def json_chunks(data: dict):
         yield (",\n" if i else "") + f" {json.dumps(str(key))}: "
         if isinstance(value, (list, tuple, np.ndarray)) and len(value) > 64:
             yield "["
-            items = _item_texts(value)
-            if items is None:
-                for j, item in enumerate(value):
-                    yield (", " if j else "") + json.dumps(to_jsonable(item))
-            else:
-                for j in range(0, len(items), 4096):
-                    yield (", " if j else "") + ", ".join(items[j : j + 4096])
+            for j in range(0, len(value), 1024):  # a block of items at a time
+                items = _item_texts(value[j : j + 1024])
+                if items is None:
+                    items = [json.dumps(to_jsonable(item)) for item in value[j : j + 1024]]
+                yield (", " if j else "") + ", ".join(items)
             yield "]"
         else:
             yield json.dumps(to_jsonable(value))

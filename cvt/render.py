@@ -110,13 +110,31 @@ def _exteriors(polygons: np.ndarray):
     return xy[~closing], counts - 1
 
 
+def _geometries(elements) -> np.ndarray:
+    """``elements`` as a 1-D object array (itself if it is one)."""
+    if isinstance(elements, np.ndarray) and elements.dtype == object and elements.ndim == 1:
+        return elements
+    geoms = np.empty(len(elements), dtype=object)
+    geoms[:] = list(elements)
+    return geoms
+
+
+def _blocks(geoms: np.ndarray, which: np.ndarray, budget: int = 1 << 16):
+    """``which`` cut into consecutive blocks of about ``budget`` vertices (at least one
+    element each): what is converted to Python objects at once stays small."""
+    ends = np.cumsum(shapely.get_num_coordinates(geoms[which]))
+    cuts = np.searchsorted(ends, np.arange(budget, ends[-1], budget), side="right") if len(ends) else []
+    edges = np.unique(np.concatenate([[0], cuts, [len(which)]])).astype(int)
+    for lo, hi in zip(edges[:-1], edges[1:], strict=True):
+        yield which[lo:hi]
+
+
 def _ring_table(elements, which=None):
     """The rings of ``elements`` (of those listed in ``which``; default: all that are
     neither None nor empty) as :func:`_rings` gives them, element by element: their
     vertices as one (P, 2) array, and per ring its element and vertex count.  Polygons
     without holes are read at once; other geometries one by one."""
-    geoms = np.empty(len(elements), dtype=object)
-    geoms[:] = list(elements)
+    geoms = _geometries(elements)
     if which is None:
         which = np.flatnonzero(shapely.is_geometry(geoms) & ~shapely.is_empty(geoms))
     simple = (shapely.get_type_id(geoms[which]) == 3) & (shapely.get_num_interior_rings(geoms[which]) == 0)
@@ -138,16 +156,19 @@ def _ring_table(elements, which=None):
 
 def format_rows(template: str, columns) -> list[str]:
     """``template`` (one line: a newline at its end, none before) filled with row i of
-    ``columns`` (equal-length sequences) for every i, by one ``str.format`` call: one
-    line per row."""
+    ``columns`` (equal-length sequences) for every i: one line per row, made by one
+    ``str.format`` call per block of rows (bounded memory)."""
     rows = len(columns[0]) if columns else 0
-    if rows == 0:
-        return []
-    table = np.empty((rows, len(columns)), dtype=object)
-    for j, column in enumerate(columns):  # Python numbers: {!r} as json writes them
-        table[:, j] = column.tolist() if isinstance(column, np.ndarray) else list(column)
-    text = (template * rows).format(*table.ravel().tolist())
-    return [line + "\n" for line in text.split("\n")[:-1]]
+    step = max(1, (1 << 16) // max(1, len(columns)))
+    out: list[str] = []
+    for lo in range(0, rows, step):
+        part = [c[lo : lo + step] for c in columns]
+        table = np.empty((len(part[0]), len(part)), dtype=object)
+        for j, column in enumerate(part):  # Python numbers: {!r} as json writes them
+            table[:, j] = column.tolist() if isinstance(column, np.ndarray) else list(column)
+        text = (template * len(table)).format(*table.ravel().tolist())
+        out += [line + "\n" for line in text.split("\n")[:-1]]
+    return out
 
 
 def _ring_texts(xy, count, template_of) -> np.ndarray:
@@ -226,32 +247,27 @@ def draw_elements(
         fills = label_colours(len(elements))
     line = rgb8(outline) if outline is not None else None
 
-    # the rings of the elements that reach the window, in the supersampled picture's pixels
-    geoms = np.empty(len(elements), dtype=object)
-    geoms[:] = list(elements)
+    # the elements that reach the window; their vertical extent in the picture's pixels
+    geoms = _geometries(elements)
     b = shapely.bounds(geoms)
     with np.errstate(invalid="ignore"):
         shown = np.isfinite(b[:, 0]) & ~((b[:, 0] > x1) | (b[:, 1] > y1) | (b[:, 2] < x0) | (b[:, 3] < y0))
-    xy, element, count = _ring_table(elements, np.flatnonzero(shown))
-    starts = np.cumsum(count) - count
-    drawn = count >= 3
-    xy = xy[_ranges(starts[drawn], count[drawn])]
-    element, count = element[drawn], count[drawn]
-    starts = np.cumsum(count) - count
-    px, py = (xy[:, 0] - x0) * k, (xy[:, 1] - y0) * k
-    top_y = np.minimum.reduceat(py, starts) if len(count) else np.zeros(0)
-    bottom_y = np.maximum.reduceat(py, starts) if len(count) else np.zeros(0)
-    colour = [tuple(c) for c in fill_rows(fills, len(elements))[element].tolist()]
+    shown = np.flatnonzero(shown)
+    top_y, bottom_y = (b[shown, 1] - y0) * k, (b[shown, 3] - y0) * k
+    rgb = fill_rows(fills, len(elements))
 
-    def paint(img, top: int, rings) -> None:
-        """Draw ``rings`` on ``img``, rows top .. top + height of the whole picture."""
-        idx = _ranges(starts[rings], count[rings])
-        pts = np.stack([px[idx], py[idx] - top], axis=1).ravel().tolist()  # whole-pixel move: exact
-        draw, at = ImageDraw.Draw(img), 0
-        for r in rings.tolist():
-            n2 = 2 * int(count[r])
-            draw.polygon(pts[at : at + n2], fill=colour[r], outline=line)
-            at += n2
+    def paint(img, top: int, which) -> None:
+        """Draw elements ``which`` on ``img``, rows top .. top + height of the picture;
+        their vertices read a block of elements at a time (bounded memory)."""
+        draw = ImageDraw.Draw(img)
+        for block in _blocks(geoms, which):
+            xy, element, count = _ring_table(geoms, block)
+            px, py = (xy[:, 0] - x0) * k, (xy[:, 1] - y0) * k - top  # whole-pixel move: exact
+            pts, at = np.stack([px, py], axis=1).ravel().tolist(), 0
+            for e, n in zip(element.tolist(), count.tolist(), strict=True):
+                if n >= 3:
+                    draw.polygon(pts[at : at + 2 * n], fill=tuple(rgb[e].tolist()), outline=line)
+                at += 2 * n
 
     banded = ss > 1 and window is None and big == (small[0] * ss, small[1] * ss)
     if masked:
@@ -266,7 +282,7 @@ def draw_elements(
                 (max(1, round(width * k)), max(1, round(height * k))), Image.NEAREST
             )
             img = full.crop((round(x0 * k), round(y0 * k), round(x0 * k) + big[0], round(y0 * k) + big[1]))
-        paint(img, 0, np.arange(len(count)))
+        paint(img, 0, shown)
         if ss > 1:
             img = img.resize(small, Image.BOX)
         return img
@@ -277,16 +293,16 @@ def draw_elements(
     # not: each band is drawn tall enough to hold whole every polygon it shows
     for top in range(0, big[1], rows):
         n_rows = min(rows, big[1] - top)
-        rings = np.flatnonzero((bottom_y >= top - 2) & (top_y <= top + n_rows + 2))
-        lo = int(np.floor(min(top, top_y[rings].min(initial=top)))) - 2
-        hi = int(np.ceil(max(top + n_rows, bottom_y[rings].max(initial=top)))) + 2
+        near = (bottom_y >= top - 2) & (top_y <= top + n_rows + 2)
+        lo = int(np.floor(min(top, top_y[near].min(initial=top)))) - 2
+        hi = int(np.ceil(max(top + n_rows, bottom_y[near].max(initial=top)))) + 2
         lo, hi = max(0, lo // step * step), min(big[1], -(-hi // step) * step)
         if masked:  # the mask's rows, each pixel repeated k times (what NEAREST gives)
             part = m[lo // int(k) : hi // int(k)].astype(np.uint8)
             band = Image.fromarray(np.repeat(np.repeat(colours[part], int(k), axis=0), int(k), axis=1), "RGB")
         else:
             band = Image.new("RGB", (big[0], hi - lo), inside if inside is not None else rgb8(background))
-        paint(band, lo, rings)
+        paint(band, lo, shown[near])
         band = band.crop((0, top - lo, big[0], top - lo + n_rows))
         out.paste(band.resize((small[0], n_rows // ss), Image.BOX), (0, top // ss))
     return out
@@ -365,37 +381,39 @@ def svg_lines(
     yield "</g>\n</svg>\n"
 
 
-def _svg_elements(elements, fills, ellipses, digits: int) -> list[str]:
+def _svg_elements(elements, fills, ellipses, digits: int):
     """The ``<path>`` or ``<ellipse>`` line of every element that is neither None nor
-    empty, in order: the text of each kind built by one format call per vertex count."""
-    geoms = np.empty(len(elements), dtype=object)
-    geoms[:] = list(elements)
-    which = np.flatnonzero(shapely.is_geometry(geoms) & ~shapely.is_empty(geoms))
+    empty, in order, a block of elements at a time: the text of each kind built by one
+    format call per vertex count."""
+    geoms = _geometries(elements)
+    present = np.flatnonzero(shapely.is_geometry(geoms) & ~shapely.is_empty(geoms))
     rgb = fill_rows(fills, len(elements))
     exact = np.zeros(len(elements), dtype=bool)
     if ellipses is not None:
-        exact[which] = np.isfinite(np.asarray(ellipses, dtype=np.float64)[which]).all(axis=1)
-    lines = np.empty(len(elements), dtype=object)
-    paths = which[~exact[which]]
-    if len(paths):
-        xy, element, count = _ring_table(elements, paths)
-        rings = _ring_texts(np.round(xy, digits), count, _svg_ring)
-        firsts = np.flatnonzero(np.r_[True, element[1:] != element[:-1]])
-        data = rings if len(firsts) == len(rings) else np.add.reduceat(rings, firsts)
-        ids = element[firsts]
-        lines[ids] = format_rows(
-            '<path id="e{}" d="{}" fill="#{:02x}{:02x}{:02x}"/>\n', [ids, data, *rgb[ids].T]
-        )
-    shapes = which[exact[which]]
-    if len(shapes):
-        cx, cy, rx, ry, deg = np.asarray(ellipses, dtype=np.float64)[shapes].T
-        f = f"{{:.{digits}f}}"
-        lines[shapes] = format_rows(
-            f'<ellipse id="e{{}}" cx="{f}" cy="{f}" rx="{f}" ry="{f}" transform="rotate({f} {f} {f})" '
-            'fill="#{:02x}{:02x}{:02x}"/>\n',
-            [shapes, cx, cy, rx, ry, deg, cx, cy, *rgb[shapes].T],
-        )
-    return lines[which].tolist()
+        ellipses = np.asarray(ellipses, dtype=np.float64)
+        exact[present] = np.isfinite(ellipses[present]).all(axis=1)
+    for which in _blocks(geoms, present):
+        lines = np.empty(len(which), dtype=object)
+        paths = np.flatnonzero(~exact[which])
+        if len(paths):
+            xy, element, count = _ring_table(geoms, which[paths])
+            rings = _ring_texts(np.round(xy, digits), count, _svg_ring)
+            firsts = np.flatnonzero(np.r_[True, element[1:] != element[:-1]])
+            data = rings if len(firsts) == len(rings) else np.add.reduceat(rings, firsts)
+            ids = element[firsts]
+            lines[np.searchsorted(which, ids)] = format_rows(
+                '<path id="e{}" d="{}" fill="#{:02x}{:02x}{:02x}"/>\n', [ids, data, *rgb[ids].T]
+            )
+        shapes = which[exact[which]]
+        if len(shapes):
+            cx, cy, rx, ry, deg = ellipses[shapes].T
+            f = f"{{:.{digits}f}}"
+            lines[np.searchsorted(which, shapes)] = format_rows(
+                f'<ellipse id="e{{}}" cx="{f}" cy="{f}" rx="{f}" ry="{f}" transform="rotate({f} {f} {f})" '
+                'fill="#{:02x}{:02x}{:02x}"/>\n',
+                [shapes, cx, cy, rx, ry, deg, cx, cy, *rgb[shapes].T],
+            )
+        yield from lines.tolist()
 
 
 def ellipse_parameters(centres, angles, sizes, semi_axes) -> np.ndarray:
@@ -425,8 +443,7 @@ def element_coordinates_json(elements, digits: int = 3) -> list[str]:
     the polygons' built by one format call per vertex count."""
     import json
 
-    geoms = np.empty(len(elements), dtype=object)
-    geoms[:] = list(elements)
+    geoms = _geometries(elements)
     out = np.full(len(elements), "null", dtype=object)
     present = shapely.is_geometry(geoms) & ~shapely.is_empty(geoms)
     polygons = np.flatnonzero(present & (shapely.get_type_id(geoms) == 3))
