@@ -488,6 +488,26 @@ def to_jsonable(obj):
     return obj
 
 
+def _item_texts(value) -> list[str] | None:
+    """The JSON text of each item of a list, built whole-array where the list is a
+    finite float or an integer array (1-D or rows) or a list of shapely geometries and
+    None (their outlines); None for anything else (converted item by item)."""
+    from compact_distributions.cvt.render import element_coordinates_json, format_rows
+
+    if isinstance(value, np.ndarray) and value.ndim in (1, 2) and value.size:
+        ints = np.issubdtype(value.dtype, np.integer)
+        if not ints and not (np.issubdtype(value.dtype, np.floating) and np.isfinite(value).all()):
+            return None
+        field = "{}" if ints else "{!r}"  # what json writes for a Python int / float
+        if value.ndim == 1:
+            return list(map(str if ints else repr, value.tolist()))
+        row = "[" + ", ".join([field] * value.shape[1]) + "]\n"
+        return [line[:-1] for line in format_rows(row, list(value.T))]
+    if isinstance(value, list) and all(v is None or hasattr(v, "geom_type") for v in value):
+        return element_coordinates_json(value)
+    return None
+
+
 def json_chunks(data: dict):
     """The text of :func:`dumps` piece by piece: one top-level key per line, each value
     compact; long lists (sites, element outlines) are converted one item at a time, so
@@ -497,8 +517,11 @@ def json_chunks(data: dict):
         yield (",\n" if i else "") + f" {json.dumps(str(key))}: "
         if isinstance(value, (list, tuple, np.ndarray)) and len(value) > 64:
             yield "["
-            for j, item in enumerate(value):
-                yield (", " if j else "") + json.dumps(to_jsonable(item))
+            for j in range(0, len(value), 1024):  # a block of items at a time
+                items = _item_texts(value[j : j + 1024])
+                if items is None:
+                    items = [json.dumps(to_jsonable(item)) for item in value[j : j + 1024]]
+                yield (", " if j else "") + ", ".join(items)
             yield "]"
         else:
             yield json.dumps(to_jsonable(value))
@@ -522,10 +545,14 @@ def write_lines(path, chunks) -> None:
 
 
 def write_sites_csv(path, sites, angles, scales) -> None:
-    lines = ["x,y,angle_deg,scale"]
-    for (x, y), a, s in zip(sites, angles, scales, strict=True):
-        lines.append(f"{x:.6f},{y:.6f},{np.degrees(a):.6f},{s:.6f}")
-    Path(path).write_text("\n".join(lines) + "\n")
+    from compact_distributions.cvt.render import format_rows
+
+    sites = np.asarray(sites, dtype=np.float64).reshape(-1, 2)
+    angles, scales = np.asarray(angles, dtype=np.float64), np.asarray(scales, dtype=np.float64)
+    if not len(sites) == len(angles) == len(scales):
+        raise ValueError(f"{len(sites)} sites, {len(angles)} angles and {len(scales)} scales")
+    rows = format_rows("{:.6f},{:.6f},{:.6f},{:.6f}\n", [sites[:, 0], sites[:, 1], np.degrees(angles), scales])
+    Path(path).write_text("".join(["x,y,angle_deg,scale\n", *rows]))
 
 
 def command_line(argv=None) -> str:

@@ -16,8 +16,6 @@ in 0..1); fills may be '#rrggbb' strings, float arrays in 0..1 or uint8 arrays.
 
 from __future__ import annotations
 
-from xml.sax.saxutils import quoteattr
-
 import numpy as np
 import shapely
 
@@ -85,16 +83,131 @@ def label_colours(n: int, seed: int = 12345) -> np.ndarray:
     return out
 
 
+def fill_rows(fills, n: int) -> np.ndarray:
+    """(n, 3) int: the first ``n`` of ``fills`` as :func:`rgb8` reads each one (an array
+    of numbers at once, anything else colour by colour)."""
+    if isinstance(fills, np.ndarray) and fills.ndim == 2 and fills.shape[1] >= 3 and len(fills) >= n:
+        if np.issubdtype(fills.dtype, np.integer):
+            return fills[:n, :3].astype(np.int64)
+        if np.issubdtype(fills.dtype, np.floating) and np.isfinite(fills[:n, :3]).all():
+            return np.round(np.clip(fills[:n, :3].astype(np.float64), 0, 1) * 255).astype(np.int64)
+    return np.array([rgb8(fills[k]) for k in range(n)], dtype=np.int64).reshape(n, 3)
+
+
+def _ranges(starts, counts) -> np.ndarray:
+    """The indices starts[i] .. starts[i] + counts[i] - 1, for every i in turn."""
+    offsets = np.cumsum(counts) - counts
+    return np.repeat(np.asarray(starts) - offsets, counts) + np.arange(int(np.sum(counts)))
+
+
+def _exteriors(polygons: np.ndarray):
+    """The exterior rings of shapely ``polygons`` (not closed): their vertices as one
+    (P, 2) array and each ring's vertex count."""
+    xy, ring = shapely.get_coordinates(shapely.get_exterior_ring(polygons), return_index=True)
+    counts = np.bincount(ring, minlength=len(polygons))
+    closing = np.zeros(len(xy), dtype=bool)
+    closing[np.cumsum(counts) - 1] = True  # each ring repeats its first vertex last
+    return xy[~closing], counts - 1
+
+
+def _geometries(elements) -> np.ndarray:
+    """``elements`` as a 1-D object array (itself if it is one)."""
+    if isinstance(elements, np.ndarray) and elements.dtype == object and elements.ndim == 1:
+        return elements
+    geoms = np.empty(len(elements), dtype=object)
+    geoms[:] = list(elements)
+    return geoms
+
+
+def _blocks(geoms: np.ndarray, which: np.ndarray, budget: int = 1 << 16):
+    """``which`` cut into consecutive blocks of about ``budget`` vertices (at least one
+    element each): what is converted to Python objects at once stays small."""
+    ends = np.cumsum(shapely.get_num_coordinates(geoms[which]))
+    cuts = np.searchsorted(ends, np.arange(budget, ends[-1], budget), side="right") if len(ends) else []
+    edges = np.unique(np.concatenate([[0], cuts, [len(which)]])).astype(int)
+    for lo, hi in zip(edges[:-1], edges[1:], strict=True):
+        yield which[lo:hi]
+
+
+def _ring_table(elements, which=None):
+    """The rings of ``elements`` (of those listed in ``which``; default: all that are
+    neither None nor empty) as :func:`_rings` gives them, element by element: their
+    vertices as one (P, 2) array, and per ring its element and vertex count.  Polygons
+    without holes are read at once; other geometries one by one."""
+    geoms = _geometries(elements)
+    if which is None:
+        which = np.flatnonzero(shapely.is_geometry(geoms) & ~shapely.is_empty(geoms))
+    simple = (shapely.get_type_id(geoms[which]) == 3) & (shapely.get_num_interior_rings(geoms[which]) == 0)
+    xy, count = _exteriors(geoms[which[simple]])
+    element = which[simple]
+    if simple.all():
+        return xy, element, count
+    parts = [(element, count, xy)]
+    for k in which[~simple]:
+        rings = list(_rings(geoms[k]))
+        if rings:
+            parts.append((np.full(len(rings), k), np.array([len(r) for r in rings]), np.concatenate(rings)))
+    element = np.concatenate([p[0] for p in parts])
+    count = np.concatenate([p[1] for p in parts])
+    xy = np.concatenate([p[2] for p in parts])
+    order = np.argsort(element, kind="stable")
+    return xy[_ranges((np.cumsum(count) - count)[order], count[order])], element[order], count[order]
+
+
+def format_rows(template: str, columns) -> list[str]:
+    """``template`` (one line: a newline at its end, none before) filled with row i of
+    ``columns`` (equal-length sequences) for every i: one line per row, made by one
+    ``str.format`` call per block of rows (bounded memory)."""
+    rows = len(columns[0]) if columns else 0
+    step = max(1, (1 << 16) // max(1, len(columns)))
+    out: list[str] = []
+    for lo in range(0, rows, step):
+        part = [c[lo : lo + step] for c in columns]
+        table = np.empty((len(part[0]), len(part)), dtype=object)
+        for j, column in enumerate(part):  # Python numbers: {!r} as json writes them
+            table[:, j] = column.tolist() if isinstance(column, np.ndarray) else list(column)
+        text = (template * len(table)).format(*table.ravel().tolist())
+        out += [line + "\n" for line in text.split("\n")[:-1]]
+    return out
+
+
+def _ring_texts(xy, count, template_of) -> np.ndarray:
+    """Per ring (``count`` vertices each, ``xy`` one ring after another) the text
+    ``template_of(V)`` (V vertices) filled with its x0, y0, x1, y1, ...: one format
+    call per distinct vertex count."""
+    starts = np.cumsum(count) - count
+    out = np.empty(len(count), dtype=object)
+    for v in np.unique(count).tolist():
+        rings = np.flatnonzero(count == v)
+        pts = xy[_ranges(starts[rings], count[rings])].reshape(len(rings), 2 * v)
+        out[rings] = [t[:-1] for t in format_rows(template_of(v) + "\n", list(pts.T))]
+    return out
+
+
+def _svg_ring(v: int) -> str:
+    return "M{:g},{:g} L" + " ".join(["{:g},{:g}"] * (v - 1)) + "Z"
+
+
+def _json_ring(v: int) -> str:
+    return "[" + ", ".join(["[{!r}, {!r}]"] * v) + "]"
+
+
 # ------------------------------------------------------------------ rasters
 def cells_image(labels: np.ndarray, n_elements: int, sites=None):
     """The cells in distinct colours (PIL image); sites drawn as dark dots if given."""
     from PIL import Image
 
-    rgb = label_colours(n_elements)[np.where(labels >= 0, labels, n_elements)]
+    h, w = labels.shape
+    rgb = label_colours(n_elements).astype("<u4")
+    packed = rgb[:, 0] | rgb[:, 1] << 8 | rgb[:, 2] << 16  # one 4-byte gather per pixel: R, G, B, pad
+    # label -1 (outside) takes the last colour by numpy's own negative indexing
+    pixels = packed[labels if labels.min(initial=0) >= -1 else np.where(labels >= 0, labels, n_elements)]
     if sites is not None:
-        h, w = labels.shape
-        rgb[pixel_index(sites, w, h)] = (20, 20, 20)
-    return Image.fromarray(rgb, mode="RGB")
+        pixels[pixel_index(sites, w, h)] = 20 | 20 << 8 | 20 << 16
+    return Image.frombuffer("RGBX", (w, h), np.ascontiguousarray(pixels), "raw", "RGBX", 0, 1).convert("RGB")
+
+
+BAND_BYTES = 8 << 20  # a supersampled picture is drawn in bands of about this size
 
 
 def draw_elements(
@@ -116,41 +229,83 @@ def draw_elements(
     ``fills``: one colour per element (default :func:`label_colours`).  ``background``
     paints everything; where ``region_mask`` ((H, W) bool) is given, its inside is painted
     ``region_colour``; without a mask, ``region_colour`` (if given) paints the whole raster.
-    ``window`` (x0, y0, x1, y1) in raster pixels draws only that part of the raster."""
+    ``window`` (x0, y0, x1, y1) in raster pixels draws only that part of the raster.
+
+    A supersampled picture of the whole raster is drawn and reduced band by band (rows
+    in whole boxes of the reduction, each polygon moved by whole pixels): the same image
+    as one drawn at once, in a fixed amount of memory."""
     from PIL import Image, ImageDraw
 
     x0, y0, x1, y1 = (0.0, 0.0, float(width), float(height)) if window is None else map(float, window)
     ss = max(1, int(supersample))
     k = scale * ss
     big = (max(1, round((x1 - x0) * k)), max(1, round((y1 - y0) * k)))
+    small = (max(1, round((x1 - x0) * scale)), max(1, round((y1 - y0) * scale)))
     inside = rgb8(region_colour) if region_colour is not None else None
-    if region_mask is None or inside is None:
-        img = Image.new("RGB", big, inside if inside is not None else rgb8(background))
-    else:
-        m = np.asarray(region_mask, dtype=bool)
-        rgb = np.where(m[..., None], np.array(inside, np.uint8), np.array(rgb8(background), np.uint8))
-        full = Image.fromarray(rgb.astype(np.uint8), "RGB").resize(
-            (max(1, round(width * k)), max(1, round(height * k))), Image.NEAREST
-        )
-        img = full.crop((round(x0 * k), round(y0 * k), round(x0 * k) + big[0], round(y0 * k) + big[1]))
+    masked = region_mask is not None and inside is not None
     if fills is None:
         fills = label_colours(len(elements))
     line = rgb8(outline) if outline is not None else None
-    draw = ImageDraw.Draw(img)
-    for idx, geom in enumerate(elements):
-        if geom is None or geom.is_empty:
-            continue
-        bx0, by0, bx1, by1 = geom.bounds
-        if bx0 > x1 or by0 > y1 or bx1 < x0 or by1 < y0:
-            continue
-        fill = rgb8(fills[idx])
-        for ring in _rings(geom):
-            pts = [((float(x) - x0) * k, (float(y) - y0) * k) for x, y in ring]
-            if len(pts) >= 3:
-                draw.polygon(pts, fill=fill, outline=line)
-    if ss > 1:
-        img = img.resize((max(1, round((x1 - x0) * scale)), max(1, round((y1 - y0) * scale))), Image.BOX)
-    return img
+
+    # the elements that reach the window; their vertical extent in the picture's pixels
+    geoms = _geometries(elements)
+    b = shapely.bounds(geoms)
+    with np.errstate(invalid="ignore"):
+        shown = np.isfinite(b[:, 0]) & ~((b[:, 0] > x1) | (b[:, 1] > y1) | (b[:, 2] < x0) | (b[:, 3] < y0))
+    shown = np.flatnonzero(shown)
+    top_y, bottom_y = (b[shown, 1] - y0) * k, (b[shown, 3] - y0) * k
+    rgb = fill_rows(fills, len(elements))
+
+    def paint(img, top: int, which) -> None:
+        """Draw elements ``which`` on ``img``, rows top .. top + height of the picture;
+        their vertices read a block of elements at a time (bounded memory)."""
+        draw = ImageDraw.Draw(img)
+        for block in _blocks(geoms, which):
+            xy, element, count = _ring_table(geoms, block)
+            px, py = (xy[:, 0] - x0) * k, (xy[:, 1] - y0) * k - top  # whole-pixel move: exact
+            pts, at = np.stack([px, py], axis=1).ravel().tolist(), 0
+            for e, n in zip(element.tolist(), count.tolist(), strict=True):
+                if n >= 3:
+                    draw.polygon(pts[at : at + 2 * n], fill=tuple(rgb[e].tolist()), outline=line)
+                at += 2 * n
+
+    banded = ss > 1 and window is None and big == (small[0] * ss, small[1] * ss)
+    if masked:
+        banded = banded and float(k).is_integer()
+        m = np.asarray(region_mask, dtype=bool)
+        colours = np.array([rgb8(background), inside], dtype=np.uint8)
+    if not banded:
+        if not masked:
+            img = Image.new("RGB", big, inside if inside is not None else rgb8(background))
+        else:
+            full = Image.fromarray(colours[m.astype(np.uint8)], "RGB").resize(
+                (max(1, round(width * k)), max(1, round(height * k))), Image.NEAREST
+            )
+            img = full.crop((round(x0 * k), round(y0 * k), round(x0 * k) + big[0], round(y0 * k) + big[1]))
+        paint(img, 0, shown)
+        if ss > 1:
+            img = img.resize(small, Image.BOX)
+        return img
+    step = int(np.lcm(int(k), ss)) if masked else ss
+    rows = max(step, BAND_BYTES // (3 * big[0]) // step * step)
+    out = Image.new("RGB", small)
+    # PIL fills a polygon that crosses an image's edge differently from one that does
+    # not: each band is drawn tall enough to hold whole every polygon it shows
+    for top in range(0, big[1], rows):
+        n_rows = min(rows, big[1] - top)
+        near = (bottom_y >= top - 2) & (top_y <= top + n_rows + 2)
+        lo = int(np.floor(min(top, top_y[near].min(initial=top)))) - 2
+        hi = int(np.ceil(max(top + n_rows, bottom_y[near].max(initial=top)))) + 2
+        lo, hi = max(0, lo // step * step), min(big[1], -(-hi // step) * step)
+        if masked:  # the mask's rows, each pixel repeated k times (what NEAREST gives)
+            part = m[lo // int(k) : hi // int(k)].astype(np.uint8)
+            band = Image.fromarray(np.repeat(np.repeat(colours[part], int(k), axis=0), int(k), axis=1), "RGB")
+        else:
+            band = Image.new("RGB", (big[0], hi - lo), inside if inside is not None else rgb8(background))
+        paint(band, lo, shown[near])
+        band = band.crop((0, top - lo, big[0], top - lo + n_rows))
+        out.paste(band.resize((small[0], n_rows // ss), Image.BOX), (0, top // ss))
+    return out
 
 
 # ------------------------------------------------------------------ SVG
@@ -222,20 +377,43 @@ def svg_lines(
     )
     out.append(f'<g id="elements"{stroke_attr} stroke-linejoin="round">')
     yield from (line + "\n" for line in out)
-    fmt = f"{{:.{digits}f}}"
-    for k, geom in enumerate(elements):
-        if geom is None or geom.is_empty:
-            continue
-        fill = quoteattr(hex_colour(fills[k]))
-        if ellipses is not None and np.isfinite(ellipses[k]).all():
-            cx, cy, rx, ry, deg = (fmt.format(v) for v in ellipses[k])
-            yield (
-                f'<ellipse id="e{k}" cx="{cx}" cy="{cy}" rx="{rx}" ry="{ry}" '
-                f'transform="rotate({deg} {cx} {cy})" fill={fill}/>\n'
-            )
-        else:
-            yield f'<path id="e{k}" d="{_path_data(geom, digits)}" fill={fill}/>\n'
+    yield from _svg_elements(elements, fills, ellipses, digits)
     yield "</g>\n</svg>\n"
+
+
+def _svg_elements(elements, fills, ellipses, digits: int):
+    """The ``<path>`` or ``<ellipse>`` line of every element that is neither None nor
+    empty, in order, a block of elements at a time: the text of each kind built by one
+    format call per vertex count."""
+    geoms = _geometries(elements)
+    present = np.flatnonzero(shapely.is_geometry(geoms) & ~shapely.is_empty(geoms))
+    rgb = fill_rows(fills, len(elements))
+    exact = np.zeros(len(elements), dtype=bool)
+    if ellipses is not None:
+        ellipses = np.asarray(ellipses, dtype=np.float64)
+        exact[present] = np.isfinite(ellipses[present]).all(axis=1)
+    for which in _blocks(geoms, present):
+        lines = np.empty(len(which), dtype=object)
+        paths = np.flatnonzero(~exact[which])
+        if len(paths):
+            xy, element, count = _ring_table(geoms, which[paths])
+            rings = _ring_texts(np.round(xy, digits), count, _svg_ring)
+            firsts = np.flatnonzero(np.r_[True, element[1:] != element[:-1]])
+            data = rings if len(firsts) == len(rings) else np.add.reduceat(rings, firsts)
+            ids = element[firsts]
+            lines[np.searchsorted(which, ids)] = format_rows(
+                '<path id="e{}" d="{}" fill="#{:02x}{:02x}{:02x}"/>\n', [ids, data, *rgb[ids].T]
+            )
+        shapes = which[exact[which]]
+        if len(shapes):
+            cx, cy, rx, ry, deg = ellipses[shapes].T
+            f = f"{{:.{digits}f}}"
+            lines[np.searchsorted(which, shapes)] = format_rows(
+                f'<ellipse id="e{{}}" cx="{f}" cy="{f}" rx="{f}" ry="{f}" transform="rotate({f} {f} {f})" '
+                'fill="#{:02x}{:02x}{:02x}"/>\n',
+                [shapes, cx, cy, rx, ry, deg, cx, cy, *rgb[shapes].T],
+            )
+        yield from lines.tolist()
 
 
 def ellipse_parameters(centres, angles, sizes, semi_axes) -> np.ndarray:
@@ -260,6 +438,22 @@ def element_coordinates(elements, digits: int = 3) -> list:
     return out
 
 
+def element_coordinates_json(elements, digits: int = 3) -> list[str]:
+    """The JSON text of each outline of :func:`element_coordinates` ("null" for none),
+    the polygons' built by one format call per vertex count."""
+    import json
+
+    geoms = _geometries(elements)
+    out = np.full(len(elements), "null", dtype=object)
+    present = shapely.is_geometry(geoms) & ~shapely.is_empty(geoms)
+    polygons = np.flatnonzero(present & (shapely.get_type_id(geoms) == 3))
+    xy, count = _exteriors(geoms[polygons])
+    out[polygons] = _ring_texts(np.round(xy, digits), count, _json_ring)
+    for k in np.flatnonzero(present & (shapely.get_type_id(geoms) != 3)).tolist():
+        out[k] = json.dumps(element_coordinates([geoms[k]], digits)[0])
+    return out.tolist()
+
+
 __all__ = [
     "parse_colour",
     "rgb8",
@@ -271,4 +465,8 @@ __all__ = [
     "svg_lines",
     "ellipse_parameters",
     "element_coordinates",
+    "element_coordinates_json",
+    "fill_rows",
+    "format_rows",
+    "BAND_BYTES",
 ]

@@ -376,3 +376,83 @@ def test_unknown_fit_is_an_input_error():
     g = Grid(8, 8)
     with pytest.raises(InputError, match="unknown fit 'best'"):
         place_elements(np.zeros((8, 8), np.int32), [[4.0, 4.0]], None, "square", 1.0, g, fit="best")
+
+
+# --- the centre fit against a search written out cell by cell -----------------------------
+def _cell_samples_by_hand(labels, i):
+    """Midpoints of the unit edges between cell i's pixels and any other (or the border)."""
+    h, w = labels.shape
+    out = []
+    for r, c in zip(*np.nonzero(labels == i), strict=True):
+        for dr, dc, x, y in ((0, -1, c, r + 0.5), (0, 1, c + 1, r + 0.5), (-1, 0, c + 0.5, r), (1, 0, c + 0.5, r + 1)):
+            rr, cc = r + dr, c + dc
+            if not (0 <= rr < h and 0 <= cc < w) or labels[rr, cc] != i:
+                out.append((x, y))
+    return np.array(out, dtype=np.float64)
+
+
+def _size_by_hand(ball, samples, centre, angle, half, labels, i):
+    """Largest size at ``centre``: the textbook gauge ρ(R(-θ)(q - p)), grout kept clear."""
+    h, w = labels.shape
+    x, y = centre
+    if not (0 <= x < w and 0 <= y < h) or labels[int(np.floor(y)), int(np.floor(x))] != i:
+        return 0.0
+    c, s = math.cos(angle), math.sin(angle)
+    v = samples - centre
+    u = np.stack([c * v[:, 0] + s * v[:, 1], -s * v[:, 0] + c * v[:, 1]], axis=1)  # R(-θ) v
+    if ball.kind == "polygon":
+        f = ball.normals / ball.offsets[:, None]
+        reach = (u @ f.T - half * np.hypot(f[:, 0], f[:, 1])).max(axis=1)
+    else:
+        a, b = ball.semi_axes
+        rho = np.hypot(u[:, 0] / a, u[:, 1] / b)
+        grad = np.hypot(u[:, 0] / a**2, u[:, 1] / b**2) / np.where(rho > 0, rho, 1)
+        reach = rho - half * np.where(rho > 0, grad, 0)
+    return max(float(reach.min()), 0.0)
+
+
+def _search_by_hand(ball, samples, start, angle, half, labels, i):
+    centre = np.array(start, dtype=np.float64)
+    best = _size_by_hand(ball, samples, centre, angle, half, labels, i)
+    for frac in (0.3, 0.15, 0.075, 0.0375):
+        for _ in range(3):
+            step, grew = frac * max(best, 1.0), False
+            for move in ((1, 0), (-1, 0), (0, 1), (0, -1), (1, 1), (1, -1), (-1, 1), (-1, -1)):
+                trial = centre + step * np.array(move, dtype=np.float64)
+                size = _size_by_hand(ball, samples, trial, angle, half, labels, i)
+                if size > best * (1 + 1e-9):
+                    centre, best, grew = trial, size, True
+            if not grew:
+                break
+    return centre, best
+
+
+@pytest.mark.parametrize(
+    "metric,shape,gap,field", [("linf", "square", 1.0, None), ("l2-axial", "ellipse", 0.0, "circular")]
+)
+def test_centre_fit_matches_a_search_cell_by_cell(metric, shape, gap, field):
+    """fit_centres (blocks of cells, the samples' projections folded in once) gives the
+    sizes of a pattern search written out per cell with the textbook gauge, from the same
+    two starts, to rounding; the centres too, except where both starts reach one size."""
+    from compact_distributions.cvt.lloyd import final_labels, lloyd
+    from compact_distributions.cvt.placement import _inscribed_centres, fit_centres
+    from compact_distributions.cvt.shapes import element_ball
+
+    grid = Grid(72, 56)
+    fld = None if field is None else DirectionField.named(field, grid.width, grid.height)
+    p = Problem(grid, 24, make_metric(metric), field=fld, seed=5)
+    b = NumpyBackend()
+    r = lloyd(p, b, 4)
+    lab = final_labels(p, b, r)
+    centres, sizes = fit_centres(lab, r.sites, r.angles, shape, p.metric.aspect, gap)
+    starts = _inscribed_centres(lab, shape, p.metric.aspect, len(r.sites))
+    ball = element_ball(shape, p.metric.aspect)
+    assert (sizes > 0).sum() >= 20
+    for i in range(len(r.sites)):
+        q = _cell_samples_by_hand(lab, i)
+        assert len(q) > 0
+        c1, s1 = _search_by_hand(ball, q, r.sites[i], r.angles[i], gap / 2, lab, i)
+        c2, s2 = _search_by_hand(ball, q, starts[i], r.angles[i], gap / 2, lab, i)
+        assert sizes[i] == pytest.approx(max(s1, s2), rel=1e-9, abs=1e-9)
+        if abs(s1 - s2) > 1e-9 * max(s1, s2):
+            assert centres[i] == pytest.approx(c2 if s2 > s1 else c1, abs=1e-9)

@@ -1,0 +1,121 @@
+"""The run's writers built whole-array (cvt/render.py, bench/outputs.py) against the same
+files written element by element in the plainest way."""
+
+import json
+
+import numpy as np
+import pytest
+import shapely
+
+from compact_distributions.bench.outputs import dumps, write_sites_csv
+from compact_distributions.cvt import render
+from compact_distributions.cvt.render import (
+    PAPER,
+    cells_image,
+    draw_elements,
+    element_coordinates,
+    hex_colour,
+    label_colours,
+    svg_lines,
+)
+from compact_distributions.cvt.shapes import element_polygons
+
+W, H = 120, 90
+
+
+def mixed_elements(n=160, seed=3):
+    """Overlapping squares partly off the raster, a None, an empty polygon, a multipolygon,
+    a polygon with a hole and a 40-gon."""
+    rng = np.random.default_rng(seed)
+    centres = rng.uniform(-6, [W + 6, H + 6], (n, 2))
+    els = list(element_polygons("square", 1.0, centres, rng.uniform(0, 3, n), rng.uniform(1, 7, n)))
+    els[3], els[7] = None, shapely.Polygon()
+    els[11] = shapely.MultiPolygon([shapely.box(10, 10, 20, 20), shapely.box(30, 30, 45, 41)])
+    els[12] = shapely.box(50, 50, 90, 80).difference(shapely.box(60, 60, 70, 70))
+    els[13] = shapely.Point(3, 3).buffer(5, 10)
+    return els, rng
+
+
+@pytest.mark.parametrize(
+    "options",
+    [{}, {"scale": 2.0}, {"scale": 1.7, "outline": "#000000"}, {"region_colour": PAPER, "mask": True},
+     {"region_colour": PAPER, "mask": True, "scale": 0.5, "supersample": 4}],
+)
+def test_banded_drawing_is_the_picture_drawn_at_once(monkeypatch, options):
+    els, rng = mixed_elements()
+    options = dict(options)
+    if options.pop("mask", False):
+        mask = np.zeros((H, W), dtype=bool)
+        mask[8:80, 5:110] = True
+        mask[40:60, 50:60] = False
+        options["region_mask"] = mask
+    fills = rng.random((len(els), 3))
+    monkeypatch.setattr(render, "BAND_BYTES", 1 << 40)  # one band: the whole picture
+    whole = np.asarray(draw_elements(els, W, H, fills, **options))
+    monkeypatch.setattr(render, "BAND_BYTES", 1)  # the thinnest bands
+    thin = np.asarray(draw_elements(els, W, H, fills, **options))
+    assert whole.shape[:2] == (round(H * options.get("scale", 1.0)), round(W * options.get("scale", 1.0)))
+    assert len(np.unique(whole.reshape(-1, 3), axis=0)) > 50
+    assert np.array_equal(whole, thin)
+
+
+def test_svg_element_lines_are_the_plain_formatting():
+    els, rng = mixed_elements()
+    fills = rng.random((len(els), 3))
+    ellipses = np.full((len(els), 5), np.nan)
+    ellipses[20:30] = rng.uniform(1, 40, (10, 5))
+    lines = [s for s in svg_lines(els, W, H, fills, ellipses=ellipses, digits=2) if s.startswith("<path id=")
+             or s.startswith("<ellipse")]
+    expected = []
+    for k, g in enumerate(els):
+        if g is None or g.is_empty:
+            continue
+        fill = hex_colour(fills[k])
+        if k in range(20, 30):
+            cx, cy, rx, ry, deg = (f"{v:.2f}" for v in ellipses[k])
+            expected.append(
+                f'<ellipse id="e{k}" cx="{cx}" cy="{cy}" rx="{rx}" ry="{ry}" '
+                f'transform="rotate({deg} {cx} {cy})" fill="{fill}"/>\n'
+            )
+            continue
+        d = ""
+        for poly in getattr(g, "geoms", [g]):
+            for ring in [poly.exterior, *poly.interiors]:
+                pts = [f"{x:g},{y:g}" for x, y in np.round(np.asarray(ring.coords)[:-1], 2)]
+                d += f"M{pts[0]} L{' '.join(pts[1:])}Z"
+        expected.append(f'<path id="e{k}" d="{d}" fill="{fill}"/>\n')
+    assert len(expected) > 100 and lines == expected
+
+
+def test_result_json_lists_are_the_plain_json():
+    els, rng = mixed_elements()
+    sites = rng.uniform(0, 100, (len(els), 2))
+    data = {"sites": sites, "angles": sites[:, 0], "ids": np.arange(len(els)), "elements": els,
+            "with_nan": np.r_[np.nan, sites[1:, 1]]}
+    parsed = json.loads(dumps(data))
+    assert parsed["sites"] == sites.tolist() and parsed["angles"] == sites[:, 0].tolist()
+    assert parsed["ids"] == list(range(len(els)))
+    assert parsed["elements"] == element_coordinates(els)
+    text = dumps(data)
+    for key in ("sites", "elements"):
+        line = next(s for s in text.splitlines() if s.startswith(f' "{key}"'))
+        items = data[key].tolist() if key == "sites" else element_coordinates(els)
+        assert line.rstrip(",") == f' "{key}": [' + ", ".join(json.dumps(v) for v in items) + "]"
+
+
+def test_sites_csv_is_the_plain_formatting(tmp_path):
+    rng = np.random.default_rng(1)
+    sites, angles, scales = rng.uniform(0, 500, (300, 2)), rng.uniform(-4, 4, 300), rng.uniform(0.1, 3, 300)
+    write_sites_csv(tmp_path / "s.csv", sites, angles, scales)
+    rows = [f"{x:.6f},{y:.6f},{np.degrees(a):.6f},{s:.6f}" for (x, y), a, s in zip(sites, angles, scales, strict=True)]
+    assert (tmp_path / "s.csv").read_text() == "\n".join(["x,y,angle_deg,scale", *rows]) + "\n"
+
+
+def test_cells_image_paints_each_label_its_colour_and_the_sites_dark():
+    rng = np.random.default_rng(2)
+    labels = rng.integers(-1, 40, (H, W)).astype(np.int32)
+    sites = np.array([[3.5, 4.5], [100.2, 80.9]])
+    img = np.asarray(cells_image(labels, 40, sites))
+    want = label_colours(40)[np.where(labels >= 0, labels, 40)]
+    want[[4, 80], [3, 100]] = 20
+    assert img.dtype == np.uint8 and np.array_equal(img, want)
