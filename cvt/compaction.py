@@ -157,6 +157,17 @@ class _Unit:
         if m.kind == "polygon":
             self.verts = m.outline()
             self.normals = m.normals / np.hypot(*m.normals.T)[:, None]
+            # h along each of its own face normals: a constant of the shape
+            self.offsets = (self.verts @ self.normals.T).max(axis=0)
+            k = len(self.verts)
+            # centrally symmetric (squares, rectangles, hexagons, octagons): vertices and
+            # normals come in opposite pairs k, k + K/2, so h(n) = max over half the
+            # vertices of |v·n| and h(−n) = h(n): half the work, the same values
+            self.symmetric = bool(
+                k % 2 == 0
+                and np.allclose(self.verts[k // 2 :], -self.verts[: k // 2], rtol=0, atol=1e-12)
+                and np.allclose(self.normals[k // 2 :], -self.normals[: k // 2], rtol=0, atol=1e-12)
+            )
         else:
             self.axes = m.semi_axes
 
@@ -170,6 +181,11 @@ class _Unit:
             uy *= b
             return np.sqrt(ux * ux + uy * uy)  # |diag(a, b) u|; faster than np.hypot
         v = self.verts
+        if self.symmetric:  # max(a, −a, b, −b, ...) = max(|a|, |b|, ...) exactly
+            out = np.abs(v[0, 0] * ux + v[0, 1] * uy)
+            for k in range(1, len(v) // 2):
+                np.maximum(out, np.abs(v[k, 0] * ux + v[k, 1] * uy), out=out)
+            return out
         out = v[0, 0] * ux + v[0, 1] * uy
         for k in range(1, len(v)):
             np.maximum(out, v[k, 0] * ux + v[k, 1] * uy, out=out)
@@ -212,13 +228,15 @@ def _refine_angles(gap_at, phi, width):
     return best, np.maximum(ga, gb)
 
 
-def _best_direction(gap_of, nx, ny, curved_from=None, enough=None):
+def _best_direction(gap_of, nx, ny, curved_from=None, enough=None, g=None):
     """Per row, the preferred candidate direction (columns of ``nx``, ``ny``, in order of
     preference) and its gap.  For curved shapes (``curved_from``: a reference angle per
     row) the rows whose gap is below ``enough`` also try _SAMPLES directions within ±90°
     of it, refined by golden section, taken when clearly better.  ``gap_of(nx, ny, rows)``
-    evaluates the rows ``rows`` (a slice or indices), broadcasting over columns."""
-    g = gap_of(nx, ny, slice(None))
+    evaluates the rows ``rows`` (a slice or indices), broadcasting over columns; ``g``:
+    the candidates' gaps where the caller has them already."""
+    if g is None:
+        g = gap_of(nx, ny, slice(None))
     g = np.where(np.isfinite(g), g, -np.inf)  # last round's n is NaN for new rows
     k, best = _argmax_rows(g)
     rows = np.arange(len(k))
@@ -253,20 +271,44 @@ def _best_pair_directions(unit, c, r, cos, sin, i, j, prev_n, enough=None):
         clx, cly = np.where(d > 0, dx / d, 1.0), np.where(d > 0, dy / d, 0.0)
     # in order of preference: faces (walls to slide along), last round's n, centre line
     cands_x, cands_y = [prev_n[:, 0:1], clx[:, None]], [prev_n[:, 1:2], cly[:, None]]
+    args = tuple(v[:, None] for v in (dx, dy, r[i], r[j], cos[i], sin[i], cos[j], sin[j]))
+    gap_of = lambda nx, ny, k: _pair_gap(unit, *(a[k] for a in args), nx, ny)  # noqa: E731
+    g = None
     if unit.kind == "polygon":
-        fx, fy = unit.face_normals(cos[i], sin[i])
-        gx, gy = unit.face_normals(cos[j], sin[j])
+        dx_, dy_ = dx[:, None], dy[:, None]
+        fx, fy, gi = _face_gaps(unit, dx_, dy_, *args[2:])
+        # j's faces seen from j: the gap along −g is the gap along g from j to i
+        gx, gy, gj = _face_gaps(unit, -dx_, -dy_, args[3], args[2], *args[6:], *args[4:6])
         cands_x = [fx, -gx] + cands_x
         cands_y = [fy, -gy] + cands_y
-    args = tuple(v[:, None] for v in (dx, dy, r[i], r[j], cos[i], sin[i], cos[j], sin[j]))
+        g = np.concatenate(
+            [gi, gj, gap_of(np.concatenate(cands_x[2:], axis=1), np.concatenate(cands_y[2:], axis=1), slice(None))],
+            axis=1,
+        )
     curved = unit.kind == "ellipse" and unit.axes[0] != unit.axes[1]  # circles: centre line
     return _best_direction(
-        lambda nx, ny, k: _pair_gap(unit, *(a[k] for a in args), nx, ny),
+        gap_of,
         np.concatenate(cands_x, axis=1),
         np.concatenate(cands_y, axis=1),
         np.arctan2(cly, clx) if curved else None,
         enough,
+        g,
     )
+
+
+def _face_gaps(unit, dx, dy, ra, rb, ca, sa, cb, sb):
+    """Face normals n_k of polygon a (turned by its angle) and the gaps along them from a
+    to b (``dx``, ``dy``: b's centre minus a's): h_a(n_k) is a constant of the shape,
+    and for a centrally symmetric shape the opposite normal's gap needs no new support."""
+    fx, fy = unit.face_normals(ca[:, 0], sa[:, 0])
+    if unit.symmetric:
+        h = fx.shape[1] // 2
+        nd = fx[:, :h] * dx + fy[:, :h] * dy
+        hb = rb * unit.support(fx[:, :h], fy[:, :h], cb, sb)  # = rb·h_b(±n)
+        g = np.concatenate([nd - hb, -nd - hb], axis=1) - ra * unit.offsets
+    else:
+        g = fx * dx + fy * dy - ra * unit.offsets - rb * unit.support(-fx, -fy, cb, sb)
+    return fx, fy, g
 
 
 def _near_pairs(unit, c, r, cos, sin, budget, gap, prev):
