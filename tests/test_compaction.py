@@ -335,7 +335,7 @@ def test_pair_gaps_along_face_normals_match_the_outlines(shape):
         flip = np.einsum("ij,ij->i", m, xy[a][:-1][: len(m)] - inside) < 0
         return np.where(flip[:, None], -m, m)
 
-    for k, (a, b) in enumerate(zip(i, j)):
+    for k, (a, b) in enumerate(zip(i, j, strict=True)):
         assert math.hypot(nx[k], ny[k]) == pytest.approx(1.0)
         assert g[k] == pytest.approx(outline_gap(a, b, nx[k], ny[k]), abs=1e-9)
         best = max(
