@@ -104,7 +104,9 @@ Where this departs from the issue's sketch
 from __future__ import annotations
 
 import math
+import os
 import time
+from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -123,6 +125,7 @@ _SAMPLES = 16  # directions sampled for curved shapes (then refined)
 _REFINE = 14  # golden-section steps of that refinement
 _GOLD = (math.sqrt(5) - 1) / 2
 _TIE = 1e-6  # px: candidate directions this close count as equally good (> SLACK·√2)
+_TILES_PER_WORKER = 8  # fewer tiles per thread than this: not worth a thread
 
 
 @dataclass
@@ -548,7 +551,9 @@ def _shrink_to_fit(rows: _Rows, c, r, gap, need):
     raise RuntimeError("compaction: could not restore separation after shrinking")
 
 
-def _solve_lp(rows: _Rows, act, c, r, gap, delta, lo_dr, hi_dr, weight, tile, options, move_cost=0.0):
+def _solve_lp(
+    rows: _Rows, act, c, r, gap, delta, lo_dr, hi_dr, weight, tile, options, move_cost=0.0, workers=1
+):
     """The round's program in displacements (Δc, Δr) of the active elements, one HiGHS
     model per tile; returns Δc (N, 2), Δr (N,), the simplex iterations and the number of
     tiles HiGHS did not solve to optimality (those keep Δ = 0)."""
@@ -603,11 +608,26 @@ def _solve_lp(rows: _Rows, act, c, r, gap, delta, lo_dr, hi_dr, weight, tile, op
     half_s = 0.5 * ps[cross]
     o_lo = -np.concatenate([rows.seg_slack(c, r, 0.5 * gap), half_s, half_s])
     o_tile = tile[one]
-    po, oo = np.argsort(p_tile, kind="stable"), np.argsort(o_tile, kind="stable")
-    p_idx, p_val, p_lo = p_idx[po], p_val[po], p_lo[po]
-    o_idx, o_val, o_lo = o_idx[oo], o_val[oo], o_lo[oo]
-    p_cut = np.searchsorted(p_tile[po], tiles, side="left"), np.searchsorted(p_tile[po], tiles, side="right")
-    o_cut = np.searchsorted(o_tile[oo], tiles, side="left"), np.searchsorted(o_tile[oo], tiles, side="right")
+    # every row in one CSR layout ordered by tile (a tile's pair rows, then its one-element
+    # rows), columns numbered within the row's tile: a tile's model is then plain slices
+    nr_p, nr_o = len(p_lo), len(o_lo)
+    ent = np.full((nr_p + nr_o, 2 * k), -1, dtype=np.int64)
+    val = np.zeros((nr_p + nr_o, 2 * k))
+    ent[:nr_p], val[:nr_p] = p_idx, p_val
+    ent[nr_p:, :k], val[nr_p:, :k] = o_idx, o_val
+    r_tile = np.concatenate([p_tile, o_tile])
+    order = np.lexsort((np.repeat([0, 1], [nr_p, nr_o]), r_tile))
+    ent, val, r_tile = ent[order], val[order], r_tile[order]
+    # the current state (0) is feasible
+    row_lo = np.minimum(np.concatenate([p_lo, o_lo])[order], 0.0)
+    t_of = np.searchsorted(tiles, r_tile)
+    real = ent >= 0
+    ent = np.where(real, ent - k * bounds_e[t_of][:, None], -1)
+    index = ent[real].astype(np.int32)
+    value = val[real]
+    r_start = np.zeros(len(r_tile) + 1, dtype=np.int64)
+    np.cumsum(real.sum(axis=1), out=r_start[1:])
+    r_cut = np.searchsorted(r_tile, tiles, side="left"), np.searchsorted(r_tile, tiles, side="right")
 
     ncol = k * len(elems)
     cost = np.zeros(ncol)
@@ -623,40 +643,52 @@ def _solve_lp(rows: _Rows, act, c, r, gap, delta, lo_dr, hi_dr, weight, tile, op
         hi[0::3] = hi[1::3] = d
     cost[k - 1 :: k] = -weight[elems]
     lo[k - 1 :: k], hi[k - 1 :: k] = lo_dr[elems], hi_dr[elems]
-    x = np.empty(ncol)
+    x = np.zeros(ncol)
+    inf = highspy.kHighsInf
+    optimal = highspy.HighsModelStatus.kOptimal
+    rowwise = highspy.MatrixFormat.kRowwise
 
-    h = quiet_highs()
-    for key, value in options.items():
-        h.setOptionValue(key, value)
-    iters = failed = 0
-    for t in range(len(tiles)):  # one small model per tile: a loop over tiles, not pairs
-        c0, c1 = k * bounds_e[t], k * bounds_e[t + 1]
-        a0, a1 = p_cut[0][t], p_cut[1][t]
-        b0, b1 = o_cut[0][t], o_cut[1][t]
-        npr, nor = a1 - a0, b1 - b0
-        lp = highspy.HighsLp()
-        lp.num_col_ = c1 - c0
-        lp.num_row_ = npr + nor
-        lp.col_cost_, lp.col_lower_, lp.col_upper_ = cost[c0:c1], lo[c0:c1], hi[c0:c1]
-        row_lo = np.concatenate([p_lo[a0:a1], o_lo[b0:b1]])
-        lp.row_lower_ = np.minimum(row_lo, 0.0)  # the current state (0) is feasible
-        lp.row_upper_ = np.full(npr + nor, highspy.kHighsInf)
-        lp.a_matrix_.format_ = highspy.MatrixFormat.kRowwise
-        lp.a_matrix_.start_ = np.concatenate(
-            [np.arange(npr + 1) * 2 * k, 2 * k * npr + np.arange(1, nor + 1) * k]
-        ).astype(np.int32)
-        lp.a_matrix_.index_ = (np.concatenate([p_idx[a0:a1].ravel(), o_idx[b0:b1].ravel()]) - c0).astype(
-            np.int32
-        )
-        lp.a_matrix_.value_ = np.concatenate([p_val[a0:a1].ravel(), o_val[b0:b1].ravel()])
-        h.passModel(lp)
-        h.run()
-        if h.getModelStatus() == highspy.HighsModelStatus.kOptimal:
-            x[c0:c1] = h.getSolution().col_value
-            iters += h.getInfo().simplex_iteration_count
-        else:  # a tile the solver does not finish stays where it is (a feasible point)
-            x[c0:c1] = 0.0
-            failed += 1
+    def solve(h, tiles_of_worker):
+        """Solve the given tiles, one small model each, with solver ``h``; a tile the
+        solver does not finish stays where it is (x = 0, a feasible point)."""
+        iters = failed = 0
+        for t in tiles_of_worker:  # a loop over tiles, not pairs
+            c0, c1 = k * bounds_e[t], k * bounds_e[t + 1]
+            a0, a1 = r_cut[0][t], r_cut[1][t]
+            lp = highspy.HighsLp()
+            lp.num_col_ = c1 - c0
+            lp.num_row_ = a1 - a0
+            lp.col_cost_, lp.col_lower_, lp.col_upper_ = cost[c0:c1], lo[c0:c1], hi[c0:c1]
+            lp.row_lower_ = row_lo[a0:a1]
+            lp.row_upper_ = np.full(a1 - a0, inf)
+            lp.a_matrix_.format_ = rowwise
+            lp.a_matrix_.start_ = (r_start[a0 : a1 + 1] - r_start[a0]).astype(np.int32)
+            lp.a_matrix_.index_ = index[r_start[a0] : r_start[a1]]
+            lp.a_matrix_.value_ = value[r_start[a0] : r_start[a1]]
+            h.passModel(lp)
+            h.run()
+            if h.getModelStatus() == optimal:
+                x[c0:c1] = h.getSolution().col_value
+                iters += h.getInfo().simplex_iteration_count
+            else:
+                failed += 1
+        return iters, failed
+
+    # HiGHS lets go of the interpreter while it solves: tiles are independent programs,
+    # so the workers' threads solve them side by side (each tile's answer is the same
+    # whichever worker solves it)
+    workers = max(1, min(workers, len(tiles) // _TILES_PER_WORKER))
+    solvers = [quiet_highs() for _ in range(workers)]  # made here: silencing is process-wide
+    for h in solvers:
+        for key, value_ in options.items():
+            h.setOptionValue(key, value_)
+    jobs = [range(w, len(tiles), workers) for w in range(workers)]
+    if workers == 1:
+        done = [solve(solvers[0], jobs[0])]
+    else:
+        with ThreadPoolExecutor(workers) as pool:
+            done = list(pool.map(solve, solvers, jobs))
+    iters, failed = (sum(v) for v in zip(*done, strict=True))
     dc = np.zeros((n, 2))
     dr = np.zeros(n)
     if split:
@@ -709,6 +741,7 @@ def compact(
     on_round=None,
     walls=None,
     max_sizes=None,
+    threads: int | None = None,
 ) -> CompactionResult:
     """Compact placed elements (module docstring): return new centres and sizes.
 
@@ -725,7 +758,9 @@ def compact(
     ``on_round(k, centres, sizes)`` is called with each round's (overlap-free) state.
     ``walls`` ((H, W) bool, outside the region): thin walls whose centre lines
     (:func:`wall_segments`) bound the elements instead of their pixels' sides: each
-    element keeps G/2 from a wall's centre line, as from the border."""
+    element keeps G/2 from a wall's centre line, as from the border.  ``threads``: how
+    many threads solve the tiles' programs side by side (None: the cores this process may
+    use); the result does not depend on it."""
     shape = check_shape(shape)
     gap = parse_gap(gap)
     mask = _region_mask(region)
@@ -758,6 +793,9 @@ def compact(
     shrink = real_number(shrink, "shrink", minimum=0.0, below=1.0)
     tol = real_number(tol, "tol", minimum=0.0)
     move_cost = real_number(move_cost, "move_cost", minimum=0.0)
+    threads = (
+        len(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity") else (os.cpu_count() or 1)
+    ) if threads is None else whole_number(threads, "threads", minimum=1)
     if max_growth is not None:
         max_growth = real_number(max_growth, "max_growth", above=0.0)
     if max_sizes is not None:
@@ -841,7 +879,7 @@ def compact(
         tl = time.perf_counter()
         tcpu = time.process_time()
         tile = _tiles(c, act, mask, tile_elements, k)
-        sol = _solve_lp(rows, act, c, r, gap, delta, lo_dr, hi_dr, weight, tile, options, move_cost)
+        sol = _solve_lp(rows, act, c, r, gap, delta, lo_dr, hi_dr, weight, tile, options, move_cost, threads)
         result.lp_seconds += time.perf_counter() - tl
         tcpu = time.process_time() - tcpu
         dc, dr, iters, failed = sol

@@ -146,6 +146,21 @@ def test_compaction_grows_coverage_in_a_non_convex_region(shape):
     assert after.coverage > before + 0.05 and after.overlap == 0.0
 
 
+def test_tiles_solved_in_threads_give_the_same_elements():
+    """Tiles are independent programs: solved by two threads side by side (here 30 tiles,
+    enough for two workers) or one after another, the elements are the same, and apart."""
+    grid, sites, angles, sizes = random_layout("hexagon", 5, 120, "L", gap=0.5)
+    runs = [
+        compact(sites, angles, sizes, "hexagon", 0.5, grid, gap=0.5, rounds=3, tile_elements=4, threads=t)
+        for t in (1, 2)
+    ]
+    assert np.array_equal(runs[0].centres, runs[1].centres)
+    assert np.array_equal(runs[0].sizes, runs[1].sizes)
+    assert runs[0].history[-1]["iters"] == runs[1].history[-1]["iters"] > 0
+    assert_separated("hexagon", runs[1].centres, angles, runs[1].sizes, grid, 0.5)
+    assert (runs[1].sizes ** 2).sum() > 1.05 * (sizes**2).sum()
+
+
 def test_gap_is_kept_between_pairs_and_to_the_border():
     grid, sites, angles, sizes = random_layout("square", 11, 30, "annulus", gap=1.5)
     res = compact(sites, angles, sizes, "square", 0.5, grid, gap=1.5, rounds=4, tile_elements=8)
