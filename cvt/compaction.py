@@ -325,10 +325,17 @@ def _near_pairs(unit, c, r, cos, sin, budget, gap, prev):
     ij = tree.query_pairs(2 * reach.max() + gap + _SELECT, output_type="ndarray")
     i, j = act[ij[:, 0]], act[ij[:, 1]]
     d = np.hypot(*(c[j] - c[i]).T)
-    keep = d < unit.rho * (r[i] + r[j]) + budget[i] + budget[j] + gap + _SELECT
-    i, j = i[keep], j[keep]
-    prev_n = _lookup(prev, i * len(r) + j)
     enough = gap + budget[i] + budget[j] + _SELECT
+    keep = d < unit.rho * (r[i] + r[j]) + enough
+    i, j, d, enough = i[keep], j[keep], d[keep], enough[keep]
+    # the centre line is one of the candidates and the one chosen is within _TIE of the
+    # best: pairs already far enough apart along it are left out without the others
+    dx, dy = c[j, 0] - c[i, 0], c[j, 1] - c[i, 1]
+    with np.errstate(invalid="ignore", divide="ignore"):
+        along = _pair_gap(unit, dx, dy, r[i], r[j], cos[i], sin[i], cos[j], sin[j], dx / d, dy / d)
+    keep = ~(along >= enough + _TIE)  # coincident centres (NaN) stay
+    i, j, enough = i[keep], j[keep], enough[keep]
+    prev_n = _lookup(prev, i * len(r) + j)
     nx, ny, g = _best_pair_directions(unit, c, r, cos, sin, i, j, prev_n, enough)
     keep = g < enough
     return i[keep], j[keep], nx[keep], ny[keep], g[keep]
