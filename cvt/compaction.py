@@ -85,10 +85,16 @@ pairs as walls) fell to ~1 s per round; carrying its basis from round to round (
 basis mapped by pair) cut the iterations by a quarter but the time by under 10 %, as
 every round moves all bounds.  One small model per tile: ~0.25 s CPU per round, with
 about 2 points less coverage than the untiled program at equal rounds (squares after 3
-rounds 0.956 against 0.977), which one more round makes up.  Solving tiles in two
-threads gave no gain here.  Defaults (4 rounds, growth 0.15, move 0.5, 64 elements per
-tile): ~1.1 s CPU, coverage 0.97; building a round (kd-trees, directions, rows) in numpy
-is ~0.07 s of each round.
+rounds 0.956 against 0.977), which one more round makes up.  The tiles' dual simplex is
+the floor: about 3.5 iterations per element and round, whatever the tile size (16 to 128
+elements per tile: within 20 % of the time, with less coverage below 64), the HiGHS
+options (crash, pricing, edge weights, presolve, one block-diagonal model per 2-16
+tiles) or the start (each tile's basis from two rounds back, mapped by element and row,
+halves the later rounds' iterations but not their time: HiGHS repairs the alien basis).
+Tiles are independent, and HiGHS lets go of the interpreter while it solves, so one
+thread per core solves them (1.9x on two cores when the second is idle).  Defaults
+(4 rounds, growth 0.15, move 0.5, 64 elements per tile): ~1.0 s CPU, coverage 0.97;
+building a round (kd-trees, directions, rows) in numpy is ~0.05 s of each round.
 
 Where this departs from the issue's sketch
 ------------------------------------------
