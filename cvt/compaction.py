@@ -624,20 +624,23 @@ def _solve_lp(
     # every row in one CSR layout ordered by tile (a tile's pair rows, then its one-element
     # rows), columns numbered within the row's tile: a tile's model is then plain slices
     nr_p, nr_o = len(p_lo), len(o_lo)
-    ent = np.full((nr_p + nr_o, 2 * k), -1, dtype=np.int64)
+    r_tile = np.concatenate([p_tile, o_tile])
+    order = np.lexsort((np.repeat([0, 1], [nr_p, nr_o]), r_tile))
+    r_tile = r_tile[order]
+    # column numbers within the tile: minus the tile's first column
+    first_col = (k * bounds_e[np.searchsorted(tiles, r_tile)]).astype(np.int32)
+    ent = np.full((nr_p + nr_o, 2 * k), -1, dtype=np.int32)
     val = np.zeros((nr_p + nr_o, 2 * k))
     ent[:nr_p], val[:nr_p] = p_idx, p_val
     ent[nr_p:, :k], val[nr_p:, :k] = o_idx, o_val
-    r_tile = np.concatenate([p_tile, o_tile])
-    order = np.lexsort((np.repeat([0, 1], [nr_p, nr_o]), r_tile))
-    ent, val, r_tile = ent[order], val[order], r_tile[order]
+    ent, val = ent[order], val[order]
+    real = ent >= 0
+    ent -= first_col[:, None]
+    index = ent[real]
+    value = val[real]
+    del ent, val
     # the current state (0) is feasible
     row_lo = np.minimum(np.concatenate([p_lo, o_lo])[order], 0.0)
-    t_of = np.searchsorted(tiles, r_tile)
-    real = ent >= 0
-    ent = np.where(real, ent - k * bounds_e[t_of][:, None], -1)
-    index = ent[real].astype(np.int32)
-    value = val[real]
     r_start = np.zeros(len(r_tile) + 1, dtype=np.int64)
     np.cumsum(real.sum(axis=1), out=r_start[1:])
     r_cut = np.searchsorted(r_tile, tiles, side="left"), np.searchsorted(r_tile, tiles, side="right")
