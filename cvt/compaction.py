@@ -702,8 +702,18 @@ def _solve_lp(
     if workers == 1:
         done = [solve(solvers[0], jobs[0])]
     else:
+
+        def work(h, job):
+            try:
+                return solve(h, job)
+            finally:  # a thread that ran HiGHS ends its scheduler before it exits, as
+                # highspy's own solver threads do (a scheduler left behind can deadlock)
+                reset = getattr(highspy.Highs, "resetThreadScheduler", None)
+                if reset is not None:
+                    reset(False)
+
         with ThreadPoolExecutor(workers) as pool:
-            done = list(pool.map(solve, solvers, jobs))
+            done = list(pool.map(work, solvers, jobs))
     iters, failed = (sum(v) for v in zip(*done, strict=True))
     dc = np.zeros((n, 2))
     dr = np.zeros(n)
