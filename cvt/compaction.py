@@ -85,10 +85,16 @@ pairs as walls) fell to ~1 s per round; carrying its basis from round to round (
 basis mapped by pair) cut the iterations by a quarter but the time by under 10 %, as
 every round moves all bounds.  One small model per tile: ~0.25 s CPU per round, with
 about 2 points less coverage than the untiled program at equal rounds (squares after 3
-rounds 0.956 against 0.977), which one more round makes up.  Solving tiles in two
-threads gave no gain here.  Defaults (4 rounds, growth 0.15, move 0.5, 64 elements per
-tile): ~1.1 s CPU, coverage 0.97; building a round (kd-trees, directions, rows) in numpy
-is ~0.07 s of each round.
+rounds 0.956 against 0.977), which one more round makes up.  The tiles' dual simplex is
+the floor: about 3.5 iterations per element and round, whatever the tile size (16 to 128
+elements per tile: within 20 % of the time, with less coverage below 64), the HiGHS
+options (crash, pricing, edge weights, presolve, one block-diagonal model per 2-16
+tiles) or the start (each tile's basis from two rounds back, mapped by element and row,
+halves the later rounds' iterations but not their time: HiGHS repairs the alien basis).
+Tiles are independent, and HiGHS lets go of the interpreter while it solves, so one
+thread per core solves them (1.9x on two cores when the second is idle).  Defaults
+(4 rounds, growth 0.15, move 0.5, 64 elements per tile): ~1.0 s CPU, coverage 0.97;
+building a round (kd-trees, directions, rows) in numpy is ~0.05 s of each round.
 
 Where this departs from the issue's sketch
 ------------------------------------------
@@ -104,7 +110,9 @@ Where this departs from the issue's sketch
 from __future__ import annotations
 
 import math
+import os
 import time
+from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -123,6 +131,7 @@ _SAMPLES = 16  # directions sampled for curved shapes (then refined)
 _REFINE = 14  # golden-section steps of that refinement
 _GOLD = (math.sqrt(5) - 1) / 2
 _TIE = 1e-6  # px: candidate directions this close count as equally good (> SLACK·√2)
+_TILES_PER_WORKER = 8  # fewer tiles per thread than this: not worth a thread
 
 
 @dataclass
@@ -157,6 +166,17 @@ class _Unit:
         if m.kind == "polygon":
             self.verts = m.outline()
             self.normals = m.normals / np.hypot(*m.normals.T)[:, None]
+            # h along each of its own face normals: a constant of the shape
+            self.offsets = (self.verts @ self.normals.T).max(axis=0)
+            k = len(self.verts)
+            # centrally symmetric (squares, rectangles, hexagons, octagons): vertices and
+            # normals come in opposite pairs k, k + K/2, so h(n) = max over half the
+            # vertices of |v·n| and h(−n) = h(n): half the work, the same values
+            self.symmetric = bool(
+                k % 2 == 0
+                and np.allclose(self.verts[k // 2 :], -self.verts[: k // 2], rtol=0, atol=1e-12)
+                and np.allclose(self.normals[k // 2 :], -self.normals[: k // 2], rtol=0, atol=1e-12)
+            )
         else:
             self.axes = m.semi_axes
 
@@ -170,6 +190,11 @@ class _Unit:
             uy *= b
             return np.sqrt(ux * ux + uy * uy)  # |diag(a, b) u|; faster than np.hypot
         v = self.verts
+        if self.symmetric:  # max(a, −a, b, −b, ...) = max(|a|, |b|, ...) exactly
+            out = np.abs(v[0, 0] * ux + v[0, 1] * uy)
+            for k in range(1, len(v) // 2):
+                np.maximum(out, np.abs(v[k, 0] * ux + v[k, 1] * uy), out=out)
+            return out
         out = v[0, 0] * ux + v[0, 1] * uy
         for k in range(1, len(v)):
             np.maximum(out, v[k, 0] * ux + v[k, 1] * uy, out=out)
@@ -212,13 +237,15 @@ def _refine_angles(gap_at, phi, width):
     return best, np.maximum(ga, gb)
 
 
-def _best_direction(gap_of, nx, ny, curved_from=None, enough=None):
+def _best_direction(gap_of, nx, ny, curved_from=None, enough=None, g=None):
     """Per row, the preferred candidate direction (columns of ``nx``, ``ny``, in order of
     preference) and its gap.  For curved shapes (``curved_from``: a reference angle per
     row) the rows whose gap is below ``enough`` also try _SAMPLES directions within ±90°
     of it, refined by golden section, taken when clearly better.  ``gap_of(nx, ny, rows)``
-    evaluates the rows ``rows`` (a slice or indices), broadcasting over columns."""
-    g = gap_of(nx, ny, slice(None))
+    evaluates the rows ``rows`` (a slice or indices), broadcasting over columns; ``g``:
+    the candidates' gaps where the caller has them already."""
+    if g is None:
+        g = gap_of(nx, ny, slice(None))
     g = np.where(np.isfinite(g), g, -np.inf)  # last round's n is NaN for new rows
     k, best = _argmax_rows(g)
     rows = np.arange(len(k))
@@ -253,20 +280,44 @@ def _best_pair_directions(unit, c, r, cos, sin, i, j, prev_n, enough=None):
         clx, cly = np.where(d > 0, dx / d, 1.0), np.where(d > 0, dy / d, 0.0)
     # in order of preference: faces (walls to slide along), last round's n, centre line
     cands_x, cands_y = [prev_n[:, 0:1], clx[:, None]], [prev_n[:, 1:2], cly[:, None]]
+    args = tuple(v[:, None] for v in (dx, dy, r[i], r[j], cos[i], sin[i], cos[j], sin[j]))
+    gap_of = lambda nx, ny, k: _pair_gap(unit, *(a[k] for a in args), nx, ny)  # noqa: E731
+    g = None
     if unit.kind == "polygon":
-        fx, fy = unit.face_normals(cos[i], sin[i])
-        gx, gy = unit.face_normals(cos[j], sin[j])
+        dx_, dy_ = dx[:, None], dy[:, None]
+        fx, fy, gi = _face_gaps(unit, dx_, dy_, *args[2:])
+        # j's faces seen from j: the gap along −g is the gap along g from j to i
+        gx, gy, gj = _face_gaps(unit, -dx_, -dy_, args[3], args[2], *args[6:], *args[4:6])
         cands_x = [fx, -gx] + cands_x
         cands_y = [fy, -gy] + cands_y
-    args = tuple(v[:, None] for v in (dx, dy, r[i], r[j], cos[i], sin[i], cos[j], sin[j]))
+        g = np.concatenate(
+            [gi, gj, gap_of(np.concatenate(cands_x[2:], axis=1), np.concatenate(cands_y[2:], axis=1), slice(None))],
+            axis=1,
+        )
     curved = unit.kind == "ellipse" and unit.axes[0] != unit.axes[1]  # circles: centre line
     return _best_direction(
-        lambda nx, ny, k: _pair_gap(unit, *(a[k] for a in args), nx, ny),
+        gap_of,
         np.concatenate(cands_x, axis=1),
         np.concatenate(cands_y, axis=1),
         np.arctan2(cly, clx) if curved else None,
         enough,
+        g,
     )
+
+
+def _face_gaps(unit, dx, dy, ra, rb, ca, sa, cb, sb):
+    """Face normals n_k of polygon a (turned by its angle) and the gaps along them from a
+    to b (``dx``, ``dy``: b's centre minus a's): h_a(n_k) is a constant of the shape,
+    and for a centrally symmetric shape the opposite normal's gap needs no new support."""
+    fx, fy = unit.face_normals(ca[:, 0], sa[:, 0])
+    if unit.symmetric:
+        h = fx.shape[1] // 2
+        nd = fx[:, :h] * dx + fy[:, :h] * dy
+        hb = rb * unit.support(fx[:, :h], fy[:, :h], cb, sb)  # = rb·h_b(±n)
+        g = np.concatenate([nd - hb, -nd - hb], axis=1) - ra * unit.offsets
+    else:
+        g = fx * dx + fy * dy - ra * unit.offsets - rb * unit.support(-fx, -fy, cb, sb)
+    return fx, fy, g
 
 
 def _near_pairs(unit, c, r, cos, sin, budget, gap, prev):
@@ -280,10 +331,17 @@ def _near_pairs(unit, c, r, cos, sin, budget, gap, prev):
     ij = tree.query_pairs(2 * reach.max() + gap + _SELECT, output_type="ndarray")
     i, j = act[ij[:, 0]], act[ij[:, 1]]
     d = np.hypot(*(c[j] - c[i]).T)
-    keep = d < unit.rho * (r[i] + r[j]) + budget[i] + budget[j] + gap + _SELECT
-    i, j = i[keep], j[keep]
-    prev_n = _lookup(prev, i * len(r) + j)
     enough = gap + budget[i] + budget[j] + _SELECT
+    keep = d < unit.rho * (r[i] + r[j]) + enough
+    i, j, d, enough = i[keep], j[keep], d[keep], enough[keep]
+    # the centre line is one of the candidates and the one chosen is within _TIE of the
+    # best: pairs already far enough apart along it are left out without the others
+    dx, dy = c[j, 0] - c[i, 0], c[j, 1] - c[i, 1]
+    with np.errstate(invalid="ignore", divide="ignore"):
+        along = _pair_gap(unit, dx, dy, r[i], r[j], cos[i], sin[i], cos[j], sin[j], dx / d, dy / d)
+    keep = ~(along >= enough + _TIE)  # coincident centres (NaN) stay
+    i, j, enough = i[keep], j[keep], enough[keep]
+    prev_n = _lookup(prev, i * len(r) + j)
     nx, ny, g = _best_pair_directions(unit, c, r, cos, sin, i, j, prev_n, enough)
     keep = g < enough
     return i[keep], j[keep], nx[keep], ny[keep], g[keep]
@@ -506,7 +564,9 @@ def _shrink_to_fit(rows: _Rows, c, r, gap, need):
     raise RuntimeError("compaction: could not restore separation after shrinking")
 
 
-def _solve_lp(rows: _Rows, act, c, r, gap, delta, lo_dr, hi_dr, weight, tile, options, move_cost=0.0):
+def _solve_lp(
+    rows: _Rows, act, c, r, gap, delta, lo_dr, hi_dr, weight, tile, options, move_cost=0.0, workers=1
+):
     """The round's program in displacements (Δc, Δr) of the active elements, one HiGHS
     model per tile; returns Δc (N, 2), Δr (N,), the simplex iterations and the number of
     tiles HiGHS did not solve to optimality (those keep Δ = 0)."""
@@ -561,11 +621,29 @@ def _solve_lp(rows: _Rows, act, c, r, gap, delta, lo_dr, hi_dr, weight, tile, op
     half_s = 0.5 * ps[cross]
     o_lo = -np.concatenate([rows.seg_slack(c, r, 0.5 * gap), half_s, half_s])
     o_tile = tile[one]
-    po, oo = np.argsort(p_tile, kind="stable"), np.argsort(o_tile, kind="stable")
-    p_idx, p_val, p_lo = p_idx[po], p_val[po], p_lo[po]
-    o_idx, o_val, o_lo = o_idx[oo], o_val[oo], o_lo[oo]
-    p_cut = np.searchsorted(p_tile[po], tiles, side="left"), np.searchsorted(p_tile[po], tiles, side="right")
-    o_cut = np.searchsorted(o_tile[oo], tiles, side="left"), np.searchsorted(o_tile[oo], tiles, side="right")
+    # every row in one CSR layout ordered by tile (a tile's pair rows, then its one-element
+    # rows), columns numbered within the row's tile: a tile's model is then plain slices
+    nr_p, nr_o = len(p_lo), len(o_lo)
+    r_tile = np.concatenate([p_tile, o_tile])
+    order = np.lexsort((np.repeat([0, 1], [nr_p, nr_o]), r_tile))
+    r_tile = r_tile[order]
+    # column numbers within the tile: minus the tile's first column
+    first_col = (k * bounds_e[np.searchsorted(tiles, r_tile)]).astype(np.int32)
+    ent = np.full((nr_p + nr_o, 2 * k), -1, dtype=np.int32)
+    val = np.zeros((nr_p + nr_o, 2 * k))
+    ent[:nr_p], val[:nr_p] = p_idx, p_val
+    ent[nr_p:, :k], val[nr_p:, :k] = o_idx, o_val
+    ent, val = ent[order], val[order]
+    real = ent >= 0
+    ent -= first_col[:, None]
+    index = ent[real]
+    value = val[real]
+    del ent, val
+    # the current state (0) is feasible
+    row_lo = np.minimum(np.concatenate([p_lo, o_lo])[order], 0.0)
+    r_start = np.zeros(len(r_tile) + 1, dtype=np.int64)
+    np.cumsum(real.sum(axis=1), out=r_start[1:])
+    r_cut = np.searchsorted(r_tile, tiles, side="left"), np.searchsorted(r_tile, tiles, side="right")
 
     ncol = k * len(elems)
     cost = np.zeros(ncol)
@@ -581,40 +659,62 @@ def _solve_lp(rows: _Rows, act, c, r, gap, delta, lo_dr, hi_dr, weight, tile, op
         hi[0::3] = hi[1::3] = d
     cost[k - 1 :: k] = -weight[elems]
     lo[k - 1 :: k], hi[k - 1 :: k] = lo_dr[elems], hi_dr[elems]
-    x = np.empty(ncol)
+    x = np.zeros(ncol)
+    inf = highspy.kHighsInf
+    optimal = highspy.HighsModelStatus.kOptimal
+    rowwise = highspy.MatrixFormat.kRowwise
 
-    h = quiet_highs()
-    for key, value in options.items():
-        h.setOptionValue(key, value)
-    iters = failed = 0
-    for t in range(len(tiles)):  # one small model per tile: a loop over tiles, not pairs
-        c0, c1 = k * bounds_e[t], k * bounds_e[t + 1]
-        a0, a1 = p_cut[0][t], p_cut[1][t]
-        b0, b1 = o_cut[0][t], o_cut[1][t]
-        npr, nor = a1 - a0, b1 - b0
-        lp = highspy.HighsLp()
-        lp.num_col_ = c1 - c0
-        lp.num_row_ = npr + nor
-        lp.col_cost_, lp.col_lower_, lp.col_upper_ = cost[c0:c1], lo[c0:c1], hi[c0:c1]
-        row_lo = np.concatenate([p_lo[a0:a1], o_lo[b0:b1]])
-        lp.row_lower_ = np.minimum(row_lo, 0.0)  # the current state (0) is feasible
-        lp.row_upper_ = np.full(npr + nor, highspy.kHighsInf)
-        lp.a_matrix_.format_ = highspy.MatrixFormat.kRowwise
-        lp.a_matrix_.start_ = np.concatenate(
-            [np.arange(npr + 1) * 2 * k, 2 * k * npr + np.arange(1, nor + 1) * k]
-        ).astype(np.int32)
-        lp.a_matrix_.index_ = (np.concatenate([p_idx[a0:a1].ravel(), o_idx[b0:b1].ravel()]) - c0).astype(
-            np.int32
-        )
-        lp.a_matrix_.value_ = np.concatenate([p_val[a0:a1].ravel(), o_val[b0:b1].ravel()])
-        h.passModel(lp)
-        h.run()
-        if h.getModelStatus() == highspy.HighsModelStatus.kOptimal:
-            x[c0:c1] = h.getSolution().col_value
-            iters += h.getInfo().simplex_iteration_count
-        else:  # a tile the solver does not finish stays where it is (a feasible point)
-            x[c0:c1] = 0.0
-            failed += 1
+    def solve(h, tiles_of_worker):
+        """Solve the given tiles, one small model each, with solver ``h``; a tile the
+        solver does not finish stays where it is (x = 0, a feasible point)."""
+        iters = failed = 0
+        for t in tiles_of_worker:  # a loop over tiles, not pairs
+            c0, c1 = k * bounds_e[t], k * bounds_e[t + 1]
+            a0, a1 = r_cut[0][t], r_cut[1][t]
+            lp = highspy.HighsLp()
+            lp.num_col_ = c1 - c0
+            lp.num_row_ = a1 - a0
+            lp.col_cost_, lp.col_lower_, lp.col_upper_ = cost[c0:c1], lo[c0:c1], hi[c0:c1]
+            lp.row_lower_ = row_lo[a0:a1]
+            lp.row_upper_ = np.full(a1 - a0, inf)
+            lp.a_matrix_.format_ = rowwise
+            lp.a_matrix_.start_ = (r_start[a0 : a1 + 1] - r_start[a0]).astype(np.int32)
+            lp.a_matrix_.index_ = index[r_start[a0] : r_start[a1]]
+            lp.a_matrix_.value_ = value[r_start[a0] : r_start[a1]]
+            h.passModel(lp)
+            h.run()
+            if h.getModelStatus() == optimal:
+                x[c0:c1] = h.getSolution().col_value
+                iters += h.getInfo().simplex_iteration_count
+            else:
+                failed += 1
+        return iters, failed
+
+    # HiGHS lets go of the interpreter while it solves: tiles are independent programs,
+    # so the workers' threads solve them side by side (each tile's answer is the same
+    # whichever worker solves it)
+    workers = max(1, min(workers, len(tiles) // _TILES_PER_WORKER))
+    solvers = [quiet_highs() for _ in range(workers)]  # made here: silencing is process-wide
+    for h in solvers:
+        for key, value_ in options.items():
+            h.setOptionValue(key, value_)
+    jobs = [range(w, len(tiles), workers) for w in range(workers)]
+    if workers == 1:
+        done = [solve(solvers[0], jobs[0])]
+    else:
+
+        def work(h, job):
+            try:
+                return solve(h, job)
+            finally:  # a thread that ran HiGHS ends its scheduler before it exits, as
+                # highspy's own solver threads do (a scheduler left behind can deadlock)
+                reset = getattr(highspy.Highs, "resetThreadScheduler", None)
+                if reset is not None:
+                    reset(False)
+
+        with ThreadPoolExecutor(workers) as pool:
+            done = list(pool.map(work, solvers, jobs))
+    iters, failed = (sum(v) for v in zip(*done, strict=True))
     dc = np.zeros((n, 2))
     dr = np.zeros(n)
     if split:
@@ -667,6 +767,7 @@ def compact(
     on_round=None,
     walls=None,
     max_sizes=None,
+    threads: int | None = None,
 ) -> CompactionResult:
     """Compact placed elements (module docstring): return new centres and sizes.
 
@@ -683,7 +784,9 @@ def compact(
     ``on_round(k, centres, sizes)`` is called with each round's (overlap-free) state.
     ``walls`` ((H, W) bool, outside the region): thin walls whose centre lines
     (:func:`wall_segments`) bound the elements instead of their pixels' sides: each
-    element keeps G/2 from a wall's centre line, as from the border."""
+    element keeps G/2 from a wall's centre line, as from the border.  ``threads``: how
+    many threads solve the tiles' programs side by side (None: the cores this process may
+    use); the result does not depend on it."""
     shape = check_shape(shape)
     gap = parse_gap(gap)
     mask = _region_mask(region)
@@ -716,6 +819,9 @@ def compact(
     shrink = real_number(shrink, "shrink", minimum=0.0, below=1.0)
     tol = real_number(tol, "tol", minimum=0.0)
     move_cost = real_number(move_cost, "move_cost", minimum=0.0)
+    threads = (
+        len(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity") else (os.cpu_count() or 1)
+    ) if threads is None else whole_number(threads, "threads", minimum=1)
     if max_growth is not None:
         max_growth = real_number(max_growth, "max_growth", above=0.0)
     if max_sizes is not None:
@@ -799,7 +905,7 @@ def compact(
         tl = time.perf_counter()
         tcpu = time.process_time()
         tile = _tiles(c, act, mask, tile_elements, k)
-        sol = _solve_lp(rows, act, c, r, gap, delta, lo_dr, hi_dr, weight, tile, options, move_cost)
+        sol = _solve_lp(rows, act, c, r, gap, delta, lo_dr, hi_dr, weight, tile, options, move_cost, threads)
         result.lp_seconds += time.perf_counter() - tl
         tcpu = time.process_time() - tcpu
         dc, dr, iters, failed = sol

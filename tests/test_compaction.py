@@ -15,7 +15,7 @@ from hypothesis import strategies as st
 
 from compact_distributions.backends.numpy_backend import NumpyBackend
 from compact_distributions.cvt.alternate import alternate_triangles, alternating_turns, check_alternate
-from compact_distributions.cvt.compaction import boundary_segments, compact
+from compact_distributions.cvt.compaction import _best_pair_directions, _Unit, boundary_segments, compact
 from compact_distributions.cvt.errors import InputError
 from compact_distributions.cvt.evaluate import evaluate, region_polygon
 from compact_distributions.cvt.fields import DensityMap
@@ -144,6 +144,21 @@ def test_compaction_grows_coverage_in_a_non_convex_region(shape):
     before = evaluate(list(polygons(shape, c0, r.angles, s0)), grid).coverage
     after = evaluate(list(polygons(shape, res.centres, r.angles, res.sizes)), grid)
     assert after.coverage > before + 0.05 and after.overlap == 0.0
+
+
+def test_tiles_solved_in_threads_give_the_same_elements():
+    """Tiles are independent programs: solved by two threads side by side (here 30 tiles,
+    enough for two workers) or one after another, the elements are the same, and apart."""
+    grid, sites, angles, sizes = random_layout("hexagon", 5, 120, "L", gap=0.5)
+    runs = [
+        compact(sites, angles, sizes, "hexagon", 0.5, grid, gap=0.5, rounds=3, tile_elements=4, threads=t)
+        for t in (1, 2)
+    ]
+    assert np.array_equal(runs[0].centres, runs[1].centres)
+    assert np.array_equal(runs[0].sizes, runs[1].sizes)
+    assert runs[0].history[-1]["iters"] == runs[1].history[-1]["iters"] > 0
+    assert_separated("hexagon", runs[1].centres, angles, runs[1].sizes, grid, 0.5)
+    assert (runs[1].sizes ** 2).sum() > 1.05 * (sizes**2).sum()
 
 
 def test_gap_is_kept_between_pairs_and_to_the_border():
@@ -303,6 +318,45 @@ def test_overlapping_start_is_repaired():
     res = compact(c, np.zeros(4), np.array([5.0, 5.0, 3.0, 3.0]), "square", 1.0, grid, gap=1.0, rounds=0)
     assert res.dropped == 1 and (res.sizes > 0).sum() == 3
     assert_separated("square", res.centres, np.zeros(4), res.sizes, grid, 1.0)
+
+
+# ------------------------------------------------------------------ separating directions
+@pytest.mark.parametrize("shape", [s for s in ELEMENT_SHAPES if element_ball(s, 0.5).kind == "polygon"])
+def test_pair_gaps_along_face_normals_match_the_outlines(shape):
+    """The gap a pair is given (along the direction chosen) is the gap of the two exact
+    outlines along it, and no face normal of either outline separates them more: the
+    outlines' vertices (shapely) against the support functions and the shortcuts for
+    a shape's own faces and for centrally symmetric shapes."""
+    rng = np.random.default_rng(7)
+    n = 400
+    c = rng.uniform(0, 60, (n, 2))
+    th = rng.uniform(0, 2 * math.pi, n)
+    r = rng.uniform(1, 4, n)
+    i, j = np.arange(0, n, 2), np.arange(1, n, 2)
+    unit = _Unit(shape, 0.5)
+    prev = np.full((len(i), 2), np.nan)
+    nx, ny, g = _best_pair_directions(unit, c, r, np.cos(th), np.sin(th), i, j, prev)
+    xy = [np.asarray(shapely.get_coordinates(p)).reshape(-1, 2) for p in polygons(shape, c, th, r)]
+
+    def outline_gap(a, b, ux, uy):  # min over b's vertices − max over a's, along u
+        return (xy[b] @ [ux, uy]).min() - (xy[a] @ [ux, uy]).max()
+
+    def normals(a):  # outward unit normals of a's outline edges
+        e = np.diff(xy[a], axis=0)
+        m = np.stack([e[:, 1], -e[:, 0]], axis=1)
+        m = m[np.hypot(*m.T) > 1e-12]
+        m /= np.hypot(*m.T)[:, None]
+        inside = xy[a].mean(axis=0)
+        flip = np.einsum("ij,ij->i", m, xy[a][:-1][: len(m)] - inside) < 0
+        return np.where(flip[:, None], -m, m)
+
+    for k, (a, b) in enumerate(zip(i, j, strict=True)):
+        assert math.hypot(nx[k], ny[k]) == pytest.approx(1.0)
+        assert g[k] == pytest.approx(outline_gap(a, b, nx[k], ny[k]), abs=1e-9)
+        best = max(
+            [outline_gap(a, b, *m) for m in normals(a)] + [outline_gap(a, b, *-m) for m in normals(b)]
+        )
+        assert g[k] >= best - 1e-9
 
 
 # ------------------------------------------------------------------ region pieces
