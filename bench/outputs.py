@@ -551,7 +551,9 @@ def write_sites_csv(path, sites, angles, scales) -> None:
     angles, scales = np.asarray(angles, dtype=np.float64), np.asarray(scales, dtype=np.float64)
     if not len(sites) == len(angles) == len(scales):
         raise ValueError(f"{len(sites)} sites, {len(angles)} angles and {len(scales)} scales")
-    rows = format_rows("{:.6f},{:.6f},{:.6f},{:.6f}\n", [sites[:, 0], sites[:, 1], np.degrees(angles), scales])
+    rows = format_rows(
+        "{:.6f},{:.6f},{:.6f},{:.6f}\n", [sites[:, 0], sites[:, 1], np.degrees(angles), scales]
+    )
     Path(path).write_text("".join(["x,y,angle_deg,scale\n", *rows]))
 
 

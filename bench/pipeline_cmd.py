@@ -70,7 +70,7 @@ def raster_side(n: int) -> int:
 # Runs a Python child that reports its own peak resident memory as it exits: the kernel's
 # high-water mark of the process after exec (VmHWM).  The rusage of a forked child also
 # counts the parent's pages it shared before exec, so it would add this process's size.
-_LAUNCHER = """
+PEAK_LAUNCHER = """
 import atexit, runpy, sys
 report, mode, target = sys.argv[1], sys.argv[2], sys.argv[3]
 def _report():
@@ -98,7 +98,7 @@ def run_measured(python_args: list[str]) -> tuple[int, str, float, int]:
         report = Path(tmp) / "peak_kb"
         t0 = time.perf_counter()
         done = subprocess.run(
-            [sys.executable, "-c", _LAUNCHER, str(report), *python_args],
+            [sys.executable, "-c", PEAK_LAUNCHER, str(report), *python_args],
             stdout=subprocess.DEVNULL,
             stderr=subprocess.PIPE,
         )
@@ -399,6 +399,7 @@ def render_plot(table, path: Path) -> bool:
 
 __all__ = [
     "run_measured",
+    "PEAK_LAUNCHER",
     "PipelineSpec",
     "PipelineRequest",
     "pipeline",

@@ -291,7 +291,11 @@ def _best_pair_directions(unit, c, r, cos, sin, i, j, prev_n, enough=None):
         cands_x = [fx, -gx] + cands_x
         cands_y = [fy, -gy] + cands_y
         g = np.concatenate(
-            [gi, gj, gap_of(np.concatenate(cands_x[2:], axis=1), np.concatenate(cands_y[2:], axis=1), slice(None))],
+            [
+                gi,
+                gj,
+                gap_of(np.concatenate(cands_x[2:], axis=1), np.concatenate(cands_y[2:], axis=1), slice(None)),
+            ],
             axis=1,
         )
     curved = unit.kind == "ellipse" and unit.axes[0] != unit.axes[1]  # circles: centre line
@@ -820,8 +824,10 @@ def compact(
     tol = real_number(tol, "tol", minimum=0.0)
     move_cost = real_number(move_cost, "move_cost", minimum=0.0)
     threads = (
-        len(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity") else (os.cpu_count() or 1)
-    ) if threads is None else whole_number(threads, "threads", minimum=1)
+        (len(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity") else (os.cpu_count() or 1))
+        if threads is None
+        else whole_number(threads, "threads", minimum=1)
+    )
     if max_growth is not None:
         max_growth = real_number(max_growth, "max_growth", above=0.0)
     if max_sizes is not None:

@@ -5,9 +5,11 @@ from __future__ import annotations
 
 import os
 import resource
+import shutil
 import struct
 import subprocess
 import sys
+import tempfile
 import threading
 import time
 import zlib
@@ -42,10 +44,16 @@ def _cap():
 
 def run_measured(argv, cwd=None, env=None, timeout=300):
     """(exit status, stderr, peak resident MB, seconds) of ``cvtbench ARGV`` in a child
-    process with capped address space; the peak is the child's own (wait4)."""
+    process with capped address space.  The peak is the child's own after exec (VmHWM,
+    which the child reports as it exits): the rusage of a forked child also counts the
+    pages of this process it shared before exec.  A child killed before it reports falls
+    back to that rusage."""
+    from compact_distributions.bench.pipeline_cmd import PEAK_LAUNCHER
+
+    report = Path(tempfile.mkdtemp(prefix="hostile-peak-")) / "peak_kb"
     t0 = time.perf_counter()
     proc = subprocess.Popen(
-        CLI + [str(a) for a in argv],
+        [sys.executable, "-c", PEAK_LAUNCHER, str(report), *CLI[1:], *[str(a) for a in argv]],
         cwd=cwd,
         env={**os.environ, **(env or {})},
         stdout=subprocess.DEVNULL,
@@ -68,9 +76,11 @@ def run_measured(argv, cwd=None, env=None, timeout=300):
     reader.join()
     proc.stderr.close()
     proc.returncode = os.waitstatus_to_exitcode(status)  # reaped here, not by Popen
+    peak_kb = int(report.read_text()) if report.exists() else usage.ru_maxrss
+    shutil.rmtree(report.parent, ignore_errors=True)
     return (
         proc.returncode,
         b"".join(err).decode(errors="replace"),
-        usage.ru_maxrss / 1024,
+        peak_kb / 1024,
         time.perf_counter() - t0,
     )

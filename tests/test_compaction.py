@@ -353,9 +353,7 @@ def test_pair_gaps_along_face_normals_match_the_outlines(shape):
     for k, (a, b) in enumerate(zip(i, j, strict=True)):
         assert math.hypot(nx[k], ny[k]) == pytest.approx(1.0)
         assert g[k] == pytest.approx(outline_gap(a, b, nx[k], ny[k]), abs=1e-9)
-        best = max(
-            [outline_gap(a, b, *m) for m in normals(a)] + [outline_gap(a, b, *-m) for m in normals(b)]
-        )
+        best = max([outline_gap(a, b, *m) for m in normals(a)] + [outline_gap(a, b, *-m) for m in normals(b)])
         assert g[k] >= best - 1e-9
 
 

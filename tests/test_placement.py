@@ -384,7 +384,12 @@ def _cell_samples_by_hand(labels, i):
     h, w = labels.shape
     out = []
     for r, c in zip(*np.nonzero(labels == i), strict=True):
-        for dr, dc, x, y in ((0, -1, c, r + 0.5), (0, 1, c + 1, r + 0.5), (-1, 0, c + 0.5, r), (1, 0, c + 0.5, r + 1)):
+        for dr, dc, x, y in (
+            (0, -1, c, r + 0.5),
+            (0, 1, c + 1, r + 0.5),
+            (-1, 0, c + 0.5, r),
+            (1, 0, c + 0.5, r + 1),
+        ):
             rr, cc = r + dr, c + dc
             if not (0 <= rr < h and 0 <= cc < w) or labels[rr, cc] != i:
                 out.append((x, y))

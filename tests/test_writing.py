@@ -38,8 +38,13 @@ def mixed_elements(n=160, seed=3):
 
 @pytest.mark.parametrize(
     "options",
-    [{}, {"scale": 2.0}, {"scale": 1.7, "outline": "#000000"}, {"region_colour": PAPER, "mask": True},
-     {"region_colour": PAPER, "mask": True, "scale": 0.5, "supersample": 4}],
+    [
+        {},
+        {"scale": 2.0},
+        {"scale": 1.7, "outline": "#000000"},
+        {"region_colour": PAPER, "mask": True},
+        {"region_colour": PAPER, "mask": True, "scale": 0.5, "supersample": 4},
+    ],
 )
 def test_banded_drawing_is_the_picture_drawn_at_once(monkeypatch, options):
     els, rng = mixed_elements()
@@ -64,8 +69,11 @@ def test_svg_element_lines_are_the_plain_formatting():
     fills = rng.random((len(els), 3))
     ellipses = np.full((len(els), 5), np.nan)
     ellipses[20:30] = rng.uniform(1, 40, (10, 5))
-    lines = [s for s in svg_lines(els, W, H, fills, ellipses=ellipses, digits=2) if s.startswith("<path id=")
-             or s.startswith("<ellipse")]
+    lines = [
+        s
+        for s in svg_lines(els, W, H, fills, ellipses=ellipses, digits=2)
+        if s.startswith("<path id=") or s.startswith("<ellipse")
+    ]
     expected = []
     for k, g in enumerate(els):
         if g is None or g.is_empty:
@@ -90,8 +98,13 @@ def test_svg_element_lines_are_the_plain_formatting():
 def test_result_json_lists_are_the_plain_json():
     els, rng = mixed_elements()
     sites = rng.uniform(0, 100, (len(els), 2))
-    data = {"sites": sites, "angles": sites[:, 0], "ids": np.arange(len(els)), "elements": els,
-            "with_nan": np.r_[np.nan, sites[1:, 1]]}
+    data = {
+        "sites": sites,
+        "angles": sites[:, 0],
+        "ids": np.arange(len(els)),
+        "elements": els,
+        "with_nan": np.r_[np.nan, sites[1:, 1]],
+    }
     parsed = json.loads(dumps(data))
     assert parsed["sites"] == sites.tolist() and parsed["angles"] == sites[:, 0].tolist()
     assert parsed["ids"] == list(range(len(els)))
@@ -107,7 +120,10 @@ def test_sites_csv_is_the_plain_formatting(tmp_path):
     rng = np.random.default_rng(1)
     sites, angles, scales = rng.uniform(0, 500, (300, 2)), rng.uniform(-4, 4, 300), rng.uniform(0.1, 3, 300)
     write_sites_csv(tmp_path / "s.csv", sites, angles, scales)
-    rows = [f"{x:.6f},{y:.6f},{np.degrees(a):.6f},{s:.6f}" for (x, y), a, s in zip(sites, angles, scales, strict=True)]
+    rows = [
+        f"{x:.6f},{y:.6f},{np.degrees(a):.6f},{s:.6f}"
+        for (x, y), a, s in zip(sites, angles, scales, strict=True)
+    ]
     assert (tmp_path / "s.csv").read_text() == "\n".join(["x,y,angle_deg,scale", *rows]) + "\n"
 
 
