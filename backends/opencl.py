@@ -20,8 +20,9 @@ pixel; the default on GPUs).
 
 Device choice, first that applies: the ``device`` option ("PLATFORM[:DEVICE]", indices
 or name fragments, as ``cvtbench run --device``), the ``PYOPENCL_CTX`` environment
-variable (same syntax), else the first GPU, else the first CPU device, else any device.
-Nothing is ever asked interactively.
+variable (same syntax), else the first GPU, else the first CPU device, else any device;
+a device whose compiler fails on a one-line probe kernel is passed over (or, when named,
+refused with the compiler's reason).  Nothing is ever asked interactively.
 """
 
 from __future__ import annotations
@@ -124,13 +125,44 @@ def _pick(items, token: str, what: str, source: str, names):
     raise InputError(f"{source}={token!r}: no OpenCL {what} {token!r} (have {have})")
 
 
+_PROBE = "__kernel void probe(__global int *a) { a[get_global_id(0)] = 1; }"
+
+
+def compile_problem(cl, dev) -> str | None:
+    """Why ``dev`` cannot compile a kernel, or None.  An OpenCL runtime can list a device
+    whose compiler then fails on every program (PoCL built with an LLVM that does not know
+    the host processor stops with "unknown target CPU 'generic'"), so a device is tried
+    with a one-line program before it is chosen."""
+    import warnings
+
+    try:
+        ctx = cl.Context([dev])
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore")  # compiler chatter is not an error
+            cl.Program(ctx, _PROBE).build()
+    except cl.Error as exc:
+        lines = [ln.strip() for ln in str(exc).splitlines() if "error" in ln.lower()]
+        return (lines[-1] if lines else " ".join(str(exc).split()))[:200]
+    return None
+
+
 def _preferred(cl, devices: list):
-    """A GPU if there is one, else a CPU, else the first device."""
-    for kind in (cl.device_type.GPU, cl.device_type.CPU):
-        for dev in devices:
-            if dev.type & kind:
-                return dev
-    return devices[0]
+    """The first device that compiles a kernel: GPUs, then CPUs, then any other."""
+
+    def rank(dev):
+        return 0 if dev.type & cl.device_type.GPU else 1 if dev.type & cl.device_type.CPU else 2
+
+    failures = []
+    for dev in sorted(devices, key=rank):  # sorted() is stable: driver order within a kind
+        problem = compile_problem(cl, dev)
+        if problem is None:
+            return dev
+        failures.append(f"{describe_device(cl, dev)}: {problem}")
+    raise BackendUnavailable(
+        "opencl: no OpenCL device compiles kernels ("
+        + "; ".join(failures)
+        + "); on Debian or Ubuntu, `apt-get install pocl-opencl-icd` adds a PoCL that does"
+    )
 
 
 def choose_device(cl, spec: str | None = None):
@@ -153,7 +185,7 @@ def choose_device(cl, spec: str | None = None):
         raise _no_device(f"platform {platform.name.strip()!r} has no device")
     if len(parts) == 1 or not parts[1].strip():
         return _preferred(cl, devices)
-    return _pick(devices, parts[1], "device", source, [d.name for d in devices])
+    return _preferred(cl, [_pick(devices, parts[1], "device", source, [d.name for d in devices])])
 
 
 class OpenCLBackend(Backend):

@@ -365,6 +365,58 @@ def test_no_platform_is_backend_unavailable(monkeypatch):
         choose_device(types.SimpleNamespace(Error=FakeError, get_platforms=no_icd))
 
 
+def _fake_cl(devices_by_platform, broken):
+    """A stand-in for pyopencl whose devices listed in ``broken`` fail every build."""
+    import types
+
+    class FakeError(Exception):
+        pass
+
+    kinds = types.SimpleNamespace(GPU=4, CPU=2, to_string=lambda t: {4: "GPU", 2: "CPU"}[t])
+    platforms = []
+    for pname, devs in devices_by_platform:
+        plat = types.SimpleNamespace(name=pname)
+        plat.get_devices = (lambda ds: lambda: ds)(
+            [types.SimpleNamespace(name=d, type=t, platform=plat) for d, t in devs]
+        )
+        platforms.append(plat)
+
+    class Program:
+        def __init__(self, ctx, source):
+            self.dev = ctx
+
+        def build(self, options=None):
+            if self.dev.name in broken:
+                raise FakeError("Build on device:\nerror: unknown target CPU 'generic'")
+            return self
+
+    return types.SimpleNamespace(
+        Error=FakeError,
+        get_platforms=lambda: platforms,
+        device_type=kinds,
+        Context=lambda devs: devs[0],
+        Program=Program,
+    )
+
+
+def test_a_device_that_cannot_compile_is_passed_over_or_refused(monkeypatch):
+    """An OpenCL runtime may list a CPU whose compiler fails on every kernel (PoCL whose
+    LLVM does not know the processor); the device chosen is one that compiles, and
+    where none does (or the one named does not) the backend is unavailable with the
+    compiler's line, never an error at the first Lloyd step."""
+    monkeypatch.delenv("PYOPENCL_CTX", raising=False)
+    cl = _fake_cl([("old", [("cpu-a", 2)]), ("new", [("cpu-b", 2)])], broken={"cpu-a"})
+    assert choose_device(cl).name == "cpu-b"
+    assert choose_device(cl, "new").name == "cpu-b"
+    with pytest.raises(BackendUnavailable, match="cpu-a.*unknown target CPU 'generic'"):
+        choose_device(cl, "old")
+    gpu_broken = _fake_cl([("p", [("gpu", 4), ("cpu", 2)])], broken={"gpu"})
+    assert choose_device(gpu_broken).name == "cpu"
+    none = _fake_cl([("p", [("cpu-a", 2), ("cpu-b", 2)])], broken={"cpu-a", "cpu-b"})
+    with pytest.raises(BackendUnavailable, match="no OpenCL device compiles kernels.*cpu-a.*cpu-b"):
+        choose_device(none)
+
+
 @pytest.mark.parametrize("name", ["l2", "linf", "triangle", "l2-axial", "hexagon"])
 def test_seeded_search_gives_the_unseeded_labels_over_lloyd_iterations(name):
     """The block search seeded by the last call's labels only tightens its bound: over
