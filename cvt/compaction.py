@@ -113,14 +113,17 @@ case above, the area gain (after the repair) of the tiles' exact optima is 0.158
 the untiled optimum 0.186; PDHG from zero reaches 0.168 / 0.179 / 0.183 after 50 / 100
 / 200 steps, leaving rows short by at most 0.2-0.4 px (repaired by shrinking, with less
 loss than the tile walls cost).  A step is two sparse products (~6 entries per pair row)
-and a few whole-array operations, ~0.2 ms per 1000 elements, so 100 steps cost less than
-building the round.  Four rounds of 100 steps: ~0.2 s CPU against ~0.8 s for the tiles,
-and 1.1 % more area (Table 2's ours-compact rows 0.4-1.3 points more coverage); 64 000
-squares at 4096²: ~4.4 s CPU against ~12 s.  Primal/dual step ratio 4 (2 and 8 within
-0.3 % of the area); starting each round from last round's duals (mapped by pair) made no
-difference; steps are stopped early only when converged (no column moving and no row
-short by more than 1e-10 px: small programs, which then meet HiGHS' optimum).  PDHG is
-plain single-threaded NumPy: the result does not depend on ``threads``.
+and a few whole-array operations, so 100 steps cost about as much as building the round.
+Four rounds of 100 steps: ~0.2 s CPU against ~0.8 s for the tiles, and 1.1 % more area
+(Table 2's ours-compact rows 0.4-1.4 points more coverage); 64 000 squares at 4096²:
+~3.6-4.4 s CPU against ~12 s, half of it building the rounds.  50 steps per round give
+about the tiles' coverage (-0.3 to +0.7 % of the area, by shape) for ~20 % less time.
+Primal/dual step ratio 4 (2 and 8 within 0.3 % of the area).  Measured no better:
+starting each round from last round's duals (mapped by pair), steps folded into the
+matrices, float32 products, relaxation 1.5 (~20 % fewer steps for the same gain).  Steps
+stop early only when converged (no column moving and no row short by more than 1e-10 px:
+small programs, which then meet HiGHS' optimum).  PDHG is plain single-threaded NumPy
+and scipy.sparse: the result does not depend on ``threads``.
 
 Where this departs from the issue's sketch
 ------------------------------------------
@@ -130,7 +133,8 @@ Where this departs from the issue's sketch
   at any raster size); sizes are capped per round relative to each size, not by one
   absolute cap; the objective is the area Σ r_i·Δr_i.
 * The region is kept by (2) against boundary pieces with a best direction per piece.
-* The program is solved per tile with walls between tiles (see Speed).
+* The program is solved approximately as a whole by PDHG, or exactly per tile with walls
+  between tiles by HiGHS (see Speed); the exact check after each round makes either safe.
 """
 
 from __future__ import annotations
@@ -932,7 +936,10 @@ def compact(
     (:func:`wall_segments`) bound the elements instead of their pixels' sides: each
     element keeps G/2 from a wall's centre line, as from the border.  ``threads``: how
     many threads solve the tiles' programs side by side (None: the cores this process may
-    use); the result does not depend on it."""
+    use); the result does not depend on it.  ``solver``: "pdhg" (default: each round's
+    whole program by ``iterations`` PDHG steps at most) or "highs" (HiGHS' dual simplex
+    per tile of about ``tile_elements`` elements, in ``threads`` threads; also used when
+    ``move_cost`` > 0); either way every round is checked exactly (module docstring)."""
     shape = check_shape(shape)
     gap = parse_gap(gap)
     mask = _region_mask(region)
