@@ -31,11 +31,17 @@ displacements (Δc_i, Δr_i):
 n is fixed per pair and round: the candidate with the largest left side of (1)/(2) now,
 among the face normals of both polygons, the centre line (or the nearest point of the
 piece and its normal) and last round's n of that pair; curved shapes add 16 sampled
-directions refined by a golden-section search.  The program is split into square tiles of
-about ``tile_elements`` elements: a pair cut by a tile border becomes a wall between the
-two, each side keeping to its half of the current slack of (1) (the two halves add up to
-(1)), so each tile is an independent program; tiles shift by half a tile every other
-round.  Each tile is solved by HiGHS' dual simplex (``highspy``).
+directions refined by a golden-section search.
+
+The program is solved (``solver``) either approximately as a whole, by a fixed number of
+steps (``iterations``, default 100) of the primal-dual hybrid gradient method (PDHG,
+Chambolle-Pock with diagonal steps) on all elements at once: sparse products and clipping
+in NumPy and scipy.sparse, the default; or exactly per tile by HiGHS' dual simplex
+(``highspy``; ``solver="highs"``, and always when ``move_cost`` > 0): the program is split
+into square tiles of about ``tile_elements`` elements, a pair cut by a tile border becomes
+a wall between the two, each side keeping to its half of the current slack of (1) (the two
+halves add up to (1)), so each tile is an independent program; tiles shift by half a tile
+every other round.
 
 Why every round is overlap-free (the guarantee)
 -----------------------------------------------
@@ -45,14 +51,19 @@ Why every round is overlap-free (the guarantee)
   grows by at most growth·r_i·ρ (ρ = circumradius of K), and the distance between two
   convex sets drops by at most the sum of these (it is 1-Lipschitz in each set's
   Hausdorff distance).  Pairs and pieces left out therefore stay at least G (G/2) apart.
-* Pairs and pieces in the program are separated by (1)/(2), which the solution meets.  The
-  solver meets constraints only to its tolerance (~1e-7), so after every solve each
+* Pairs and pieces in the program are separated by (1)/(2) once the solution meets them.
+  Neither solver meets them exactly (HiGHS to its tolerance, ~1e-7; PDHG's last step
+  leaves rows short by up to a few tenths of a pixel), so after every solve each
   constraint is evaluated again in float64 and elements short of ``SLACK`` (1e-7 px) are
   shrunk about their centres (both elements of a row by the same factor, each element by
   the smallest factor of its rows); shrinking only adds to every left side of (1)/(2)
-  (h >= 0), so one pass restores them all.  The guarantee rests on this exact check, not
-  on the solver: a tile that HiGHS does not solve to optimality stays where it is
-  (Δ = 0 is feasible) and is counted in the round's ``history``.
+  (h >= 0), so one pass restores them all.  A row that no shrinking can meet (PDHG put
+  two centres closer than G) puts its elements back at the round's start, repeated
+  until none is left (the start meets every row), so that no element is lost; counted as
+  ``reverted``.  Both solvers keep the bounds on moves and growth exactly (PDHG clips
+  every step to them).  The guarantee rests on this exact check, not on the solver: a
+  tile that HiGHS does not solve to optimality stays where it is (Δ = 0 is feasible) and
+  is counted in the round's ``history``.
 * Containment: (1)/(2) are linear, so they hold all along the straight path from the old
   state to the new one; an element moves continuously without crossing the boundary, so
   an element whose centre starts in the region stays in it (a centre outside the region
@@ -96,6 +107,24 @@ thread per core solves them (1.9x on two cores when the second is idle).  Defaul
 (4 rounds, growth 0.15, move 0.5, 64 elements per tile): ~1.0 s CPU, coverage 0.97;
 building a round (kd-trees, directions, rows) in numpy is ~0.05 s of each round.
 
+PDHG on the whole untiled program does better on both counts, as the program needs no
+exact optimum: every row is checked and repaired afterwards.  On the first round of the
+case above, the area gain (after the repair) of the tiles' exact optima is 0.158 and of
+the untiled optimum 0.186; PDHG from zero reaches 0.168 / 0.179 / 0.183 after 50 / 100
+/ 200 steps, leaving rows short by at most 0.2-0.4 px (repaired by shrinking, with less
+loss than the tile walls cost).  A step is two sparse products (~6 entries per pair row)
+and a few whole-array operations, so 100 steps cost about as much as building the round.
+Four rounds of 100 steps: ~0.2 s CPU against ~0.8 s for the tiles, and 1.1 % more area
+(Table 2's ours-compact rows 0.4-1.4 points more coverage); 64 000 squares at 4096²:
+~3.6-4.4 s CPU against ~12 s, half of it building the rounds.  50 steps per round give
+about the tiles' coverage (-0.3 to +0.7 % of the area, by shape) for ~20 % less time.
+Primal/dual step ratio 4 (2 and 8 within 0.3 % of the area).  Measured no better:
+starting each round from last round's duals (mapped by pair), steps folded into the
+matrices, float32 products, relaxation 1.5 (~20 % fewer steps for the same gain).  Steps
+stop early only when converged (no column moving and no row short by more than 1e-10 px:
+small programs, which then meet HiGHS' optimum).  PDHG is plain single-threaded NumPy
+and scipy.sparse: the result does not depend on ``threads``.
+
 Where this departs from the issue's sketch
 ------------------------------------------
 * (1) uses h_j(−n), not h_j(n): the two are equal for centrally symmetric elements, not
@@ -104,7 +133,8 @@ Where this departs from the issue's sketch
   at any raster size); sizes are capped per round relative to each size, not by one
   absolute cap; the objective is the area Σ r_i·Δr_i.
 * The region is kept by (2) against boundary pieces with a best direction per piece.
-* The program is solved per tile with walls between tiles (see Speed).
+* The program is solved approximately as a whole by PDHG, or exactly per tile with walls
+  between tiles by HiGHS (see Speed); the exact check after each round makes either safe.
 """
 
 from __future__ import annotations
@@ -132,6 +162,10 @@ _REFINE = 14  # golden-section steps of that refinement
 _GOLD = (math.sqrt(5) - 1) / 2
 _TIE = 1e-6  # px: candidate directions this close count as equally good (> SLACK·√2)
 _TILES_PER_WORKER = 8  # fewer tiles per thread than this: not worth a thread
+_PDHG_ITERATIONS = 100  # PDHG steps per round
+_PDHG_CHECK = 20  # PDHG: steps between convergence checks
+_PDHG_STILL = 1e-10  # px: PDHG has converged when no column moves and no row is short by more
+_STEP_RATIO = 4.0  # PDHG: primal steps this much longer (dual ones shorter) than balanced
 
 
 @dataclass
@@ -568,6 +602,31 @@ def _shrink_to_fit(rows: _Rows, c, r, gap, need):
     raise RuntimeError("compaction: could not restore separation after shrinking")
 
 
+def _revert_hopeless(rows: _Rows, c, r, new_c, new_r, gap, need):
+    """Put back at their round's start (centre and size, in place) the elements of every
+    row that no shrinking could meet at the new centres (an approximate solution may
+    bring two centres closer than the gap); repeated until none is left, which ends at
+    the latest when all are back (the start meets every row).  Returns how many were put
+    back: without this, shrinking would drop one element of each such row."""
+    back = np.zeros(len(r), dtype=bool)
+    zero = np.zeros(len(r))
+    for _ in range(len(r) + 1):  # a few passes of whole-array work, seldom more than one
+        live_p = (new_r[rows.i] > 0) & (new_r[rows.j] > 0)
+        live_s = new_r[rows.e] > 0
+        # with sizes 0 a row has its most slack: short even then, shrinking cannot help
+        hp = live_p & (rows.pair_slack(new_c, zero, gap) <= 2 * need)
+        hs = live_s & (rows.seg_slack(new_c, zero, 0.5 * gap) <= 2 * need)
+        if not (hp.any() or hs.any()):
+            break
+        idx = np.unique(np.concatenate([rows.i[hp], rows.j[hp], rows.e[hs]]))
+        idx = idx[~back[idx]]
+        if len(idx) == 0:  # every such row is between elements at their start: hopeless there too
+            break
+        back[idx] = True
+        new_c[idx], new_r[idx] = c[idx], r[idx]
+    return int(back.sum())
+
+
 def _solve_lp(
     rows: _Rows, act, c, r, gap, delta, lo_dr, hi_dr, weight, tile, options, move_cost=0.0, workers=1
 ):
@@ -728,6 +787,91 @@ def _solve_lp(
     return dc, dr, iters, failed
 
 
+def _solve_pdhg(rows: _Rows, act, c, r, gap, delta, lo_dr, hi_dr, weight, iterations, step_ratio):
+    """The round's program (the same as :func:`_solve_lp`'s, untiled) solved
+    approximately by ``iterations`` steps of the primal-dual hybrid gradient method
+    (Chambolle-Pock, diagonal steps of Pock & Chambolle 2011), all elements at once.
+
+    Starts from x = 0, y = 0 (last round's duals, mapped by pair, were measured no
+    better).  Returns Δc (N, 2), Δr (N,), the largest row violation left and the steps
+    taken (fewer than ``iterations`` when converged).  The moves and growths always keep
+    their bounds (each step is clipped to them); the rows hold only approximately, which
+    the caller's float64 check and shrinking make exact."""
+    import scipy.sparse as sp
+
+    n = len(r)
+    col = np.full(n, -1, dtype=np.int64)
+    col[act] = np.arange(len(act))
+    ncol = 3 * len(act)
+    npair, nseg = len(rows.i), len(rows.e)
+    # A x >= b with x = (Δx, Δy, Δr) per active element: pair rows (6 entries), then
+    # piece rows (3 entries); CSR built directly, rows are already in order
+    ci, cj, ce = 3 * col[rows.i], 3 * col[rows.j], 3 * col[rows.e]
+    if (ci < 0).any() or (cj < 0).any() or (ce < 0).any():
+        raise RuntimeError("compaction: a row refers to an element without a size")
+    index = np.concatenate(
+        [
+            np.stack([ci, ci + 1, ci + 2, cj, cj + 1, cj + 2], axis=1).ravel(),
+            np.stack([ce, ce + 1, ce + 2], axis=1).ravel(),
+        ]
+    )
+    value = np.concatenate(
+        [
+            np.stack([-rows.nx, -rows.ny, -rows.hi, rows.nx, rows.ny, -rows.hj], axis=1).ravel(),
+            np.stack([-rows.sx, -rows.sy, -rows.he], axis=1).ravel(),
+        ]
+    )
+    start = np.concatenate([np.arange(0, 6 * npair + 1, 6), 6 * npair + np.arange(3, 3 * nseg + 1, 3)])
+    a = sp.csr_matrix((value, index, start), shape=(npair + nseg, ncol))
+    at = a.T.tocsr()
+    # the current state (x = 0) is feasible
+    b = np.minimum(-np.concatenate([rows.pair_slack(c, r, gap), rows.seg_slack(c, r, 0.5 * gap)]), 0.0)
+    lo, hi, cost = np.empty(ncol), np.empty(ncol), np.zeros(ncol)
+    d = delta[act]
+    lo[0::3] = lo[1::3] = -d
+    hi[0::3] = hi[1::3] = d
+    lo[2::3], hi[2::3] = lo_dr[act], hi_dr[act]
+    cost[2::3] = -weight[act]
+    # diagonal steps: 1 / (row or column sum of |A|), balanced by step_ratio
+    absval = np.abs(value)
+    col_sum = np.bincount(index, weights=absval, minlength=ncol)
+    row_sum = np.add.reduceat(absval, start[:-1]) if len(absval) else np.zeros(0)
+    tau = step_ratio / np.maximum(col_sum, 1e-12)
+    sigma = 1.0 / (step_ratio * np.maximum(row_sum, 1e-12))
+    x = np.zeros(ncol)
+    y = np.zeros(npair + nseg)
+    x_new, z = np.empty(ncol), np.empty(ncol)
+    aty = at @ y
+    x_seen = x.copy()
+    steps = 0
+    for steps in range(1, iterations + 1):  # a loop over steps of whole-array work
+        # x ← clip(x − τ(c − Aᵀy)); y ← max(0, y + σ(b − A(2x_new − x)))
+        np.subtract(aty, cost, out=x_new)
+        x_new *= tau
+        x_new += x
+        np.clip(x_new, lo, hi, out=x_new)
+        np.multiply(x_new, 2.0, out=z)
+        z -= x
+        y += sigma * (b - a @ z)
+        np.maximum(y, 0.0, out=y)
+        x, x_new = x_new, x
+        aty = at @ y
+        if steps % _PDHG_CHECK == 0:
+            # a fixed point of the steps is the program's optimum: stop when x stands
+            # still and meets the rows (small programs; large ones use every step)
+            if (
+                np.max(np.abs(x - x_seen), initial=0.0) < _PDHG_STILL
+                and np.max(b - a @ x, initial=0.0) < _PDHG_STILL
+            ):
+                break
+            x_seen[:] = x
+    dc = np.zeros((n, 2))
+    dr = np.zeros(n)
+    dc[act, 0], dc[act, 1], dr[act] = x[0::3], x[1::3], x[2::3]
+    violation = float(np.max(b - a @ x, initial=0.0))
+    return dc, dr, violation, steps
+
+
 # --------------------------------------------------------------------- driver
 def _tiles(c, act, mask, per_tile, k):
     """Tile id per element: squares holding about ``per_tile`` elements each, shifted by
@@ -772,6 +916,8 @@ def compact(
     walls=None,
     max_sizes=None,
     threads: int | None = None,
+    solver: str = "pdhg",
+    iterations: int = _PDHG_ITERATIONS,
 ) -> CompactionResult:
     """Compact placed elements (module docstring): return new centres and sizes.
 
@@ -790,7 +936,10 @@ def compact(
     (:func:`wall_segments`) bound the elements instead of their pixels' sides: each
     element keeps G/2 from a wall's centre line, as from the border.  ``threads``: how
     many threads solve the tiles' programs side by side (None: the cores this process may
-    use); the result does not depend on it."""
+    use); the result does not depend on it.  ``solver``: "pdhg" (default: each round's
+    whole program by ``iterations`` PDHG steps at most) or "highs" (HiGHS' dual simplex
+    per tile of about ``tile_elements`` elements, in ``threads`` threads; also used when
+    ``move_cost`` > 0); either way every round is checked exactly (module docstring)."""
     shape = check_shape(shape)
     gap = parse_gap(gap)
     mask = _region_mask(region)
@@ -823,6 +972,9 @@ def compact(
     shrink = real_number(shrink, "shrink", minimum=0.0, below=1.0)
     tol = real_number(tol, "tol", minimum=0.0)
     move_cost = real_number(move_cost, "move_cost", minimum=0.0)
+    if solver not in ("pdhg", "highs"):
+        raise InputError(f"solver must be 'pdhg' or 'highs', got {solver!r}")
+    iterations = whole_number(iterations, "iterations", minimum=1)
     threads = (
         (len(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity") else (os.cpu_count() or 1))
         if threads is None
@@ -863,6 +1015,8 @@ def compact(
     prev_p = prev_s = None
     result = CompactionResult(c, r, th, 0, 0.0)
     options = {"presolve": "off", **(lp_options or {})}
+    if move_cost > 0:
+        solver = "highs"  # |Δc| in the objective: split columns, HiGHS only
     for k in range(max(rounds, 1)):
         delta = move * unit.inr * r
         up = growth * r
@@ -910,13 +1064,23 @@ def compact(
         weight = r / r[act].mean()  # d(area) = 2·r·dr
         tl = time.perf_counter()
         tcpu = time.process_time()
-        tile = _tiles(c, act, mask, tile_elements, k)
-        sol = _solve_lp(rows, act, c, r, gap, delta, lo_dr, hi_dr, weight, tile, options, move_cost, threads)
+        if solver == "pdhg":
+            dc, dr, violation, iters = _solve_pdhg(
+                rows, act, c, r, gap, delta, lo_dr, hi_dr, weight, iterations, _STEP_RATIO
+            )
+            failed = 0
+        else:
+            tile = _tiles(c, act, mask, tile_elements, k)
+            sol = _solve_lp(
+                rows, act, c, r, gap, delta, lo_dr, hi_dr, weight, tile, options, move_cost, threads
+            )
+            dc, dr, iters, failed = sol
+            violation = None
         result.lp_seconds += time.perf_counter() - tl
         tcpu = time.process_time() - tcpu
-        dc, dr, iters, failed = sol
         new_c = c + dc
         new_r = np.where(r > 0, np.maximum(r + dr, 0.0), 0.0)
+        reverted = _revert_hopeless(rows, c, r, new_c, new_r, gap, SLACK)
         new_r, dropped = _shrink_to_fit(rows, new_c, new_r, gap, SLACK)
         result.dropped += dropped
         c, r = new_c, new_r
@@ -932,6 +1096,8 @@ def compact(
                 "lp_cpu": tcpu,
                 "iters": iters,
                 "failed_tiles": failed,
+                "violation": violation,
+                "reverted": reverted,
                 "seconds": time.perf_counter() - t0,
             }
         )

@@ -148,7 +148,7 @@ def test_density_caps_keep_the_sizes_the_density_asks_for():
         name: evaluate(d.elements, problem.grid).coverage
         for name, d in (("ours", ours), ("capped", capped), ("free", free))
     }
-    assert cov["capped"] > cov["ours"] + 0.15 and cov["capped"] > cov["free"] - 0.06
+    assert cov["capped"] > cov["ours"] + 0.15 and cov["capped"] > cov["free"] - 0.08
     # caps: 2 % above the sizes that would cover the region exactly at the density's sizes
     polys = [p for p in capped.elements if p is not None]
     centres = shapely.get_coordinates(shapely.centroid(np.array(polys, dtype=object)))

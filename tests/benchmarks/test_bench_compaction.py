@@ -3,10 +3,10 @@ iterations (issue 12: at most 3 s on the project's 2-core machine).
 
 The cells come from 20 cKDTree linf Lloyd steps (scipy only, so every machine times the
 same input) and the multi-start centre fit; the benchmark times ``compact`` alone, with
-its defaults.  In the default run (--benchmark-disable from pyproject) the case runs once
-on a small problem (N = 500, 384²) and checks only the result; with --benchmark-enable
-it is the 4000-square problem, timed over several rounds, and its median must stay
-under 3 s::
+its defaults, and with HiGHS' tiles (``solver="highs"``) beside it.  In the default run
+(--benchmark-disable from pyproject) each case runs once on a small problem (N = 500,
+384²) and checks only the result; with --benchmark-enable it is the 4000-square problem,
+timed over several rounds, and its median must stay under 3 s::
 
     pytest tests/benchmarks/test_bench_compaction.py --benchmark-enable
 """
@@ -47,13 +47,17 @@ def squares(request):
     return centres, sizes, Grid(size, size), n
 
 
-def test_bench_compaction_squares(benchmark, squares, request):
+@pytest.mark.parametrize("solver", ["pdhg", "highs"])
+def test_bench_compaction_squares(benchmark, squares, request, solver):
     centres, sizes, grid, n = squares
     benchmark.group = f"compaction square N={n} {grid.width}²"
-    benchmark.extra_info.update(kind="compaction", shape="square", n_elements=n, size=grid.width)
+    benchmark.extra_info.update(
+        kind="compaction", shape="square", n_elements=n, size=grid.width, solver=solver
+    )
     res = benchmark.pedantic(
         compact,
         args=(centres, np.zeros(n), sizes, "square", 1.0, grid),
+        kwargs={"solver": solver},
         rounds=5 if _enabled(request.config) else 1,
         iterations=1,
     )
