@@ -287,8 +287,16 @@ def ellipse_rows(polygons, element: str, aspect: float) -> np.ndarray | None:
         if p is None or p.is_empty or p.geom_type != "Polygon" or len(p.exterior.coords) != len(unit) + 1:
             continue
         c = np.asarray(p.centroid.coords[0])
-        v = np.asarray(p.exterior.coords[0]) - c
+        ring = np.asarray(p.exterior.coords[:-1])
+        v = ring[0] - c
         size = math.sqrt(p.area / unit_area)
+        # a tile cut to fit a wall can have as many vertices as the whole ellipse: it is
+        # one only where every vertex is the unit outline's, turned and scaled
+        turn = math.atan2(v[1], v[0]) - math.atan2(unit[0, 1], unit[0, 0])
+        cos, sin = math.cos(turn), math.sin(turn)
+        whole = c + size * (unit @ np.array([[cos, sin], [-sin, cos]]))
+        if np.abs(whole - ring).max() > 1e-6 * max(size, 1.0):
+            continue
         rows[k] = ellipse_parameters(c[None], [math.atan2(v[1], v[0])], [size], ball.semi_axes)[0]
     return rows
 
