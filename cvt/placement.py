@@ -157,7 +157,7 @@ class _Gauge:
 
     def prepare(self, balls, qx, qy, anchor) -> list:
         """Terms of the samples (``qx``, ``qy``: (M, W), row i in ball ``balls[i]``):
-        arrays whose next-to-last axis is the row; ``anchor`` (N, 2) per ball."""
+        arrays whose last two axes are (row, sample) or (row, 1); ``anchor`` (N, 2) per ball."""
         if self.kind == "polygon":
             ux, uy = qx - anchor[balls, 0][:, None], qy - anchor[balls, 1][:, None]
             proj = np.empty((len(self.fx), *qx.shape))
@@ -166,27 +166,62 @@ class _Gauge:
             return [proj]
         return [qx, qy, self.q[:, balls, None]]
 
-    def least(self, terms, balls, points, anchor) -> np.ndarray:
-        """(M,) per row, the smallest size at which the element centred at ``points[i]``
-        (ball ``balls[i]``) reaches one of the row's samples."""
+    def rows(self, balls, anchor) -> list:
+        """The per-row coefficients of :meth:`reach` for rows in balls ``balls``: arrays
+        whose last axis is the row (select rows with ``[..., which]``)."""
+        if self.kind == "polygon":
+            return [self.fx[:, balls], self.fy[:, balls], anchor[balls, 0], anchor[balls, 1]]
+        return []
+
+    def reach(self, terms, coef, points) -> np.ndarray:
+        """(M, W): per row and sample, the size at which the element centred at
+        ``points[i]`` reaches the sample (its row's least is the element's size).  Each
+        entry depends on its own sample and row only, so any subset of the columns
+        gives the same values bit for bit (and its minimum bounds the size from above)."""
         if self.kind == "polygon":
             (proj,) = terms
-            dx, dy = points[:, 0] - anchor[balls, 0], points[:, 1] - anchor[balls, 1]
-            shift = self.fx[:, balls] * dx + self.fy[:, balls] * dy + self.slack[:, None]  # (K, M)
+            fx, fy, ax, ay = coef
+            shift = fx * (points[:, 0] - ax) + fy * (points[:, 1] - ay) + self.slack[:, None]  # (K, M)
             out = proj[0] - shift[0][:, None]
             for k in range(1, len(proj)):
                 np.maximum(out, proj[k] - shift[k][:, None], out=out)
-            return out.min(axis=1)
+            return out
         qx, qy, (q0, q1, q2) = terms
         vx, vy = qx - points[:, 0, None], qy - points[:, 1, None]
         gx = q0 * vx + q1 * vy  # Q v = ρ ∇ρ
         gy = q1 * vx + q2 * vy
         rho = np.sqrt(np.maximum(vx * gx + vy * gy, 0.0))
         if self.half <= 0:
-            return rho.min(axis=1)
+            return rho
         with np.errstate(divide="ignore", invalid="ignore"):
             grad = np.where(rho > 0, np.hypot(gx, gy) / rho, 0.0)
-        return (rho - self.half * grad).min(axis=1)
+        return rho - self.half * grad
+
+    def least(self, terms, balls, points, anchor) -> np.ndarray:
+        """(M,) per row, the smallest size at which the element centred at ``points[i]``
+        (ball ``balls[i]``) reaches one of the row's samples."""
+        return self.reach(terms, self.rows(balls, anchor), points).min(axis=1)
+
+
+def _pick_rows(arrays, which) -> list:
+    """The rows ``which`` of arrays whose next-to-last axis is the row."""
+    return [np.take(a, which, axis=-2) for a in arrays]
+
+
+def _pick_columns(arrays, rows, cols) -> list:
+    """Per row ``rows[i]`` the samples ``cols[i]`` (an index or a row of them) of
+    C-contiguous arrays whose last two axes are (row, sample); an array of one column
+    per row gives its rows.  One flat gather per array: far cheaper than indexing two
+    axes at once."""
+    out = []
+    for a in arrays:
+        if a.shape[-1] == 1:
+            out.append(np.take(a, rows, axis=-2))
+            continue
+        at = rows.reshape(rows.shape + (1,) * (cols.ndim - 1)) * a.shape[-1] + cols
+        flat = a.reshape(*a.shape[:-2], -1)
+        out.append(np.take(flat, at.ravel(), axis=-1).reshape(*a.shape[:-2], *cols.shape))
+    return out
 
 
 class _CellSamples:
@@ -255,41 +290,83 @@ _FIT_MOVES = np.array(
 _FIT_REPEATS = 3  # tries of the 8 moves per step, while the cell still grows
 
 
-def _fit_search(labels, ids, terms, gauge: _Gauge, centres, anchor):
+_WITNESSES = 8  # samples per cell whose reach bounds a trial's size from above
+_FIT_BLOCK = 1 << 18  # samples per block of the search: few Python steps per cell, terms still small
+
+
+def _fit_search(labels, ids, terms, gauge: _Gauge, starts, anchor):
     """The pattern search of :func:`fit_centres` for the cells labelled ``ids`` (also
-    their balls; ``terms`` their samples' :meth:`_Gauge.prepare`) from ``centres``: the
-    centres and sizes it ends at."""
+    their balls; ``terms`` their samples' :meth:`_Gauge.prepare`) from each of ``starts``
+    ((S, M, 2), all searched together): the centres (S, M, 2) and sizes (S, M) it ends at.
+
+    A trial's size is at most its reach to any one sample of its cell, so each search
+    keeps a few *witnesses* (its cell's nearest samples at the start, then the nearest
+    sample of each trial evaluated in full) and evaluates a trial on all the cell's
+    samples only where the witnesses allow it to grow: the same decisions, sizes and
+    centres as evaluating every trial in full, at a fraction of the cost."""
     h, w = labels.shape
     flat = labels.ravel()
+    m = len(ids)
+    src = np.tile(np.arange(m), len(starts))  # search row -> its cell's row in ``terms``
+    centres = np.concatenate(starts).astype(np.float64)
+    coef = gauge.rows(ids[src], anchor)
 
-    def sizes(which, points, least):
+    def sizes(rows, points, reach):
         x, y = points[:, 0], points[:, 1]
         own = (x >= 0) & (x < w) & (y >= 0) & (y < h)
         pixel = np.clip(y, 0, h - 1).astype(np.intp) * w + np.clip(x, 0, w - 1).astype(np.intp)
-        own &= flat[pixel] == ids[which]
-        return np.where(own, np.maximum(least, 0.0), 0.0)
+        own &= flat[pixel] == ids[src[rows]]
+        return np.where(own, np.maximum(reach.min(axis=1), 0.0), 0.0)
 
-    every = np.arange(len(ids))
-    best = sizes(every, centres, gauge.least(terms, ids, centres, anchor))
+    every = np.arange(len(src))
+    reach = gauge.reach(_pick_rows(terms, src), coef, centres)
+    best = sizes(every, centres, reach)
+    if reach.shape[1] > _WITNESSES:
+        witness = np.argpartition(reach, _WITNESSES - 1, axis=1)[:, :_WITNESSES]
+    else:  # every sample is a witness: the bound is the size
+        witness = np.broadcast_to(
+            np.minimum(np.arange(_WITNESSES), reach.shape[1] - 1), (len(src), _WITNESSES)
+        ).copy()
+    del reach
+    tried = 0
     for frac in _FIT_STEPS:
-        active, here, here_balls = every, terms, ids
+        # the search rows still in play (all, at each new step), and their own copies
+        rows, here = every, coef
+        seen = _pick_columns(terms, src, witness)
+        c, b = centres.copy(), best.copy()
         for _ in range(_FIT_REPEATS):
-            if len(active) == 0:
+            if len(rows) == 0:
                 break
-            if len(active) < len(here_balls):
-                here, here_balls = [t[..., active, :] for t in terms], ids[active]
-            step = frac * np.maximum(best[active], 1.0)
-            grew = np.zeros(len(active), dtype=bool)
+            step = frac * np.maximum(b, 1.0)
+            grew = np.zeros(len(rows), dtype=bool)
             for move in _FIT_MOVES:
-                trial = centres[active] + step[:, None] * move
-                size = sizes(active, trial, gauge.least(here, here_balls, trial, anchor))
-                better = size > best[active] * (1 + 1e-9)
+                trial = c + step[:, None] * move
+                bound = gauge.reach(seen, here, trial).min(axis=1)
+                need = np.flatnonzero(bound > b * (1 + 1e-9))
+                if len(need) == 0:
+                    continue
+                full = gauge.reach(
+                    _pick_rows(terms, src[rows[need]]), [x[..., need] for x in here], trial[need]
+                )
+                size = sizes(rows[need], trial[need], full)
+                # the trial's nearest sample joins the witnesses, in turn over their slots
+                col, slot = full.argmin(axis=1), tried % _WITNESSES
+                tried += 1
+                witness[rows[need], slot] = col
+                for sv, tv in zip(seen, _pick_columns(terms, src[rows[need]], col), strict=True):
+                    if sv.shape[-1] > 1:
+                        sv[..., need, slot] = tv
+                better = size > b[need] * (1 + 1e-9)
                 if better.any():
-                    a = active[better]
-                    centres[a], best[a] = trial[better], size[better]
-                    grew |= better
-            active = active[grew]
-    return centres, best
+                    up = need[better]
+                    c[up], b[up] = trial[up], size[better]
+                    grew[up] = True
+            centres[rows], best[rows] = c, b
+            if not grew.all():  # go on with the searches still growing only
+                keep = np.flatnonzero(grew)
+                rows, here, c, b = rows[keep], [x[..., keep] for x in here], c[keep], b[keep]
+                seen = [x[..., keep, :] for x in seen]
+    return centres.reshape(len(starts), m, 2), best.reshape(len(starts), m)
 
 
 def _inscribed_centres(labels, shape: str, aspect, n: int) -> np.ndarray:
@@ -350,9 +427,10 @@ def fit_centres(labels, sites, angles, shape: str, aspect, gap: float = 0.0):
     from both starts (circles 0.723 / 0.728, triangles 0.516 / 0.522).
 
     Cells are independent, so the search runs on blocks of cells of like sample counts
-    (:meth:`_CellSamples.blocks`), whose samples' terms stay in the cache for the whole
-    search; a trial costs one subtraction and one max per facet and sample
-    (:class:`_Gauge`), and memory does not grow with N beyond the samples themselves."""
+    (:meth:`_CellSamples.blocks`), both starts at once; a trial is first bounded from a
+    few samples of its cell (:func:`_fit_search`), and only a trial that may grow costs
+    one subtraction and one max per facet and sample of its cell (:class:`_Gauge`).
+    Memory does not grow with N beyond the samples themselves."""
     labels = np.asarray(labels)
     sites = np.asarray(sites, dtype=np.float64).reshape(-1, 2)
     n = len(sites)
@@ -367,11 +445,10 @@ def fit_centres(labels, sites, angles, shape: str, aspect, gap: float = 0.0):
     start2 = _inscribed_centres(labels, shape, aspect, n)
     missing = ~np.isfinite(start2).all(axis=1)
     start2[missing] = sites[missing]
-    for which, x, y in samples.blocks():  # cells are independent: one block at a time
+    for which, x, y in samples.blocks(_FIT_BLOCK):  # cells are independent: one block at a time
         ids = samples.cells[which]
         terms = gauge.prepare(ids, x, y, sites)
-        c_a, s_a = _fit_search(labels, ids, terms, gauge, sites[ids], sites)
-        c_b, s_b = _fit_search(labels, ids, terms, gauge, start2[ids], sites)
+        (c_a, c_b), (s_a, s_b) = _fit_search(labels, ids, terms, gauge, [sites[ids], start2[ids]], sites)
         second = s_b > s_a
         out_c[ids] = np.where(second[:, None], c_b, c_a)
         out_s[ids] = np.where(second, s_b, s_a)
