@@ -173,21 +173,26 @@ class _Gauge:
             return [self.fx[:, balls], self.fy[:, balls], anchor[balls, 0], anchor[balls, 1]]
         return []
 
-    def reach(self, terms, coef, points) -> np.ndarray:
+    def reach(self, terms, coef, points, rows_last: bool = False) -> np.ndarray:
         """(M, W): per row and sample, the size at which the element centred at
-        ``points[i]`` reaches the sample (its row's least is the element's size).  Each
-        entry depends on its own sample and row only, so any subset of the columns
-        gives the same values bit for bit (and its minimum bounds the size from above)."""
+        ``points[i]`` reaches the sample (its row's least is the element's size); (W, M)
+        for terms laid out with the row last (``rows_last``).  Each entry depends on its
+        own sample and row only, so any subset of the samples, in either layout, gives
+        the same values bit for bit (and its minimum bounds the size from above)."""
+
+        def per_row(v):  # a value per row, against the row's samples
+            return v[None, :] if rows_last else v[:, None]
+
         if self.kind == "polygon":
             (proj,) = terms
             fx, fy, ax, ay = coef
             shift = fx * (points[:, 0] - ax) + fy * (points[:, 1] - ay) + self.slack[:, None]  # (K, M)
-            out = proj[0] - shift[0][:, None]
+            out = proj[0] - per_row(shift[0])
             for k in range(1, len(proj)):
-                np.maximum(out, proj[k] - shift[k][:, None], out=out)
+                np.maximum(out, proj[k] - per_row(shift[k]), out=out)
             return out
         qx, qy, (q0, q1, q2) = terms
-        vx, vy = qx - points[:, 0, None], qy - points[:, 1, None]
+        vx, vy = qx - per_row(points[:, 0]), qy - per_row(points[:, 1])
         gx = q0 * vx + q1 * vy  # Q v = ρ ∇ρ
         gy = q1 * vx + q2 * vy
         rho = np.sqrt(np.maximum(vx * gx + vy * gy, 0.0))
@@ -224,6 +229,15 @@ def _pick_columns(arrays, rows, cols) -> list:
     return out
 
 
+def _stable_order(keys, n: int) -> np.ndarray:
+    """``np.argsort(keys, kind="stable")`` for integer keys in [0, n): one or two passes
+    over 16-bit digits, which NumPy sorts by radix (far faster than a merge sort)."""
+    order = np.argsort((keys & 0xFFFF).astype(np.uint16), kind="stable")
+    if n > 1 << 16:
+        order = order[np.argsort((keys[order] >> 16).astype(np.uint16), kind="stable")]
+    return order
+
+
 class _CellSamples:
     """The contour samples of a label raster (:func:`contour_samples`) grouped by cell:
     ``cells`` (the labels that own samples), per cell its ``counts`` of samples."""
@@ -232,7 +246,7 @@ class _CellSamples:
         owner, qx, qy = contour_samples(labels)
         # half-integers: float32 holds them exactly, in half the memory
         qx, qy = qx.astype(np.float32), qy.astype(np.float32)
-        order = np.argsort(owner, kind="stable")
+        order = _stable_order(owner, n)
         self.qx, self.qy = qx[order], qy[order]
         del qx, qy, order
         counts = np.bincount(owner, minlength=n)[:n]
@@ -332,7 +346,8 @@ def _fit_search(labels, ids, terms, gauge: _Gauge, starts, anchor):
     for frac in _FIT_STEPS:
         # the search rows still in play (all, at each new step), and their own copies
         rows, here = every, coef
-        seen = _pick_columns(terms, src, witness)
+        # the witnesses' terms, the row last: a bound is then a minimum over a few rows
+        seen = [np.ascontiguousarray(np.swapaxes(x, -1, -2)) for x in _pick_columns(terms, src, witness)]
         c, b = centres.copy(), best.copy()
         for _ in range(_FIT_REPEATS):
             if len(rows) == 0:
@@ -341,7 +356,7 @@ def _fit_search(labels, ids, terms, gauge: _Gauge, starts, anchor):
             grew = np.zeros(len(rows), dtype=bool)
             for move in _FIT_MOVES:
                 trial = c + step[:, None] * move
-                bound = gauge.reach(seen, here, trial).min(axis=1)
+                bound = gauge.reach(seen, here, trial, rows_last=True).min(axis=0)
                 need = np.flatnonzero(bound > b * (1 + 1e-9))
                 if len(need) == 0:
                     continue
@@ -353,9 +368,9 @@ def _fit_search(labels, ids, terms, gauge: _Gauge, starts, anchor):
                 col, slot = full.argmin(axis=1), tried % _WITNESSES
                 tried += 1
                 witness[rows[need], slot] = col
-                for sv, tv in zip(seen, _pick_columns(terms, src[rows[need]], col), strict=True):
-                    if sv.shape[-1] > 1:
-                        sv[..., need, slot] = tv
+                for sv, tv, t in zip(seen, _pick_columns(terms, src[rows[need]], col), terms, strict=True):
+                    if t.shape[-1] > 1:  # not a term per row
+                        sv[..., slot, need] = tv
                 better = size > b[need] * (1 + 1e-9)
                 if better.any():
                     up = need[better]
@@ -365,7 +380,7 @@ def _fit_search(labels, ids, terms, gauge: _Gauge, starts, anchor):
             if not grew.all():  # go on with the searches still growing only
                 keep = np.flatnonzero(grew)
                 rows, here, c, b = rows[keep], [x[..., keep] for x in here], c[keep], b[keep]
-                seen = [x[..., keep, :] for x in seen]
+                seen = [x[..., keep] for x in seen]
     return centres.reshape(len(starts), m, 2), best.reshape(len(starts), m)
 
 
