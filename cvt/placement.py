@@ -87,17 +87,19 @@ def element_for(metric: Metric, element: str | None = None) -> tuple[str, float]
     return shape, turn
 
 
-def contour_samples(labels: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """Midpoints of the cell contours: ``(owner, x, y)`` with one entry per (cell, edge).
+def contour_samples(labels: np.ndarray, dtype=np.float64) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Midpoints of the cell contours: ``(owner, x, y)`` with one entry per (cell, edge),
+    x and y of ``dtype`` (half-integers below 2^24: float32 holds them exactly).
 
     Every pair of 4-neighbour pixels with different labels shares a unit edge; its
     midpoint is a sample of the contour of each of the two cells (outside labels, -1,
     own nothing).  The raster's border is contour too (as if padded with -1).  Samples
     come in four runs (the left and the right cell of each vertical edge, then the upper
     and the lower cell of each horizontal edge), each in raster order."""
-    labels = np.asarray(labels)
+    labels, dtype = np.asarray(labels), np.dtype(dtype)
     h, w = labels.shape
     flat = labels.ravel()
+    half = dtype.type(0.5)
     # vertical edges x = c (c = 0 .. w) of row r: pixel (r, c - 1) | pixel (r, c)
     cut = np.empty((h, w + 1), dtype=bool)
     cut[:, 0], cut[:, w] = labels[:, 0] != -1, labels[:, w - 1] != -1
@@ -107,7 +109,8 @@ def contour_samples(labels: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndar
     at = r * w + c
     left = np.where(c > 0, flat[np.maximum(at - 1, 0)], -1)
     right = np.where(c < w, flat[np.minimum(at, flat.size - 1)], -1)
-    runs = [(left, c, r + 0.5), (right, c, r + 0.5)]
+    xs, ys = c.astype(dtype), r.astype(dtype) + half
+    runs = [(left, xs, ys), (right, xs, ys)]
     # horizontal edges y = r (r = 0 .. h) of column c: pixel (r - 1, c) over pixel (r, c)
     cut = np.empty((h + 1, w), dtype=bool)
     cut[0], cut[h] = labels[0] != -1, labels[h - 1] != -1
@@ -117,11 +120,12 @@ def contour_samples(labels: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndar
     at = r2 * w + c2
     top = np.where(r2 > 0, flat[np.maximum(at - w, 0)], -1)
     bottom = np.where(r2 < h, flat[np.minimum(at, flat.size - 1)], -1)
-    runs += [(top, c2 + 0.5, r2), (bottom, c2 + 0.5, r2)]
+    xs, ys = c2.astype(dtype) + half, r2.astype(dtype)
+    runs += [(top, xs, ys), (bottom, xs, ys)]
     keeps = [run[0] >= 0 for run in runs]
     total = sum(int(k.sum()) for k in keeps)
     owner = np.empty(total, dtype=np.int32)
-    x, y = np.empty(total), np.empty(total)
+    x, y = np.empty(total, dtype), np.empty(total, dtype)
     start = 0
     for (who, xs, ys), keep in zip(runs, keeps, strict=True):  # four runs, written in place
         end = start + int(keep.sum())
@@ -243,9 +247,7 @@ class _CellSamples:
     ``cells`` (the labels that own samples), per cell its ``counts`` of samples."""
 
     def __init__(self, labels, n: int):
-        owner, qx, qy = contour_samples(labels)
-        # half-integers: float32 holds them exactly, in half the memory
-        qx, qy = qx.astype(np.float32), qy.astype(np.float32)
+        owner, qx, qy = contour_samples(labels, np.float32)  # exact, in half the memory
         order = _stable_order(owner, n)
         self.qx, self.qy = qx[order], qy[order]
         del qx, qy, order
