@@ -386,6 +386,46 @@ def _fit_search(labels, ids, terms, gauge: _Gauge, starts, anchor):
     return centres.reshape(len(starts), m, 2), best.reshape(len(starts), m)
 
 
+_DEPTH_REACH = 32  # px: deeper cells are left to SciPy's transform, whose cost does not grow with depth
+
+
+def _squared_depth(inner, sy: float, sx: float):
+    """The squared Euclidean distance from each pixel to the nearest pixel that
+    is not ``inner``, with rows ``sy`` and columns ``sx`` apart; None where some pixel is
+    more than :data:`_DEPTH_REACH` rows, or 4x as many columns, from one.
+
+    Separable: the distance down each column, one row further at each pass, then along
+    the rows one offset k at a time while some pixel may still be nearer to a column k
+    away; the raster's cells are small, so a few passes do.  Exact: the squares are sums
+    of two squared multiples of the spacings, in float32 where it holds them exactly
+    (spacings in quarters: 1, and 1/β and β for β = 1/2), else in float64."""
+    # rows to the nearest outer pixel of the column: one row further at each pass
+    far, one = np.int16(_DEPTH_REACH + 1), np.int16(1)
+    down = np.where(inner, far, np.int16(0))
+    for _ in range(_DEPTH_REACH):
+        if down.max() < far:
+            break
+        np.minimum(down[1:], down[:-1] + one, out=down[1:])
+        np.minimum(down[:-1], down[1:] + one, out=down[:-1])
+    if down.max() >= far:
+        return None
+    # float32 is exact for spacings in quarters (1, and β = 1/2: 2 and 1/2)
+    exact = float(4 * sy).is_integer() and float(4 * sx).is_integer()
+    kind = np.float32 if exact else np.float64
+    col = np.square(down.astype(kind) * kind(sy))
+    del down
+    if math.sqrt(col.max()) > 4 * _DEPTH_REACH * sx:  # too many columns to look across
+        return None
+    out = col.copy()
+    k = 1
+    while k < out.shape[1] and kind(sx * k) ** 2 < out.max():
+        step = kind(sx * k) ** 2
+        np.minimum(out[:, :-k], col[:, k:] + step, out=out[:, :-k])
+        np.minimum(out[:, k:], col[:, :-k] + step, out=out[:, k:])
+        k += 1
+    return out
+
+
 def _inscribed_centres(labels, shape: str, aspect, n: int) -> np.ndarray:
     """(n, 2) per cell, the centre of the pixel farthest from the cell's contour, by a
     distance transform in the element's own metric (chessboard for squares, Euclidean
@@ -405,11 +445,11 @@ def _inscribed_centres(labels, shape: str, aspect, n: int) -> np.ndarray:
     kind = shape_record(shape).distance
     if kind == "chessboard":
         dt = ndimage.distance_transform_cdt(inner, metric="chessboard")
-    elif kind == "scaled":
-        beta = element_ball(shape, aspect).aspect  # gauge ~ hypot(β·dx, dy/β)
-        dt = ndimage.distance_transform_edt(inner, sampling=(1.0 / beta, beta))
     else:
-        dt = ndimage.distance_transform_edt(inner)
+        beta = element_ball(shape, aspect).aspect if kind == "scaled" else 1.0  # gauge ~ hypot(β·dx, dy/β)
+        dt = _squared_depth(inner, 1.0 / beta, beta)
+        if dt is None:  # cells too wide for the short transform: SciPy's
+            dt = ndimage.distance_transform_edt(inner, sampling=(1.0 / beta, beta))
     del inner
     lab, d = labels.ravel(), dt.ravel()
     outside = lab < 0

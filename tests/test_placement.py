@@ -577,3 +577,29 @@ def test_contour_samples_in_float32_are_exact():
     o32, x32, y32 = contour_samples(lab, np.float32)
     assert x32.dtype == y32.dtype == np.float32 and x64.dtype == np.float64
     assert np.array_equal(o32, o64) and np.array_equal(x32, x64) and np.array_equal(y32, y64)
+
+
+@pytest.mark.parametrize("spacing", [(1.0, 1.0), (2.0, 0.5), (1 / 0.3, 0.3)])
+def test_squared_depth_is_scipys_euclidean_transform(spacing):
+    """The short separable transform gives SciPy's Euclidean distances (squared) on
+    random masks, or None (SciPy's then) where a pixel lies too deep."""
+    from scipy import ndimage
+
+    from compact_distributions.cvt.placement import _squared_depth
+
+    rng = np.random.default_rng(3)
+    done = 0
+    for _ in range(25):
+        h, w = rng.integers(3, 70, 2)
+        inner = rng.random((h, w)) < rng.uniform(0.5, 0.97)
+        inner[[0, -1]], inner[:, [0, -1]] = False, False
+        got = _squared_depth(inner, *spacing)
+        if got is None:
+            continue
+        done += 1
+        want = ndimage.distance_transform_edt(inner, sampling=spacing) ** 2
+        assert np.allclose(got, want, rtol=1e-12, atol=1e-9)
+    assert done >= 10
+    deep = np.ones((200, 200), dtype=bool)
+    deep[[0, -1]], deep[:, [0, -1]] = False, False
+    assert _squared_depth(deep, *spacing) is None  # 99 rows from the edge
