@@ -327,16 +327,15 @@ def _fit_search(labels, ids, terms, gauge: _Gauge, starts, anchor):
     centres = np.concatenate(starts).astype(np.float64)
     coef = gauge.rows(ids[src], anchor)
 
-    def sizes(rows, points, reach):
+    def own(rows, points):  # whether each point lies in a pixel of its row's cell
         x, y = points[:, 0], points[:, 1]
-        own = (x >= 0) & (x < w) & (y >= 0) & (y < h)
+        inside = (x >= 0) & (x < w) & (y >= 0) & (y < h)
         pixel = np.clip(y, 0, h - 1).astype(np.intp) * w + np.clip(x, 0, w - 1).astype(np.intp)
-        own &= flat[pixel] == ids[src[rows]]
-        return np.where(own, np.maximum(reach.min(axis=1), 0.0), 0.0)
+        return inside & (flat[pixel] == ids[src[rows]])
 
     every = np.arange(len(src))
     reach = gauge.reach(_pick_rows(terms, src), coef, centres)
-    best = sizes(every, centres, reach)
+    best = np.where(own(every, centres), np.maximum(reach.min(axis=1), 0.0), 0.0)
     if reach.shape[1] > _WITNESSES:
         witness = np.argpartition(reach, _WITNESSES - 1, axis=1)[:, :_WITNESSES]
     else:  # every sample is a witness: the bound is the size
@@ -365,16 +364,17 @@ def _fit_search(labels, ids, terms, gauge: _Gauge, starts, anchor):
                 full = gauge.reach(
                     _pick_rows(terms, src[rows[need]]), [x[..., need] for x in here], trial[need]
                 )
-                size = sizes(rows[need], trial[need], full)
                 # the trial's nearest sample joins the witnesses, in turn over their slots
                 col, slot = full.argmin(axis=1), tried % _WITNESSES
+                size = full[np.arange(len(need)), col]
                 tried += 1
                 witness[rows[need], slot] = col
                 for sv, tv, t in zip(seen, _pick_columns(terms, src[rows[need]], col), terms, strict=True):
                     if t.shape[-1] > 1:  # not a term per row
                         sv[..., slot, need] = tv
-                better = size > b[need] * (1 + 1e-9)
-                if better.any():
+                better = np.flatnonzero(size > b[need] * (1 + 1e-9))  # then size > 0
+                better = better[own(rows[need[better]], trial[need[better]])]
+                if len(better):
                     up = need[better]
                     c[up], b[up] = trial[up], size[better]
                     grew[up] = True
