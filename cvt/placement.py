@@ -88,14 +88,28 @@ def element_for(metric: Metric, element: str | None = None) -> tuple[str, float]
 
 
 def contour_samples(labels: np.ndarray, dtype=np.float64) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """Midpoints of the cell contours: ``(owner, x, y)`` with one entry per (cell, edge),
-    x and y of ``dtype`` (half-integers below 2^24: float32 holds them exactly).
+    """Midpoints of the cell contours, one per (cell, edge).
 
     Every pair of 4-neighbour pixels with different labels shares a unit edge; its
     midpoint is a sample of the contour of each of the two cells (outside labels, -1,
     own nothing).  The raster's border is contour too (as if padded with -1).  Samples
     come in four runs (the left and the right cell of each vertical edge, then the upper
-    and the lower cell of each horizontal edge), each in raster order."""
+    and the lower cell of each horizontal edge), each in raster order.
+
+    Parameters
+    ----------
+    labels : (H, W) int array
+        The label raster, -1 outside the region.
+    dtype : numpy float type, default float64
+        The type of x and y.  They are half-integers below 2^24, so float32 holds them
+        exactly in half the memory.
+
+    Returns
+    -------
+    owner : (S,) int32
+        The cell of each sample.
+    x, y : (S,) arrays of ``dtype``
+        Its position in pixels."""
     labels, dtype = np.asarray(labels), np.dtype(dtype)
     h, w = labels.shape
     flat = labels.ravel()
