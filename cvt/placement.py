@@ -87,17 +87,33 @@ def element_for(metric: Metric, element: str | None = None) -> tuple[str, float]
     return shape, turn
 
 
-def contour_samples(labels: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """Midpoints of the cell contours: ``(owner, x, y)`` with one entry per (cell, edge).
+def contour_samples(labels: np.ndarray, dtype=np.float64) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Midpoints of the cell contours, one per (cell, edge).
 
     Every pair of 4-neighbour pixels with different labels shares a unit edge; its
     midpoint is a sample of the contour of each of the two cells (outside labels, -1,
     own nothing).  The raster's border is contour too (as if padded with -1).  Samples
     come in four runs (the left and the right cell of each vertical edge, then the upper
-    and the lower cell of each horizontal edge), each in raster order."""
-    labels = np.asarray(labels)
+    and the lower cell of each horizontal edge), each in raster order.
+
+    Parameters
+    ----------
+    labels : (H, W) int array
+        The label raster, -1 outside the region.
+    dtype : numpy float type, default float64
+        The type of x and y.  They are half-integers below 2^24, so float32 holds them
+        exactly in half the memory.
+
+    Returns
+    -------
+    owner : (S,) int32
+        The cell of each sample.
+    x, y : (S,) arrays of ``dtype``
+        Its position in pixels."""
+    labels, dtype = np.asarray(labels), np.dtype(dtype)
     h, w = labels.shape
     flat = labels.ravel()
+    half = dtype.type(0.5)
     # vertical edges x = c (c = 0 .. w) of row r: pixel (r, c - 1) | pixel (r, c)
     cut = np.empty((h, w + 1), dtype=bool)
     cut[:, 0], cut[:, w] = labels[:, 0] != -1, labels[:, w - 1] != -1
@@ -107,7 +123,8 @@ def contour_samples(labels: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndar
     at = r * w + c
     left = np.where(c > 0, flat[np.maximum(at - 1, 0)], -1)
     right = np.where(c < w, flat[np.minimum(at, flat.size - 1)], -1)
-    runs = [(left, c, r + 0.5), (right, c, r + 0.5)]
+    xs, ys = c.astype(dtype), r.astype(dtype) + half
+    runs = [(left, xs, ys), (right, xs, ys)]
     # horizontal edges y = r (r = 0 .. h) of column c: pixel (r - 1, c) over pixel (r, c)
     cut = np.empty((h + 1, w), dtype=bool)
     cut[0], cut[h] = labels[0] != -1, labels[h - 1] != -1
@@ -117,11 +134,12 @@ def contour_samples(labels: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndar
     at = r2 * w + c2
     top = np.where(r2 > 0, flat[np.maximum(at - w, 0)], -1)
     bottom = np.where(r2 < h, flat[np.minimum(at, flat.size - 1)], -1)
-    runs += [(top, c2 + 0.5, r2), (bottom, c2 + 0.5, r2)]
+    xs, ys = c2.astype(dtype) + half, r2.astype(dtype)
+    runs += [(top, xs, ys), (bottom, xs, ys)]
     keeps = [run[0] >= 0 for run in runs]
     total = sum(int(k.sum()) for k in keeps)
     owner = np.empty(total, dtype=np.int32)
-    x, y = np.empty(total), np.empty(total)
+    x, y = np.empty(total, dtype), np.empty(total, dtype)
     start = 0
     for (who, xs, ys), keep in zip(runs, keeps, strict=True):  # four runs, written in place
         end = start + int(keep.sum())
@@ -157,7 +175,7 @@ class _Gauge:
 
     def prepare(self, balls, qx, qy, anchor) -> list:
         """Terms of the samples (``qx``, ``qy``: (M, W), row i in ball ``balls[i]``):
-        arrays whose next-to-last axis is the row; ``anchor`` (N, 2) per ball."""
+        arrays whose last two axes are (row, sample) or (row, 1); ``anchor`` (N, 2) per ball."""
         if self.kind == "polygon":
             ux, uy = qx - anchor[balls, 0][:, None], qy - anchor[balls, 1][:, None]
             proj = np.empty((len(self.fx), *qx.shape))
@@ -166,27 +184,76 @@ class _Gauge:
             return [proj]
         return [qx, qy, self.q[:, balls, None]]
 
-    def least(self, terms, balls, points, anchor) -> np.ndarray:
-        """(M,) per row, the smallest size at which the element centred at ``points[i]``
-        (ball ``balls[i]``) reaches one of the row's samples."""
+    def rows(self, balls, anchor) -> list:
+        """The per-row coefficients of :meth:`reach` for rows in balls ``balls``: arrays
+        whose last axis is the row (select rows with ``[..., which]``)."""
+        if self.kind == "polygon":
+            return [self.fx[:, balls], self.fy[:, balls], anchor[balls, 0], anchor[balls, 1]]
+        return []
+
+    def reach(self, terms, coef, points, rows_last: bool = False) -> np.ndarray:
+        """(M, W): per row and sample, the size at which the element centred at
+        ``points[i]`` reaches the sample (its row's least is the element's size); (W, M)
+        for terms laid out with the row last (``rows_last``).  Each entry depends on its
+        own sample and row only, so any subset of the samples, in either layout, gives
+        the same values bit for bit (and its minimum bounds the size from above)."""
+
+        def per_row(v):  # a value per row, against the row's samples
+            return v[None, :] if rows_last else v[:, None]
+
         if self.kind == "polygon":
             (proj,) = terms
-            dx, dy = points[:, 0] - anchor[balls, 0], points[:, 1] - anchor[balls, 1]
-            shift = self.fx[:, balls] * dx + self.fy[:, balls] * dy + self.slack[:, None]  # (K, M)
-            out = proj[0] - shift[0][:, None]
+            fx, fy, ax, ay = coef
+            shift = fx * (points[:, 0] - ax) + fy * (points[:, 1] - ay) + self.slack[:, None]  # (K, M)
+            out = proj[0] - per_row(shift[0])
             for k in range(1, len(proj)):
-                np.maximum(out, proj[k] - shift[k][:, None], out=out)
-            return out.min(axis=1)
+                np.maximum(out, proj[k] - per_row(shift[k]), out=out)
+            return out
         qx, qy, (q0, q1, q2) = terms
-        vx, vy = qx - points[:, 0, None], qy - points[:, 1, None]
+        vx, vy = qx - per_row(points[:, 0]), qy - per_row(points[:, 1])
         gx = q0 * vx + q1 * vy  # Q v = ρ ∇ρ
         gy = q1 * vx + q2 * vy
         rho = np.sqrt(np.maximum(vx * gx + vy * gy, 0.0))
         if self.half <= 0:
-            return rho.min(axis=1)
+            return rho
         with np.errstate(divide="ignore", invalid="ignore"):
             grad = np.where(rho > 0, np.hypot(gx, gy) / rho, 0.0)
-        return (rho - self.half * grad).min(axis=1)
+        return rho - self.half * grad
+
+    def least(self, terms, balls, points, anchor) -> np.ndarray:
+        """(M,) per row, the smallest size at which the element centred at ``points[i]``
+        (ball ``balls[i]``) reaches one of the row's samples."""
+        return self.reach(terms, self.rows(balls, anchor), points).min(axis=1)
+
+
+def _pick_rows(arrays, which) -> list:
+    """The rows ``which`` of arrays whose next-to-last axis is the row."""
+    return [np.take(a, which, axis=-2) for a in arrays]
+
+
+def _pick_columns(arrays, rows, cols) -> list:
+    """Per row ``rows[i]`` the samples ``cols[i]`` (an index or a row of them) of
+    C-contiguous arrays whose last two axes are (row, sample); an array of one column
+    per row gives its rows.  One flat gather per array: far cheaper than indexing two
+    axes at once."""
+    out = []
+    for a in arrays:
+        if a.shape[-1] == 1:
+            out.append(np.take(a, rows, axis=-2))
+            continue
+        at = rows.reshape(rows.shape + (1,) * (cols.ndim - 1)) * a.shape[-1] + cols
+        flat = a.reshape(*a.shape[:-2], -1)
+        out.append(np.take(flat, at.ravel(), axis=-1).reshape(*a.shape[:-2], *cols.shape))
+    return out
+
+
+def _stable_order(keys, n: int) -> np.ndarray:
+    """``np.argsort(keys, kind="stable")`` for integer keys in [0, n): one or two passes
+    over 16-bit digits, which NumPy sorts by radix (far faster than a merge sort)."""
+    order = np.argsort((keys & 0xFFFF).astype(np.uint16), kind="stable")
+    if n > 1 << 16:
+        order = order[np.argsort((keys[order] >> 16).astype(np.uint16), kind="stable")]
+    return order
 
 
 class _CellSamples:
@@ -194,10 +261,8 @@ class _CellSamples:
     ``cells`` (the labels that own samples), per cell its ``counts`` of samples."""
 
     def __init__(self, labels, n: int):
-        owner, qx, qy = contour_samples(labels)
-        # half-integers: float32 holds them exactly, in half the memory
-        qx, qy = qx.astype(np.float32), qy.astype(np.float32)
-        order = np.argsort(owner, kind="stable")
+        owner, qx, qy = contour_samples(labels, np.float32)  # exact, in half the memory
+        order = _stable_order(owner, n)
         self.qx, self.qy = qx[order], qy[order]
         del qx, qy, order
         counts = np.bincount(owner, minlength=n)[:n]
@@ -255,41 +320,124 @@ _FIT_MOVES = np.array(
 _FIT_REPEATS = 3  # tries of the 8 moves per step, while the cell still grows
 
 
-def _fit_search(labels, ids, terms, gauge: _Gauge, centres, anchor):
+_WITNESSES = 8  # samples per cell whose reach bounds a trial's size from above
+_FIT_BLOCK = 1 << 18  # samples per block of the search: few Python steps per cell, terms still small
+
+
+def _fit_search(labels, ids, terms, gauge: _Gauge, starts, anchor):
     """The pattern search of :func:`fit_centres` for the cells labelled ``ids`` (also
-    their balls; ``terms`` their samples' :meth:`_Gauge.prepare`) from ``centres``: the
-    centres and sizes it ends at."""
+    their balls; ``terms`` their samples' :meth:`_Gauge.prepare`) from each of ``starts``
+    ((S, M, 2), all searched together): the centres (S, M, 2) and sizes (S, M) it ends at.
+
+    A trial's size is at most its reach to any one sample of its cell, so each search
+    keeps a few *witnesses* (its cell's nearest samples at the start, then the nearest
+    sample of each trial evaluated in full) and evaluates a trial on all the cell's
+    samples only where the witnesses allow it to grow: the same decisions, sizes and
+    centres as evaluating every trial in full, at a fraction of the cost."""
     h, w = labels.shape
     flat = labels.ravel()
+    m = len(ids)
+    src = np.tile(np.arange(m), len(starts))  # search row -> its cell's row in ``terms``
+    centres = np.concatenate(starts).astype(np.float64)
+    coef = gauge.rows(ids[src], anchor)
 
-    def sizes(which, points, least):
+    def own(rows, points):  # whether each point lies in a pixel of its row's cell
         x, y = points[:, 0], points[:, 1]
-        own = (x >= 0) & (x < w) & (y >= 0) & (y < h)
+        inside = (x >= 0) & (x < w) & (y >= 0) & (y < h)
         pixel = np.clip(y, 0, h - 1).astype(np.intp) * w + np.clip(x, 0, w - 1).astype(np.intp)
-        own &= flat[pixel] == ids[which]
-        return np.where(own, np.maximum(least, 0.0), 0.0)
+        return inside & (flat[pixel] == ids[src[rows]])
 
-    every = np.arange(len(ids))
-    best = sizes(every, centres, gauge.least(terms, ids, centres, anchor))
+    every = np.arange(len(src))
+    reach = gauge.reach(_pick_rows(terms, src), coef, centres)
+    best = np.where(own(every, centres), np.maximum(reach.min(axis=1), 0.0), 0.0)
+    if reach.shape[1] > _WITNESSES:
+        witness = np.argpartition(reach, _WITNESSES - 1, axis=1)[:, :_WITNESSES]
+    else:  # every sample is a witness: the bound is the size
+        witness = np.broadcast_to(
+            np.minimum(np.arange(_WITNESSES), reach.shape[1] - 1), (len(src), _WITNESSES)
+        ).copy()
+    del reach
+    tried = 0
     for frac in _FIT_STEPS:
-        active, here, here_balls = every, terms, ids
+        # the search rows still in play (all, at each new step), and their own copies
+        rows, here = every, coef
+        # the witnesses' terms, the row last: a bound is then a minimum over a few rows
+        seen = [np.ascontiguousarray(np.swapaxes(x, -1, -2)) for x in _pick_columns(terms, src, witness)]
+        c, b = centres.copy(), best.copy()
         for _ in range(_FIT_REPEATS):
-            if len(active) == 0:
+            if len(rows) == 0:
                 break
-            if len(active) < len(here_balls):
-                here, here_balls = [t[..., active, :] for t in terms], ids[active]
-            step = frac * np.maximum(best[active], 1.0)
-            grew = np.zeros(len(active), dtype=bool)
+            step = frac * np.maximum(b, 1.0)
+            grew = np.zeros(len(rows), dtype=bool)
             for move in _FIT_MOVES:
-                trial = centres[active] + step[:, None] * move
-                size = sizes(active, trial, gauge.least(here, here_balls, trial, anchor))
-                better = size > best[active] * (1 + 1e-9)
-                if better.any():
-                    a = active[better]
-                    centres[a], best[a] = trial[better], size[better]
-                    grew |= better
-            active = active[grew]
-    return centres, best
+                trial = c + step[:, None] * move
+                bound = gauge.reach(seen, here, trial, rows_last=True).min(axis=0)
+                need = np.flatnonzero(bound > b * (1 + 1e-9))
+                if len(need) == 0:
+                    continue
+                full = gauge.reach(
+                    _pick_rows(terms, src[rows[need]]), [x[..., need] for x in here], trial[need]
+                )
+                # the trial's nearest sample joins the witnesses, in turn over their slots
+                col, slot = full.argmin(axis=1), tried % _WITNESSES
+                size = full[np.arange(len(need)), col]
+                tried += 1
+                witness[rows[need], slot] = col
+                for sv, tv, t in zip(seen, _pick_columns(terms, src[rows[need]], col), terms, strict=True):
+                    if t.shape[-1] > 1:  # not a term per row
+                        sv[..., slot, need] = tv
+                better = np.flatnonzero(size > b[need] * (1 + 1e-9))  # then size > 0
+                better = better[own(rows[need[better]], trial[need[better]])]
+                if len(better):
+                    up = need[better]
+                    c[up], b[up] = trial[up], size[better]
+                    grew[up] = True
+            centres[rows], best[rows] = c, b
+            if not grew.all():  # go on with the searches still growing only
+                keep = np.flatnonzero(grew)
+                rows, here, c, b = rows[keep], [x[..., keep] for x in here], c[keep], b[keep]
+                seen = [x[..., keep] for x in seen]
+    return centres.reshape(len(starts), m, 2), best.reshape(len(starts), m)
+
+
+_DEPTH_REACH = 32  # px: deeper cells are left to SciPy's transform, whose cost does not grow with depth
+
+
+def _squared_depth(inner, sy: float, sx: float):
+    """The squared Euclidean distance from each pixel to the nearest pixel that
+    is not ``inner``, with rows ``sy`` and columns ``sx`` apart; None where some pixel is
+    more than :data:`_DEPTH_REACH` rows, or 4x as many columns, from one.
+
+    Separable: the distance down each column, one row further at each pass, then along
+    the rows one offset k at a time while some pixel may still be nearer to a column k
+    away; the raster's cells are small, so a few passes do.  Exact: the squares are sums
+    of two squared multiples of the spacings, in float32 where it holds them exactly
+    (spacings in quarters: 1, and 1/β and β for β = 1/2), else in float64."""
+    # rows to the nearest outer pixel of the column: one row further at each pass
+    far, one = np.int16(_DEPTH_REACH + 1), np.int16(1)
+    down = np.where(inner, far, np.int16(0))
+    for _ in range(_DEPTH_REACH):
+        if down.max() < far:
+            break
+        np.minimum(down[1:], down[:-1] + one, out=down[1:])
+        np.minimum(down[:-1], down[1:] + one, out=down[:-1])
+    if down.max() >= far:
+        return None
+    # float32 is exact for spacings in quarters (1, and β = 1/2: 2 and 1/2)
+    exact = float(4 * sy).is_integer() and float(4 * sx).is_integer()
+    kind = np.float32 if exact else np.float64
+    col = np.square(down.astype(kind) * kind(sy))
+    del down
+    if math.sqrt(col.max()) > 4 * _DEPTH_REACH * sx:  # too many columns to look across
+        return None
+    out = col.copy()
+    k = 1
+    while k < out.shape[1] and kind(sx * k) ** 2 < out.max():
+        step = kind(sx * k) ** 2
+        np.minimum(out[:, :-k], col[:, k:] + step, out=out[:, :-k])
+        np.minimum(out[:, k:], col[:, :-k] + step, out=out[:, k:])
+        k += 1
+    return out
 
 
 def _inscribed_centres(labels, shape: str, aspect, n: int) -> np.ndarray:
@@ -311,11 +459,11 @@ def _inscribed_centres(labels, shape: str, aspect, n: int) -> np.ndarray:
     kind = shape_record(shape).distance
     if kind == "chessboard":
         dt = ndimage.distance_transform_cdt(inner, metric="chessboard")
-    elif kind == "scaled":
-        beta = element_ball(shape, aspect).aspect  # gauge ~ hypot(β·dx, dy/β)
-        dt = ndimage.distance_transform_edt(inner, sampling=(1.0 / beta, beta))
     else:
-        dt = ndimage.distance_transform_edt(inner)
+        beta = element_ball(shape, aspect).aspect if kind == "scaled" else 1.0  # gauge ~ hypot(β·dx, dy/β)
+        dt = _squared_depth(inner, 1.0 / beta, beta)
+        if dt is None:  # cells too wide for the short transform: SciPy's
+            dt = ndimage.distance_transform_edt(inner, sampling=(1.0 / beta, beta))
     del inner
     lab, d = labels.ravel(), dt.ravel()
     outside = lab < 0
@@ -350,9 +498,10 @@ def fit_centres(labels, sites, angles, shape: str, aspect, gap: float = 0.0):
     from both starts (circles 0.723 / 0.728, triangles 0.516 / 0.522).
 
     Cells are independent, so the search runs on blocks of cells of like sample counts
-    (:meth:`_CellSamples.blocks`), whose samples' terms stay in the cache for the whole
-    search; a trial costs one subtraction and one max per facet and sample
-    (:class:`_Gauge`), and memory does not grow with N beyond the samples themselves."""
+    (:meth:`_CellSamples.blocks`), both starts at once; a trial is first bounded from a
+    few samples of its cell (:func:`_fit_search`), and only a trial that may grow costs
+    one subtraction and one max per facet and sample of its cell (:class:`_Gauge`).
+    Memory does not grow with N beyond the samples themselves."""
     labels = np.asarray(labels)
     sites = np.asarray(sites, dtype=np.float64).reshape(-1, 2)
     n = len(sites)
@@ -367,11 +516,10 @@ def fit_centres(labels, sites, angles, shape: str, aspect, gap: float = 0.0):
     start2 = _inscribed_centres(labels, shape, aspect, n)
     missing = ~np.isfinite(start2).all(axis=1)
     start2[missing] = sites[missing]
-    for which, x, y in samples.blocks():  # cells are independent: one block at a time
+    for which, x, y in samples.blocks(_FIT_BLOCK):  # cells are independent: one block at a time
         ids = samples.cells[which]
         terms = gauge.prepare(ids, x, y, sites)
-        c_a, s_a = _fit_search(labels, ids, terms, gauge, sites[ids], sites)
-        c_b, s_b = _fit_search(labels, ids, terms, gauge, start2[ids], sites)
+        (c_a, c_b), (s_a, s_b) = _fit_search(labels, ids, terms, gauge, [sites[ids], start2[ids]], sites)
         second = s_b > s_a
         out_c[ids] = np.where(second[:, None], c_b, c_a)
         out_s[ids] = np.where(second, s_b, s_a)

@@ -433,7 +433,15 @@ def _search_by_hand(ball, samples, start, angle, half, labels, i):
 
 
 @pytest.mark.parametrize(
-    "metric,shape,gap,field", [("linf", "square", 1.0, None), ("l2-axial", "ellipse", 0.0, "circular")]
+    "metric,shape,gap,field",
+    [
+        ("linf", "square", 1.0, None),
+        ("l2-axial", "ellipse", 0.0, "circular"),
+        ("triangle", "triangle", 1.5, "circular"),
+        ("l2", "circle", 2.0, None),
+        ("hexagon", "hexagon", 0.0, "wave:30"),
+        ("l2", "ellipse", 1.0, "circular"),
+    ],
 )
 def test_centre_fit_matches_a_search_cell_by_cell(metric, shape, gap, field):
     """fit_centres (blocks of cells, the samples' projections folded in once) gives the
@@ -461,3 +469,137 @@ def test_centre_fit_matches_a_search_cell_by_cell(metric, shape, gap, field):
         assert sizes[i] == pytest.approx(max(s1, s2), rel=1e-9, abs=1e-9)
         if abs(s1 - s2) > 1e-9 * max(s1, s2):
             assert centres[i] == pytest.approx(c2 if s2 > s1 else c1, abs=1e-9)
+
+
+# --- the parts the fit is built from, against plain NumPy ---------------------------------
+def test_witness_bounds_never_skip_a_trial_that_would_grow():
+    """Searching with witness bounds (a trial evaluated in full only where a few samples
+    allow it to grow) gives the sizes and centres of evaluating every trial in full, bit
+    for bit, with angles and grout, on polygons and ellipses alike."""
+    from compact_distributions.cvt import placement as pl
+    from compact_distributions.cvt.metrics import compile_sites
+    from compact_distributions.cvt.shapes import element_ball
+
+    grid = Grid(96, 80)
+    p = Problem(grid, 40, make_metric("l2"), field=DirectionField.named("circular", 96, 80), seed=4)
+    b = NumpyBackend()
+    from compact_distributions.cvt.lloyd import final_labels, lloyd
+
+    r = lloyd(p, b, 3)
+    lab = final_labels(p, b, r)
+    for shape, aspect, gap in (("square", 1.0, 1.0), ("ellipse", 0.5, 1.0), ("triangle", 1.0, 0.0)):
+        gauge = pl._Gauge(compile_sites(element_ball(shape, aspect), r.sites, r.angles, None), gap / 2)
+        samples = pl._CellSamples(lab, len(r.sites))
+        for which, x, y in samples.blocks():
+            ids = samples.cells[which]
+            terms = gauge.prepare(ids, x, y, r.sites)
+            starts = [r.sites[ids], r.sites[ids] + 0.7]
+            centres, sizes = pl._fit_search(lab, ids, terms, gauge, starts, r.sites)
+            for s, start in enumerate(starts):  # every trial in full, one move at a time
+                c, best = _search_in_full(lab, ids, terms, gauge, start.copy(), r.sites)
+                assert np.array_equal(sizes[s], best), shape
+                assert np.array_equal(centres[s], c), shape
+
+
+def _search_in_full(labels, ids, terms, gauge, centres, anchor):
+    """The pattern search of fit_centres with every trial's size taken over all of its
+    cell's samples (the search before witness bounds)."""
+    from compact_distributions.cvt import placement as pl
+
+    h, w = labels.shape
+
+    def size(rows, points):
+        x, y = points[:, 0], points[:, 1]
+        own = (x >= 0) & (x < w) & (y >= 0) & (y < h)
+        pix = labels[np.clip(y, 0, h - 1).astype(int), np.clip(x, 0, w - 1).astype(int)]
+        least = gauge.least([t[..., rows, :] for t in terms], ids[rows], points, anchor)
+        return np.where(own & (pix == ids[rows]), np.maximum(least, 0.0), 0.0)
+
+    every = np.arange(len(ids))
+    best = size(every, centres)
+    for frac in pl._FIT_STEPS:
+        active = every
+        for _ in range(pl._FIT_REPEATS):
+            if len(active) == 0:
+                break
+            step = frac * np.maximum(best[active], 1.0)
+            grew = np.zeros(len(active), dtype=bool)
+            for move in pl._FIT_MOVES:
+                trial = centres[active] + step[:, None] * move
+                s = size(active, trial)
+                better = s > best[active] * (1 + 1e-9)
+                centres[active[better]], best[active[better]] = trial[better], s[better]
+                grew |= better
+            active = active[grew]
+    return centres, best
+
+
+def test_stable_order_is_numpys_stable_argsort():
+    from compact_distributions.cvt.placement import _stable_order
+
+    rng = np.random.default_rng(0)
+    for n in (1, 7, 1 << 16, (1 << 16) + 1, 300_000, (1 << 31) - 1):
+        keys = rng.integers(0, n, 50_000).astype(np.int32)
+        assert np.array_equal(_stable_order(keys, n), np.argsort(keys, kind="stable")), n
+
+
+def test_pick_columns_and_rows_last_reach_match_plain_indexing():
+    """The flat gathers pick what two-axis indexing picks, and the size reached from the
+    picked samples, laid out with the row last, is the same bit for bit."""
+    from compact_distributions.cvt import placement as pl
+    from compact_distributions.cvt.metrics import compile_sites
+    from compact_distributions.cvt.shapes import element_ball
+
+    rng = np.random.default_rng(1)
+    m, width = 30, 11
+    sites = rng.uniform(10, 50, (m, 2))
+    qx, qy = sites[:, :1] + rng.uniform(-9, 9, (m, width)), sites[:, 1:] + rng.uniform(-9, 9, (m, width))
+    rows = rng.permutation(m)[:12]
+    cols = rng.integers(0, width, (12, 5))
+    for shape in ("triangle", "ellipse"):
+        gauge = pl._Gauge(compile_sites(element_ball(shape, 0.5), sites, rng.uniform(0, 3, m), None), 0.4)
+        ids = np.arange(m)
+        terms = gauge.prepare(ids, qx, qy, sites)
+        picked = pl._pick_columns(terms, rows, cols)
+        for a, t in zip(picked, terms, strict=True):
+            want = t[..., rows, :] if t.shape[-1] == 1 else t[..., rows[:, None], cols]
+            assert np.array_equal(a, want)
+        points = sites[rows] + rng.uniform(-2, 2, (12, 2))
+        coef = gauge.rows(ids[rows], sites)
+        full = gauge.reach(pl._pick_rows(terms, rows), coef, points)
+        last = gauge.reach([np.ascontiguousarray(np.swapaxes(a, -1, -2)) for a in picked], coef, points, True)
+        assert np.array_equal(last.T, np.take_along_axis(full, cols, axis=1))
+
+
+def test_contour_samples_in_float32_are_exact():
+    lab = np.random.default_rng(2).integers(-1, 5, (40, 50)).astype(np.int32)
+    o64, x64, y64 = contour_samples(lab)
+    o32, x32, y32 = contour_samples(lab, np.float32)
+    assert x32.dtype == y32.dtype == np.float32 and x64.dtype == np.float64
+    assert np.array_equal(o32, o64) and np.array_equal(x32, x64) and np.array_equal(y32, y64)
+
+
+@pytest.mark.parametrize("spacing", [(1.0, 1.0), (2.0, 0.5), (1 / 0.3, 0.3)])
+def test_squared_depth_is_scipys_euclidean_transform(spacing):
+    """The short separable transform gives SciPy's Euclidean distances (squared) on
+    random masks, or None (SciPy's then) where a pixel lies too deep."""
+    from scipy import ndimage
+
+    from compact_distributions.cvt.placement import _squared_depth
+
+    rng = np.random.default_rng(3)
+    done = 0
+    for _ in range(25):
+        h, w = rng.integers(3, 70, 2)
+        inner = rng.random((h, w)) < rng.uniform(0.5, 0.97)
+        inner[[0, -1]], inner[:, [0, -1]] = False, False
+        got = _squared_depth(inner, *spacing)
+        if got is None:
+            continue
+        done += 1
+        want = ndimage.distance_transform_edt(inner, sampling=spacing) ** 2
+        assert np.allclose(got, want, rtol=1e-12, atol=1e-9)
+    assert done >= 10
+    deep = np.ones((200, 200), dtype=bool)
+    deep[[0, -1]], deep[:, [0, -1]] = False, False
+    assert _squared_depth(deep, *spacing) is None  # 99 rows from the edge
