@@ -315,7 +315,8 @@ __kernel void label_blocks(const int width, const int height,
     for (int gy = gy0; gy <= gy1; ++gy) {
         const float top = gy * cell, bottom = (gy + 1) * cell;
         const float gapy = box_y1 < top ? top - box_y1 : (box_y0 > bottom ? box_y0 - bottom : 0.0f);
-        const int in_rows = gy >= cy0 - rings && gy <= cy1 + rings;
+        /* rings = -1 (seeded): no cell was searched whole, even under the block */
+        const int in_rows = rings >= 0 && gy >= cy0 - rings && gy <= cy1 + rings;
         for (int gx = gx0; gx <= gx1; ++gx) {
             if (in_rows && gx >= cx0 - rings && gx <= cx1 + rings)
                 continue; /* searched whole in step 2 */
