@@ -9,9 +9,11 @@ hold a nearer site; the bound ``|x - p_i| <= circumradius · s_max · d_i(x)`` h
 every angle, scale and aspect, so the result is exact (up to float32) and the cost per
 pixel does not grow with N.
 
-:meth:`OpenCLBackend.moments` also sums the moments on the device (runs of equal labels
-per row segment, added with atomics), so a Lloyd iteration reads back 5·N integers, not
-the raster; :meth:`OpenCLBackend.label` reads the raster.
+:meth:`OpenCLBackend.moments` also sums the moments on the device, added with atomics,
+so a Lloyd iteration reads back 5·N integers, not the raster; :meth:`OpenCLBackend.label`
+reads the raster.  The block kernel sums its own block once per label in it as it writes
+the labels; after the per-pixel kernel, ``row_moments`` sums runs of equal labels per row
+segment.
 
 Two label kernels, the same search: ``label_blocks`` (one work-item per 8x8 block of
 pixels; the default on CPUs, where PoCL vectorises its inner loop over the block's pixels,
@@ -42,6 +44,8 @@ from .base import Backend
 
 KERNEL_FILE = Path(__file__).with_name("opencl_kernels.cl")
 SEGMENT = 64  # pixels of a row per work-item of the moments kernel
+ACC_BYTES = 64  # per site: five 64-bit sums in one cache line (the kernel file says why)
+BLOCK_SIZES = (0, 4, 8, 16)  # label_blocks works a row of a block as one 4-, 8- or 16-wide vector
 REACH_MARGIN = 1e-4  # relative slack on the search bound against float32 rounding
 
 
@@ -162,7 +166,10 @@ class OpenCLBackend(Backend):
     ``device``: "PLATFORM[:DEVICE]" (indices or name fragments); ``split_atomics``: keep
     the moment sums as 32-bit split counters even where 64-bit atomics exist (tests use
     it to check the portable path); ``cell_factor``: grid cell width in average site
-    spacings; ``local_size``: the label kernel's work-group shape (None: the driver's)."""
+    spacings; ``local_size``: the label kernel's work-group shape (None: the driver's);
+    ``block``: pixels per side of the block kernel's work-item (4, 8 or 16), 0 for the
+    per-pixel kernel, None for the device's default; ``seed``: seed the block search with
+    the last call's labels (False: the plain search, for tests)."""
 
     name = "opencl"
     bytes_per_pixel = (
@@ -179,6 +186,10 @@ class OpenCLBackend(Backend):
         block: int | None = None,
         seed: bool = True,
     ):
+        if block is not None and block not in BLOCK_SIZES:
+            raise InputError(
+                f"opencl: block must be one of {BLOCK_SIZES} (0: a pixel per work-item), got {block!r}"
+            )
         cl = self._cl = _import_pyopencl()
         self._device = choose_device(cl, device)
         try:
@@ -234,8 +245,8 @@ class OpenCLBackend(Backend):
             opts = [
                 f"-DSTRIDE={stride}",
                 f"-DK={k}",
-                f"-DBW={max(self.block, 1)}",
-                f"-DBH={max(self.block, 1)}",
+                f"-DBW={self.block or 8}",  # label_pixels does not use them
+                f"-DBH={self.block or 8}",
             ]
             if metric.kind == "ellipse":
                 opts.append("-DMETRIC_ELLIPSE")
@@ -326,8 +337,9 @@ class OpenCLBackend(Backend):
         reach = metric.circumradius * float(scales.max()) * (1 + REACH_MARGIN)
         return records, k, reach
 
-    def _run_labels(self, sites, angles, scales, metric: Metric, grid: Grid):
-        """Enqueue the label kernel; the labels stay in the device buffer 'labels'."""
+    def _run_labels(self, sites, angles, scales, metric: Metric, grid: Grid, acc_buf=None):
+        """Enqueue the label kernel; the labels stay in the device buffer 'labels'.  With
+        ``acc_buf`` (zeroed, block kernel only) the kernel also adds the moments to it."""
         n = len(sites)
         if self._queue is None:
             raise RuntimeError("opencl: this backend was closed; create a new one")
@@ -393,6 +405,8 @@ class OpenCLBackend(Backend):
             rank_buf,
             np.int32(n),
             np.int32(seed and self.seed),
+            self._buffer("moments", 4) if acc_buf is None else acc_buf,
+            np.int32(acc_buf is not None),
         )
         local = self.local_size
         if self.block > 0:
@@ -423,33 +437,38 @@ class OpenCLBackend(Backend):
     def _moments(self, sites, angles, scales, metric: Metric, grid: Grid) -> Moments:
         """Labels and their integer moments on the device; reads back 5·N sums."""
         cl = self._cl
-        labels_buf, n = self._run_labels(sites, angles, scales, metric, grid)
-        k = 0 if metric.kind == "ellipse" else np.asarray(metric.normals).shape[0]
-        _, moments_kernel = self._kernels(metric, k)
-        words = 5 * n if self.int64_atomics else 10 * n
-        acc_buf = self._buffer("moments", 4 * 2 * 5 * n)
-        cl.enqueue_fill_buffer(self._queue, acc_buf, np.uint32(0), 0, 4 * 2 * 5 * n)
-        w, h = grid.width, grid.height
-        moments_kernel.set_args(np.int32(w), np.int32(h), np.int32(SEGMENT), labels_buf, np.int32(n), acc_buf)
-        try:
-            cl.enqueue_nd_range_kernel(self._queue, moments_kernel, (-(-w // SEGMENT), h), None)
-        except cl.Error as exc:
-            raise BackendUnavailable(f"opencl: moments kernel failed on {self.device()}: {exc}") from None
-        if self.int64_atomics:
-            acc = np.empty(words, dtype=np.uint64)
-            self._read(acc, acc_buf)
-            sums = acc.view(np.int64).reshape(5, n)
+        n = len(sites)
+        acc_buf = self._buffer("moments", ACC_BYTES * n)
+        cl.enqueue_fill_buffer(self._queue, acc_buf, np.uint32(0), 0, ACC_BYTES * n)
+        if self.block > 0:  # the block kernel sums its own labels
+            self._run_labels(sites, angles, scales, metric, grid, acc_buf)
         else:
-            acc = np.empty(words, dtype=np.uint32)
-            self._read(acc, acc_buf)
-            lo, hi = acc[: 5 * n].astype(np.int64), acc[5 * n :].astype(np.int64)
-            sums = ((hi << 32) | lo).reshape(5, n)
+            labels_buf, _ = self._run_labels(sites, angles, scales, metric, grid)
+            k = 0 if metric.kind == "ellipse" else np.asarray(metric.normals).shape[0]
+            _, moments_kernel = self._kernels(metric, k)
+            w, h = grid.width, grid.height
+            moments_kernel.set_args(
+                np.int32(w), np.int32(h), np.int32(SEGMENT), labels_buf, np.int32(n), acc_buf
+            )
+            try:
+                cl.enqueue_nd_range_kernel(self._queue, moments_kernel, (-(-w // SEGMENT), h), None)
+            except cl.Error as exc:
+                raise BackendUnavailable(f"opencl: moments kernel failed on {self.device()}: {exc}") from None
+        acc = np.empty((n, ACC_BYTES // 8), dtype=np.uint64)
+        self._read(acc, acc_buf)
+        if self.int64_atomics:
+            sums = acc[:, :5].view(np.int64).T
+        else:  # 32-bit low words, then high words, in one record
+            words = acc.view(np.uint32).astype(np.int64)
+            sums = ((words[:, 8:13] << 32) | words[:, :5]).T
         return Moments(*(np.ascontiguousarray(row) for row in sums))
 
 
 __all__ = [
     "KERNEL_FILE",
     "SEGMENT",
+    "ACC_BYTES",
+    "BLOCK_SIZES",
     "REACH_MARGIN",
     "pocl_cache_dir",
     "cache_problem",

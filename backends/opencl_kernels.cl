@@ -4,7 +4,7 @@
      METRIC_ELLIPSE        the metric is elliptic (l2, l2-axial); else polygonal
      K                     number of facets of a polygonal metric (3 or 4 here)
      STRIDE                floats per site record (see below)
-     BW, BH                pixels per work-item of label_blocks (8 x 8)
+     BW, BH                pixels per work-item of label_blocks (8 x 8; BW = 4, 8 or 16)
      USE_INT64_ATOMICS     the device has cl_khr_int64_base_atomics; else the moment sums
                            are kept as split 32-bit counters (low word + carries)
 
@@ -24,25 +24,86 @@
 #pragma OPENCL EXTENSION cl_khr_int64_base_atomics : enable
 #endif
 
-/* The distance of a site record from (px, py): d for polygons, d^2 for ellipses
-   (the comparison and the search bound take that into account). */
+/* The distance of a site record at offset v = (vx, vy) from its site: d for polygons,
+   d^2 for ellipses (the comparison and the search bound take that into account).  One
+   expression for one pixel (T = float) and for a row of pixels at one vy (T = a vector
+   type): the block and the pixel kernels give the same labels. */
+#ifdef METRIC_ELLIPSE
+#define DISTANCE_AT_OFFSET(NAME, T)                                                     \
+    inline T NAME(__global const float *rec, const T vx, const float vy)                \
+    {                                                                                   \
+        const T u = rec[4] * vx + rec[5] * vy;                                          \
+        const float w = rec[6] * vy;                                                    \
+        return u * u + w * w;                                                           \
+    }
+#else
+#define DISTANCE_AT_OFFSET(NAME, T)                                                     \
+    inline T NAME(__global const float *rec, const T vx, const float vy)                \
+    {                                                                                   \
+        T d = rec[4] * vx + rec[5] * vy;                                                \
+        _Pragma("unroll") for (int k = 1; k < K; ++k)                                   \
+        {                                                                               \
+            const T e = rec[4 + 2 * k] * vx + rec[5 + 2 * k] * vy;                      \
+            d = e > d ? e : d;                                                          \
+        }                                                                               \
+        return d;                                                                       \
+    }
+#endif
+DISTANCE_AT_OFFSET(offset_distance, float)
+
+/* The distance of a site record from pixel centre (px, py). */
 inline float site_distance(__global const float *rec, const float px, const float py)
 {
-    const float vx = (px - rec[0]) - rec[2];
-    const float vy = (py - rec[1]) - rec[3];
-#ifdef METRIC_ELLIPSE
-    const float u = rec[4] * vx + rec[5] * vy;
-    const float w = rec[6] * vy;
-    return u * u + w * w;
+    return offset_distance(rec, (px - rec[0]) - rec[2], (py - rec[1]) - rec[3]);
+}
+
+/* ------------------------------------------------------------------------ moments */
+
+/* A site's five sums share one 64-byte record (one cache line: the five atomics of a
+   run or a block touch one line, not five). */
+#ifdef USE_INT64_ATOMICS
+typedef ulong acc_t;
+inline void add_sum(volatile __global ulong *acc, const int q, const int n, const int site,
+                    const ulong v)
+{
+    atom_add(acc + 8 * site + q, v);
+}
 #else
-    float d = rec[4] * vx + rec[5] * vy;
-#pragma unroll
-    for (int k = 1; k < K; ++k) {
-        const float e = rec[4 + 2 * k] * vx + rec[5 + 2 * k] * vy;
-        d = e > d ? e : d;
-    }
-    return d;
+typedef uint acc_t;
+/* A 64-bit sum as two 32-bit counters: low words at [16*site + q], high words at
+   [16*site + 8 + q].  Each addition that wraps the low word adds one carry, so
+   total = high * 2^32 + low whatever the order of the atomics. */
+inline void add_sum(volatile __global uint *acc, const int q, const int n, const int site,
+                    const ulong v)
+{
+    const uint vlo = (uint)v;
+    const uint old = atomic_add(acc + 16 * site + q, vlo);
+    const uint carry = old > 0xffffffffu - vlo ? 1u : 0u;
+    const uint vhi = (uint)(v >> 32) + carry;
+    if (vhi)
+        atomic_add(acc + 16 * site + 8 + q, vhi);
+}
 #endif
+
+/* Σ_{j=0..m} j^2 (0 for m < 0) */
+inline ulong sum_squares(const long m)
+{
+    if (m < 0)
+        return 0;
+    const ulong u = (ulong)m;
+    return u * (u + 1) * (2 * u + 1) / 6;
+}
+
+inline void flush_run(volatile __global acc_t *acc, const int n, const int site,
+                      const int a, const int b, const int row)
+{
+    const ulong len = (ulong)(b - a + 1);
+    const ulong r = (ulong)row;
+    add_sum(acc, 0, n, site, len);
+    add_sum(acc, 1, n, site, (ulong)(a + b) * len / 2);
+    add_sum(acc, 2, n, site, r * len);
+    add_sum(acc, 3, n, site, sum_squares(b) - sum_squares((long)a - 1));
+    add_sum(acc, 4, n, site, r * r * len);
 }
 
 /* One work-item per pixel: the nearest site, searched over a uniform grid of cells ring
@@ -68,10 +129,12 @@ __kernel void label_pixels(const int width, const int height,
                            __global const int *site_index,
                            __global const uchar *mask, const int use_mask,
                            __global int *labels,
-                           __global const int *site_rank, const int n, const int seed)
+                           __global const int *site_rank, const int n, const int seed,
+                           volatile __global acc_t *acc, const int sums)
 {
     /* site_rank, n, seed: label_blocks' seeds (not used here: one pixel's search is
-       already short, and a GPU runs it one lane per pixel) */
+       already short, and a GPU runs it one lane per pixel); acc, sums: label_blocks'
+       moments (here row_moments sums them) */
     const int j = get_global_id(0);
     const int i = get_global_id(1);
     if (j >= width || i >= height)
@@ -171,34 +234,132 @@ __kernel void label_pixels(const int width, const int height,
    The block stops after the first ring at which every pixel inside the region is done
    by the bound above. */
 
-/* Try one site on every pixel of the block (the vectorised loop). */
+/* A row of a block as one BW-wide vector (BW = 4, 8 or 16): the searches and sums below
+   work a row at a time, which PoCL's loop vectoriser does not always find on its own. */
+#define CAT_(a, b) a##b
+#define CAT(a, b) CAT_(a, b)
+typedef CAT(int, BW) rowi;
+typedef CAT(uint, BW) rowu;
+typedef CAT(float, BW) rowf;
+#define load_row CAT(vload, BW)
+__constant int LANES[16] = {0, 1, 2, 3, 4, 5, 6, 7, 8, 9, 10, 11, 12, 13, 14, 15};
+
+/* the largest, the sum and the smallest of a row's lanes, by halving */
+inline float hmaxf(rowf v)
+{
+#if BW == 16
+    const float8 a = v.lo > v.hi ? v.lo : v.hi;
+    const float4 b = a.lo > a.hi ? a.lo : a.hi;
+#elif BW == 8
+    const float4 b = v.lo > v.hi ? v.lo : v.hi;
+#else
+    const float4 b = v;
+#endif
+    const float2 c = b.lo > b.hi ? b.lo : b.hi;
+    return c.x > c.y ? c.x : c.y;
+}
+
+inline int hsum(rowi v)
+{
+#if BW == 16
+    const int4 b = (v.lo + v.hi).lo + (v.lo + v.hi).hi;
+#elif BW == 8
+    const int4 b = v.lo + v.hi;
+#else
+    const int4 b = v;
+#endif
+    const int2 c = b.lo + b.hi;
+    return c.x + c.y;
+}
+
+inline uint hmin(rowu v)
+{
+#if BW == 16
+    const uint4 b = min(min(v.lo, v.hi).lo, min(v.lo, v.hi).hi);
+#elif BW == 8
+    const uint4 b = min(v.lo, v.hi);
+#else
+    const uint4 b = v;
+#endif
+    const uint2 c = min(b.lo, b.hi);
+    return min(c.x, c.y);
+}
+
+DISTANCE_AT_OFFSET(row_distance, rowf)
+
+/* Try one site on every pixel of the block, a row at a time (pxs: the block's pixel
+   x centres). */
 #define TRY_SITE(REC, IDX)                                                              \
-    for (int yy = 0; yy < BH; ++yy) {                                                   \
-        const float py = (float)(y0 + yy) + 0.5f;                                       \
-        for (int xx = 0; xx < BW; ++xx) {                                               \
-            const float px = (float)(x0 + xx) + 0.5f;                                   \
-            const float d = site_distance((REC), px, py);                               \
-            const float b = best[yy][xx];                                               \
-            const int better = d < b || (d == b && (IDX) < best_idx[yy][xx]);           \
-            best[yy][xx] = better ? d : b;                                              \
-            best_idx[yy][xx] = better ? (IDX) : best_idx[yy][xx];                       \
+    {                                                                                   \
+        __global const float *rec_ = (REC);                                             \
+        const int idx_ = (IDX);                                                         \
+        const rowf vx_ = (pxs - rec_[0]) - rec_[2];                                     \
+        for (int yy = 0; yy < BH; ++yy) {                                               \
+            const float vy_ = (((float)(y0 + yy) + 0.5f) - rec_[1]) - rec_[3];          \
+            const rowf d = row_distance(rec_, vx_, vy_);                                \
+            const rowf b = load_row(0, best[yy]);                                       \
+            const rowi bi = load_row(0, best_idx[yy]);                                  \
+            const rowi better = d < b | (d == b & idx_ < bi);                           \
+            CAT(vstore, BW)(better ? d : b, 0, best[yy]);                               \
+            CAT(vstore, BW)(better ? (rowi)(idx_) : bi, 0, best_idx[yy]);                \
         }                                                                               \
     }
 
 /* The largest best d over the block's live pixels, as a distance (sqrt for ellipses). */
 inline float worst_of(const float best[BH][BW], const int live[BH][BW])
 {
-    float worst = 0.0f;
-    for (int yy = 0; yy < BH; ++yy)
-        for (int xx = 0; xx < BW; ++xx) {
-            const float b = live[yy][xx] ? best[yy][xx] : 0.0f;
-            worst = b > worst ? b : worst;
-        }
+    rowf wv = 0.0f;
+    for (int yy = 0; yy < BH; ++yy) {
+        const rowf b = load_row(0, best[yy]);
+        const rowf bl = load_row(0, live[yy]) != 0 ? b : (rowf)(0.0f);
+        wv = bl > wv ? bl : wv;
+    }
+    const float worst = hmaxf(wv);
 #ifdef METRIC_ELLIPSE
     return sqrt(worst);
 #else
     return worst > 0.0f ? worst : 0.0f;
 #endif
+}
+
+/* The moments of one block, added once per label it holds (a block spans a few cells):
+   each pass takes the lowest label not yet summed and sums all its pixels at once, in
+   block-local coordinates that fit an int, then shifts the sums to the raster's origin
+   in 64 bits.  Fewer atomics than one per run of a row (row_moments), and the labels
+   are not read back from memory. */
+inline void block_sums(volatile __global acc_t *acc, const int n, const int best_idx[BH][BW],
+                       const int live[BH][BW], const int x0, const int y0)
+{
+    const rowi xs = load_row(0, LANES), xs2 = xs * xs;
+    rowi lab[BH]; /* -1: outside the region, or summed already */
+    for (int yy = 0; yy < BH; ++yy)
+        lab[yy] = load_row(0, best_idx[yy]) | (load_row(0, live[yy]) == 0);
+    for (;;) {
+        rowu low = (rowu)(0xffffffffu); /* -1 as unsigned is above every label */
+        for (int yy = 0; yy < BH; ++yy)
+            low = min(low, CAT(as_uint, BW)(lab[yy]));
+        const uint site = hmin(low);
+        if (site == 0xffffffffu)
+            break;
+        rowi c = 0, sx = 0, sxx = 0, sy = 0, syy = 0;
+        for (int yy = 0; yy < BH; ++yy) {
+            const rowi m = lab[yy] == (int)site; /* -1 where this label */
+            c -= m;
+            sx += m & xs;
+            sxx += m & xs2;
+            sy += m & yy;
+            syy += m & (yy * yy);
+            lab[yy] |= m;
+        }
+        const ulong len = (ulong)hsum(c), X = (ulong)x0, Y = (ulong)y0;
+        const ulong lx = (ulong)hsum(sx), lxx = (ulong)hsum(sxx);
+        const ulong ly = (ulong)hsum(sy), lyy = (ulong)hsum(syy);
+        add_sum(acc, 0, n, (int)site, len);
+        add_sum(acc, 1, n, (int)site, len * X + lx);
+        add_sum(acc, 2, n, (int)site, len * Y + ly);
+        add_sum(acc, 3, n, (int)site, len * X * X + 2 * X * lx + lxx);
+        add_sum(acc, 4, n, (int)site, len * Y * Y + 2 * Y * ly + lyy);
+    }
 }
 
 __kernel void label_blocks(const int width, const int height,
@@ -210,7 +371,8 @@ __kernel void label_blocks(const int width, const int height,
                            __global const int *site_index,
                            __global const uchar *mask, const int use_mask,
                            __global int *labels,
-                           __global const int *site_rank, const int n, const int seed)
+                           __global const int *site_rank, const int n, const int seed,
+                           volatile __global acc_t *acc, const int sums)
 {
     const int x0 = get_global_id(0) * BW;
     const int y0 = get_global_id(1) * BH;
@@ -253,6 +415,7 @@ __kernel void label_blocks(const int width, const int height,
         }
 
     /* the box of the block's pixel centres */
+    const rowf pxs = CAT(convert_float, BW)(x0 + load_row(0, LANES)) + 0.5f;
     const float box_x0 = (float)x0 + 0.5f, box_x1 = (float)(x0 + xn - 1) + 0.5f;
     const float box_y0 = (float)y0 + 0.5f, box_y1 = (float)(y0 + yn - 1) + 0.5f;
 
@@ -346,53 +509,8 @@ __kernel void label_blocks(const int width, const int height,
     for (int yy = 0; yy < yn; ++yy)
         for (int xx = 0; xx < xn; ++xx)
             labels[(y0 + yy) * width + x0 + xx] = live[yy][xx] ? best_idx[yy][xx] : -1;
-}
-
-/* ------------------------------------------------------------------------ moments */
-
-#ifdef USE_INT64_ATOMICS
-typedef ulong acc_t;
-inline void add_sum(volatile __global ulong *acc, const int q, const int n, const int site,
-                    const ulong v)
-{
-    atom_add(acc + q * n + site, v);
-}
-#else
-typedef uint acc_t;
-/* A 64-bit sum as two 32-bit counters: low words at [q*n + site], high words at
-   [5n + q*n + site].  Each addition that wraps the low word adds one carry, so
-   total = high * 2^32 + low whatever the order of the atomics. */
-inline void add_sum(volatile __global uint *acc, const int q, const int n, const int site,
-                    const ulong v)
-{
-    const uint vlo = (uint)v;
-    const uint old = atomic_add(acc + q * n + site, vlo);
-    const uint carry = old > 0xffffffffu - vlo ? 1u : 0u;
-    const uint vhi = (uint)(v >> 32) + carry;
-    if (vhi)
-        atomic_add(acc + 5 * n + q * n + site, vhi);
-}
-#endif
-
-/* Σ_{j=0..m} j^2 (0 for m < 0) */
-inline ulong sum_squares(const long m)
-{
-    if (m < 0)
-        return 0;
-    const ulong u = (ulong)m;
-    return u * (u + 1) * (2 * u + 1) / 6;
-}
-
-inline void flush_run(volatile __global acc_t *acc, const int n, const int site,
-                      const int a, const int b, const int row)
-{
-    const ulong len = (ulong)(b - a + 1);
-    const ulong r = (ulong)row;
-    add_sum(acc, 0, n, site, len);
-    add_sum(acc, 1, n, site, (ulong)(a + b) * len / 2);
-    add_sum(acc, 2, n, site, r * len);
-    add_sum(acc, 3, n, site, sum_squares(b) - sum_squares((long)a - 1));
-    add_sum(acc, 4, n, site, r * r * len);
+    if (sums)
+        block_sums(acc, n, best_idx, live, x0, y0);
 }
 
 /* Per-site integer sums (count, Σj, Σi, Σj², Σi²) of the label raster.  One work-item

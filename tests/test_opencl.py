@@ -144,11 +144,15 @@ def test_exact_ties_across_cells_go_to_the_lower_index(backends, name, kernel):
     assert (lab[:, 30] == 0).all() and (lab[:20, 29] == 1).all() and (lab[:, 31] == 0).all()
 
 
+@pytest.mark.parametrize("kernel", KERNELS)
 @pytest.mark.parametrize("split", [False, True], ids=["native", "split32"])
 @pytest.mark.parametrize("name", ["l2", "linf", "triangle"])
-def test_device_moments_equal_host_sums_of_device_labels(name, split):
-    sites, angles, scales, metric, grid = random_case(name, True, seed=5)
-    ocl = OpenCLBackend(split_atomics=split)
+def test_device_moments_equal_host_sums_of_device_labels(name, split, kernel):
+    """The block kernel sums its own labels, the pixel kernel's are summed by row runs:
+    both must give the host's sums of the labels exactly (the raster is not a multiple
+    of the block, and the region is not a rectangle)."""
+    sites, angles, scales, metric, grid = random_case(name, True, seed=5, w=251, h=189)
+    ocl = OpenCLBackend(split_atomics=split, block=KERNELS[kernel])
     try:
         labels = ocl.label(sites, angles=angles, scales=scales, metric=metric, grid=grid)
         got = ocl.moments(sites, angles=angles, scales=scales, metric=metric, grid=grid)
@@ -159,11 +163,33 @@ def test_device_moments_equal_host_sums_of_device_labels(name, split):
         np.testing.assert_array_equal(getattr(got, field), getattr(want, field), err_msg=field)
 
 
+@pytest.mark.parametrize("block", [4, 16])
+@pytest.mark.parametrize("name", ["l2", "linf", "hexagon"])
+def test_every_block_size_gives_the_pixel_kernels_labels_and_sums(backends, name, block):
+    """Rows of 4 or 16 lanes: labels bit-identical to the per-pixel kernel (the same
+    float expression, one pixel at a time), sums equal to the host's sums of them."""
+    sites, angles, scales, metric, grid = random_case(name, True, seed=8, w=203, h=149)
+    args = dict(angles=angles, scales=scales, metric=metric, grid=grid)
+    want = backends["pixels"].label(sites, **args)
+    with OpenCLBackend(block=block) as ocl:
+        mom = ocl.moments(sites, **args)
+        np.testing.assert_array_equal(ocl.label(sites, **args), want)
+    host = moments_from_labels(want, len(sites))
+    for field in ("count", "sx", "sy", "sxx", "syy"):
+        np.testing.assert_array_equal(getattr(mom, field), getattr(host, field), err_msg=field)
+
+
+def test_block_size_without_a_vector_width_is_an_input_error():
+    with pytest.raises(InputError, match="block"):
+        OpenCLBackend(block=6)
+
+
+@pytest.mark.parametrize("kernel", KERNELS)
 @pytest.mark.parametrize("split", [False, True], ids=["native", "split32"])
-def test_moment_sums_past_32_bits(split):
+def test_moment_sums_past_32_bits(split, kernel):
     """One site owning a 4096 x 300 raster: Σj² = 300·Σ_{j<4096} j² ≈ 6.9e12, and the
     split counters wrap their low word many times."""
-    ocl = OpenCLBackend(split_atomics=split)
+    ocl = OpenCLBackend(split_atomics=split, block=KERNELS[kernel])
     try:
         mom = ocl.moments(np.array([[5.0, 5.0]]), metric=make_metric("l2"), grid=Grid(4096, 300))
     finally:
