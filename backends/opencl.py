@@ -45,6 +45,7 @@ from .base import Backend
 KERNEL_FILE = Path(__file__).with_name("opencl_kernels.cl")
 SEGMENT = 64  # pixels of a row per work-item of the moments kernel
 ACC_BYTES = 64  # per site: five 64-bit sums in one cache line (the kernel file says why)
+STRIP = 4  # blocks side by side per work-item of label_blocks: they share their sums
 BLOCK_SIZES = (0, 4, 8, 16)  # label_blocks works a row of a block as one 4-, 8- or 16-wide vector
 REACH_MARGIN = 1e-4  # relative slack on the search bound against float32 rounding
 
@@ -206,6 +207,7 @@ class OpenCLBackend(Backend):
         if block is None:  # CPUs vectorise over a block's pixels; GPUs want a pixel each
             block = 0 if self._device.type & cl.device_type.GPU else 8
         self.block = int(block)
+        self.strip = STRIP
         self._programs: dict[tuple, tuple] = {}  # (kind, K, int64) -> (label, moments kernels)
         self._buffers: dict[str, object] = {}
         self._mask_source = None  # the mask array last uploaded (grids are immutable)
@@ -238,7 +240,7 @@ class OpenCLBackend(Backend):
     # ---------------------------------------------------------------- programs
     def _kernels(self, metric: Metric, k: int):
         """The built (label, moments) kernels for this metric kind; built once."""
-        key = (metric.kind, k, self.int64_atomics, self.block)
+        key = (metric.kind, k, self.int64_atomics, self.block, self.strip)
         if key not in self._programs:
             cl = self._cl
             stride = 8 if metric.kind == "ellipse" else 4 + 2 * k
@@ -247,6 +249,7 @@ class OpenCLBackend(Backend):
                 f"-DK={k}",
                 f"-DBW={self.block or 8}",  # label_pixels does not use them
                 f"-DBH={self.block or 8}",
+                f"-DSTRIP={self.strip}",
             ]
             if metric.kind == "ellipse":
                 opts.append("-DMETRIC_ELLIPSE")
@@ -409,8 +412,8 @@ class OpenCLBackend(Backend):
             np.int32(acc_buf is not None),
         )
         local = self.local_size
-        if self.block > 0:
-            w, h = -(-w // self.block), -(-h // self.block)  # one work-item per block
+        if self.block > 0:  # one work-item per STRIP blocks of a row
+            w, h = -(-w // (self.block * self.strip)), -(-h // self.block)
         if local is None:
             global_size = (w, h)
         else:
@@ -469,6 +472,7 @@ __all__ = [
     "SEGMENT",
     "ACC_BYTES",
     "BLOCK_SIZES",
+    "STRIP",
     "REACH_MARGIN",
     "pocl_cache_dir",
     "cache_problem",

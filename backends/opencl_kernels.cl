@@ -106,6 +106,15 @@ inline void flush_run(volatile __global acc_t *acc, const int n, const int site,
     add_sum(acc, 4, n, site, r * r * len);
 }
 
+/* The arguments of both label kernels, in the order the host sets them. */
+#define LABEL_KERNEL_ARGS                                                               \
+    const int width, const int height, const int ncx, const int ncy, const float cell,  \
+        const float reach, const float slack, __global const int *cell_start,           \
+        __global const float *cell_reach, __global const float *records,                \
+        __global const int *site_index, __global const uchar *mask, const int use_mask, \
+        __global int *labels, __global const int *site_rank, const int n, const int seed, \
+        volatile __global acc_t *acc, const int sums
+
 /* One work-item per pixel: the nearest site, searched over a uniform grid of cells ring
    by ring (Chebyshev rings of cells around the pixel's cell).
 
@@ -120,17 +129,7 @@ inline void flush_run(volatile __global acc_t *acc, const int n, const int site,
    `slack` (pixels, from the host) an absolute one against float32 rounding (of d, and of
    cell edges far from the origin), so near-ties are always evaluated and go to the lower
    index. */
-__kernel void label_pixels(const int width, const int height,
-                           const int ncx, const int ncy, const float cell,
-                           const float reach, const float slack,
-                           __global const int *cell_start,
-                           __global const float *cell_reach,
-                           __global const float *records,
-                           __global const int *site_index,
-                           __global const uchar *mask, const int use_mask,
-                           __global int *labels,
-                           __global const int *site_rank, const int n, const int seed,
-                           volatile __global acc_t *acc, const int sums)
+__kernel void label_pixels(LABEL_KERNEL_ARGS)
 {
     /* site_rank, n, seed: label_blocks' seeds (not used here: one pixel's search is
        already short, and a GPU runs it one lane per pixel); acc, sums: label_blocks'
@@ -322,13 +321,31 @@ inline float worst_of(const float best[BH][BW], const int live[BH][BW])
 #endif
 }
 
-/* The moments of one block, added once per label it holds (a block spans a few cells):
-   each pass takes the lowest label not yet summed and sums all its pixels at once, in
-   block-local coordinates that fit an int, then shifts the sums to the raster's origin
-   in 64 bits.  Fewer atomics than one per run of a row (row_moments), and the labels
-   are not read back from memory. */
-inline void block_sums(volatile __global acc_t *acc, const int n, const int best_idx[BH][BW],
-                       const int live[BH][BW], const int x0, const int y0)
+/* The moments of a work-item's blocks: each block is summed once per label in it (a
+   block spans a few cells): each pass takes the lowest label not yet summed and sums all
+   its pixels at once, in block-local coordinates that fit an int, shifted to the
+   raster's origin in 64 bits.  The sums gather in a small table of the work-item's
+   labels (its blocks share most of them) and go to the device's sums with one atomic
+   each when the table is full and at the end: a few atomics per label and work-item,
+   not one per run of a row (row_moments), and the labels are not read back. */
+#define TABLE 8
+typedef struct {
+    int used;
+    int site[TABLE];
+    ulong sum[TABLE][5];
+} sums_table;
+
+inline void flush_table(volatile __global acc_t *acc, const int n, sums_table *t)
+{
+    for (int e = 0; e < t->used; ++e)
+        for (int q = 0; q < 5; ++q)
+            add_sum(acc, q, n, t->site[e], t->sum[e][q]);
+    t->used = 0;
+}
+
+inline void block_sums(volatile __global acc_t *acc, const int n, sums_table *t,
+                       const int best_idx[BH][BW], const int live[BH][BW], const int x0,
+                       const int y0)
 {
     const rowi xs = load_row(0, LANES), xs2 = xs * xs;
     rowi lab[BH]; /* -1: outside the region, or summed already */
@@ -338,12 +355,12 @@ inline void block_sums(volatile __global acc_t *acc, const int n, const int best
         rowu low = (rowu)(0xffffffffu); /* -1 as unsigned is above every label */
         for (int yy = 0; yy < BH; ++yy)
             low = min(low, CAT(as_uint, BW)(lab[yy]));
-        const uint site = hmin(low);
-        if (site == 0xffffffffu)
+        const int site = (int)hmin(low);
+        if (site == -1)
             break;
         rowi c = 0, sx = 0, sxx = 0, sy = 0, syy = 0;
         for (int yy = 0; yy < BH; ++yy) {
-            const rowi m = lab[yy] == (int)site; /* -1 where this label */
+            const rowi m = lab[yy] == site; /* -1 where this label */
             c -= m;
             sx += m & xs;
             sxx += m & xs2;
@@ -351,38 +368,44 @@ inline void block_sums(volatile __global acc_t *acc, const int n, const int best
             syy += m & (yy * yy);
             lab[yy] |= m;
         }
+        int e = 0;
+        while (e < t->used && t->site[e] != site)
+            ++e;
+        if (e == TABLE) {
+            flush_table(acc, n, t);
+            e = 0;
+        }
+        if (e == t->used) {
+            t->used = e + 1;
+            t->site[e] = site;
+            for (int q = 0; q < 5; ++q)
+                t->sum[e][q] = 0;
+        }
         const ulong len = (ulong)hsum(c), X = (ulong)x0, Y = (ulong)y0;
         const ulong lx = (ulong)hsum(sx), lxx = (ulong)hsum(sxx);
         const ulong ly = (ulong)hsum(sy), lyy = (ulong)hsum(syy);
-        add_sum(acc, 0, n, (int)site, len);
-        add_sum(acc, 1, n, (int)site, len * X + lx);
-        add_sum(acc, 2, n, (int)site, len * Y + ly);
-        add_sum(acc, 3, n, (int)site, len * X * X + 2 * X * lx + lxx);
-        add_sum(acc, 4, n, (int)site, len * Y * Y + 2 * Y * ly + lyy);
+        t->sum[e][0] += len;
+        t->sum[e][1] += len * X + lx;
+        t->sum[e][2] += len * Y + ly;
+        t->sum[e][3] += len * X * X + 2 * X * lx + lxx;
+        t->sum[e][4] += len * Y * Y + 2 * Y * ly + lyy;
     }
 }
 
-__kernel void label_blocks(const int width, const int height,
-                           const int ncx, const int ncy, const float cell,
-                           const float reach, const float slack,
-                           __global const int *cell_start,
-                           __global const float *cell_reach,
-                           __global const float *records,
-                           __global const int *site_index,
-                           __global const uchar *mask, const int use_mask,
-                           __global int *labels,
-                           __global const int *site_rank, const int n, const int seed,
-                           volatile __global acc_t *acc, const int sums)
+/* The labels of the block at (x0, y0), written to `labels`; its labels and live pixels
+   also to the caller's arrays. */
+inline void search_block(const int width, const int height, const int ncx, const int ncy,
+                         const float cell, const float reach, const float slack,
+                         __global const int *cell_start, __global const float *cell_reach,
+                         __global const float *records, __global const int *site_index,
+                         __global const uchar *mask, const int use_mask, __global int *labels,
+                         __global const int *site_rank, const int n, const int seed,
+                         const int x0, const int y0, int best_idx[BH][BW], int live[BH][BW])
 {
-    const int x0 = get_global_id(0) * BW;
-    const int y0 = get_global_id(1) * BH;
-    if (x0 >= width || y0 >= height)
-        return;
     const int xn = x0 + BW < width ? BW : width - x0; /* pixels of the block inside */
     const int yn = y0 + BH < height ? BH : height - y0;
 
     /* which pixels count: inside the raster and the region */
-    int live[BH][BW];
     int any_live = 0;
     for (int yy = 0; yy < BH; ++yy)
         for (int xx = 0; xx < BW; ++xx) {
@@ -407,7 +430,6 @@ __kernel void label_blocks(const int width, const int height,
     cy1 = cy1 < ncy ? cy1 : ncy - 1;
 
     float best[BH][BW];
-    int best_idx[BH][BW];
     for (int yy = 0; yy < BH; ++yy)
         for (int xx = 0; xx < BW; ++xx) {
             best[yy][xx] = INFINITY;
@@ -509,8 +531,30 @@ __kernel void label_blocks(const int width, const int height,
     for (int yy = 0; yy < yn; ++yy)
         for (int xx = 0; xx < xn; ++xx)
             labels[(y0 + yy) * width + x0 + xx] = live[yy][xx] ? best_idx[yy][xx] : -1;
+}
+
+/* One work-item per STRIP blocks side by side in a row of blocks (they share the sums
+   table). */
+__kernel void label_blocks(LABEL_KERNEL_ARGS)
+{
+    const int y0 = get_global_id(1) * BH;
+    if (y0 >= height)
+        return;
+    sums_table table;
+    table.used = 0;
+    for (int g = 0; g < STRIP; ++g) {
+        const int x0 = (get_global_id(0) * STRIP + g) * BW;
+        if (x0 >= width)
+            break;
+        int best_idx[BH][BW], live[BH][BW];
+        search_block(width, height, ncx, ncy, cell, reach, slack, cell_start, cell_reach,
+                     records, site_index, mask, use_mask, labels, site_rank, n, seed, x0, y0,
+                     best_idx, live);
+        if (sums)
+            block_sums(acc, n, &table, best_idx, live, x0, y0);
+    }
     if (sums)
-        block_sums(acc, n, best_idx, live, x0, y0);
+        flush_table(acc, n, &table);
 }
 
 /* Per-site integer sums (count, Σj, Σi, Σj², Σi²) of the label raster.  One work-item
