@@ -405,17 +405,22 @@ inline void search_block(const int width, const int height, const int ncx, const
     const int xn = x0 + BW < width ? BW : width - x0; /* pixels of the block inside */
     const int yn = y0 + BH < height ? BH : height - y0;
 
-    /* which pixels count: inside the raster and the region */
-    int any_live = 0;
-    for (int yy = 0; yy < BH; ++yy)
-        for (int xx = 0; xx < BW; ++xx) {
-            int in = xx < xn && yy < yn;
-            if (in && use_mask)
-                in = mask[(y0 + yy) * width + x0 + xx] != 0;
-            live[yy][xx] = in;
-            any_live |= in;
+    /* which pixels count: inside the raster and the region (1, else 0) */
+    const rowi lanes = load_row(0, LANES);
+    rowi any = 0;
+    for (int yy = 0; yy < BH; ++yy) {
+        rowi in = (lanes < xn) & (rowi)(yy < yn ? -1 : 0); /* -1 where live */
+        if (use_mask && yy < yn) {
+            if (xn == BW)
+                in &= CAT(convert_int, BW)(CAT(vload, BW)(0, mask + (y0 + yy) * width + x0)) != 0;
+            else
+                for (int xx = 0; xx < xn; ++xx)
+                    in = mask[(y0 + yy) * width + x0 + xx] != 0 ? in : in & (lanes != xx);
         }
-    if (!any_live) {
+        CAT(vstore, BW)(-in, 0, live[yy]);
+        any |= in;
+    }
+    if (hsum(any) == 0) {
         for (int yy = 0; yy < yn; ++yy)
             for (int xx = 0; xx < xn; ++xx)
                 labels[(y0 + yy) * width + x0 + xx] = -1;
@@ -430,11 +435,10 @@ inline void search_block(const int width, const int height, const int ncx, const
     cy1 = cy1 < ncy ? cy1 : ncy - 1;
 
     float best[BH][BW];
-    for (int yy = 0; yy < BH; ++yy)
-        for (int xx = 0; xx < BW; ++xx) {
-            best[yy][xx] = INFINITY;
-            best_idx[yy][xx] = 0x7fffffff;
-        }
+    for (int yy = 0; yy < BH; ++yy) {
+        CAT(vstore, BW)((rowf)(INFINITY), 0, best[yy]);
+        CAT(vstore, BW)((rowi)(0x7fffffff), 0, best_idx[yy]);
+    }
 
     /* the box of the block's pixel centres */
     const rowf pxs = CAT(convert_float, BW)(x0 + load_row(0, LANES)) + 0.5f;
@@ -528,9 +532,14 @@ inline void search_block(const int width, const int height, const int ncx, const
             }
         }
     }
-    for (int yy = 0; yy < yn; ++yy)
-        for (int xx = 0; xx < xn; ++xx)
-            labels[(y0 + yy) * width + x0 + xx] = live[yy][xx] ? best_idx[yy][xx] : -1;
+    for (int yy = 0; yy < yn; ++yy) {
+        const rowi row = load_row(0, live[yy]) != 0 ? load_row(0, best_idx[yy]) : (rowi)(-1);
+        if (xn == BW)
+            CAT(vstore, BW)(row, 0, labels + (y0 + yy) * width + x0);
+        else
+            for (int xx = 0; xx < xn; ++xx)
+                labels[(y0 + yy) * width + x0 + xx] = live[yy][xx] ? best_idx[yy][xx] : -1;
+    }
 }
 
 /* One work-item per STRIP blocks side by side in a row of blocks (they share the sums
