@@ -147,11 +147,13 @@ def test_exact_ties_across_cells_go_to_the_lower_index(backends, name, kernel):
 @pytest.mark.parametrize("kernel", KERNELS)
 @pytest.mark.parametrize("split", [False, True], ids=["native", "split32"])
 @pytest.mark.parametrize("name", ["l2", "linf", "triangle"])
-def test_device_moments_equal_host_sums_of_device_labels(name, split, kernel):
+@pytest.mark.parametrize("n", [300, 6000], ids=["sparse", "dense"])
+def test_device_moments_equal_host_sums_of_device_labels(name, split, kernel, n):
     """The block kernel sums its own labels, the pixel kernel's are summed by row runs:
     both must give the host's sums of the labels exactly (the raster is not a multiple
-    of the block, and the region is not a rectangle)."""
-    sites, angles, scales, metric, grid = random_case(name, True, seed=5, w=251, h=189)
+    of the block, and the region is not a rectangle).  Dense sites put more labels in
+    a work-item's blocks than its table of sums holds."""
+    sites, angles, scales, metric, grid = random_case(name, True, seed=5, w=251, h=189, n=n)
     ocl = OpenCLBackend(split_atomics=split, block=KERNELS[kernel])
     try:
         labels = ocl.label(sites, angles=angles, scales=scales, metric=metric, grid=grid)
