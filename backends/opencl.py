@@ -378,6 +378,11 @@ class OpenCLBackend(Backend):
         starts_buf = self._upload("cell_start", starts)
         reach_buf = self._upload("cell_reach", cell_reach.astype(np.float32))
         records_buf = self._upload("records", records[order])
+        # per sorted site: float32 position and its own reach (label_blocks' box test)
+        site_pos = np.zeros((n, 4), dtype=np.float32)
+        site_pos[:, :2] = records[order, :2]
+        site_pos[:, 2] = scales[order] * (metric.circumradius * (1 + REACH_MARGIN))
+        pos_buf = self._upload("site_pos", site_pos)
         index_buf = self._upload("site_index", order.astype(np.int32))
         rank = np.empty(n, dtype=np.int32)
         rank[order] = np.arange(n, dtype=np.int32)
@@ -401,6 +406,7 @@ class OpenCLBackend(Backend):
             starts_buf,
             reach_buf,
             records_buf,
+            pos_buf,
             index_buf,
             mask_buf,
             np.int32(use_mask),

@@ -111,6 +111,7 @@ inline void flush_run(volatile __global acc_t *acc, const int n, const int site,
     const int width, const int height, const int ncx, const int ncy, const float cell,  \
         const float reach, const float slack, __global const int *cell_start,           \
         __global const float *cell_reach, __global const float *records,                \
+        __global const float4 *site_pos,                                                \
         __global const int *site_index, __global const uchar *mask, const int use_mask, \
         __global int *labels, __global const int *site_rank, const int n, const int seed, \
         volatile __global acc_t *acc, const int sums
@@ -131,9 +132,9 @@ inline void flush_run(volatile __global acc_t *acc, const int n, const int site,
    index. */
 __kernel void label_pixels(LABEL_KERNEL_ARGS)
 {
-    /* site_rank, n, seed: label_blocks' seeds (not used here: one pixel's search is
-       already short, and a GPU runs it one lane per pixel); acc, sums: label_blocks'
-       moments (here row_moments sums them) */
+    /* site_pos, site_rank, n, seed: label_blocks' site boxes and seeds (not used here:
+       one pixel's search is already short, and a GPU runs it one lane per pixel); acc,
+       sums: label_blocks' moments (here row_moments sums them) */
     const int j = get_global_id(0);
     const int i = get_global_id(1);
     if (j >= width || i >= height)
@@ -228,7 +229,7 @@ __kernel void label_pixels(LABEL_KERNEL_ARGS)
      sites) are tried first, so the bound is tight from the start; a Lloyd step moves
      sites little, and those sites are usually the owners again;
    - every site is tested on its own against the block's box (its distance to the box
-     of pixel centres against its cell's reach times the largest best d of the block),
+     of pixel centres against its own reach times the largest best d of the block),
      not only its cell.
    The block stops after the first ring at which every pixel inside the region is done
    by the bound above. */
@@ -358,16 +359,15 @@ inline void block_sums(volatile __global acc_t *acc, const int n, sums_table *t,
         const int site = (int)hmin(low);
         if (site == -1)
             break;
-        rowi c = 0, sx = 0, sxx = 0, sy = 0, syy = 0;
+        rowi c = 0, sy = 0, syy = 0; /* per lane (column): count, Σ yy, Σ yy² */
         for (int yy = 0; yy < BH; ++yy) {
             const rowi m = lab[yy] == site; /* -1 where this label */
             c -= m;
-            sx += m & xs;
-            sxx += m & xs2;
             sy += m & yy;
             syy += m & (yy * yy);
             lab[yy] |= m;
         }
+        const rowi sx = c * xs, sxx = c * xs2;
         int e = 0;
         while (e < t->used && t->site[e] != site)
             ++e;
@@ -396,7 +396,7 @@ inline void block_sums(volatile __global acc_t *acc, const int n, sums_table *t,
    also to the caller's arrays. */
 inline void search_block(const int width, const int height, const int ncx, const int ncy,
                          const float cell, const float reach, const float slack,
-                         __global const int *cell_start, __global const float *cell_reach,
+                         __global const int *cell_start, __global const float4 *site_pos,
                          __global const float *records, __global const int *site_index,
                          __global const uchar *mask, const int use_mask, __global int *labels,
                          __global const int *site_rank, const int n, const int seed,
@@ -491,8 +491,9 @@ inline void search_block(const int width, const int height, const int ncx, const
     }
     /* 3. every site that can win or tie at a pixel x lies within reach * d(x) <=
        reach * worst of it, so within `ext` of the box: the cells under the box grown by
-       `ext` hold them all.  Each cell, then each site, is tested against the block's
-       current worst best (which only falls as sites are tried). */
+       `ext` hold them all.  A row of those cells is one run of the sorted sites; each
+       site is tested by its own reach against the block's current worst best (which
+       only falls as sites are tried). */
     float worst_dist = worst_of(best, live);
     const float ext = reach * worst_dist + 2.0f * slack;
     int gx0 = (int)floor((box_x0 - ext) / cell), gx1 = (int)floor((box_x1 + ext) / cell);
@@ -502,32 +503,29 @@ inline void search_block(const int width, const int height, const int ncx, const
     gx1 = gx1 < ncx - 1 ? gx1 : ncx - 1;
     gy1 = gy1 < ncy - 1 ? gy1 : ncy - 1;
     for (int gy = gy0; gy <= gy1; ++gy) {
-        const float top = gy * cell, bottom = (gy + 1) * cell;
-        const float gapy = box_y1 < top ? top - box_y1 : (box_y0 > bottom ? box_y0 - bottom : 0.0f);
-        /* rings = -1 (seeded): no cell was searched whole, even under the block */
-        const int in_rows = rings >= 0 && gy >= cy0 - rings && gy <= cy1 + rings;
-        for (int gx = gx0; gx <= gx1; ++gx) {
-            if (in_rows && gx >= cx0 - rings && gx <= cx1 + rings)
-                continue; /* searched whole in step 2 */
-            const int c = gy * ncx + gx;
-            const float left = gx * cell, right = (gx + 1) * cell;
-            const float gapx = box_x1 < left ? left - box_x1 : (box_x0 > right ? box_x0 - right : 0.0f);
-            const float cell_lim = cell_reach[c] * worst_dist + slack;
-            if (gapx * gapx + gapy * gapy > cell_lim * cell_lim)
+        /* the cells of this row not searched whole in step 2 (rings = -1 when seeded:
+           none was, even under the block): [gx0, a1] and [b0, gx1] */
+        int a1 = gx1, b0 = gx1 + 1;
+        if (rings >= 0 && gy >= cy0 - rings && gy <= cy1 + rings) {
+            a1 = cx0 - rings - 1 < gx1 ? cx0 - rings - 1 : gx1;
+            b0 = cx1 + rings + 1 > gx0 ? cx1 + rings + 1 : gx0;
+        }
+        for (int part = 0; part < 2; ++part) {
+            const int lo = part == 0 ? gx0 : b0, hi = part == 0 ? a1 : gx1;
+            if (lo > hi)
                 continue;
-            const int s1 = cell_start[c + 1];
-            for (int s = cell_start[c]; s < s1; ++s) {
-                __global const float *rec = records + s * STRIDE;
+            const int s1 = cell_start[gy * ncx + hi + 1];
+            for (int s = cell_start[gy * ncx + lo]; s < s1; ++s) {
+                const float4 p = site_pos[s]; /* x, y, reach of the site */
+                const float gx_s = p.x < box_x0 ? box_x0 - p.x : (p.x > box_x1 ? p.x - box_x1 : 0.0f);
+                const float gy_s = p.y < box_y0 ? box_y0 - p.y : (p.y > box_y1 ? p.y - box_y1 : 0.0f);
+                const float lim = p.z * worst_dist + slack;
+                if (gx_s * gx_s + gy_s * gy_s > lim * lim)
+                    continue;
                 const int idx = site_index[s];
                 if (idx == seeds[0] || idx == seeds[1] || idx == seeds[2] || idx == seeds[3])
                     continue; /* tried in step 1 */
-                const float sx = rec[0], sy = rec[1];
-                const float gx_s = sx < box_x0 ? box_x0 - sx : (sx > box_x1 ? sx - box_x1 : 0.0f);
-                const float gy_s = sy < box_y0 ? box_y0 - sy : (sy > box_y1 ? sy - box_y1 : 0.0f);
-                const float lim = cell_reach[c] * worst_dist + slack;
-                if (gx_s * gx_s + gy_s * gy_s > lim * lim)
-                    continue;
-                TRY_SITE(rec, idx)
+                TRY_SITE(records + s * STRIDE, idx)
                 worst_dist = worst_of(best, live);
             }
         }
@@ -556,7 +554,7 @@ __kernel void label_blocks(LABEL_KERNEL_ARGS)
         if (x0 >= width)
             break;
         int best_idx[BH][BW], live[BH][BW];
-        search_block(width, height, ncx, ncy, cell, reach, slack, cell_start, cell_reach,
+        search_block(width, height, ncx, ncy, cell, reach, slack, cell_start, site_pos,
                      records, site_index, mask, use_mask, labels, site_rank, n, seed, x0, y0,
                      best_idx, live);
         if (sums)
