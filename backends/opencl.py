@@ -370,23 +370,29 @@ class OpenCLBackend(Backend):
         np.cumsum(np.bincount(cid, minlength=ncx * ncy), out=starts[1:])
 
         cl = self._cl
-        # per cell: circumradius x the largest scale in it (the kernel's local bound)
-        cell_reach = np.zeros(ncx * ncy, dtype=np.float64)
-        full = starts[1:] > starts[:-1]
-        cell_reach[full] = np.maximum.reduceat(scales[order], starts[:-1][full])
-        cell_reach *= metric.circumradius * (1 + REACH_MARGIN)
         starts_buf = self._upload("cell_start", starts)
-        reach_buf = self._upload("cell_reach", cell_reach.astype(np.float32))
         records_buf = self._upload("records", records[order])
-        # per sorted site: float32 position and its own reach (label_blocks' box test)
-        site_pos = np.zeros((n, 4), dtype=np.float32)
-        site_pos[:, :2] = records[order, :2]
-        site_pos[:, 2] = scales[order] * (metric.circumradius * (1 + REACH_MARGIN))
-        pos_buf = self._upload("site_pos", site_pos)
         index_buf = self._upload("site_index", order.astype(np.int32))
-        rank = np.empty(n, dtype=np.int32)
-        rank[order] = np.arange(n, dtype=np.int32)
-        rank_buf = self._upload("site_rank", rank)
+        site_reach = scales[order] * (metric.circumradius * (1 + REACH_MARGIN))
+        # each kernel reads its own bounds; the other's arguments get a placeholder
+        if self.block > 0:
+            # per sorted site: float32 position and its own reach (the box test), and
+            # where each site went (the seeds are site indices)
+            site_pos = np.zeros((n, 4), dtype=np.float32)
+            site_pos[:, :2] = records[order, :2]
+            site_pos[:, 2] = site_reach
+            pos_buf = self._upload("site_pos", site_pos)
+            rank = np.empty(n, dtype=np.int32)
+            rank[order] = np.arange(n, dtype=np.int32)
+            rank_buf = self._upload("site_rank", rank)
+            reach_buf = self._buffer("cell_reach", 4)
+        else:
+            # per cell: circumradius x the largest scale in it (the kernel's local bound)
+            cell_reach = np.zeros(ncx * ncy, dtype=np.float32)
+            full = starts[1:] > starts[:-1]
+            cell_reach[full] = np.maximum.reduceat(site_reach, starts[:-1][full])
+            reach_buf = self._upload("cell_reach", cell_reach)
+            pos_buf, rank_buf = self._buffer("site_pos", 16), self._buffer("site_rank", 4)
         mask_buf = self._buffer("mask", 4)
         # the last call's labels seed the block search when they are of this raster
         # (seeds only speed the search: any index below n gives the same labels)
