@@ -398,9 +398,10 @@ def test_no_platform_is_backend_unavailable(monkeypatch):
 def test_seeded_search_gives_the_unseeded_labels_over_lloyd_iterations(reference, name, n):
     """The block search seeded by the last call's labels only tightens its bound: over
     Lloyd iterations (random, then relaxing sites; angles and sizes varied) the labels,
-    and so the sites, are bit-identical to a search with no seeds, also when the seeds
-    are labels of other sites, and when a grid cell is narrower than half an 8x8 block
-    (a block then covers cells that no ring searched whole)."""
+    and so the sites, are bit-identical to a search with no seeds and to the per-pixel
+    kernel (its own search, the same float expression), also when the seeds are labels
+    of other sites, and when a grid cell is narrower than half an 8x8 block (a block
+    then covers cells that no ring searched whole)."""
     rng = np.random.default_rng(11)
     w, h = 160, 128
     field = DirectionField.from_angles(rng.uniform(-np.pi, np.pi, (h, w)))
@@ -409,8 +410,27 @@ def test_seeded_search_gives_the_unseeded_labels_over_lloyd_iterations(reference
     with OpenCLBackend(seed=True) as seeded, OpenCLBackend(seed=False) as plain:
         a, b = lloyd(problem, seeded, 5), lloyd(problem, plain, 5)
         np.testing.assert_array_equal(a.sites, b.sites)
+        with OpenCLBackend(block=0) as pixels:
+            np.testing.assert_array_equal(a.sites, lloyd(problem, pixels, 5).sites)
         args = dict(angles=a.angles, scales=a.scales, metric=problem.metric, grid=problem.grid)
         seeded.label(a.sites + rng.normal(0, 1.5, a.sites.shape), **args)  # seeds of other sites
         got = seeded.label(a.sites, **args)
         np.testing.assert_array_equal(got, plain.label(a.sites, **args))
     assert_labels_match(got, reference.label(a.sites, **args), a.sites, a.angles, a.scales, problem.metric)
+
+
+def test_speed_ratio_medians_and_rounds(monkeypatch, capsys):
+    """The one-run ratio tool: medians over every timed step of every round, one ratio
+    per round (times given, not measured), and its command line on a small problem."""
+    from compact_distributions.bench import timing
+
+    given = iter([[1.0, 3.0], [10.0, 30.0], [2.0, 2.0], [30.0, 50.0]])  # mine, theirs per round
+    monkeypatch.setattr(timing, "time_lloyd", lambda *a, **k: next(given))
+    r = timing.speed_ratio("mine", "theirs", "l2", 10, 32, warmup=0, repeats=2, rounds=2)
+    assert r["seconds"] == 2.0 and r["against_seconds"] == 30.0 and r["ratio"] == 15.0
+    assert r["ratios"] == [10.0, 20.0]
+    monkeypatch.undo()
+    args = ["--backend", "opencl", "--against", "numpy", "--metrics", "l2,linf", "--elements", "30"]
+    assert timing.main(args + ["--size", "48", "--warmup", "1", "--repeats", "2", "--rounds", "1"]) == 0
+    out = capsys.readouterr().out
+    assert out.count("ratio") == 2 and "l2, N = 30, 48²: opencl" in out
