@@ -47,6 +47,9 @@ SEGMENT = 64  # pixels of a row per work-item of the moments kernel
 ACC_BYTES = 64  # per site: five 64-bit sums in one cache line (the kernel file says why)
 STRIP = 4  # blocks side by side per work-item of label_blocks: they share their sums
 BLOCK_SIZES = (0, 4, 8, 16)  # label_blocks works a row of a block as one 4-, 8- or 16-wide vector
+# label_blocks' default work-group: PoCL holds the private arrays of all of a group's
+# work-items at once, and its own choice (thousands of them) overflowed a thread's stack
+BLOCK_GROUP = (8, 1)
 REACH_MARGIN = 1e-4  # relative slack on the search bound against float32 rounding
 
 
@@ -167,7 +170,8 @@ class OpenCLBackend(Backend):
     ``device``: "PLATFORM[:DEVICE]" (indices or name fragments); ``split_atomics``: keep
     the moment sums as 32-bit split counters even where 64-bit atomics exist (tests use
     it to check the portable path); ``cell_factor``: grid cell width in average site
-    spacings; ``local_size``: the label kernel's work-group shape (None: the driver's);
+    spacings; ``local_size``: the label kernel's work-group shape (None: the driver's for
+    the per-pixel kernel, ``BLOCK_GROUP`` for the block kernel);
     ``block``: pixels per side of the block kernel's work-item (4, 8 or 16), 0 for the
     per-pixel kernel, None for the device's default; ``seed``: seed the block search with
     the last call's labels (False: the plain search, for tests)."""
@@ -426,6 +430,7 @@ class OpenCLBackend(Backend):
         local = self.local_size
         if self.block > 0:  # one work-item per STRIP blocks of a row
             w, h = -(-w // (self.block * self.strip)), -(-h // self.block)
+            local = BLOCK_GROUP if local is None else local
         if local is None:
             global_size = (w, h)
         else:
@@ -485,6 +490,7 @@ __all__ = [
     "ACC_BYTES",
     "BLOCK_SIZES",
     "STRIP",
+    "BLOCK_GROUP",
     "REACH_MARGIN",
     "pocl_cache_dir",
     "cache_problem",

@@ -215,11 +215,10 @@ __kernel void label_pixels(LABEL_KERNEL_ARGS)
     labels[pix] = best_idx;
 }
 
-/* The same search for CPUs: one work-item per BW x BH block of pixels.  Every pixel of
-   the block visits the same sites, so the innermost loop runs over the block's pixels for
-   one site with a fixed trip count and no dependence between iterations: the compiler
-   vectorises it (a per-pixel loop over sites, as in label_pixels, is a serial argmin that
-   CPUs run one lane wide).
+/* The same search for CPUs: one work-item per STRIP blocks of BW x BH pixels side by
+   side.  Every pixel of a block visits the same sites, so the innermost loop runs over
+   the block's pixels for one site, a row as one vector (a per-pixel loop over sites, as
+   in label_pixels, is a serial argmin that CPUs run one lane wide).
 
    The search is the ring search above, with two cuts that leave the result unchanged
    (the nearest site under (d, index) does not depend on the order sites are tried, and
@@ -230,9 +229,9 @@ __kernel void label_pixels(LABEL_KERNEL_ARGS)
      sites little, and those sites are usually the owners again;
    - every site is tested on its own against the block's box (its distance to the box
      of pixel centres against its own reach times the largest best d of the block),
-     not only its cell.
-   The block stops after the first ring at which every pixel inside the region is done
-   by the bound above. */
+     not only its cell; the sites near a strip are listed once for its blocks.
+   Without seeds, a block searches rings of cells until one held a site; then the
+   bound above decides which further sites are tried (step 3, label_blocks). */
 
 /* A row of a block as one BW-wide vector (BW = 4, 8 or 16): the searches and sums below
    work a row at a time, which PoCL's loop vectoriser does not always find on its own. */
@@ -287,21 +286,21 @@ inline uint hmin(rowu v)
 
 DISTANCE_AT_OFFSET(row_distance, rowf)
 
-/* Try one site on every pixel of the block, a row at a time (pxs: the block's pixel
-   x centres). */
-#define TRY_SITE(REC, IDX)                                                              \
+/* Try one site on every pixel of a block, a row at a time (BEST, BEST_IDX: the block's
+   bests; PXS: its pixel x centres; Y0: its top row). */
+#define TRY_SITE(BEST, BEST_IDX, PXS, Y0, REC, IDX)                                     \
     {                                                                                   \
         __global const float *rec_ = (REC);                                             \
         const int idx_ = (IDX);                                                         \
-        const rowf vx_ = (pxs - rec_[0]) - rec_[2];                                     \
+        const rowf vx_ = ((PXS) - rec_[0]) - rec_[2];                                   \
         for (int yy = 0; yy < BH; ++yy) {                                               \
-            const float vy_ = (((float)(y0 + yy) + 0.5f) - rec_[1]) - rec_[3];          \
+            const float vy_ = (((float)((Y0) + yy) + 0.5f) - rec_[1]) - rec_[3];        \
             const rowf d = row_distance(rec_, vx_, vy_);                                \
-            const rowf b = load_row(0, best[yy]);                                       \
-            const rowi bi = load_row(0, best_idx[yy]);                                  \
+            const rowf b = load_row(0, (BEST)[yy]);                                     \
+            const rowi bi = load_row(0, (BEST_IDX)[yy]);                                \
             const rowi better = d < b | (d == b & idx_ < bi);                           \
-            CAT(vstore, BW)(better ? d : b, 0, best[yy]);                               \
-            CAT(vstore, BW)(better ? (rowi)(idx_) : bi, 0, best_idx[yy]);                \
+            CAT(vstore, BW)(better ? d : b, 0, (BEST)[yy]);                             \
+            CAT(vstore, BW)(better ? (rowi)(idx_) : bi, 0, (BEST_IDX)[yy]);              \
         }                                                                               \
     }
 
@@ -392,15 +391,15 @@ inline void block_sums(volatile __global acc_t *acc, const int n, sums_table *t,
     }
 }
 
-/* The labels of the block at (x0, y0), written to `labels`; its labels and live pixels
-   also to the caller's arrays. */
-inline void search_block(const int width, const int height, const int ncx, const int ncy,
-                         const float cell, const float reach, const float slack,
-                         __global const int *cell_start, __global const float4 *site_pos,
-                         __global const float *records, __global const int *site_index,
-                         __global const uchar *mask, const int use_mask, __global int *labels,
-                         __global const int *site_rank, const int n, const int seed,
-                         const int x0, const int y0, int best_idx[BH][BW], int live[BH][BW])
+/* Steps 1 and 2 of the block at (x0, y0): its live pixels, its seeds and their bests,
+   or the rings' without seeds.  0 if no pixel of it is live (its labels are written). */
+inline int start_block(const int width, const int height, const int ncx, const int ncy,
+                       const float cell, __global const int *cell_start,
+                       __global const float *records, __global const int *site_index,
+                       __global const uchar *mask, const int use_mask, __global int *labels,
+                       __global const int *site_rank, const int n, const int seed, const int x0,
+                       const int y0, float best[BH][BW], int best_idx[BH][BW], int live[BH][BW],
+                       int seeds[4])
 {
     const int xn = x0 + BW < width ? BW : width - x0; /* pixels of the block inside */
     const int yn = y0 + BH < height ? BH : height - y0;
@@ -424,7 +423,7 @@ inline void search_block(const int width, const int height, const int ncx, const
         for (int yy = 0; yy < yn; ++yy)
             for (int xx = 0; xx < xn; ++xx)
                 labels[(y0 + yy) * width + x0 + xx] = -1;
-        return;
+        return 0;
     }
 
     int cx0 = (int)(((float)x0 + 0.5f) / cell), cx1 = (int)(((float)(x0 + xn - 1) + 0.5f) / cell);
@@ -434,19 +433,16 @@ inline void search_block(const int width, const int height, const int ncx, const
     cy0 = cy0 < ncy ? cy0 : ncy - 1;
     cy1 = cy1 < ncy ? cy1 : ncy - 1;
 
-    float best[BH][BW];
     for (int yy = 0; yy < BH; ++yy) {
         CAT(vstore, BW)((rowf)(INFINITY), 0, best[yy]);
         CAT(vstore, BW)((rowi)(0x7fffffff), 0, best_idx[yy]);
     }
 
-    /* the box of the block's pixel centres */
     const rowf pxs = CAT(convert_float, BW)(x0 + load_row(0, LANES)) + 0.5f;
-    const float box_x0 = (float)x0 + 0.5f, box_x1 = (float)(x0 + xn - 1) + 0.5f;
-    const float box_y0 = (float)y0 + 0.5f, box_y1 = (float)(y0 + yn - 1) + 0.5f;
 
     /* 1. the previous owners of the corners (any valid index is a safe seed) */
-    int seeds[4] = {-1, -1, -1, -1};
+    for (int q = 0; q < 4; ++q)
+        seeds[q] = -1;
     int tried = 0;
     if (seed) {
         const int corner[4] = {y0 * width + x0, y0 * width + x0 + xn - 1,
@@ -460,13 +456,12 @@ inline void search_block(const int width, const int height, const int ncx, const
                 seeds[q] = l;
                 tried = 1;
                 __global const float *rec = records + site_rank[l] * STRIDE;
-                TRY_SITE(rec, l)
+                TRY_SITE(best, best_idx, pxs, y0, rec, l)
             }
         }
     }
     /* 2. without seeds: every site of the rings of cells around the block, until one
        ring held a site (then every pixel has a finite best) */
-    int rings = -1; /* rings 0..rings are searched whole */
     for (int r = 0; !tried; ++r) {
         const int bx0 = cx0 - r, bx1 = cx1 + r, by0 = cy0 - r, by1 = cy1 + r;
         const int inner = bx1 - bx0;
@@ -480,22 +475,55 @@ inline void search_block(const int width, const int height, const int ncx, const
                 for (int s = cell_start[c]; s < s1; ++s) {
                     __global const float *rec = records + s * STRIDE;
                     const int idx = site_index[s];
-                    TRY_SITE(rec, idx)
+                    TRY_SITE(best, best_idx, pxs, y0, rec, idx)
                     tried = 1;
                 }
             }
         }
-        rings = r;
         if (bx0 <= 0 && by0 <= 0 && bx1 >= ncx - 1 && by1 >= ncy - 1)
             break; /* the whole grid */
     }
-    /* 3. every site that can win or tie at a pixel x lies within reach * d(x) <=
-       reach * worst of it, so within `ext` of the box: the cells under the box grown by
-       `ext` hold them all.  A row of those cells is one run of the sorted sites; each
-       site is tested by its own reach against the block's current worst best (which
-       only falls as sites are tried). */
-    float worst_dist = worst_of(best, live);
-    const float ext = reach * worst_dist + 2.0f * slack;
+    return 1;
+}
+
+/* One work-item per STRIP blocks side by side in a row of blocks: steps 1 and 2 per
+   block, then step 3 for all of them at once, then their labels and sums.
+
+   3. every site that can win or tie at a pixel x of a block lies within reach * d(x) <=
+   reach * worst of the block, so within `ext` of the block's box: the cells under the
+   strip's box grown by the largest `ext` hold them all.  A row of those cells is one run
+   of the sorted sites; each site is tested by its own reach against each block's
+   current worst best (which only falls as sites are tried), and tried on the blocks it
+   may change.  A site tried twice on a block (a seed, or a ring's in step 2) changes
+   nothing the second time. */
+__kernel void label_blocks(LABEL_KERNEL_ARGS)
+{
+    const int y0 = get_global_id(1) * BH;
+    const int xs0 = get_global_id(0) * STRIP * BW;
+    if (y0 >= height || xs0 >= width)
+        return;
+    const int yn = y0 + BH < height ? BH : height - y0;
+    float best[STRIP][BH][BW];
+    int best_idx[STRIP][BH][BW], live[STRIP][BH][BW], seeds[STRIP][4];
+    float worst[STRIP], bx0[STRIP], bx1[STRIP];
+    int on[STRIP];
+    float ext = 0.0f;
+    for (int g = 0; g < STRIP; ++g) {
+        const int x0 = xs0 + g * BW;
+        on[g] = x0 < width && start_block(width, height, ncx, ncy, cell, cell_start, records,
+                                          site_index, mask, use_mask, labels, site_rank, n,
+                                          seed, x0, y0, best[g], best_idx[g], live[g], seeds[g]);
+        if (!on[g])
+            continue;
+        const int xn = x0 + BW < width ? BW : width - x0;
+        bx0[g] = (float)x0 + 0.5f; /* the box of the block's pixel centres in x */
+        bx1[g] = (float)(x0 + xn - 1) + 0.5f;
+        worst[g] = worst_of(best[g], live[g]);
+        const float e = reach * worst[g] + 2.0f * slack;
+        ext = e > ext ? e : ext;
+    }
+    const float box_x0 = (float)xs0 + 0.5f, box_y0 = (float)y0 + 0.5f;
+    const float box_x1 = (float)(xs0 + STRIP * BW - 1) + 0.5f, box_y1 = (float)(y0 + yn - 1) + 0.5f;
     int gx0 = (int)floor((box_x0 - ext) / cell), gx1 = (int)floor((box_x1 + ext) / cell);
     int gy0 = (int)floor((box_y0 - ext) / cell), gy1 = (int)floor((box_y1 + ext) / cell);
     gx0 = gx0 > 0 ? gx0 : 0;
@@ -503,62 +531,42 @@ inline void search_block(const int width, const int height, const int ncx, const
     gx1 = gx1 < ncx - 1 ? gx1 : ncx - 1;
     gy1 = gy1 < ncy - 1 ? gy1 : ncy - 1;
     for (int gy = gy0; gy <= gy1; ++gy) {
-        /* the cells of this row not searched whole in step 2 (rings = -1 when seeded:
-           none was, even under the block): [gx0, a1] and [b0, gx1] */
-        int a1 = gx1, b0 = gx1 + 1;
-        if (rings >= 0 && gy >= cy0 - rings && gy <= cy1 + rings) {
-            a1 = cx0 - rings - 1 < gx1 ? cx0 - rings - 1 : gx1;
-            b0 = cx1 + rings + 1 > gx0 ? cx1 + rings + 1 : gx0;
-        }
-        for (int part = 0; part < 2; ++part) {
-            const int lo = part == 0 ? gx0 : b0, hi = part == 0 ? a1 : gx1;
-            if (lo > hi)
-                continue;
-            const int s1 = cell_start[gy * ncx + hi + 1];
-            for (int s = cell_start[gy * ncx + lo]; s < s1; ++s) {
-                const float4 p = site_pos[s]; /* x, y, reach of the site */
-                const float gx_s = p.x < box_x0 ? box_x0 - p.x : (p.x > box_x1 ? p.x - box_x1 : 0.0f);
-                const float gy_s = p.y < box_y0 ? box_y0 - p.y : (p.y > box_y1 ? p.y - box_y1 : 0.0f);
-                const float lim = p.z * worst_dist + slack;
-                if (gx_s * gx_s + gy_s * gy_s > lim * lim)
+        const int s1 = cell_start[gy * ncx + gx1 + 1];
+        for (int s = cell_start[gy * ncx + gx0]; s < s1; ++s) {
+            const float4 p = site_pos[s]; /* x, y, reach of the site */
+            const float gy_s = p.y < box_y0 ? box_y0 - p.y : (p.y > box_y1 ? p.y - box_y1 : 0.0f);
+            int idx = -1;
+            for (int g = 0; g < STRIP; ++g) {
+                const float gx_s = p.x < bx0[g] ? bx0[g] - p.x : (p.x > bx1[g] ? p.x - bx1[g] : 0.0f);
+                const float lim = p.z * worst[g] + slack;
+                if (!on[g] || gx_s * gx_s + gy_s * gy_s > lim * lim)
                     continue;
-                const int idx = site_index[s];
-                if (idx == seeds[0] || idx == seeds[1] || idx == seeds[2] || idx == seeds[3])
+                idx = idx < 0 ? site_index[s] : idx;
+                if (idx == seeds[g][0] || idx == seeds[g][1] || idx == seeds[g][2] || idx == seeds[g][3])
                     continue; /* tried in step 1 */
-                TRY_SITE(records + s * STRIDE, idx)
-                worst_dist = worst_of(best, live);
+                const rowf pxs = CAT(convert_float, BW)(xs0 + g * BW + load_row(0, LANES)) + 0.5f;
+                TRY_SITE(best[g], best_idx[g], pxs, y0, records + s * STRIDE, idx)
+                worst[g] = worst_of(best[g], live[g]);
             }
         }
     }
-    for (int yy = 0; yy < yn; ++yy) {
-        const rowi row = load_row(0, live[yy]) != 0 ? load_row(0, best_idx[yy]) : (rowi)(-1);
-        if (xn == BW)
-            CAT(vstore, BW)(row, 0, labels + (y0 + yy) * width + x0);
-        else
-            for (int xx = 0; xx < xn; ++xx)
-                labels[(y0 + yy) * width + x0 + xx] = live[yy][xx] ? best_idx[yy][xx] : -1;
-    }
-}
-
-/* One work-item per STRIP blocks side by side in a row of blocks (they share the sums
-   table). */
-__kernel void label_blocks(LABEL_KERNEL_ARGS)
-{
-    const int y0 = get_global_id(1) * BH;
-    if (y0 >= height)
-        return;
     sums_table table;
     table.used = 0;
     for (int g = 0; g < STRIP; ++g) {
-        const int x0 = (get_global_id(0) * STRIP + g) * BW;
-        if (x0 >= width)
-            break;
-        int best_idx[BH][BW], live[BH][BW];
-        search_block(width, height, ncx, ncy, cell, reach, slack, cell_start, site_pos,
-                     records, site_index, mask, use_mask, labels, site_rank, n, seed, x0, y0,
-                     best_idx, live);
+        if (!on[g])
+            continue;
+        const int x0 = xs0 + g * BW;
+        const int xn = x0 + BW < width ? BW : width - x0;
+        for (int yy = 0; yy < yn; ++yy) {
+            const rowi row = load_row(0, live[g][yy]) != 0 ? load_row(0, best_idx[g][yy]) : (rowi)(-1);
+            if (xn == BW)
+                CAT(vstore, BW)(row, 0, labels + (y0 + yy) * width + x0);
+            else
+                for (int xx = 0; xx < xn; ++xx)
+                    labels[(y0 + yy) * width + x0 + xx] = live[g][yy][xx] ? best_idx[g][yy][xx] : -1;
+        }
         if (sums)
-            block_sums(acc, n, &table, best_idx, live, x0, y0);
+            block_sums(acc, n, &table, best_idx[g], live[g], x0, y0);
     }
     if (sums)
         flush_table(acc, n, &table);
