@@ -304,7 +304,7 @@ class OpenCLBackend(Backend):
         array = np.ascontiguousarray(array)
         buf = self._buffer(name, array.nbytes)
         if array.nbytes:
-            self._cl.enqueue_copy(self._queue, buf, array, is_blocking=False)
+            self._cl.enqueue_copy(self._queue, buf, array, is_blocking=True)
         return buf
 
     # ------------------------------------------------------------------ labels
