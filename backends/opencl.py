@@ -9,9 +9,11 @@ hold a nearer site; the bound ``|x - p_i| <= circumradius · s_max · d_i(x)`` h
 every angle, scale and aspect, so the result is exact (up to float32) and the cost per
 pixel does not grow with N.
 
-:meth:`OpenCLBackend.moments` also sums the moments on the device (runs of equal labels
-per row segment, added with atomics), so a Lloyd iteration reads back 5·N integers, not
-the raster; :meth:`OpenCLBackend.label` reads the raster.
+:meth:`OpenCLBackend.moments` also sums the moments on the device, added with atomics,
+so a Lloyd iteration reads back 5·N integers, not the raster; :meth:`OpenCLBackend.label`
+reads the raster.  The block kernel sums its own block once per label in it as it writes
+the labels; after the per-pixel kernel, ``row_moments`` sums runs of equal labels per row
+segment.
 
 Two label kernels, the same search: ``label_blocks`` (one work-item per 8x8 block of
 pixels; the default on CPUs, where PoCL vectorises its inner loop over the block's pixels,
@@ -43,6 +45,12 @@ from .base import Backend
 
 KERNEL_FILE = Path(__file__).with_name("opencl_kernels.cl")
 SEGMENT = 64  # pixels of a row per work-item of the moments kernel
+ACC_BYTES = 64  # per site: five 64-bit sums in one cache line (the kernel file says why)
+STRIP = 4  # blocks side by side per work-item of label_blocks: they share their sums
+BLOCK_SIZES = (0, 4, 8, 16)  # label_blocks works a row of a block as one 4-, 8- or 16-wide vector
+# label_blocks' default work-group: PoCL holds the private arrays of all of a group's
+# work-items at once, and its own choice (thousands of them) overflowed a thread's stack
+BLOCK_GROUP = (8, 1)
 REACH_MARGIN = 1e-4  # relative slack on the search bound against float32 rounding
 
 
@@ -194,7 +202,11 @@ class OpenCLBackend(Backend):
     ``device``: "PLATFORM[:DEVICE]" (indices or name fragments); ``split_atomics``: keep
     the moment sums as 32-bit split counters even where 64-bit atomics exist (tests use
     it to check the portable path); ``cell_factor``: grid cell width in average site
-    spacings; ``local_size``: the label kernel's work-group shape (None: the driver's)."""
+    spacings; ``local_size``: the label kernel's work-group shape (None: the driver's for
+    the per-pixel kernel, ``BLOCK_GROUP`` for the block kernel);
+    ``block``: pixels per side of the block kernel's work-item (4, 8 or 16), 0 for the
+    per-pixel kernel, None for the device's default; ``seed``: seed the block search with
+    the last call's labels (False: the plain search, for tests)."""
 
     name = "opencl"
     bytes_per_pixel = (
@@ -211,6 +223,10 @@ class OpenCLBackend(Backend):
         block: int | None = None,
         seed: bool = True,
     ):
+        if block is not None and block not in BLOCK_SIZES:
+            raise InputError(
+                f"opencl: block must be one of {BLOCK_SIZES} (0: a pixel per work-item), got {block!r}"
+            )
         cl = self._cl = _import_pyopencl()
         self._device = choose_device(cl, device)
         try:
@@ -227,6 +243,7 @@ class OpenCLBackend(Backend):
         if block is None:  # CPUs vectorise over a block's pixels; GPUs want a pixel each
             block = 0 if self._device.type & cl.device_type.GPU else 8
         self.block = int(block)
+        self.strip = STRIP
         self._programs: dict[tuple, tuple] = {}  # (kind, K, int64) -> (label, moments kernels)
         self._buffers: dict[str, object] = {}
         self._mask_source = None  # the mask array last uploaded (grids are immutable)
@@ -259,15 +276,16 @@ class OpenCLBackend(Backend):
     # ---------------------------------------------------------------- programs
     def _kernels(self, metric: Metric, k: int):
         """The built (label, moments) kernels for this metric kind; built once."""
-        key = (metric.kind, k, self.int64_atomics, self.block)
+        key = (metric.kind, k, self.int64_atomics, self.block, self.strip)
         if key not in self._programs:
             cl = self._cl
             stride = 8 if metric.kind == "ellipse" else 4 + 2 * k
             opts = [
                 f"-DSTRIDE={stride}",
                 f"-DK={k}",
-                f"-DBW={max(self.block, 1)}",
-                f"-DBH={max(self.block, 1)}",
+                f"-DBW={self.block or 8}",  # label_pixels does not use them
+                f"-DBH={self.block or 8}",
+                f"-DSTRIP={self.strip}",
             ]
             if metric.kind == "ellipse":
                 opts.append("-DMETRIC_ELLIPSE")
@@ -358,8 +376,9 @@ class OpenCLBackend(Backend):
         reach = metric.circumradius * float(scales.max()) * (1 + REACH_MARGIN)
         return records, k, reach
 
-    def _run_labels(self, sites, angles, scales, metric: Metric, grid: Grid):
-        """Enqueue the label kernel; the labels stay in the device buffer 'labels'."""
+    def _run_labels(self, sites, angles, scales, metric: Metric, grid: Grid, acc_buf=None):
+        """Enqueue the label kernel; the labels stay in the device buffer 'labels'.  With
+        ``acc_buf`` (zeroed, block kernel only) the kernel also adds the moments to it."""
         n = len(sites)
         if self._queue is None:
             raise RuntimeError("opencl: this backend was closed; create a new one")
@@ -387,18 +406,29 @@ class OpenCLBackend(Backend):
         np.cumsum(np.bincount(cid, minlength=ncx * ncy), out=starts[1:])
 
         cl = self._cl
-        # per cell: circumradius x the largest scale in it (the kernel's local bound)
-        cell_reach = np.zeros(ncx * ncy, dtype=np.float64)
-        full = starts[1:] > starts[:-1]
-        cell_reach[full] = np.maximum.reduceat(scales[order], starts[:-1][full])
-        cell_reach *= metric.circumradius * (1 + REACH_MARGIN)
         starts_buf = self._upload("cell_start", starts)
-        reach_buf = self._upload("cell_reach", cell_reach.astype(np.float32))
         records_buf = self._upload("records", records[order])
         index_buf = self._upload("site_index", order.astype(np.int32))
-        rank = np.empty(n, dtype=np.int32)
-        rank[order] = np.arange(n, dtype=np.int32)
-        rank_buf = self._upload("site_rank", rank)
+        site_reach = scales[order] * (metric.circumradius * (1 + REACH_MARGIN))
+        # each kernel reads its own bounds; the other's arguments get a placeholder
+        if self.block > 0:
+            # per sorted site: float32 position and its own reach (the box test), and
+            # where each site went (the seeds are site indices)
+            site_pos = np.zeros((n, 4), dtype=np.float32)
+            site_pos[:, :2] = records[order, :2]
+            site_pos[:, 2] = site_reach
+            pos_buf = self._upload("site_pos", site_pos)
+            rank = np.empty(n, dtype=np.int32)
+            rank[order] = np.arange(n, dtype=np.int32)
+            rank_buf = self._upload("site_rank", rank)
+            reach_buf = self._buffer("cell_reach", 4)
+        else:
+            # per cell: circumradius x the largest scale in it (the kernel's local bound)
+            cell_reach = np.zeros(ncx * ncy, dtype=np.float32)
+            full = starts[1:] > starts[:-1]
+            cell_reach[full] = np.maximum.reduceat(site_reach, starts[:-1][full])
+            reach_buf = self._upload("cell_reach", cell_reach)
+            pos_buf, rank_buf = self._buffer("site_pos", 16), self._buffer("site_rank", 4)
         mask_buf = self._buffer("mask", 4)
         # the last call's labels seed the block search when they are of this raster
         # (seeds only speed the search: any index below n gives the same labels)
@@ -418,6 +448,7 @@ class OpenCLBackend(Backend):
             starts_buf,
             reach_buf,
             records_buf,
+            pos_buf,
             index_buf,
             mask_buf,
             np.int32(use_mask),
@@ -425,10 +456,13 @@ class OpenCLBackend(Backend):
             rank_buf,
             np.int32(n),
             np.int32(seed and self.seed),
+            self._buffer("moments", 4) if acc_buf is None else acc_buf,
+            np.int32(acc_buf is not None),
         )
         local = self.local_size
-        if self.block > 0:
-            w, h = -(-w // self.block), -(-h // self.block)  # one work-item per block
+        if self.block > 0:  # one work-item per STRIP blocks of a row
+            w, h = -(-w // (self.block * self.strip)), -(-h // self.block)
+            local = BLOCK_GROUP if local is None else local
         if local is None:
             global_size = (w, h)
         else:
@@ -455,33 +489,40 @@ class OpenCLBackend(Backend):
     def _moments(self, sites, angles, scales, metric: Metric, grid: Grid) -> Moments:
         """Labels and their integer moments on the device; reads back 5·N sums."""
         cl = self._cl
-        labels_buf, n = self._run_labels(sites, angles, scales, metric, grid)
-        k = 0 if metric.kind == "ellipse" else np.asarray(metric.normals).shape[0]
-        _, moments_kernel = self._kernels(metric, k)
-        words = 5 * n if self.int64_atomics else 10 * n
-        acc_buf = self._buffer("moments", 4 * 2 * 5 * n)
-        cl.enqueue_fill_buffer(self._queue, acc_buf, np.uint32(0), 0, 4 * 2 * 5 * n)
-        w, h = grid.width, grid.height
-        moments_kernel.set_args(np.int32(w), np.int32(h), np.int32(SEGMENT), labels_buf, np.int32(n), acc_buf)
-        try:
-            cl.enqueue_nd_range_kernel(self._queue, moments_kernel, (-(-w // SEGMENT), h), None)
-        except cl.Error as exc:
-            raise BackendUnavailable(f"opencl: moments kernel failed on {self.device()}: {exc}") from None
-        if self.int64_atomics:
-            acc = np.empty(words, dtype=np.uint64)
-            self._read(acc, acc_buf)
-            sums = acc.view(np.int64).reshape(5, n)
+        n = len(sites)
+        acc_buf = self._buffer("moments", ACC_BYTES * n)
+        cl.enqueue_fill_buffer(self._queue, acc_buf, np.uint32(0), 0, ACC_BYTES * n)
+        if self.block > 0:  # the block kernel sums its own labels
+            self._run_labels(sites, angles, scales, metric, grid, acc_buf)
         else:
-            acc = np.empty(words, dtype=np.uint32)
-            self._read(acc, acc_buf)
-            lo, hi = acc[: 5 * n].astype(np.int64), acc[5 * n :].astype(np.int64)
-            sums = ((hi << 32) | lo).reshape(5, n)
+            labels_buf, _ = self._run_labels(sites, angles, scales, metric, grid)
+            k = 0 if metric.kind == "ellipse" else np.asarray(metric.normals).shape[0]
+            _, moments_kernel = self._kernels(metric, k)
+            w, h = grid.width, grid.height
+            moments_kernel.set_args(
+                np.int32(w), np.int32(h), np.int32(SEGMENT), labels_buf, np.int32(n), acc_buf
+            )
+            try:
+                cl.enqueue_nd_range_kernel(self._queue, moments_kernel, (-(-w // SEGMENT), h), None)
+            except cl.Error as exc:
+                raise BackendUnavailable(f"opencl: moments kernel failed on {self.device()}: {exc}") from None
+        acc = np.empty((n, ACC_BYTES // 8), dtype=np.uint64)
+        self._read(acc, acc_buf)
+        if self.int64_atomics:
+            sums = acc[:, :5].view(np.int64).T
+        else:  # 32-bit low words, then high words, in one record
+            words = acc.view(np.uint32).astype(np.int64)
+            sums = ((words[:, 8:13] << 32) | words[:, :5]).T
         return Moments(*(np.ascontiguousarray(row) for row in sums))
 
 
 __all__ = [
     "KERNEL_FILE",
     "SEGMENT",
+    "ACC_BYTES",
+    "BLOCK_SIZES",
+    "STRIP",
+    "BLOCK_GROUP",
     "REACH_MARGIN",
     "pocl_cache_dir",
     "cache_problem",

@@ -4,7 +4,7 @@
      METRIC_ELLIPSE        the metric is elliptic (l2, l2-axial); else polygonal
      K                     number of facets of a polygonal metric (3 or 4 here)
      STRIDE                floats per site record (see below)
-     BW, BH                pixels per work-item of label_blocks (8 x 8)
+     BW, BH                pixels per work-item of label_blocks (8 x 8; BW = 4, 8 or 16)
      USE_INT64_ATOMICS     the device has cl_khr_int64_base_atomics; else the moment sums
                            are kept as split 32-bit counters (low word + carries)
 
@@ -24,26 +24,97 @@
 #pragma OPENCL EXTENSION cl_khr_int64_base_atomics : enable
 #endif
 
-/* The distance of a site record from (px, py): d for polygons, d^2 for ellipses
-   (the comparison and the search bound take that into account). */
+/* The distance of a site record at offset v = (vx, vy) from its site: d for polygons,
+   d^2 for ellipses (the comparison and the search bound take that into account).  One
+   expression for one pixel (T = float) and for a row of pixels at one vy (T = a vector
+   type): the block and the pixel kernels give the same labels. */
+#ifdef METRIC_ELLIPSE
+#define DISTANCE_AT_OFFSET(NAME, T)                                                     \
+    inline T NAME(__global const float *rec, const T vx, const float vy)                \
+    {                                                                                   \
+        const T u = rec[4] * vx + rec[5] * vy;                                          \
+        const float w = rec[6] * vy;                                                    \
+        return u * u + w * w;                                                           \
+    }
+#else
+#define DISTANCE_AT_OFFSET(NAME, T)                                                     \
+    inline T NAME(__global const float *rec, const T vx, const float vy)                \
+    {                                                                                   \
+        T d = rec[4] * vx + rec[5] * vy;                                                \
+        _Pragma("unroll") for (int k = 1; k < K; ++k)                                   \
+        {                                                                               \
+            const T e = rec[4 + 2 * k] * vx + rec[5 + 2 * k] * vy;                      \
+            d = e > d ? e : d;                                                          \
+        }                                                                               \
+        return d;                                                                       \
+    }
+#endif
+DISTANCE_AT_OFFSET(offset_distance, float)
+
+/* The distance of a site record from pixel centre (px, py). */
 inline float site_distance(__global const float *rec, const float px, const float py)
 {
-    const float vx = (px - rec[0]) - rec[2];
-    const float vy = (py - rec[1]) - rec[3];
-#ifdef METRIC_ELLIPSE
-    const float u = rec[4] * vx + rec[5] * vy;
-    const float w = rec[6] * vy;
-    return u * u + w * w;
-#else
-    float d = rec[4] * vx + rec[5] * vy;
-#pragma unroll
-    for (int k = 1; k < K; ++k) {
-        const float e = rec[4 + 2 * k] * vx + rec[5 + 2 * k] * vy;
-        d = e > d ? e : d;
-    }
-    return d;
-#endif
+    return offset_distance(rec, (px - rec[0]) - rec[2], (py - rec[1]) - rec[3]);
 }
+
+/* ------------------------------------------------------------------------ moments */
+
+/* A site's five sums share one 64-byte record (one cache line: the five atomics of a
+   run or a block touch one line, not five). */
+#ifdef USE_INT64_ATOMICS
+typedef ulong acc_t;
+inline void add_sum(volatile __global ulong *acc, const int q, const int n, const int site,
+                    const ulong v)
+{
+    atom_add(acc + 8 * site + q, v);
+}
+#else
+typedef uint acc_t;
+/* A 64-bit sum as two 32-bit counters: low words at [16*site + q], high words at
+   [16*site + 8 + q].  Each addition that wraps the low word adds one carry, so
+   total = high * 2^32 + low whatever the order of the atomics. */
+inline void add_sum(volatile __global uint *acc, const int q, const int n, const int site,
+                    const ulong v)
+{
+    const uint vlo = (uint)v;
+    const uint old = atomic_add(acc + 16 * site + q, vlo);
+    const uint carry = old > 0xffffffffu - vlo ? 1u : 0u;
+    const uint vhi = (uint)(v >> 32) + carry;
+    if (vhi)
+        atomic_add(acc + 16 * site + 8 + q, vhi);
+}
+#endif
+
+/* Σ_{j=0..m} j^2 (0 for m < 0) */
+inline ulong sum_squares(const long m)
+{
+    if (m < 0)
+        return 0;
+    const ulong u = (ulong)m;
+    return u * (u + 1) * (2 * u + 1) / 6;
+}
+
+inline void flush_run(volatile __global acc_t *acc, const int n, const int site,
+                      const int a, const int b, const int row)
+{
+    const ulong len = (ulong)(b - a + 1);
+    const ulong r = (ulong)row;
+    add_sum(acc, 0, n, site, len);
+    add_sum(acc, 1, n, site, (ulong)(a + b) * len / 2);
+    add_sum(acc, 2, n, site, r * len);
+    add_sum(acc, 3, n, site, sum_squares(b) - sum_squares((long)a - 1));
+    add_sum(acc, 4, n, site, r * r * len);
+}
+
+/* The arguments of both label kernels, in the order the host sets them. */
+#define LABEL_KERNEL_ARGS                                                               \
+    const int width, const int height, const int ncx, const int ncy, const float cell,  \
+        const float reach, const float slack, __global const int *cell_start,           \
+        __global const float *cell_reach, __global const float *records,                \
+        __global const float4 *site_pos,                                                \
+        __global const int *site_index, __global const uchar *mask, const int use_mask, \
+        __global int *labels, __global const int *site_rank, const int n, const int seed, \
+        volatile __global acc_t *acc, const int sums
 
 /* One work-item per pixel: the nearest site, searched over a uniform grid of cells ring
    by ring (Chebyshev rings of cells around the pixel's cell).
@@ -59,19 +130,11 @@ inline float site_distance(__global const float *rec, const float px, const floa
    `slack` (pixels, from the host) an absolute one against float32 rounding (of d, and of
    cell edges far from the origin), so near-ties are always evaluated and go to the lower
    index. */
-__kernel void label_pixels(const int width, const int height,
-                           const int ncx, const int ncy, const float cell,
-                           const float reach, const float slack,
-                           __global const int *cell_start,
-                           __global const float *cell_reach,
-                           __global const float *records,
-                           __global const int *site_index,
-                           __global const uchar *mask, const int use_mask,
-                           __global int *labels,
-                           __global const int *site_rank, const int n, const int seed)
+__kernel void label_pixels(LABEL_KERNEL_ARGS)
 {
-    /* site_rank, n, seed: label_blocks' seeds (not used here: one pixel's search is
-       already short, and a GPU runs it one lane per pixel) */
+    /* site_pos, site_rank, n, seed: label_blocks' site boxes and seeds (not used here:
+       one pixel's search is already short, and a GPU runs it one lane per pixel); acc,
+       sums: label_blocks' moments (here row_moments sums them) */
     const int j = get_global_id(0);
     const int i = get_global_id(1);
     if (j >= width || i >= height)
@@ -152,11 +215,10 @@ __kernel void label_pixels(const int width, const int height,
     labels[pix] = best_idx;
 }
 
-/* The same search for CPUs: one work-item per BW x BH block of pixels.  Every pixel of
-   the block visits the same sites, so the innermost loop runs over the block's pixels for
-   one site with a fixed trip count and no dependence between iterations: the compiler
-   vectorises it (a per-pixel loop over sites, as in label_pixels, is a serial argmin that
-   CPUs run one lane wide).
+/* The same search for CPUs: one work-item per STRIP blocks of BW x BH pixels side by
+   side.  Every pixel of a block visits the same sites, so the innermost loop runs over
+   the block's pixels for one site, a row as one vector (a per-pixel loop over sites, as
+   in label_pixels, is a serial argmin that CPUs run one lane wide).
 
    The search is the ring search above, with two cuts that leave the result unchanged
    (the nearest site under (d, index) does not depend on the order sites are tried, and
@@ -166,34 +228,92 @@ __kernel void label_pixels(const int width, const int height,
      sites) are tried first, so the bound is tight from the start; a Lloyd step moves
      sites little, and those sites are usually the owners again;
    - every site is tested on its own against the block's box (its distance to the box
-     of pixel centres against its cell's reach times the largest best d of the block),
-     not only its cell.
-   The block stops after the first ring at which every pixel inside the region is done
-   by the bound above. */
+     of pixel centres against its own reach times the largest best d of the block),
+     not only its cell; the sites near a strip are listed once for its blocks.
+   Without seeds, a block searches rings of cells until one held a site; then the
+   bound above decides which further sites are tried (step 3, label_blocks). */
 
-/* Try one site on every pixel of the block (the vectorised loop). */
-#define TRY_SITE(REC, IDX)                                                              \
-    for (int yy = 0; yy < BH; ++yy) {                                                   \
-        const float py = (float)(y0 + yy) + 0.5f;                                       \
-        for (int xx = 0; xx < BW; ++xx) {                                               \
-            const float px = (float)(x0 + xx) + 0.5f;                                   \
-            const float d = site_distance((REC), px, py);                               \
-            const float b = best[yy][xx];                                               \
-            const int better = d < b || (d == b && (IDX) < best_idx[yy][xx]);           \
-            best[yy][xx] = better ? d : b;                                              \
-            best_idx[yy][xx] = better ? (IDX) : best_idx[yy][xx];                       \
+/* A row of a block as one BW-wide vector (BW = 4, 8 or 16): the searches and sums below
+   work a row at a time, which PoCL's loop vectoriser does not always find on its own. */
+#define CAT_(a, b) a##b
+#define CAT(a, b) CAT_(a, b)
+typedef CAT(int, BW) rowi;
+typedef CAT(uint, BW) rowu;
+typedef CAT(float, BW) rowf;
+#define load_row CAT(vload, BW)
+__constant int LANES[16] = {0, 1, 2, 3, 4, 5, 6, 7, 8, 9, 10, 11, 12, 13, 14, 15};
+
+/* the largest, the sum and the smallest of a row's lanes, by halving */
+inline float hmaxf(rowf v)
+{
+#if BW == 16
+    const float8 a = v.lo > v.hi ? v.lo : v.hi;
+    const float4 b = a.lo > a.hi ? a.lo : a.hi;
+#elif BW == 8
+    const float4 b = v.lo > v.hi ? v.lo : v.hi;
+#else
+    const float4 b = v;
+#endif
+    const float2 c = b.lo > b.hi ? b.lo : b.hi;
+    return c.x > c.y ? c.x : c.y;
+}
+
+inline int hsum(rowi v)
+{
+#if BW == 16
+    const int4 b = (v.lo + v.hi).lo + (v.lo + v.hi).hi;
+#elif BW == 8
+    const int4 b = v.lo + v.hi;
+#else
+    const int4 b = v;
+#endif
+    const int2 c = b.lo + b.hi;
+    return c.x + c.y;
+}
+
+inline uint hmin(rowu v)
+{
+#if BW == 16
+    const uint4 b = min(min(v.lo, v.hi).lo, min(v.lo, v.hi).hi);
+#elif BW == 8
+    const uint4 b = min(v.lo, v.hi);
+#else
+    const uint4 b = v;
+#endif
+    const uint2 c = min(b.lo, b.hi);
+    return min(c.x, c.y);
+}
+
+DISTANCE_AT_OFFSET(row_distance, rowf)
+
+/* Try one site on every pixel of a block, a row at a time (BEST, BEST_IDX: the block's
+   bests; PXS: its pixel x centres; Y0: its top row). */
+#define TRY_SITE(BEST, BEST_IDX, PXS, Y0, REC, IDX)                                     \
+    {                                                                                   \
+        __global const float *rec_ = (REC);                                             \
+        const int idx_ = (IDX);                                                         \
+        const rowf vx_ = ((PXS) - rec_[0]) - rec_[2];                                   \
+        for (int yy = 0; yy < BH; ++yy) {                                               \
+            const float vy_ = (((float)((Y0) + yy) + 0.5f) - rec_[1]) - rec_[3];        \
+            const rowf d = row_distance(rec_, vx_, vy_);                                \
+            const rowf b = load_row(0, (BEST)[yy]);                                     \
+            const rowi bi = load_row(0, (BEST_IDX)[yy]);                                \
+            const rowi better = d < b | (d == b & idx_ < bi);                           \
+            CAT(vstore, BW)(better ? d : b, 0, (BEST)[yy]);                             \
+            CAT(vstore, BW)(better ? (rowi)(idx_) : bi, 0, (BEST_IDX)[yy]);              \
         }                                                                               \
     }
 
 /* The largest best d over the block's live pixels, as a distance (sqrt for ellipses). */
 inline float worst_of(const float best[BH][BW], const int live[BH][BW])
 {
-    float worst = 0.0f;
-    for (int yy = 0; yy < BH; ++yy)
-        for (int xx = 0; xx < BW; ++xx) {
-            const float b = live[yy][xx] ? best[yy][xx] : 0.0f;
-            worst = b > worst ? b : worst;
-        }
+    rowf wv = 0.0f;
+    for (int yy = 0; yy < BH; ++yy) {
+        const rowf b = load_row(0, best[yy]);
+        const rowf bl = load_row(0, live[yy]) != 0 ? b : (rowf)(0.0f);
+        wv = bl > wv ? bl : wv;
+    }
+    const float worst = hmaxf(wv);
 #ifdef METRIC_ELLIPSE
     return sqrt(worst);
 #else
@@ -201,40 +321,109 @@ inline float worst_of(const float best[BH][BW], const int live[BH][BW])
 #endif
 }
 
-__kernel void label_blocks(const int width, const int height,
-                           const int ncx, const int ncy, const float cell,
-                           const float reach, const float slack,
-                           __global const int *cell_start,
-                           __global const float *cell_reach,
-                           __global const float *records,
-                           __global const int *site_index,
-                           __global const uchar *mask, const int use_mask,
-                           __global int *labels,
-                           __global const int *site_rank, const int n, const int seed)
+/* The moments of a work-item's blocks: each block is summed once per label in it (a
+   block spans a few cells): each pass takes the lowest label not yet summed and sums all
+   its pixels at once, in block-local coordinates that fit an int, shifted to the
+   raster's origin in 64 bits.  The sums gather in a small table of the work-item's
+   labels (its blocks share most of them) and go to the device's sums with one atomic
+   each when the table is full and at the end: a few atomics per label and work-item,
+   not one per run of a row (row_moments), and the labels are not read back. */
+#define TABLE 8
+typedef struct {
+    int used;
+    int site[TABLE];
+    ulong sum[TABLE][5];
+} sums_table;
+
+inline void flush_table(volatile __global acc_t *acc, const int n, sums_table *t)
 {
-    const int x0 = get_global_id(0) * BW;
-    const int y0 = get_global_id(1) * BH;
-    if (x0 >= width || y0 >= height)
-        return;
+    for (int e = 0; e < t->used; ++e)
+        for (int q = 0; q < 5; ++q)
+            add_sum(acc, q, n, t->site[e], t->sum[e][q]);
+    t->used = 0;
+}
+
+inline void block_sums(volatile __global acc_t *acc, const int n, sums_table *t,
+                       const int best_idx[BH][BW], const int live[BH][BW], const int x0,
+                       const int y0)
+{
+    const rowi xs = load_row(0, LANES), xs2 = xs * xs;
+    rowi lab[BH]; /* -1: outside the region, or summed already */
+    for (int yy = 0; yy < BH; ++yy)
+        lab[yy] = load_row(0, best_idx[yy]) | (load_row(0, live[yy]) == 0);
+    for (;;) {
+        rowu low = (rowu)(0xffffffffu); /* -1 as unsigned is above every label */
+        for (int yy = 0; yy < BH; ++yy)
+            low = min(low, CAT(as_uint, BW)(lab[yy]));
+        const int site = (int)hmin(low);
+        if (site == -1)
+            break;
+        rowi c = 0, sy = 0, syy = 0; /* per lane (column): count, Σ yy, Σ yy² */
+        for (int yy = 0; yy < BH; ++yy) {
+            const rowi m = lab[yy] == site; /* -1 where this label */
+            c -= m;
+            sy += m & yy;
+            syy += m & (yy * yy);
+            lab[yy] |= m;
+        }
+        const rowi sx = c * xs, sxx = c * xs2;
+        int e = 0;
+        while (e < t->used && t->site[e] != site)
+            ++e;
+        if (e == TABLE) {
+            flush_table(acc, n, t);
+            e = 0;
+        }
+        if (e == t->used) {
+            t->used = e + 1;
+            t->site[e] = site;
+            for (int q = 0; q < 5; ++q)
+                t->sum[e][q] = 0;
+        }
+        const ulong len = (ulong)hsum(c), X = (ulong)x0, Y = (ulong)y0;
+        const ulong lx = (ulong)hsum(sx), lxx = (ulong)hsum(sxx);
+        const ulong ly = (ulong)hsum(sy), lyy = (ulong)hsum(syy);
+        t->sum[e][0] += len;
+        t->sum[e][1] += len * X + lx;
+        t->sum[e][2] += len * Y + ly;
+        t->sum[e][3] += len * X * X + 2 * X * lx + lxx;
+        t->sum[e][4] += len * Y * Y + 2 * Y * ly + lyy;
+    }
+}
+
+/* Steps 1 and 2 of the block at (x0, y0): its live pixels, its seeds and their bests,
+   or the rings' without seeds.  0 if no pixel of it is live (its labels are written). */
+inline int start_block(const int width, const int height, const int ncx, const int ncy,
+                       const float cell, __global const int *cell_start,
+                       __global const float *records, __global const int *site_index,
+                       __global const uchar *mask, const int use_mask, __global int *labels,
+                       __global const int *site_rank, const int n, const int seed, const int x0,
+                       const int y0, float best[BH][BW], int best_idx[BH][BW], int live[BH][BW],
+                       int seeds[4])
+{
     const int xn = x0 + BW < width ? BW : width - x0; /* pixels of the block inside */
     const int yn = y0 + BH < height ? BH : height - y0;
 
-    /* which pixels count: inside the raster and the region */
-    int live[BH][BW];
-    int any_live = 0;
-    for (int yy = 0; yy < BH; ++yy)
-        for (int xx = 0; xx < BW; ++xx) {
-            int in = xx < xn && yy < yn;
-            if (in && use_mask)
-                in = mask[(y0 + yy) * width + x0 + xx] != 0;
-            live[yy][xx] = in;
-            any_live |= in;
+    /* which pixels count: inside the raster and the region (1, else 0) */
+    const rowi lanes = load_row(0, LANES);
+    rowi any = 0;
+    for (int yy = 0; yy < BH; ++yy) {
+        rowi in = (lanes < xn) & (rowi)(yy < yn ? -1 : 0); /* -1 where live */
+        if (use_mask && yy < yn) {
+            if (xn == BW)
+                in &= CAT(convert_int, BW)(CAT(vload, BW)(0, mask + (y0 + yy) * width + x0)) != 0;
+            else
+                for (int xx = 0; xx < xn; ++xx)
+                    in = mask[(y0 + yy) * width + x0 + xx] != 0 ? in : in & (lanes != xx);
         }
-    if (!any_live) {
+        CAT(vstore, BW)(-in, 0, live[yy]);
+        any |= in;
+    }
+    if (hsum(any) == 0) {
         for (int yy = 0; yy < yn; ++yy)
             for (int xx = 0; xx < xn; ++xx)
                 labels[(y0 + yy) * width + x0 + xx] = -1;
-        return;
+        return 0;
     }
 
     int cx0 = (int)(((float)x0 + 0.5f) / cell), cx1 = (int)(((float)(x0 + xn - 1) + 0.5f) / cell);
@@ -244,20 +433,16 @@ __kernel void label_blocks(const int width, const int height,
     cy0 = cy0 < ncy ? cy0 : ncy - 1;
     cy1 = cy1 < ncy ? cy1 : ncy - 1;
 
-    float best[BH][BW];
-    int best_idx[BH][BW];
-    for (int yy = 0; yy < BH; ++yy)
-        for (int xx = 0; xx < BW; ++xx) {
-            best[yy][xx] = INFINITY;
-            best_idx[yy][xx] = 0x7fffffff;
-        }
+    for (int yy = 0; yy < BH; ++yy) {
+        CAT(vstore, BW)((rowf)(INFINITY), 0, best[yy]);
+        CAT(vstore, BW)((rowi)(0x7fffffff), 0, best_idx[yy]);
+    }
 
-    /* the box of the block's pixel centres */
-    const float box_x0 = (float)x0 + 0.5f, box_x1 = (float)(x0 + xn - 1) + 0.5f;
-    const float box_y0 = (float)y0 + 0.5f, box_y1 = (float)(y0 + yn - 1) + 0.5f;
+    const rowf pxs = CAT(convert_float, BW)(x0 + load_row(0, LANES)) + 0.5f;
 
     /* 1. the previous owners of the corners (any valid index is a safe seed) */
-    int seeds[4] = {-1, -1, -1, -1};
+    for (int q = 0; q < 4; ++q)
+        seeds[q] = -1;
     int tried = 0;
     if (seed) {
         const int corner[4] = {y0 * width + x0, y0 * width + x0 + xn - 1,
@@ -271,13 +456,12 @@ __kernel void label_blocks(const int width, const int height,
                 seeds[q] = l;
                 tried = 1;
                 __global const float *rec = records + site_rank[l] * STRIDE;
-                TRY_SITE(rec, l)
+                TRY_SITE(best, best_idx, pxs, y0, rec, l)
             }
         }
     }
     /* 2. without seeds: every site of the rings of cells around the block, until one
        ring held a site (then every pixel has a finite best) */
-    int rings = -1; /* rings 0..rings are searched whole */
     for (int r = 0; !tried; ++r) {
         const int bx0 = cx0 - r, bx1 = cx1 + r, by0 = cy0 - r, by1 = cy1 + r;
         const int inner = bx1 - bx0;
@@ -291,21 +475,55 @@ __kernel void label_blocks(const int width, const int height,
                 for (int s = cell_start[c]; s < s1; ++s) {
                     __global const float *rec = records + s * STRIDE;
                     const int idx = site_index[s];
-                    TRY_SITE(rec, idx)
+                    TRY_SITE(best, best_idx, pxs, y0, rec, idx)
                     tried = 1;
                 }
             }
         }
-        rings = r;
         if (bx0 <= 0 && by0 <= 0 && bx1 >= ncx - 1 && by1 >= ncy - 1)
             break; /* the whole grid */
     }
-    /* 3. every site that can win or tie at a pixel x lies within reach * d(x) <=
-       reach * worst of it, so within `ext` of the box: the cells under the box grown by
-       `ext` hold them all.  Each cell, then each site, is tested against the block's
-       current worst best (which only falls as sites are tried). */
-    float worst_dist = worst_of(best, live);
-    const float ext = reach * worst_dist + 2.0f * slack;
+    return 1;
+}
+
+/* One work-item per STRIP blocks side by side in a row of blocks: steps 1 and 2 per
+   block, then step 3 for all of them at once, then their labels and sums.
+
+   3. every site that can win or tie at a pixel x of a block lies within reach * d(x) <=
+   reach * worst of the block, so within `ext` of the block's box: the cells under the
+   strip's box grown by the largest `ext` hold them all.  A row of those cells is one run
+   of the sorted sites; each site is tested by its own reach against each block's
+   current worst best (which only falls as sites are tried), and tried on the blocks it
+   may change.  A site tried twice on a block (a seed, or a ring's in step 2) changes
+   nothing the second time. */
+__kernel void label_blocks(LABEL_KERNEL_ARGS)
+{
+    const int y0 = get_global_id(1) * BH;
+    const int xs0 = get_global_id(0) * STRIP * BW;
+    if (y0 >= height || xs0 >= width)
+        return;
+    const int yn = y0 + BH < height ? BH : height - y0;
+    float best[STRIP][BH][BW];
+    int best_idx[STRIP][BH][BW], live[STRIP][BH][BW], seeds[STRIP][4];
+    float worst[STRIP], bx0[STRIP], bx1[STRIP];
+    int on[STRIP];
+    float ext = 0.0f;
+    for (int g = 0; g < STRIP; ++g) {
+        const int x0 = xs0 + g * BW;
+        on[g] = x0 < width && start_block(width, height, ncx, ncy, cell, cell_start, records,
+                                          site_index, mask, use_mask, labels, site_rank, n,
+                                          seed, x0, y0, best[g], best_idx[g], live[g], seeds[g]);
+        if (!on[g])
+            continue;
+        const int xn = x0 + BW < width ? BW : width - x0;
+        bx0[g] = (float)x0 + 0.5f; /* the box of the block's pixel centres in x */
+        bx1[g] = (float)(x0 + xn - 1) + 0.5f;
+        worst[g] = worst_of(best[g], live[g]);
+        const float e = reach * worst[g] + 2.0f * slack;
+        ext = e > ext ? e : ext;
+    }
+    const float box_x0 = (float)xs0 + 0.5f, box_y0 = (float)y0 + 0.5f;
+    const float box_x1 = (float)(xs0 + STRIP * BW - 1) + 0.5f, box_y1 = (float)(y0 + yn - 1) + 0.5f;
     int gx0 = (int)floor((box_x0 - ext) / cell), gx1 = (int)floor((box_x1 + ext) / cell);
     int gy0 = (int)floor((box_y0 - ext) / cell), gy1 = (int)floor((box_y1 + ext) / cell);
     gx0 = gx0 > 0 ? gx0 : 0;
@@ -313,85 +531,45 @@ __kernel void label_blocks(const int width, const int height,
     gx1 = gx1 < ncx - 1 ? gx1 : ncx - 1;
     gy1 = gy1 < ncy - 1 ? gy1 : ncy - 1;
     for (int gy = gy0; gy <= gy1; ++gy) {
-        const float top = gy * cell, bottom = (gy + 1) * cell;
-        const float gapy = box_y1 < top ? top - box_y1 : (box_y0 > bottom ? box_y0 - bottom : 0.0f);
-        const int in_rows = gy >= cy0 - rings && gy <= cy1 + rings;
-        for (int gx = gx0; gx <= gx1; ++gx) {
-            if (in_rows && gx >= cx0 - rings && gx <= cx1 + rings)
-                continue; /* searched whole in step 2 */
-            const int c = gy * ncx + gx;
-            const float left = gx * cell, right = (gx + 1) * cell;
-            const float gapx = box_x1 < left ? left - box_x1 : (box_x0 > right ? box_x0 - right : 0.0f);
-            const float cell_lim = cell_reach[c] * worst_dist + slack;
-            if (gapx * gapx + gapy * gapy > cell_lim * cell_lim)
-                continue;
-            const int s1 = cell_start[c + 1];
-            for (int s = cell_start[c]; s < s1; ++s) {
-                __global const float *rec = records + s * STRIDE;
-                const int idx = site_index[s];
-                if (idx == seeds[0] || idx == seeds[1] || idx == seeds[2] || idx == seeds[3])
-                    continue; /* tried in step 1 */
-                const float sx = rec[0], sy = rec[1];
-                const float gx_s = sx < box_x0 ? box_x0 - sx : (sx > box_x1 ? sx - box_x1 : 0.0f);
-                const float gy_s = sy < box_y0 ? box_y0 - sy : (sy > box_y1 ? sy - box_y1 : 0.0f);
-                const float lim = cell_reach[c] * worst_dist + slack;
-                if (gx_s * gx_s + gy_s * gy_s > lim * lim)
+        const int s1 = cell_start[gy * ncx + gx1 + 1];
+        for (int s = cell_start[gy * ncx + gx0]; s < s1; ++s) {
+            const float4 p = site_pos[s]; /* x, y, reach of the site */
+            const float gy_s = p.y < box_y0 ? box_y0 - p.y : (p.y > box_y1 ? p.y - box_y1 : 0.0f);
+            int idx = -1;
+            for (int g = 0; g < STRIP; ++g) {
+                const float gx_s = p.x < bx0[g] ? bx0[g] - p.x : (p.x > bx1[g] ? p.x - bx1[g] : 0.0f);
+                const float lim = p.z * worst[g] + slack;
+                if (!on[g] || gx_s * gx_s + gy_s * gy_s > lim * lim)
                     continue;
-                TRY_SITE(rec, idx)
-                worst_dist = worst_of(best, live);
+                idx = idx < 0 ? site_index[s] : idx;
+                if (idx == seeds[g][0] || idx == seeds[g][1] || idx == seeds[g][2] || idx == seeds[g][3])
+                    continue; /* tried in step 1 */
+                const rowf pxs = CAT(convert_float, BW)(xs0 + g * BW + load_row(0, LANES)) + 0.5f;
+                TRY_SITE(best[g], best_idx[g], pxs, y0, records + s * STRIDE, idx)
+                worst[g] = worst_of(best[g], live[g]);
             }
         }
     }
-    for (int yy = 0; yy < yn; ++yy)
-        for (int xx = 0; xx < xn; ++xx)
-            labels[(y0 + yy) * width + x0 + xx] = live[yy][xx] ? best_idx[yy][xx] : -1;
-}
-
-/* ------------------------------------------------------------------------ moments */
-
-#ifdef USE_INT64_ATOMICS
-typedef ulong acc_t;
-inline void add_sum(volatile __global ulong *acc, const int q, const int n, const int site,
-                    const ulong v)
-{
-    atom_add(acc + q * n + site, v);
-}
-#else
-typedef uint acc_t;
-/* A 64-bit sum as two 32-bit counters: low words at [q*n + site], high words at
-   [5n + q*n + site].  Each addition that wraps the low word adds one carry, so
-   total = high * 2^32 + low whatever the order of the atomics. */
-inline void add_sum(volatile __global uint *acc, const int q, const int n, const int site,
-                    const ulong v)
-{
-    const uint vlo = (uint)v;
-    const uint old = atomic_add(acc + q * n + site, vlo);
-    const uint carry = old > 0xffffffffu - vlo ? 1u : 0u;
-    const uint vhi = (uint)(v >> 32) + carry;
-    if (vhi)
-        atomic_add(acc + 5 * n + q * n + site, vhi);
-}
-#endif
-
-/* Σ_{j=0..m} j^2 (0 for m < 0) */
-inline ulong sum_squares(const long m)
-{
-    if (m < 0)
-        return 0;
-    const ulong u = (ulong)m;
-    return u * (u + 1) * (2 * u + 1) / 6;
-}
-
-inline void flush_run(volatile __global acc_t *acc, const int n, const int site,
-                      const int a, const int b, const int row)
-{
-    const ulong len = (ulong)(b - a + 1);
-    const ulong r = (ulong)row;
-    add_sum(acc, 0, n, site, len);
-    add_sum(acc, 1, n, site, (ulong)(a + b) * len / 2);
-    add_sum(acc, 2, n, site, r * len);
-    add_sum(acc, 3, n, site, sum_squares(b) - sum_squares((long)a - 1));
-    add_sum(acc, 4, n, site, r * r * len);
+    sums_table table;
+    table.used = 0;
+    for (int g = 0; g < STRIP; ++g) {
+        if (!on[g])
+            continue;
+        const int x0 = xs0 + g * BW;
+        const int xn = x0 + BW < width ? BW : width - x0;
+        for (int yy = 0; yy < yn; ++yy) {
+            const rowi row = load_row(0, live[g][yy]) != 0 ? load_row(0, best_idx[g][yy]) : (rowi)(-1);
+            if (xn == BW)
+                CAT(vstore, BW)(row, 0, labels + (y0 + yy) * width + x0);
+            else
+                for (int xx = 0; xx < xn; ++xx)
+                    labels[(y0 + yy) * width + x0 + xx] = live[g][yy][xx] ? best_idx[g][yy][xx] : -1;
+        }
+        if (sums)
+            block_sums(acc, n, &table, best_idx[g], live[g], x0, y0);
+    }
+    if (sums)
+        flush_table(acc, n, &table);
 }
 
 /* Per-site integer sums (count, Σj, Σi, Σj², Σi²) of the label raster.  One work-item

@@ -1,11 +1,23 @@
 """The one Lloyd timing harness of the speed reports (``cvtbench backends``) and the
 regression checks (``cvtbench regress``): a problem of uniform random sites, and a
 stepper that runs the suite's own Lloyd step (:func:`cvt.lloyd.lloyd_step`) from its
-evolving sites and returns the seconds of each step."""
+evolving sites and returns the seconds of each step.
+
+:func:`speed_ratio` times two backends on the same problem in one process, rounds
+alternating, for the speed targets stated as "x times backend B" (the machine may be
+shared: a ratio measured in one run carries over, absolute times do not).  From the shell::
+
+    python -m compact_distributions.bench.timing --backend opencl --against ckdtree \
+        --metrics l2,linf --elements 4000 --size 1024
+"""
 
 from __future__ import annotations
 
+import argparse
+import os
 import time
+
+import numpy as np
 
 
 def timing_problem(metric_name: str, n_elements: int, size: int, seed: int = 0):
@@ -44,4 +56,63 @@ def time_lloyd(
     return [step() for _ in range(repeats)]
 
 
-__all__ = ["timing_problem", "LloydStepper", "time_lloyd"]
+def speed_ratio(
+    backend,
+    against,
+    metric_name: str,
+    n_elements: int,
+    size: int,
+    warmup: int = 3,
+    repeats: int = 7,
+    rounds: int = 3,
+) -> dict:
+    """Median seconds per Lloyd iteration of ``backend`` and ``against`` (live backends) on
+    one problem, and their ratio (``against`` / ``backend``: how many times faster).
+
+    Each round runs :func:`time_lloyd` (``warmup`` + ``repeats`` iterations from the
+    seeded sites) on one backend, then on the other, so both see the same load; the
+    medians are over every timed iteration of every round, ``ratios`` per round."""
+    mine, theirs, ratios = [], [], []
+    for _ in range(rounds):
+        a = time_lloyd(backend, metric_name, n_elements, size, warmup, repeats)
+        b = time_lloyd(against, metric_name, n_elements, size, warmup, repeats)
+        mine += a
+        theirs += b
+        ratios.append(float(np.median(b) / np.median(a)))
+    med_a, med_b = float(np.median(mine)), float(np.median(theirs))
+    return {"seconds": med_a, "against_seconds": med_b, "ratio": med_b / med_a, "ratios": ratios}
+
+
+def main(argv=None) -> int:
+    """Print the medians and the ratio of :func:`speed_ratio` for each metric."""
+    from compact_distributions.backends import create_backend
+
+    p = argparse.ArgumentParser(prog="python -m compact_distributions.bench.timing", description=__doc__)
+    p.add_argument("--backend", default="opencl")
+    p.add_argument("--against", default="ckdtree")
+    p.add_argument("--metrics", default="l2,linf")
+    p.add_argument("--elements", type=int, default=4000)
+    p.add_argument("--size", type=int, default=1024)
+    p.add_argument("--warmup", type=int, default=3)
+    p.add_argument("--repeats", type=int, default=7)
+    p.add_argument("--rounds", type=int, default=3)
+    args = p.parse_args(argv)
+    with create_backend(args.backend) as mine, create_backend(args.against) as theirs:
+        print(f"{args.backend}: {mine.device()}\n{args.against}: {theirs.device()}")
+        for metric in args.metrics.split(","):
+            r = speed_ratio(
+                mine, theirs, metric, args.elements, args.size, args.warmup, args.repeats, args.rounds
+            )
+            load = ", ".join(f"{v:.2f}" for v in os.getloadavg())
+            print(
+                f"{metric}, N = {args.elements}, {args.size}²: {args.backend} {r['seconds'] * 1e3:.2f} ms, "
+                f"{args.against} {r['against_seconds'] * 1e3:.1f} ms, ratio {r['ratio']:.1f}x "
+                f"(rounds: {', '.join(f'{x:.1f}x' for x in r['ratios'])}; load {load})"
+            )
+    return 0
+
+
+__all__ = ["timing_problem", "LloydStepper", "time_lloyd", "speed_ratio", "main"]
+
+if __name__ == "__main__":
+    raise SystemExit(main())

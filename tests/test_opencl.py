@@ -144,11 +144,17 @@ def test_exact_ties_across_cells_go_to_the_lower_index(backends, name, kernel):
     assert (lab[:, 30] == 0).all() and (lab[:20, 29] == 1).all() and (lab[:, 31] == 0).all()
 
 
+@pytest.mark.parametrize("kernel", KERNELS)
 @pytest.mark.parametrize("split", [False, True], ids=["native", "split32"])
 @pytest.mark.parametrize("name", ["l2", "linf", "triangle"])
-def test_device_moments_equal_host_sums_of_device_labels(name, split):
-    sites, angles, scales, metric, grid = random_case(name, True, seed=5)
-    ocl = OpenCLBackend(split_atomics=split)
+@pytest.mark.parametrize("n", [300, 6000], ids=["sparse", "dense"])
+def test_device_moments_equal_host_sums_of_device_labels(name, split, kernel, n):
+    """The block kernel sums its own labels, the pixel kernel's are summed by row runs:
+    both must give the host's sums of the labels exactly (the raster is not a multiple
+    of the block, and the region is not a rectangle).  Dense sites put more labels in
+    a work-item's blocks than its table of sums holds."""
+    sites, angles, scales, metric, grid = random_case(name, True, seed=5, w=251, h=189, n=n)
+    ocl = OpenCLBackend(split_atomics=split, block=KERNELS[kernel])
     try:
         labels = ocl.label(sites, angles=angles, scales=scales, metric=metric, grid=grid)
         got = ocl.moments(sites, angles=angles, scales=scales, metric=metric, grid=grid)
@@ -159,11 +165,33 @@ def test_device_moments_equal_host_sums_of_device_labels(name, split):
         np.testing.assert_array_equal(getattr(got, field), getattr(want, field), err_msg=field)
 
 
+@pytest.mark.parametrize("block", [4, 16])
+@pytest.mark.parametrize("name", ["l2", "linf", "hexagon"])
+def test_every_block_size_gives_the_pixel_kernels_labels_and_sums(backends, name, block):
+    """Rows of 4 or 16 lanes: labels bit-identical to the per-pixel kernel (the same
+    float expression, one pixel at a time), sums equal to the host's sums of them."""
+    sites, angles, scales, metric, grid = random_case(name, True, seed=8, w=203, h=149)
+    args = dict(angles=angles, scales=scales, metric=metric, grid=grid)
+    want = backends["pixels"].label(sites, **args)
+    with OpenCLBackend(block=block) as ocl:
+        mom = ocl.moments(sites, **args)
+        np.testing.assert_array_equal(ocl.label(sites, **args), want)
+    host = moments_from_labels(want, len(sites))
+    for field in ("count", "sx", "sy", "sxx", "syy"):
+        np.testing.assert_array_equal(getattr(mom, field), getattr(host, field), err_msg=field)
+
+
+def test_block_size_without_a_vector_width_is_an_input_error():
+    with pytest.raises(InputError, match="block"):
+        OpenCLBackend(block=6)
+
+
+@pytest.mark.parametrize("kernel", KERNELS)
 @pytest.mark.parametrize("split", [False, True], ids=["native", "split32"])
-def test_moment_sums_past_32_bits(split):
+def test_moment_sums_past_32_bits(split, kernel):
     """One site owning a 4096 x 300 raster: Σj² = 300·Σ_{j<4096} j² ≈ 6.9e12, and the
     split counters wrap their low word many times."""
-    ocl = OpenCLBackend(split_atomics=split)
+    ocl = OpenCLBackend(split_atomics=split, block=KERNELS[kernel])
     try:
         mom = ocl.moments(np.array([[5.0, 5.0]]), metric=make_metric("l2"), grid=Grid(4096, 300))
     finally:
@@ -418,20 +446,43 @@ def test_a_device_that_cannot_compile_is_passed_over_or_refused(monkeypatch):
 
 
 @pytest.mark.parametrize("name", ["l2", "linf", "triangle", "l2-axial", "hexagon"])
-def test_seeded_search_gives_the_unseeded_labels_over_lloyd_iterations(name):
+@pytest.mark.parametrize("n", [200, 2200], ids=["cells-wider-than-half-a-block", "cells-narrower"])
+def test_seeded_search_gives_the_unseeded_labels_over_lloyd_iterations(reference, name, n):
     """The block search seeded by the last call's labels only tightens its bound: over
     Lloyd iterations (random, then relaxing sites; angles and sizes varied) the labels,
-    and so the sites, are bit-identical to a search with no seeds."""
+    and so the sites, are bit-identical to a search with no seeds and to the per-pixel
+    kernel (its own search, the same float expression), also when the seeds are labels
+    of other sites, and when a grid cell is narrower than half an 8x8 block (a block
+    then covers cells that no ring searched whole)."""
     rng = np.random.default_rng(11)
-    w, h, n = 160, 128, 200
+    w, h = 160, 128
     field = DirectionField.from_angles(rng.uniform(-np.pi, np.pi, (h, w)))
     density = DensityMap(rng.uniform(0.3, 1.0, (h, w)))
     problem = Problem(Grid(w, h), n, make_metric(name), density=density, field=field, seed=5)
     with OpenCLBackend(seed=True) as seeded, OpenCLBackend(seed=False) as plain:
-        a, b = lloyd(problem, seeded, 6), lloyd(problem, plain, 6)
+        a, b = lloyd(problem, seeded, 5), lloyd(problem, plain, 5)
         np.testing.assert_array_equal(a.sites, b.sites)
-        sites, angles, scales = a.sites, a.angles, a.scales
-        for _ in range(2):  # the second call is seeded by the first
-            got = seeded.label(sites, angles=angles, scales=scales, metric=problem.metric, grid=problem.grid)
-        want = plain.label(sites, angles=angles, scales=scales, metric=problem.metric, grid=problem.grid)
-        np.testing.assert_array_equal(got, want)
+        with OpenCLBackend(block=0) as pixels:
+            np.testing.assert_array_equal(a.sites, lloyd(problem, pixels, 5).sites)
+        args = dict(angles=a.angles, scales=a.scales, metric=problem.metric, grid=problem.grid)
+        seeded.label(a.sites + rng.normal(0, 1.5, a.sites.shape), **args)  # seeds of other sites
+        got = seeded.label(a.sites, **args)
+        np.testing.assert_array_equal(got, plain.label(a.sites, **args))
+    assert_labels_match(got, reference.label(a.sites, **args), a.sites, a.angles, a.scales, problem.metric)
+
+
+def test_speed_ratio_medians_and_rounds(monkeypatch, capsys):
+    """The one-run ratio tool: medians over every timed step of every round, one ratio
+    per round (times given, not measured), and its command line on a small problem."""
+    from compact_distributions.bench import timing
+
+    given = iter([[1.0, 3.0], [10.0, 30.0], [2.0, 2.0], [30.0, 50.0]])  # mine, theirs per round
+    monkeypatch.setattr(timing, "time_lloyd", lambda *a, **k: next(given))
+    r = timing.speed_ratio("mine", "theirs", "l2", 10, 32, warmup=0, repeats=2, rounds=2)
+    assert r["seconds"] == 2.0 and r["against_seconds"] == 30.0 and r["ratio"] == 15.0
+    assert r["ratios"] == [10.0, 20.0]
+    monkeypatch.undo()
+    args = ["--backend", "opencl", "--against", "numpy", "--metrics", "l2,linf", "--elements", "30"]
+    assert timing.main(args + ["--size", "48", "--warmup", "1", "--repeats", "2", "--rounds", "1"]) == 0
+    out = capsys.readouterr().out
+    assert out.count("ratio") == 2 and "l2, N = 30, 48²: opencl" in out
