@@ -363,11 +363,12 @@ def tile_colours(lab: np.ndarray, polygons, sites, tiles: np.ndarray, pixels: np
     h, w = lab.shape[:2]
     n = len(polygons)
     flat = lab.reshape(-1, 3)
+    under = flat[pixels]
     count = np.bincount(tiles, minlength=n).astype(np.float64)
-    sums = np.stack([np.bincount(tiles, weights=flat[pixels, c], minlength=n) for c in range(3)], axis=1)
+    sums = np.stack([np.bincount(tiles, weights=under[:, c], minlength=n) for c in range(3)], axis=1)
     held = count > 0
     fill = sums / np.where(held, count, 1.0)[:, None]
-    fill = geometric_median(flat[pixels], tiles, fill)
+    fill = geometric_median(under, tiles, fill)
     points = np.array(sites, dtype=np.float64).reshape(-1, 2).copy()
     thin = [k for k in np.flatnonzero(~held) if polygons[k] is not None and not polygons[k].is_empty]
     if thin:
@@ -378,20 +379,78 @@ def tile_colours(lab: np.ndarray, polygons, sites, tiles: np.ndarray, pixels: np
     return rgb, srgb_to_lab(rgb)
 
 
+# points per block of groups in geometric_median: a block's arrays stay in the
+# processor's cache through all the steps, where the whole picture's would stream from
+# memory at every step
+MEDIAN_BLOCK = 65536
+
+
 def geometric_median(points: np.ndarray, group: np.ndarray, start: np.ndarray, steps: int = 16) -> np.ndarray:
-    """Per group, the point with the least mean Euclidean distance to the group's points
-    (Weiszfeld's iteration from ``start``, the groups' means; a step that lands on a
-    point keeps its distance from zero by a floor of 1e-9)."""
-    m = start.copy()
-    n = len(start)
-    for _ in range(steps):
-        d = np.sqrt(((points - m[group]) ** 2).sum(axis=1))
-        wgt = 1.0 / np.maximum(d, 1e-9)
-        total = np.bincount(group, weights=wgt, minlength=n)
-        ok = total > 0
-        for c in range(points.shape[1]):
-            m[ok, c] = np.bincount(group, weights=wgt * points[:, c], minlength=n)[ok] / total[ok]
+    """Per group, the point with the least mean Euclidean distance to the group's points.
+
+    Weiszfeld's iteration from ``start``; a step that lands on a point keeps its distance
+    from zero by a floor of 1e-9.  The groups are taken in blocks of about
+    :data:`MEDIAN_BLOCK` points, each block through all its steps at once.
+
+    Parameters
+    ----------
+    points : (P, D) float array
+        The points.
+    group : (P,) int array
+        The group of each point, in 0..G-1 (fastest when sorted, as
+        :func:`cvt.evaluate.pixels_under` gives them).
+    start : (G, D) float array
+        Where each group's iteration starts (the groups' means).
+    steps : int
+        Weiszfeld steps.
+
+    Returns
+    -------
+    (G, D) float array
+        The medians; ``start`` for a group without points.
+    """
+    points = np.asarray(points, dtype=np.float64)
+    group = np.asarray(group)
+    m = np.array(start, dtype=np.float64, copy=True)
+    if len(group) == 0:
+        return m
+    if np.any(group[1:] < group[:-1]):
+        order = np.argsort(group, kind="stable")
+        points, group = points[order], group[order]
+    counts = np.bincount(group, minlength=len(m))
+    held = np.flatnonzero(counts)
+    ends = np.cumsum(counts[held])
+    # blocks of whole groups
+    cuts = np.searchsorted(ends, np.arange(MEDIAN_BLOCK, ends[-1], MEDIAN_BLOCK)) + 1
+    bounds = np.unique(np.concatenate([[0], cuts, [len(held)]]))
+    for a, b in zip(bounds[:-1], bounds[1:], strict=True):
+        first = ends[a - 1] if a else 0
+        block = held[a:b]
+        m[block] = _weiszfeld(points[first : ends[b - 1]], counts[block], m[block], steps)
     return m
+
+
+def _weiszfeld(points: np.ndarray, sizes: np.ndarray, start: np.ndarray, steps: int) -> np.ndarray:
+    """:func:`geometric_median` of consecutive groups of ``sizes`` points, none empty."""
+    offsets = np.cumsum(sizes) - sizes
+    cols = [np.ascontiguousarray(points[:, c]) for c in range(points.shape[1])]
+    m = start.T.copy()
+    dist = np.empty(len(points))
+    tmp = np.empty(len(points))
+    for _ in range(steps):
+        dist.fill(0.0)
+        for c, col in enumerate(cols):
+            np.subtract(col, np.repeat(m[c], sizes), out=tmp)
+            tmp *= tmp
+            dist += tmp
+        np.sqrt(dist, out=dist)
+        np.maximum(dist, 1e-9, out=dist)
+        weight = np.reciprocal(dist, out=dist)
+        total = np.add.reduceat(weight, offsets)
+        for c, col in enumerate(cols):
+            np.multiply(col, weight, out=tmp)
+            m[c] = np.add.reduceat(tmp, offsets) / total
+    return m.T
 
 
 def ellipse_rows(polygons, element: str, aspect: float) -> np.ndarray | None:
