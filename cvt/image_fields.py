@@ -139,10 +139,20 @@ def structure_tensor(picture: np.ndarray, sigma: float = 1.0, window: float = 2.
 
 def edge_orientation(jxx, jxy, jyy) -> tuple[np.ndarray, np.ndarray]:
     """(edge angle in radians modulo π, strength sqrt(λ₁)) from the tensor."""
-    across = 0.5 * np.arctan2(2.0 * jxy, jxx - jyy)  # the gradient's line, mod π
-    half_trace = 0.5 * (jxx + jyy)
-    lam1 = half_trace + np.hypot(0.5 * (jxx - jyy), jxy)
-    return across + 0.5 * math.pi, np.sqrt(np.maximum(lam1, 0.0))
+    # in place where it can (picture-sized temporaries)
+    diff = jxx - jyy
+    along = np.arctan2(2.0 * jxy, diff)
+    along *= 0.5  # the gradient's line, mod π
+    along += 0.5 * math.pi
+    diff *= 0.5
+    lam1 = np.hypot(diff, jxy)
+    del diff
+    half_trace = jxx + jyy
+    half_trace *= 0.5
+    lam1 += half_trace
+    del half_trace
+    np.maximum(lam1, 0.0, out=lam1)
+    return along, np.sqrt(lam1, out=lam1)
 
 
 # from this sigma (px) on, gaussian_smooth filters through the FFT: the direct filter's
