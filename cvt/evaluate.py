@@ -376,8 +376,10 @@ def colour_error(
     (tile, pixel) pairs of :func:`pixels_under`; NaN when no tile holds a pixel."""
     if len(tiles) == 0:
         return float("nan")
-    diff = picture_lab.reshape(-1, 3)[pixels] - np.asarray(fills_lab)[tiles]
-    return float(np.sqrt((diff * diff).sum(axis=1)).mean())
+    diff = picture_lab.reshape(-1, 3)[pixels]
+    diff -= np.asarray(fills_lab)[tiles]
+    diff *= diff  # in place: these are as many as the tiled pixels
+    return float(np.sqrt(diff.sum(axis=1)).mean())
 
 
 STRADDLE_DEPTH = 1.0  # px of tile on each side of an edge for the tile to straddle it

@@ -41,7 +41,7 @@ from .colour import lab_to_srgb, quantised, srgb_to_lab
 from .cutting import cut_to_walls
 from .distribution import Distribution
 from .errors import InputError
-from .evaluate import colour_error, evaluate, pixels_under, straddling_tiles
+from .evaluate import Evaluation, colour_error, evaluate, pixels_under, straddling_tiles
 from .image_fields import (
     CONTRAST_RANGE,
     DEFAULT_CONTRAST,
@@ -512,6 +512,7 @@ class MosaicResult:
     fields: PictureFields | None = field(default=None, repr=False)
     problem: Problem | None = field(default=None, repr=False)
     distribution: Distribution | None = field(default=None, repr=False)  # what the method returned
+    evaluation: Evaluation | None = field(default=None, repr=False)  # coverage and overlap, as measured
     backend: str = "numpy"
     device: str = ""
     source: str = ""
@@ -731,6 +732,7 @@ def make_mosaic(
         fields=fields,
         problem=problem,
         distribution=dist,
+        evaluation=ev,
         backend=backend.variant,
         device=backend.device(),
         source=source,
