@@ -234,11 +234,12 @@ def kept_runs(labels: np.ndarray, sites, runs=None) -> np.ndarray:
     # pieces of the suspect cells only: connected components of their runs
     of_suspect = np.append(suspect, False)[lab]  # label -1 reads the appended False
     node = np.flatnonzero(of_suspect)
+    node_of = np.cumsum(of_suspect) - 1  # a suspect run's node
     r_up = np.flatnonzero(up & of_suspect)
     above = np.searchsorted(start, start[r_up] - w, side="right") - 1
     pair = of_suspect[r_down]
-    lower = np.searchsorted(node, np.concatenate([r_up, below[pair]]))
-    upper = np.searchsorted(node, np.concatenate([above, r_down[pair]]))
+    lower = node_of[np.concatenate([r_up, below[pair]])]
+    upper = node_of[np.concatenate([above, r_down[pair]])]
     graph = coo_matrix((np.ones(len(lower), dtype=np.int8), (lower, upper)), shape=(len(node), len(node)))
     n_pieces, piece = connected_components(graph, directed=False)
     owner = np.zeros(n_pieces, dtype=np.int64)
@@ -256,7 +257,7 @@ def kept_runs(labels: np.ndarray, sites, runs=None) -> np.ndarray:
     at = i * w + j
     own = np.flatnonzero(suspect & (flat[at] == np.arange(n)))
     site_run = np.searchsorted(start, at[own], side="right") - 1
-    keep_piece[own] = piece[np.searchsorted(node, site_run)]
+    keep_piece[own] = piece[node_of[site_run]]
     kept_piece = np.zeros(n_pieces, dtype=bool)
     kept_piece[keep_piece[keep_piece >= 0]] = True
     kept = inside.copy()
