@@ -161,15 +161,21 @@ def mosaic_options(args) -> dict:
 
 def mosaic_result_json(args, m, backend, stage_seconds: dict | None = None) -> dict:
     """result.json of a mosaic (the schema of bench/results.py)."""
-    from compact_distributions.cvt.evaluate import evaluate
+    import dataclasses
+
+    from compact_distributions.cvt.evaluate import empty_cells, evaluate
     from compact_distributions.cvt.problem import Grid
     from compact_distributions.cvt.render import hex_colour
 
     from .outputs import command_line
     from .results import build_result
 
-    # coverage of the whole picture: wall pixels count as grout
-    ev = evaluate(m.polygons, Grid(m.width, m.height), labels=m.labels)
+    # coverage of the whole picture (wall pixels count as grout), as make_mosaic measured it
+    if m.evaluation is None:
+        ev = evaluate(m.polygons, Grid(m.width, m.height), labels=m.labels)
+    else:
+        empty = None if m.labels is None else empty_cells(m.labels, len(m.polygons))
+        ev = dataclasses.replace(m.evaluation, empty_cells=empty)
     sources = {
         "density": "picture" if m.problem.density is not None else None,
         "field": "picture" if m.problem.field is not None else None,

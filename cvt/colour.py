@@ -28,12 +28,27 @@ _D = 6.0 / 29.0
 def srgb_to_lab(rgb) -> np.ndarray:
     """(..., 3) sRGB in 0..1 -> (..., 3) CIELAB (L* 0..100)."""
     rgb = np.asarray(rgb, dtype=np.float64)
-    lin = np.where(rgb <= 0.04045, rgb / 12.92, ((rgb + 0.055) / 1.055) ** 2.4)
-    xyz = lin @ _RGB_TO_XYZ.T / _WHITE
-    f = np.where(xyz > _D**3, np.cbrt(xyz), xyz / (3 * _D * _D) + 4.0 / 29.0)
-    return np.stack(
-        [116.0 * f[..., 1] - 16.0, 500.0 * (f[..., 0] - f[..., 1]), 200.0 * (f[..., 1] - f[..., 2])], axis=-1
-    )
+    # in place where it can: a picture's temporaries are each as large as the picture
+    lin = rgb + 0.055
+    lin /= 1.055
+    np.power(lin, 2.4, out=lin)
+    np.divide(rgb, 12.92, out=lin, where=rgb <= 0.04045)
+    xyz = lin @ _RGB_TO_XYZ.T
+    xyz /= _WHITE
+    del lin
+    f = np.cbrt(xyz)
+    small = xyz <= _D**3
+    np.divide(xyz, 3 * _D * _D, out=f, where=small)
+    np.add(f, 4.0 / 29.0, out=f, where=small)
+    del xyz
+    lab = np.empty_like(f)
+    np.multiply(f[..., 1], 116.0, out=lab[..., 0])
+    lab[..., 0] -= 16.0
+    np.subtract(f[..., 0], f[..., 1], out=lab[..., 1])
+    lab[..., 1] *= 500.0
+    np.subtract(f[..., 1], f[..., 2], out=lab[..., 2])
+    lab[..., 2] *= 200.0
+    return lab
 
 
 def lab_to_srgb(lab) -> np.ndarray:

@@ -226,10 +226,34 @@ def coverage_at_overlap_limit(
     return coverage_at_overlap(curve, limit)
 
 
+# pixels_under decides with shapely only where a pixel centre lies within this many px of
+# a convex tile's outline, or on a row through a vertex or along a nearly horizontal
+# edge; elsewhere the row's chord decides (its ends are computed to far better than this)
+CHORD_MARGIN = 1e-5
+_FLAT_EDGE = 1e-3  # px of height below which an edge's chord ends are not trusted
+
+
 def pixels_under(elements, width: int, height: int) -> tuple[np.ndarray, np.ndarray]:
-    """(tile index, flat pixel index) pairs: every pixel of the ``width`` x ``height``
-    raster whose centre (j + 0.5, i + 0.5) lies inside or on the outline of a tile
-    (None and empty tiles hold none; overlapping tiles each hold the pixel)."""
+    """Every pixel of a raster whose centre lies inside or on the outline of a tile.
+
+    Convex tiles are read row by row: the pixel centres between the ends of the row's
+    chord through the tile, less :data:`CHORD_MARGIN`, are in it, those beyond them plus
+    the margin are not, and shapely decides the rest (and every pixel of the bounding
+    box of other tiles).
+
+    Parameters
+    ----------
+    elements : list of shapely geometries
+        The tiles (None and empty tiles hold no pixel).
+    width, height : int
+        The raster.
+
+    Returns
+    -------
+    tiles, pixels : (P,) int64 arrays
+        (tile index, flat pixel index i·width + j) pairs, by tile, then pixel;
+        overlapping tiles each hold the pixel.
+    """
     idx = np.array([k for k, e in enumerate(elements) if e is not None and not e.is_empty], dtype=np.int64)
     if len(idx) == 0:
         return np.zeros(0, np.int64), np.zeros(0, np.int64)
@@ -239,15 +263,110 @@ def pixels_under(elements, width: int, height: int) -> tuple[np.ndarray, np.ndar
     i0 = np.clip(np.ceil(b[:, 1] - 0.5), 0, height).astype(np.int64)
     j1 = np.clip(np.floor(b[:, 2] - 0.5), -1, width - 1).astype(np.int64)
     i1 = np.clip(np.floor(b[:, 3] - 0.5), -1, height - 1).astype(np.int64)
-    nx, ny = np.maximum(j1 - j0 + 1, 0), np.maximum(i1 - i0 + 1, 0)
-    counts = nx * ny
-    tile = np.repeat(np.arange(len(idx)), counts)
-    offset = np.arange(int(counts.sum())) - np.repeat(np.cumsum(counts) - counts, counts)
-    jj = j0[tile] + offset % nx[tile]
-    ii = i0[tile] + offset // nx[tile]
     shapely.prepare(geoms)
+    hull = shapely.convex_hull(geoms)
+    convex = (shapely.get_type_id(geoms) == 3) & (shapely.get_num_interior_rings(geoms) == 0)
+    convex &= shapely.get_type_id(hull) == 3
+    convex &= shapely.get_num_coordinates(hull) == shapely.get_num_coordinates(
+        geoms
+    )  # every vertex on the hull
+    segments = [_chord_segments(geoms, np.flatnonzero(convex), i0, i1, j0, j1, width)]
+    other = np.flatnonzero(~convex)
+    if len(other):
+        segments.append(_box_segments(geoms, other, i0, i1, j0, j1, width))
+    tile, first, length = (np.concatenate(parts) for parts in zip(*segments, strict=True))
+    if len(other):
+        order = np.argsort(tile, kind="stable")  # each tile's segments are in pixel order already
+        tile, first, length = tile[order], first[order], length[order]
+    return idx[np.repeat(tile, length)], _expand(first, length)
+
+
+def _expand(first: np.ndarray, length: np.ndarray) -> np.ndarray:
+    """first[k], first[k] + 1, ..., first[k] + length[k] - 1 for each k, concatenated."""
+    return np.repeat(first - np.cumsum(length) + length, length) + np.arange(int(length.sum()))
+
+
+def _box_segments(geoms, tiles, i0, i1, j0, j1, width):
+    """(tile, flat pixel, 1) of the pixels of each tile's bounding box that shapely finds in it."""
+    nx = np.maximum(j1[tiles] - j0[tiles] + 1, 0)
+    ny = np.maximum(i1[tiles] - i0[tiles] + 1, 0)
+    counts = nx * ny
+    tile = np.repeat(tiles, counts)
+    offset = _expand(np.zeros(len(tiles), dtype=np.int64), counts)
+    k = np.repeat(np.arange(len(tiles)), counts)
+    jj = j0[tile] + offset % nx[k]
+    ii = i0[tile] + offset // nx[k]
     inside = shapely.intersects_xy(geoms[tile], jj + 0.5, ii + 0.5)
-    return idx[tile[inside]], ii[inside] * width + jj[inside]
+    return tile[inside], ii[inside] * width + jj[inside], np.ones(int(inside.sum()), dtype=np.int64)
+
+
+def _chord_segments(geoms, tiles, i0, i1, j0, j1, width):
+    """(tile, first flat pixel, length) of each row's pixels in each convex tile."""
+    rows = np.maximum(i1[tiles] - i0[tiles] + 1, 0)
+    base = np.cumsum(rows) - rows  # a (tile, row) pair's key: base[tile] + row - i0
+    n_keys = int(rows.sum())
+    key_tile = np.repeat(tiles, rows)
+    key_row = i0[key_tile] + _expand(np.zeros(len(tiles), dtype=np.int64), rows)
+    coords, ci = shapely.get_coordinates(geoms[tiles], return_index=True)
+    unsure = np.zeros(n_keys, dtype=bool)
+    # a row through a vertex (within the margin) is left to shapely
+    yv = coords[:, 1]
+    iv = np.round(yv - 0.5).astype(np.int64)
+    hit = (np.abs(iv + 0.5 - yv) < CHORD_MARGIN) & (iv >= i0[tiles[ci]]) & (iv <= i1[tiles[ci]])
+    unsure[base[ci[hit]] + iv[hit] - i0[tiles[ci[hit]]]] = True
+    # each edge's crossing with the rows it spans (the ring repeats its first vertex)
+    same = ci[1:] == ci[:-1]
+    a, c = coords[:-1][same], coords[1:][same]
+    t = ci[:-1][same]
+    lo, hi = np.minimum(a[:, 1], c[:, 1]), np.maximum(a[:, 1], c[:, 1])
+    e_i0 = np.maximum(np.ceil(lo - 0.5).astype(np.int64), i0[tiles[t]])
+    e_i1 = np.minimum(np.floor(hi - 0.5).astype(np.int64), i1[tiles[t]])
+    n_cross = np.maximum(e_i1 - e_i0 + 1, 0)
+    edge = np.repeat(np.arange(len(t)), n_cross)
+    row = e_i0[edge] + _expand(np.zeros(len(t), dtype=np.int64), n_cross)
+    key = base[t[edge]] + row - i0[tiles[t[edge]]]
+    dy = c[edge, 1] - a[edge, 1]
+    flat = np.abs(dy) < _FLAT_EDGE
+    unsure[key[flat]] = True
+    steady = ~flat
+    frac = (row[steady] + 0.5 - a[edge[steady], 1]) / dy[steady]
+    x = a[edge[steady], 0] + frac * (c[edge[steady], 0] - a[edge[steady], 0])
+    left = np.full(n_keys, np.inf)
+    right = np.full(n_keys, -np.inf)
+    np.minimum.at(left, key[steady], x)
+    np.maximum.at(right, key[steady], x)
+    unsure |= ~np.isfinite(left)
+    # sure: centres within the chord less the margin; candidates: within it plus the margin
+    lo_sure = np.ceil(left + CHORD_MARGIN - 0.5)
+    hi_sure = np.floor(right - CHORD_MARGIN - 0.5)
+    lo_cand = np.ceil(left - CHORD_MARGIN - 0.5)
+    hi_cand = np.floor(right + CHORD_MARGIN - 0.5)
+    lo_cand[unsure] = j0[key_tile[unsure]]
+    hi_cand[unsure] = j1[key_tile[unsure]]
+    lo_sure[unsure] = width
+    hi_sure[unsure] = -1
+    lo_cand = np.clip(lo_cand, 0, width).astype(np.int64)
+    hi_cand = np.clip(hi_cand, -1, width - 1).astype(np.int64)
+    lo_sure = np.clip(lo_sure, 0, width).astype(np.int64)
+    hi_sure = np.clip(hi_sure, -1, width - 1).astype(np.int64)
+    empty = lo_sure > hi_sure
+    lo_sure[empty] = width  # so that min / max below ignore it
+    hi_sure[empty] = -1
+    # the candidates outside the sure span, tested by shapely; a convex tile's row holds
+    # a contiguous span, so the span is the sure one widened to the candidates found in
+    left_n = np.where(empty, np.maximum(hi_cand - lo_cand + 1, 0), np.maximum(lo_sure - lo_cand, 0))
+    right_n = np.where(empty, 0, np.maximum(hi_cand - hi_sure, 0))
+    n_test = left_n + right_n
+    test_key = np.repeat(np.arange(n_keys), n_test)
+    step = _expand(np.zeros(n_keys, dtype=np.int64), n_test)
+    jj = np.where(
+        step < left_n[test_key], lo_cand[test_key] + step, hi_sure[test_key] + 1 + step - left_n[test_key]
+    )
+    ok = shapely.intersects_xy(geoms[key_tile[test_key]], jj + 0.5, key_row[test_key] + 0.5)
+    np.minimum.at(lo_sure, test_key[ok], jj[ok])
+    np.maximum.at(hi_sure, test_key[ok], jj[ok])
+    full = lo_sure <= hi_sure
+    return key_tile[full], key_row[full] * width + lo_sure[full], hi_sure[full] - lo_sure[full] + 1
 
 
 def colour_error(
@@ -257,8 +376,10 @@ def colour_error(
     (tile, pixel) pairs of :func:`pixels_under`; NaN when no tile holds a pixel."""
     if len(tiles) == 0:
         return float("nan")
-    diff = picture_lab.reshape(-1, 3)[pixels] - np.asarray(fills_lab)[tiles]
-    return float(np.sqrt((diff * diff).sum(axis=1)).mean())
+    diff = picture_lab.reshape(-1, 3)[pixels]
+    diff -= np.asarray(fills_lab)[tiles]
+    diff *= diff  # in place: these are as many as the tiled pixels
+    return float(np.sqrt(diff.sum(axis=1)).mean())
 
 
 STRADDLE_DEPTH = 1.0  # px of tile on each side of an edge for the tile to straddle it

@@ -139,10 +139,59 @@ def structure_tensor(picture: np.ndarray, sigma: float = 1.0, window: float = 2.
 
 def edge_orientation(jxx, jxy, jyy) -> tuple[np.ndarray, np.ndarray]:
     """(edge angle in radians modulo π, strength sqrt(λ₁)) from the tensor."""
-    across = 0.5 * np.arctan2(2.0 * jxy, jxx - jyy)  # the gradient's line, mod π
-    half_trace = 0.5 * (jxx + jyy)
-    lam1 = half_trace + np.hypot(0.5 * (jxx - jyy), jxy)
-    return across + 0.5 * math.pi, np.sqrt(np.maximum(lam1, 0.0))
+    # in place where it can (picture-sized temporaries)
+    diff = jxx - jyy
+    along = np.arctan2(2.0 * jxy, diff)
+    along *= 0.5  # the gradient's line, mod π
+    along += 0.5 * math.pi
+    diff *= 0.5
+    lam1 = np.hypot(diff, jxy)
+    del diff
+    half_trace = jxx + jyy
+    half_trace *= 0.5
+    lam1 += half_trace
+    del half_trace
+    np.maximum(lam1, 0.0, out=lam1)
+    return along, np.sqrt(lam1, out=lam1)
+
+
+# from this sigma (px) on, gaussian_smooth filters through the FFT: the direct filter's
+# kernel spans 8 sigma, while the FFT's cost does not grow with it
+FFT_SIGMA = 8.0
+
+
+def gaussian_smooth(image: np.ndarray, sigma: float) -> np.ndarray:
+    """``ndimage.gaussian_filter(image, sigma, mode="nearest")`` of a 2-D array.
+
+    The same kernel (truncated at 4 sigma) and border (the edge pixels repeated); from
+    :data:`FFT_SIGMA` on it is applied through the FFT (the padded picture's), which agrees
+    with the direct filter to rounding (about 1e-15 of the values).
+
+    Parameters
+    ----------
+    image : (H, W) float array
+    sigma : float
+        The Gaussian's standard deviation in pixels, the same along both axes.
+
+    Returns
+    -------
+    (H, W) float64 array
+    """
+    if sigma < FFT_SIGMA:
+        return ndimage.gaussian_filter(image, sigma, mode="nearest")
+    from scipy import fft
+
+    radius = int(4.0 * sigma + 0.5)  # ndimage's truncation
+    x = np.arange(-radius, radius + 1, dtype=np.float64)
+    kernel = np.exp(-0.5 / (sigma * sigma) * x * x)
+    kernel /= kernel.sum()
+    h, w = image.shape
+    size = (fft.next_fast_len(h + 4 * radius, real=True), fft.next_fast_len(w + 4 * radius, real=True))
+    spectrum = fft.rfft2(np.pad(np.asarray(image, dtype=np.float64), radius, mode="edge"), size)
+    spectrum *= fft.fft(kernel, size[0])[:, None]
+    spectrum *= fft.rfft(kernel, size[1])[None, :]
+    out = fft.irfft2(spectrum, size)[2 * radius : 2 * radius + h, 2 * radius : 2 * radius + w]
+    return np.ascontiguousarray(out)
 
 
 def smooth_angles(angles: np.ndarray, sigma: float, period: float) -> np.ndarray:
@@ -150,8 +199,8 @@ def smooth_angles(angles: np.ndarray, sigma: float, period: float) -> np.ndarray
     if sigma <= 0:
         return angles
     m = 2.0 * math.pi / period
-    c = ndimage.gaussian_filter(np.cos(m * angles), sigma, mode="nearest")
-    s = ndimage.gaussian_filter(np.sin(m * angles), sigma, mode="nearest")
+    c = gaussian_smooth(np.cos(m * angles), sigma)
+    s = gaussian_smooth(np.sin(m * angles), sigma)
     return np.arctan2(s, c) / m
 
 
@@ -190,7 +239,7 @@ def picture_fields(
     field = DirectionField.from_angles(angles, spec="picture")
 
     # density: smoothed colour gradient magnitude, 1 .. contrast
-    magnitude = np.sqrt(np.maximum(ndimage.gaussian_filter(jxx + jyy, spacing, mode="nearest"), 0.0))
+    magnitude = np.sqrt(np.maximum(gaussian_smooth(jxx + jyy, spacing), 0.0))
     ref = float(np.percentile(magnitude, 99)) if magnitude.size else 0.0
     detail = np.clip(magnitude / ref, 0.0, 1.0) if ref > EDGE_FLOOR / 10 else np.zeros_like(magnitude)
     density = DensityMap(1.0 + (contrast - 1.0) * detail)
@@ -276,6 +325,8 @@ __all__ = [
     "as_channels",
     "structure_tensor",
     "edge_orientation",
+    "FFT_SIGMA",
+    "gaussian_smooth",
     "smooth_angles",
     "picture_fields",
     "step_response",

@@ -41,7 +41,7 @@ from .colour import lab_to_srgb, quantised, srgb_to_lab
 from .cutting import cut_to_walls
 from .distribution import Distribution
 from .errors import InputError
-from .evaluate import colour_error, evaluate, pixels_under, straddling_tiles
+from .evaluate import Evaluation, colour_error, evaluate, pixels_under, straddling_tiles
 from .image_fields import (
     CONTRAST_RANGE,
     DEFAULT_CONTRAST,
@@ -51,7 +51,7 @@ from .image_fields import (
     strong_edges,
 )
 from .metrics import make_metric
-from .moments import moments_from_labels
+from .moments import Moments, moments_from_runs
 from .pixels import pixel_index
 from .placement import parse_gap
 from .problem import Grid, Problem, parse_size
@@ -158,41 +158,166 @@ def resample(rgb: np.ndarray, width: int, height: int) -> np.ndarray:
 # --------------------------------------------------------------------------- walls
 
 
+def label_runs(labels: np.ndarray):
+    """The row runs of a label raster: maximal stretches of one row with one label.
+
+    Parameters
+    ----------
+    labels : (H, W) int array
+        Cell of each pixel, -1 outside the region.
+
+    Returns
+    -------
+    flat : (H*W,) int array
+        ``labels`` flattened (row-major).
+    starts : (R,) bool array
+        ``starts[p]``: a run begins at flat pixel p.
+    start, end : (R,) int64 arrays
+        Run k covers flat pixels ``start[k]`` to ``end[k] - 1``; runs of -1 included,
+        in raster order.
+    run_labels : (R,) int array
+        The label of each run.
+    """
+    w = labels.shape[1]
+    flat = np.ascontiguousarray(labels).ravel()
+    starts = np.empty(flat.size, dtype=bool)
+    starts[:1] = True
+    np.not_equal(flat[1:], flat[:-1], out=starts[1:])
+    starts[::w] = True  # a run never wraps to the next row
+    start = np.flatnonzero(starts)
+    end = np.append(start[1:], flat.size)
+    return flat, starts, start, end, flat[start]
+
+
+def kept_runs(labels: np.ndarray, sites, runs=None) -> np.ndarray:
+    """Which row runs of ``labels`` :func:`split_cells` keeps.
+
+    Parameters
+    ----------
+    labels, sites
+        As for :func:`split_cells`.
+    runs : tuple, optional
+        :func:`label_runs` of ``labels``, where already at hand.
+
+    Returns
+    -------
+    (R,) bool array
+        Per run of :func:`label_runs`: inside the region and in its cell's kept piece.
+    """
+    from scipy.sparse import coo_matrix
+    from scipy.sparse.csgraph import connected_components
+
+    h, w = labels.shape
+    n = len(sites)
+    flat, starts, start, end, lab = label_runs(labels) if runs is None else runs
+    inside = lab >= 0
+    # Two runs of one cell in adjacent rows touch where their columns overlap, and the
+    # overlap begins at the start of one of them: looking straight up and down from
+    # each start finds every touching pair, each once (down only where the run below
+    # began further left, else looking up from it finds the pair).
+    second_row, last_row = np.searchsorted(start, [w, flat.size - w])
+    up = np.zeros(len(start), dtype=bool)
+    np.equal(flat[start[second_row:] - w], lab[second_row:], out=up[second_row:])
+    below_px = start[:last_row] + w
+    down = flat[below_px] == lab[:last_row]
+    down &= ~starts[below_px]
+    r_down = np.flatnonzero(down)
+    below = np.searchsorted(start, below_px[r_down], side="right") - 1
+    # a cell with one run that touches nothing above it is one piece: from every other
+    # run, stepping to a touching run above ends there
+    top = ~up
+    top[below] = False
+    top &= inside
+    suspect = np.bincount(lab[top], minlength=n) > 1
+    if not suspect.any():
+        return inside
+    # pieces of the suspect cells only: connected components of their runs
+    of_suspect = np.append(suspect, False)[lab]  # label -1 reads the appended False
+    node = np.flatnonzero(of_suspect)
+    node_of = np.cumsum(of_suspect) - 1  # a suspect run's node
+    r_up = np.flatnonzero(up & of_suspect)
+    above = np.searchsorted(start, start[r_up] - w, side="right") - 1
+    pair = of_suspect[r_down]
+    lower = node_of[np.concatenate([r_up, below[pair]])]
+    upper = node_of[np.concatenate([above, r_down[pair]])]
+    graph = coo_matrix((np.ones(len(lower), dtype=np.int8), (lower, upper)), shape=(len(node), len(node)))
+    n_pieces, piece = connected_components(graph, directed=False)
+    owner = np.zeros(n_pieces, dtype=np.int64)
+    owner[piece] = lab[node]
+    size = np.bincount(piece, weights=end[node] - start[node], minlength=n_pieces)
+    first = np.full(n_pieces, flat.size, dtype=np.int64)
+    np.minimum.at(first, piece, start[node])
+    # per cell its largest piece (of equal ones, the one that begins last in raster
+    # order), then the site's own piece where the site is in its cell
+    order = np.lexsort((first, size, owner))
+    last = np.append(owner[order][1:] != owner[order][:-1], True)
+    keep_piece = np.full(n, -1, dtype=np.int64)
+    keep_piece[owner[order[last]]] = order[last]
+    i, j = pixel_index(sites, w, h)
+    at = i * w + j
+    own = np.flatnonzero(suspect & (flat[at] == np.arange(n)))
+    site_run = np.searchsorted(start, at[own], side="right") - 1
+    keep_piece[own] = piece[node_of[site_run]]
+    kept_piece = np.zeros(n_pieces, dtype=bool)
+    kept_piece[keep_piece[keep_piece >= 0]] = True
+    kept = inside.copy()
+    kept[node] = kept_piece[piece]
+    return kept
+
+
+def _split_runs(labels: np.ndarray, sites):
+    runs = label_runs(labels)
+    return runs, kept_runs(labels, sites, runs)
+
+
 def split_cells(labels: np.ndarray, sites) -> np.ndarray:
     """``labels`` with each cell cut down to one 4-connected piece (other pixels -1).
 
     Pixels outside the region (-1: the walls) connect nothing, so a cell that a wall
     cuts falls into pieces; the piece kept is the one that holds its site's pixel, or
-    the largest where the site lies elsewhere.  Pieces are found with one
-    ``scipy.ndimage.label`` on a raster of twice the size whose in-between pixels join
-    two neighbours of the same cell."""
-    from scipy import ndimage
+    the largest where the site lies elsewhere (of equal largest pieces, the one whose
+    first pixel comes last in raster order).  Pieces are found on the rows' runs of
+    equal label (:func:`kept_runs`), and only for cells that could be in pieces.
 
-    h, w = labels.shape
-    n = len(sites)
-    inside = labels >= 0
-    grid = np.zeros((2 * h - 1, 2 * w - 1), dtype=bool)
-    grid[::2, ::2] = inside
-    grid[::2, 1::2] = inside[:, :-1] & (labels[:, :-1] == labels[:, 1:])
-    grid[1::2, ::2] = inside[:-1, :] & (labels[:-1, :] == labels[1:, :])
-    pieces, count = ndimage.label(grid)
-    pieces = pieces[::2, ::2]
-    if count == np.count_nonzero(np.bincount(labels[inside], minlength=n)):
-        return labels  # every non-empty cell is one piece
-    owner = np.zeros(count + 1, dtype=np.int64)
-    owner[pieces[inside]] = labels[inside]
-    size = np.bincount(pieces.ravel(), minlength=count + 1)
-    # per cell its largest piece, then the site's own piece where the site is in its cell
-    order = np.lexsort((size[1:], owner[1:])) + 1  # by cell, then by size
-    last = np.append(owner[order][1:] != owner[order][:-1], True)
-    keep_piece = np.zeros(n, dtype=np.int64)
-    keep_piece[owner[order[last]]] = order[last]
-    i, j = pixel_index(sites, w, h)
-    own = labels[i, j] == np.arange(n)
-    keep_piece[own] = pieces[i[own], j[own]]
-    kept = np.zeros(count + 1, dtype=bool)
-    kept[keep_piece[keep_piece > 0]] = True
-    return np.where(kept[pieces], labels, -1).astype(labels.dtype, copy=False)
+    Parameters
+    ----------
+    labels : (H, W) int array
+        Cell of each pixel, -1 outside the region.
+    sites : (N, 2) array
+        The cells' sites, pixel units.
+
+    Returns
+    -------
+    (H, W) int array
+        ``labels`` itself where every cell is one piece, else a copy with the pixels of
+        the pieces not kept set to -1.
+    """
+    (_, _, start, end, lab), kept = _split_runs(labels, sites)
+    drop = np.flatnonzero((lab >= 0) & ~kept)
+    if len(drop) == 0:
+        return labels
+    length = end[drop] - start[drop]
+    pixels = np.repeat(start[drop] - np.cumsum(length) + length, length) + np.arange(int(length.sum()))
+    out = labels.copy()
+    out.reshape(-1)[pixels] = -1
+    return out
+
+
+def split_moments(labels: np.ndarray, sites) -> Moments:
+    """The moments of ``split_cells(labels, sites)``, summed over its row runs.
+
+    Parameters
+    ----------
+    labels, sites
+        As for :func:`split_cells`.
+
+    Returns
+    -------
+    Moments
+        Bit-identical to ``moments_from_labels(split_cells(labels, sites), N)``.
+    """
+    (_, _, start, end, lab), kept = _split_runs(labels, sites)
+    return moments_from_runs(start, end, np.where(kept, lab, -1), labels.shape[1], len(sites))
 
 
 class WalledBackend:
@@ -216,8 +341,8 @@ class WalledBackend:
     def moments(self, sites, *, angles=None, scales=None, metric, grid):
         if grid.mask is None:
             return self.inner.moments(sites, angles=angles, scales=scales, metric=metric, grid=grid)
-        labels = self.label(sites, angles=angles, scales=scales, metric=metric, grid=grid)
-        return moments_from_labels(labels, len(sites))
+        labels = self.inner.label(sites, angles=angles, scales=scales, metric=metric, grid=grid)
+        return split_moments(labels, sites)
 
 
 # --------------------------------------------------------------------------- colours
@@ -239,11 +364,12 @@ def tile_colours(lab: np.ndarray, polygons, sites, tiles: np.ndarray, pixels: np
     h, w = lab.shape[:2]
     n = len(polygons)
     flat = lab.reshape(-1, 3)
+    under = flat[pixels]
     count = np.bincount(tiles, minlength=n).astype(np.float64)
-    sums = np.stack([np.bincount(tiles, weights=flat[pixels, c], minlength=n) for c in range(3)], axis=1)
+    sums = np.stack([np.bincount(tiles, weights=under[:, c], minlength=n) for c in range(3)], axis=1)
     held = count > 0
     fill = sums / np.where(held, count, 1.0)[:, None]
-    fill = geometric_median(flat[pixels], tiles, fill)
+    fill = geometric_median(under, tiles, fill)
     points = np.array(sites, dtype=np.float64).reshape(-1, 2).copy()
     thin = [k for k in np.flatnonzero(~held) if polygons[k] is not None and not polygons[k].is_empty]
     if thin:
@@ -254,20 +380,78 @@ def tile_colours(lab: np.ndarray, polygons, sites, tiles: np.ndarray, pixels: np
     return rgb, srgb_to_lab(rgb)
 
 
+# points per block of groups in geometric_median: a block's arrays stay in the
+# processor's cache through all the steps, where the whole picture's would stream from
+# memory at every step
+MEDIAN_BLOCK = 65536
+
+
 def geometric_median(points: np.ndarray, group: np.ndarray, start: np.ndarray, steps: int = 16) -> np.ndarray:
-    """Per group, the point with the least mean Euclidean distance to the group's points
-    (Weiszfeld's iteration from ``start``, the groups' means; a step that lands on a
-    point keeps its distance from zero by a floor of 1e-9)."""
-    m = start.copy()
-    n = len(start)
-    for _ in range(steps):
-        d = np.sqrt(((points - m[group]) ** 2).sum(axis=1))
-        wgt = 1.0 / np.maximum(d, 1e-9)
-        total = np.bincount(group, weights=wgt, minlength=n)
-        ok = total > 0
-        for c in range(points.shape[1]):
-            m[ok, c] = np.bincount(group, weights=wgt * points[:, c], minlength=n)[ok] / total[ok]
+    """Per group, the point with the least mean Euclidean distance to the group's points.
+
+    Weiszfeld's iteration from ``start``; a step that lands on a point keeps its distance
+    from zero by a floor of 1e-9.  The groups are taken in blocks of about
+    :data:`MEDIAN_BLOCK` points, each block through all its steps at once.
+
+    Parameters
+    ----------
+    points : (P, D) float array
+        The points.
+    group : (P,) int array
+        The group of each point, in 0..G-1 (fastest when sorted, as
+        :func:`cvt.evaluate.pixels_under` gives them).
+    start : (G, D) float array
+        Where each group's iteration starts (the groups' means).
+    steps : int
+        Weiszfeld steps.
+
+    Returns
+    -------
+    (G, D) float array
+        The medians; ``start`` for a group without points.
+    """
+    points = np.asarray(points, dtype=np.float64)
+    group = np.asarray(group)
+    m = np.array(start, dtype=np.float64, copy=True)
+    if len(group) == 0:
+        return m
+    if np.any(group[1:] < group[:-1]):
+        order = np.argsort(group, kind="stable")
+        points, group = points[order], group[order]
+    counts = np.bincount(group, minlength=len(m))
+    held = np.flatnonzero(counts)
+    ends = np.cumsum(counts[held])
+    # blocks of whole groups
+    cuts = np.searchsorted(ends, np.arange(MEDIAN_BLOCK, ends[-1], MEDIAN_BLOCK)) + 1
+    bounds = np.unique(np.concatenate([[0], cuts, [len(held)]]))
+    for a, b in zip(bounds[:-1], bounds[1:], strict=True):
+        first = ends[a - 1] if a else 0
+        block = held[a:b]
+        m[block] = _weiszfeld(points[first : ends[b - 1]], counts[block], m[block], steps)
     return m
+
+
+def _weiszfeld(points: np.ndarray, sizes: np.ndarray, start: np.ndarray, steps: int) -> np.ndarray:
+    """:func:`geometric_median` of consecutive groups of ``sizes`` points, none empty."""
+    offsets = np.cumsum(sizes) - sizes
+    cols = [np.ascontiguousarray(points[:, c]) for c in range(points.shape[1])]
+    m = start.T.copy()
+    dist = np.empty(len(points))
+    tmp = np.empty(len(points))
+    for _ in range(steps):
+        dist.fill(0.0)
+        for c, col in enumerate(cols):
+            np.subtract(col, np.repeat(m[c], sizes), out=tmp)
+            tmp *= tmp
+            dist += tmp
+        np.sqrt(dist, out=dist)
+        np.maximum(dist, 1e-9, out=dist)
+        weight = np.reciprocal(dist, out=dist)
+        total = np.add.reduceat(weight, offsets)
+        for c, col in enumerate(cols):
+            np.multiply(col, weight, out=tmp)
+            m[c] = np.add.reduceat(tmp, offsets) / total
+    return m.T
 
 
 def ellipse_rows(polygons, element: str, aspect: float) -> np.ndarray | None:
@@ -337,6 +521,7 @@ class MosaicResult:
     fields: PictureFields | None = field(default=None, repr=False)
     problem: Problem | None = field(default=None, repr=False)
     distribution: Distribution | None = field(default=None, repr=False)  # what the method returned
+    evaluation: Evaluation | None = field(default=None, repr=False)  # coverage and overlap, as measured
     backend: str = "numpy"
     device: str = ""
     source: str = ""
@@ -556,6 +741,7 @@ def make_mosaic(
         fields=fields,
         problem=problem,
         distribution=dist,
+        evaluation=ev,
         backend=backend.variant,
         device=backend.device(),
         source=source,

@@ -8,6 +8,7 @@ import pytest
 import shapely
 from scipy.optimize import minimize
 
+from compact_distributions.cvt import mosaic
 from compact_distributions.cvt.cutting import cut_to_walls
 from compact_distributions.cvt.mosaic import geometric_median
 
@@ -108,13 +109,25 @@ def test_a_wall_that_meets_the_border_is_not_rounded():
         assert (xs <= 30.5 - gap / 2 + 1e-9).all() if left else (xs >= 30.5 + gap / 2 - 1e-9).all()
 
 
-def test_geometric_median_minimises_the_mean_distance():
+@pytest.mark.parametrize("block,shuffle", [(None, False), (7, True), (40, False)])
+def test_geometric_median_minimises_the_mean_distance(monkeypatch, block, shuffle):
+    """Against a numerical optimum, whatever the blocks the groups are taken in and the
+    order of the points; a group without points keeps its start."""
+    if block is not None:
+        monkeypatch.setattr(mosaic, "MEDIAN_BLOCK", block)
     rng = np.random.default_rng(4)
-    groups = np.repeat(np.arange(5), [1, 2, 7, 30, 200])
-    points = rng.normal(size=(len(groups), 3)) * [20, 5, 5] + rng.normal(size=(5, 3))[groups] * 30
-    means = np.stack([points[groups == g].mean(axis=0) for g in range(5)])
+    sizes = [1, 2, 7, 30, 0, 200]
+    groups = np.repeat(np.arange(len(sizes)), sizes)
+    points = rng.normal(size=(len(groups), 3)) * [20, 5, 5] + rng.normal(size=(len(sizes), 3))[groups] * 30
+    if shuffle:
+        order = rng.permutation(len(groups))
+        points, groups = points[order], groups[order]
+    means = np.stack(
+        [points[groups == g].mean(axis=0) if sizes[g] else np.full(3, 7.0) for g in range(len(sizes))]
+    )
     got = geometric_median(points, groups, means)
-    for g in range(5):
+    np.testing.assert_array_equal(got[4], means[4])
+    for g in np.flatnonzero(sizes):
         pts = points[groups == g]
 
         def cost(m, pts=pts):

@@ -7,7 +7,7 @@ import numpy as np
 import pytest
 import shapely
 
-from compact_distributions.cvt.evaluate import empty_cells, evaluate, region_polygon
+from compact_distributions.cvt.evaluate import empty_cells, evaluate, pixels_under, region_polygon
 from compact_distributions.cvt.problem import Grid
 from compact_distributions.cvt.render import PAPER, draw_elements, element_coordinates, svg_document
 
@@ -159,3 +159,58 @@ def test_region_of_a_mask_is_one_valid_polygon():
     # an element across many pixel rows inside the ring is inside, untouched by clipping
     ev = evaluate([shapely.box(41, 20, 51, 44)], Grid(64, 64, mask), region=region)
     assert ev.coverage == pytest.approx(240 / mask.sum())
+
+
+def tricky_tiles(rng, n, w, h):
+    """Tiles whose outlines run through pixel centres: rotated squares, boxes with corners
+    and sides on centres, triangles with a vertex on one, slivers with a nearly flat edge,
+    non-convex L shapes, a tile with a hole, tiles over the border, None and empty."""
+    out = [None, shapely.Polygon()]
+    for _ in range(n):
+        cx, cy = rng.random(2) * [w, h]
+        s = rng.random() * 8 + 0.3
+        kind = rng.integers(0, 7)
+        if kind == 0:
+            sq = shapely.box(cx - s, cy - s, cx + s, cy + s)
+            out.append(shapely.affinity.rotate(sq, rng.random() * 90, origin=(cx, cy)))
+        elif kind == 1:
+            x0, y0 = np.floor([cx, cy]) + 0.5 * rng.integers(0, 2, 2)
+            out.append(
+                shapely.box(
+                    x0, y0, x0 + rng.integers(0, 6) + 0.5 * rng.integers(0, 2), y0 + rng.integers(1, 6)
+                )
+            )
+        elif kind == 2:
+            out.append(shapely.Polygon([np.floor([cx, cy]) + 0.5, (cx + s, cy), (cx, cy + s)]))
+        elif kind == 3:
+            out.append(shapely.box(cx, cy, cx + s, cy + s / 3).union(shapely.box(cx, cy, cx + s / 3, cy + s)))
+        elif kind == 4:
+            out.append(
+                shapely.box(cx - s, cy - s, cx + s, cy + s).difference(
+                    shapely.box(cx - 1, cy - 1, cx + 1, cy + 1)
+                )
+            )
+        elif kind == 5:
+            out.append(shapely.Polygon([(cx, cy), (cx + 9, cy + 1e-4), (cx + 9, cy + 0.7), (cx, cy + 0.5)]))
+        else:
+            out.append(shapely.Point(cx, cy).buffer(s, 8))
+    return out
+
+
+def test_pixels_under_matches_shapely_on_every_pixel():
+    """Against shapely's intersects asked for every pixel centre of the raster, tile by tile."""
+    rng = np.random.default_rng(8)
+    w, h = 40, 30
+    yy, xx = np.mgrid[0:h, 0:w] + 0.5
+    for _ in range(60):
+        tiles = tricky_tiles(rng, int(rng.integers(1, 12)), w, h)
+        got_tiles, got_pixels = pixels_under(tiles, w, h)
+        want_tiles, want_pixels = [], []
+        for k, t in enumerate(tiles):
+            if t is None or t.is_empty:
+                continue
+            inside = np.flatnonzero(shapely.intersects_xy(t, xx.ravel(), yy.ravel()))
+            want_tiles += [k] * len(inside)
+            want_pixels += list(inside)
+        np.testing.assert_array_equal(got_tiles, want_tiles)
+        np.testing.assert_array_equal(got_pixels, want_pixels)

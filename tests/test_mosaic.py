@@ -17,7 +17,7 @@ from PIL import Image
 from compact_distributions.backends.numpy_backend import NumpyBackend
 from compact_distributions.bench.cli import main
 from compact_distributions.cvt.errors import InputError
-from compact_distributions.cvt.image_fields import picture_fields
+from compact_distributions.cvt.image_fields import gaussian_smooth, picture_fields
 from compact_distributions.cvt.mosaic import make_mosaic, picture_array, raster_size, resample
 
 SVG = "{http://www.w3.org/2000/svg}"
@@ -47,6 +47,19 @@ def test_field_runs_along_the_edges_in_the_raster_frame(deg):
     angles = f.field.angles_at(np.array([[x, y] for x in (40.5, 80.5, 120.5) for y in (40.5, 80.5, 120.5)]))
     assert angle_error_deg(angles, deg, 180.0).max() < 3.0
     assert f.edges.any() and not f.edges.all()
+
+
+@pytest.mark.parametrize(
+    "shape,sigma", [((40, 90), 3.0), ((40, 90), 8.0), ((61, 37), 25.5), ((2, 130), 60.0)]
+)
+def test_gaussian_smooth_is_ndimages_filter(shape, sigma):
+    """Through the FFT for wide kernels: the same kernel, truncation and border as
+    scipy's direct filter, including a kernel wider than the picture."""
+    from scipy import ndimage
+
+    image = np.random.default_rng(5).random(shape) * 10
+    want = ndimage.gaussian_filter(image, sigma, mode="nearest")
+    np.testing.assert_allclose(gaussian_smooth(image, sigma), want, rtol=0, atol=1e-12)
 
 
 def test_flat_picture_gives_uniform_density_and_zero_field():

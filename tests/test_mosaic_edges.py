@@ -19,7 +19,7 @@ from compact_distributions.bench.cli import main
 from compact_distributions.cvt.colour import lab_to_srgb, srgb_to_lab
 from compact_distributions.cvt.errors import InputError
 from compact_distributions.cvt.image_fields import DEFAULT_EDGE_THRESHOLD, edge_contrast, strong_edges
-from compact_distributions.cvt.mosaic import make_mosaic, split_cells
+from compact_distributions.cvt.mosaic import WalledBackend, make_mosaic, split_cells, split_moments
 
 from .cli_errors import one_error
 
@@ -94,6 +94,100 @@ def test_split_cells_keeps_each_cells_piece_on_its_sites_side():
     assert (out[:, :2] == 0).all() and (out[:, 3] == -1).all()
     labels[:, 2] = 0  # no wall: nothing changes
     np.testing.assert_array_equal(split_cells(labels, np.array([[0.5, 3.0], [6.0, 3.0]])), labels)
+
+
+def flood_fill_split(labels, sites):
+    """split_cells by its definition, pixel by pixel: each cell's 4-connected pieces by
+    flood fill; keep the piece under the site where the site's pixel is in the cell, else
+    the largest (of equal ones, the one whose first pixel comes last in raster order)."""
+    h, w = labels.shape
+    piece = np.full((h, w), -1)
+    pieces = []  # (cell, first pixel in raster order, size)
+    for i0 in range(h):
+        for j0 in range(w):
+            if labels[i0, j0] < 0 or piece[i0, j0] >= 0:
+                continue
+            k, cell, todo, size = len(pieces), labels[i0, j0], [(i0, j0)], 0
+            piece[i0, j0] = k
+            while todo:
+                i, j = todo.pop()
+                size += 1
+                for a, b in ((i - 1, j), (i + 1, j), (i, j - 1), (i, j + 1)):
+                    if 0 <= a < h and 0 <= b < w and labels[a, b] == cell and piece[a, b] < 0:
+                        piece[a, b] = k
+                        todo.append((a, b))
+            pieces.append((cell, i0 * w + j0, size))
+    out = np.full_like(labels, -1)
+    for cell in range(len(sites)):
+        mine = [k for k, p in enumerate(pieces) if p[0] == cell]
+        if not mine:
+            continue
+        i = min(max(int(math.floor(sites[cell][1])), 0), h - 1)
+        j = min(max(int(math.floor(sites[cell][0])), 0), w - 1)
+        if labels[i, j] == cell:
+            keep = piece[i, j]
+        else:
+            keep = max(mine, key=lambda k: (pieces[k][2], pieces[k][1]))
+        out[piece == keep] = cell
+    return out
+
+
+def hand_moments(labels, n):
+    """count, Σj, Σi, Σj², Σi² per cell, summed pixel by pixel."""
+    sums = np.zeros((5, n), dtype=np.int64)
+    for (i, j), cell in np.ndenumerate(labels):
+        if cell >= 0:
+            sums[:, cell] += (1, j, i, j * j, i * i)
+    return sums
+
+
+def random_cells(rng):
+    """A small label raster whose cells often fall into pieces: random labels in blocks of
+    random size, walls (-1) among them, and sites anywhere (on their cell or not)."""
+    n = int(rng.integers(1, 7))
+    block = int(rng.integers(1, 4))
+    h, w = rng.integers(1, 13, 2)
+    coarse = rng.integers(-1, n, (h, w))
+    labels = np.repeat(np.repeat(coarse, block, axis=0), block, axis=1).astype(np.int32)
+    sites = rng.random((n, 2)) * [labels.shape[1] + 2, labels.shape[0] + 2] - 1  # some off the raster
+    return labels, sites
+
+
+def test_split_cells_and_moments_match_a_flood_fill():
+    rng = np.random.default_rng(11)
+    split = 0
+    for _ in range(400):
+        labels, sites = random_cells(rng)
+        want = flood_fill_split(labels, sites)
+        got = split_cells(labels, sites)
+        np.testing.assert_array_equal(got, want)
+        mom = split_moments(labels, sites)
+        np.testing.assert_array_equal(
+            np.stack([mom.count, mom.sx, mom.sy, mom.sxx, mom.syy]), hand_moments(want, len(sites))
+        )
+        split += not np.array_equal(want, labels)
+    assert split > 100  # most rasters had a cell in pieces
+
+
+def test_split_cells_of_a_real_walled_step_match_a_flood_fill():
+    """A Lloyd step's labels on the disc picture (walls along the circle, cells of
+    several sizes and angles): cells cut by the wall and pieces left by the raster."""
+    pic = disc_picture()
+    m = make_mosaic(pic, NUMPY, n_elements=150, iterations=2, seed=3, method="ours")
+    p = m.problem
+    raw = NUMPY.label(
+        m.sites, angles=p.angles_at(m.sites), scales=p.scales_at(m.sites), metric=p.metric, grid=p.grid
+    )
+    want = flood_fill_split(raw, m.sites)
+    assert not np.array_equal(want, raw)
+    np.testing.assert_array_equal(split_cells(raw, m.sites), want)
+    walled = WalledBackend(NUMPY)
+    args = dict(angles=p.angles_at(m.sites), scales=p.scales_at(m.sites), metric=p.metric, grid=p.grid)
+    np.testing.assert_array_equal(walled.label(m.sites, **args), want)
+    mom = walled.moments(m.sites, **args)
+    np.testing.assert_array_equal(
+        np.stack([mom.count, mom.sx, mom.sy, mom.sxx, mom.syy]), hand_moments(want, len(m.sites))
+    )
 
 
 # ----------------------------------------------------------------------- known edges
