@@ -66,11 +66,18 @@ def region_polygon(grid: Grid):
     return shapely.union_all(boxes)
 
 
+EMPTY_BAND = 1 << 22  # pixels read at once by empty_cells: no raster-sized temporaries
+
+
 def empty_cells(labels: np.ndarray, n_elements: int) -> int:
-    """Sites whose cell holds no pixel of the label raster."""
-    lab = np.asarray(labels).ravel()
-    counts = np.bincount(lab[lab >= 0], minlength=n_elements)[:n_elements]
-    return int((counts == 0).sum())
+    """Sites whose cell holds no pixel of the label raster (labels outside 0 .. N - 1
+    count for no site); read a band of pixels at a time."""
+    lab = np.asarray(labels).reshape(-1)
+    seen = np.zeros(n_elements, dtype=bool)
+    for lo in range(0, lab.size, EMPTY_BAND):
+        part = lab[lo : lo + EMPTY_BAND]
+        seen[part[(part >= 0) & (part < n_elements)]] = True
+    return int(n_elements - np.count_nonzero(seen))
 
 
 UNION_BATCH = 4096  # elements unioned at once: bounds the memory of a union
@@ -450,6 +457,7 @@ def measures(elements, problem, shape: str, aspect: float | None = None, region=
 __all__ = [
     "Evaluation",
     "region_polygon",
+    "EMPTY_BAND",
     "empty_cells",
     "UNION_BATCH",
     "evaluate",
