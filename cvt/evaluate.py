@@ -395,7 +395,7 @@ def neighbour_pairs(points) -> tuple[np.ndarray, np.ndarray]:
         a, b = order[:-1], order[1:]
         return np.minimum(a, b), np.maximum(a, b)
     e = np.stack([tri[:, [0, 1]], tri[:, [1, 2]], tri[:, [2, 0]]], axis=1)  # (T, 3, 2)
-    e = np.sort(e, axis=2)
+    e = np.sort(e, axis=2).astype(np.int64)  # qhull's int32 indices: a·n + b overflows past 46 340 points
     length = np.linalg.norm(pts[e[..., 0]] - pts[e[..., 1]], axis=2)  # (T, 3)
     srt = np.sort(length, axis=1)
     longest = np.argmax(length, axis=1)
