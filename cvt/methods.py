@@ -447,11 +447,10 @@ def run_ours_compact(
     )
 
 
-# compaction's peak per element (near pairs, their directions, the linear program),
-# measured for squares; the pairs grow with the square of the element's circumradius over
-# its inradius (square 2, triangle 4), and under a density's size contrast (up to 10:1)
-# with the larger elements' reach
-COMPACTION_PER_SITE = 4_000
+# compaction's peak per element (near pairs, their directions, the linear program):
+# measured 3-6 kB for squares, rectangles and triangles at 16 000-256 000 elements; under a
+# density's size contrast (up to 10:1) the larger elements' reach brings more pairs
+COMPACTION_PER_SITE = 8_000
 COMPACTION_DENSITY_FACTOR = 6
 
 
@@ -463,7 +462,7 @@ def compaction_memory(pixels: int, n_elements: int, element: str | None, density
     pixels, n_elements : int
         The raster's pixels (unused: compaction works on the elements) and the sites.
     element : str or None
-        The element shape (None: squares).
+        The element shape (unused: the figure holds for every shape measured).
     density : bool
         Whether a density makes the elements' sizes differ.
 
@@ -472,12 +471,8 @@ def compaction_memory(pixels: int, n_elements: int, element: str | None, density
     (str, float)
         The step's name and its bytes.
     """
-    from .shapes import element_ball
-
-    ball = element_ball(element or "square", None)
-    pairs = max(2.0, (ball.circumradius / ball.inradius) ** 2)
     factor = COMPACTION_DENSITY_FACTOR if density else 1
-    return "compacting the elements", COMPACTION_PER_SITE * pairs * factor * n_elements
+    return "compacting the elements", COMPACTION_PER_SITE * factor * n_elements
 
 
 def _rounds(value, name: str) -> int:
