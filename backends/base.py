@@ -38,6 +38,9 @@ class Backend(ABC):
     # less on the host, or more per site, override these
     bytes_per_pixel: float = 40
     bytes_per_site: float = 1_000
+    # what its runtime adds to the process: PoCL and llvmpipe load LLVM (~100 MiB) and
+    # build a kernel the first time (~120 MiB more); numpy and scipy add nothing
+    runtime_bytes: float = 240 * 2**20
 
     @classmethod
     def memory_estimate(cls, width: int, height: int, n_elements: int) -> float:

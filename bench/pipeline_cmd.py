@@ -136,12 +136,15 @@ class PipelineSpec:
             return mosaic_estimate(
                 self.size, self.size, self.n_elements, memory_class(self.backend), element="square"
             )
+        from compact_distributions.baselines import get_method
+
         return run_estimate(
             self.size,
             self.size,
             self.n_elements,
             memory_class(self.backend),
             element="square",
+            method=get_method(self.kind),
             what=f"the run {self.describe()}",
         )
 

@@ -275,6 +275,7 @@ def run(args) -> int:
         density=bool(opts.density),
         field=bool(opts.field_file),
         region=bool(opts.region),
+        method=method,
     ).check(args.memory_limit, lower="use a smaller --size or fewer --elements")
     load_init(opts)
     with OutputFolder(args.out, "--out", COMMAND_OUTPUTS) as tmp:

@@ -97,6 +97,7 @@ class RunSpec:
             memory_class(self.backend),
             element=self.element,
             pictures=self.picture,
+            method=self.method_record,
             what=f"the run {self.describe()}",
         )
 

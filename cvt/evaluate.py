@@ -66,11 +66,18 @@ def region_polygon(grid: Grid):
     return shapely.union_all(boxes)
 
 
+EMPTY_BAND = 1 << 22  # pixels read at once by empty_cells: no raster-sized temporaries
+
+
 def empty_cells(labels: np.ndarray, n_elements: int) -> int:
-    """Sites whose cell holds no pixel of the label raster."""
-    lab = np.asarray(labels).ravel()
-    counts = np.bincount(lab[lab >= 0], minlength=n_elements)[:n_elements]
-    return int((counts == 0).sum())
+    """Sites whose cell holds no pixel of the label raster (labels outside 0 .. N - 1
+    count for no site); read a band of pixels at a time."""
+    lab = np.asarray(labels).reshape(-1)
+    seen = np.zeros(n_elements, dtype=bool)
+    for lo in range(0, lab.size, EMPTY_BAND):
+        part = lab[lo : lo + EMPTY_BAND]
+        seen[part[(part >= 0) & (part < n_elements)]] = True
+    return int(n_elements - np.count_nonzero(seen))
 
 
 UNION_BATCH = 4096  # elements unioned at once: bounds the memory of a union
@@ -509,7 +516,7 @@ def neighbour_pairs(points) -> tuple[np.ndarray, np.ndarray]:
         a, b = order[:-1], order[1:]
         return np.minimum(a, b), np.maximum(a, b)
     e = np.stack([tri[:, [0, 1]], tri[:, [1, 2]], tri[:, [2, 0]]], axis=1)  # (T, 3, 2)
-    e = np.sort(e, axis=2)
+    e = np.sort(e, axis=2).astype(np.int64)  # qhull's int32 indices: a·n + b overflows past 46 340 points
     length = np.linalg.norm(pts[e[..., 0]] - pts[e[..., 1]], axis=2)  # (T, 3)
     srt = np.sort(length, axis=1)
     longest = np.argmax(length, axis=1)
@@ -571,6 +578,7 @@ def measures(elements, problem, shape: str, aspect: float | None = None, region=
 __all__ = [
     "Evaluation",
     "region_polygon",
+    "EMPTY_BAND",
     "empty_cells",
     "UNION_BATCH",
     "evaluate",

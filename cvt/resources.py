@@ -9,9 +9,13 @@ for less.  The limit is the memory this machine has available now (``MemAvailabl
 capped by a cgroup's limit and ``ulimit -v``), or what ``--memory-limit`` (the
 ``memory_limit`` argument of the Python API) sets.
 
-The figures per pixel and per site are peak resident memory measured on this suite
-(one process per configuration, ``ru_maxrss``) and rounded up; the tests compare the
-estimates with measured peaks.
+An estimate holds two kinds of figures: ``parts``, held for the whole run (the
+backend's rasters, the problem's images, the placed elements), which add up, and
+``stages``, held only while one step runs (placing, a method's own step such as
+compaction, the pictures), of which only the largest counts: the steps run one after
+another.  The figures per pixel and per site are peak resident memory measured on this
+suite (one process per configuration, its own high-water mark after exec) and rounded
+up; the tests compare the estimates with measured peaks.
 """
 
 from __future__ import annotations
@@ -26,15 +30,16 @@ from .validate import byte_size
 
 MiB = 2**20
 PROGRAM = 120 * MiB  # the interpreter with numpy, scipy, shapely, Pillow and matplotlib loaded
+RUNTIME = 240 * MiB  # a backend's runtime (LLVM, a first kernel build) where its class does not say
 
 # bytes per pixel of the raster (float64 images, int32 labels, their temporaries) ...
 PER_PIXEL = {
     "density": 40,  # the image at raster size, the density map, its clip and acceptance
     "field": 24,  # the image at raster size and the angles
     "region": 14,  # the mask and its resampling
-    "seeding": 8,  # the region's pixel indices
-    "placement": 24,  # contour samples and their reach, the region, the evaluation
-    "cells.png": 12,  # labels to colours (index, RGB)
+    "seeding": 8,  # the region's pixel indices (without a region none are made)
+    "placement": 24,  # mosaics: contour samples and their reach, the region, the evaluation
+    "pictures": 12,  # cells.png's colour per pixel, elements.png drawn in bands
     "labels": 48,  # a backend that does not say: labels and moments on the host
     "picture": 200,  # a mosaic's picture at raster size, its structure tensor and fields
     "colours": 60,  # each element's mean colour: a distance per pixel
@@ -42,6 +47,13 @@ PER_PIXEL = {
 # ... and per site (coefficients, the placed polygon, its outline in result.json)
 PER_SITE = {"polygon": 1_000, "curved": 4_000}  # a 128-gon outline costs ~2.5 kB in GEOS
 SUPERSAMPLE = 3  # cvt.render.draw_elements' default
+# placing: each contour sample (cvt.placement, two per edge between cells) with its sort
+# and reach; a cell of A pixels has about 4.5·sqrt(A) of them
+CONTOUR_SAMPLE = 48
+CONTOUR_SAMPLES_PER_SITE = 4.5
+# moving elements inside their cells (fit): the distance transform of the cells, by the
+# shape record's distance (chessboard: int32; the others: float64 and its feature indices)
+FIT_PER_PIXEL = {"chessboard": 6, "scaled": 18, "euclidean": 18}
 
 
 class ResourceError(InputError):
@@ -121,36 +133,61 @@ class Estimate:
     """Peak memory of one piece of work, as named parts added to the program's own."""
 
     what: str  # "this run", "the mosaic", ...
-    parts: dict[str, float] = field(default_factory=dict)
+    parts: dict[str, float] = field(default_factory=dict)  # held throughout: they add up
+    stages: dict[str, float] = field(default_factory=dict)  # one at a time: the largest counts
 
     def add(self, name: str, nbytes: float) -> Estimate:
+        """Add ``nbytes`` held for the whole run to the part ``name``."""
         self.parts[name] = self.parts.get(name, 0.0) + max(0.0, float(nbytes))
         return self
 
+    def stage(self, name: str, nbytes: float) -> Estimate:
+        """Add ``nbytes`` held only while the step ``name`` runs."""
+        self.stages[name] = self.stages.get(name, 0.0) + max(0.0, float(nbytes))
+        return self
+
+    @property
+    def held(self) -> float:
+        """The parts and the largest stage (all but the program itself)."""
+        return sum(self.parts.values()) + max(self.stages.values(), default=0.0)
+
     @property
     def total(self) -> float:
-        return PROGRAM + sum(self.parts.values())
+        return PROGRAM + self.held
 
     def check(self, limit=None, *, lower: str, name: str = "--memory-limit") -> Estimate:
         """Raise ResourceError when the estimate exceeds the limit (see :func:`memory_limit`);
         ``lower`` says how to ask for less, ``name`` is the option that raises the limit."""
         allowed, source = memory_limit(limit, name)
         if self.total > allowed:
-            top = max(self.parts, key=self.parts.get) if self.parts else "the program"
+            named = {**self.parts, **self.stages}
+            top = max(named, key=named.get) if named else "the program"
             raise ResourceError(
                 f"{self.what} needs about {format_bytes(self.total)} of memory (of which {top} "
-                f"{format_bytes(self.parts.get(top, PROGRAM))}), more than {source} "
+                f"{format_bytes(named.get(top, PROGRAM))}), more than {source} "
                 f"({format_bytes(allowed)}); {lower}, or set {name} higher if the memory is there"
             )
         return self
 
 
-def placement_bytes(pixels: int, n_elements: int, element: str | None) -> float:
-    """Placing one element per cell, evaluating them and keeping their outlines."""
+def element_bytes(n_elements: int, element: str | None) -> float:
+    """The placed elements (GEOS polygons) and their outlines while they are written."""
     from .shapes import shape_record
 
-    per_site = PER_SITE["curved" if element is not None and shape_record(element).curved else "polygon"]
-    return PER_PIXEL["placement"] * pixels + per_site * n_elements
+    curved = element is not None and shape_record(element).curved
+    return PER_SITE["curved" if curved else "polygon"] * n_elements
+
+
+def placement_bytes(pixels: int, n_elements: int, element: str | None) -> float:
+    """Placing one element per cell, evaluating them and keeping their outlines."""
+    return PER_PIXEL["placement"] * pixels + element_bytes(n_elements, element)
+
+
+def contour_bytes(pixels: int, n_elements: int) -> float:
+    """The contour samples of ``n_elements`` cells of a raster of ``pixels`` (at most
+    four per pixel), while elements are placed in the cells."""
+    samples = min(CONTOUR_SAMPLES_PER_SITE * math.sqrt(float(n_elements) * pixels), 4.0 * pixels)
+    return CONTOUR_SAMPLE * samples
 
 
 def canvas_bytes(width: int, height: int, scale: float = 1.0, supersample: int = SUPERSAMPLE) -> float:
@@ -173,27 +210,67 @@ def run_estimate(
     region: bool = False,
     placement: bool = True,
     pictures: bool = True,
+    method=None,
     what: str = "this run",
 ) -> Estimate:
-    """The peak memory of one run of a method on ``backend_class``: the problem's
-    images at raster size, the backend's labels and moments, with ``placement`` the
-    elements placed and evaluated and, with ``pictures``, the pictures of
-    ``cvtbench run``."""
+    """The peak memory of one run of a method on ``backend_class``.
+
+    Held throughout: the backend's runtime, labels and moments, the problem's images at
+    raster size and, with ``placement``, the placed elements.  One at a time: seeding
+    within a region, placing the elements in their cells (contour samples), the
+    method's own step and, with ``pictures``, the pictures of ``cvtbench run``.
+
+    Parameters
+    ----------
+    width, height, n_elements : int
+        The raster and the number of sites.
+    backend_class : type
+        The backend (its ``runtime_bytes`` and ``memory_estimate``).
+    element : str or None
+        The element shape (curved outlines cost more; the fit's distance transform).
+    density, field, region : bool
+        Whether the problem has these images.
+    placement, pictures : bool
+        Whether elements are placed, and whether ``cvtbench run``'s pictures are drawn.
+    method : Method or None
+        The method record: ``fits`` adds the fit's distance transform, ``memory`` its
+        own step (given the raster's pixels, the sites, the element and ``density``).
+    what : str
+        How the refusal names the work.
+
+    Returns
+    -------
+    Estimate
+    """
+    from .shapes import shape_record
+
     pixels = width * height
     est = Estimate(what)
+    est.add("the backend's runtime", getattr(backend_class, "runtime_bytes", RUNTIME))
     backend_bytes = getattr(backend_class, "memory_estimate", None)
     est.add(
         "the backend's labels and moments",
         backend_bytes(width, height, n_elements) if backend_bytes else PER_PIXEL["labels"] * pixels,
     )
-    est.add("seeding", PER_PIXEL["seeding"] * pixels)
     for name, used in (("density", density), ("field", field), ("region", region)):
         if used:
             est.add(f"the {name} image", PER_PIXEL[name] * pixels)
+    if region:
+        est.stage("seeding", PER_PIXEL["seeding"] * pixels)
     if placement:
-        est.add("placing and evaluating the elements", placement_bytes(pixels, n_elements, element))
+        est.add("the elements", element_bytes(n_elements, element))
+        fit = getattr(method, "fits", False) and element is not None
+        distance = shape_record(element).distance if fit else None
+        est.stage(
+            "placing the elements",
+            contour_bytes(pixels, n_elements) + FIT_PER_PIXEL.get(distance, 0) * pixels,
+        )
+        own = getattr(method, "memory", None)
+        if own is not None:
+            step, nbytes = own(pixels, n_elements, element, density)
+            est.stage(step, nbytes)
     if pictures:
-        est.add("the pictures", PER_PIXEL["cells.png"] * pixels + canvas_bytes(width, height))
+        est.stage("the pictures", PER_PIXEL["pictures"] * pixels)
     return est
 
 
@@ -220,13 +297,16 @@ def mosaic_estimate(
         element=element,
         density=True,
         field=True,
+        placement=False,
         pictures=False,
         what=what,
     )
+    est.add("seeding", PER_PIXEL["seeding"] * pixels)
+    est.add("placing and evaluating the elements", placement_bytes(pixels, n_elements, element))
     est.add("the picture and its fields", PER_PIXEL["picture"] * pixels)
     est.add("the colours", PER_PIXEL["colours"] * pixels)
     if compare:
-        est.add("the second mosaic of the comparison", sum(est.parts.values()))
+        est.add("the second mosaic of the comparison", est.held)
         est.add("the comparison picture", 3 * canvas_bytes(width, height))
     if png_scale is not None:
         est.add("mosaic.png", canvas_bytes(width, height, png_scale))
@@ -241,6 +321,12 @@ __all__ = [
     "memory_limit",
     "run_estimate",
     "placement_bytes",
+    "element_bytes",
+    "contour_bytes",
+    "RUNTIME",
+    "CONTOUR_SAMPLE",
+    "CONTOUR_SAMPLES_PER_SITE",
+    "FIT_PER_PIXEL",
     "canvas_bytes",
     "format_bytes",
     "PROGRAM",

@@ -24,11 +24,16 @@ def initial_sites(problem: Problem) -> np.ndarray:
         return problem.init_sites.copy()
     grid, n = problem.grid, problem.n_elements
     rng = np.random.default_rng(problem.seed)
-    inside = np.flatnonzero(grid.inside().ravel())
+    # the region's pixel indices; without a mask, the raster's are 0 .. W·H - 1 and are
+    # not made (choosing among a count draws the same as among that many indices)
+    inside = None if grid.mask is None else np.flatnonzero(grid.mask.ravel())
+    count = grid.pixel_count
     if problem.density is None:
-        picks = rng.choice(inside, size=n, replace=False)
+        picks = rng.choice(count if inside is None else inside, size=n, replace=False)
         return _pixels_to_points(picks, grid.width, rng)
-    accept = problem.density.acceptance().ravel()[inside]
+    accept = problem.density.acceptance().ravel()
+    if inside is not None:
+        accept = accept[inside]
     if not (accept > 0).any():
         from .errors import InputError
 
@@ -37,7 +42,7 @@ def initial_sites(problem: Problem) -> np.ndarray:
     # Rejection sampling by batches: propose pixels uniformly in the region, accept with
     # probability density/max; distinct pixels so two sites never coincide.
     while len(chosen) < n:
-        batch = rng.choice(len(inside), size=max(4 * n, 1024))
+        batch = rng.choice(count, size=max(4 * n, 1024))
         keep = batch[rng.random(len(batch)) < accept[batch]]
         chosen = np.concatenate([chosen, keep])
         _, first = np.unique(chosen, return_index=True)
@@ -45,9 +50,10 @@ def initial_sites(problem: Problem) -> np.ndarray:
         if len(chosen) >= n or (accept > 0).sum() >= n:
             continue
         # fewer positive pixels than sites: fill with the remaining region pixels
-        rest = np.setdiff1d(np.arange(len(inside)), chosen)
+        rest = np.setdiff1d(np.arange(count), chosen)
         chosen = np.concatenate([chosen, rng.permutation(rest)])
-    return _pixels_to_points(inside[chosen[:n]], grid.width, rng)
+    picks = chosen[:n] if inside is None else inside[chosen[:n]]
+    return _pixels_to_points(picks, grid.width, rng)
 
 
 __all__ = ["initial_sites"]

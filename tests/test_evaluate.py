@@ -75,6 +75,21 @@ def test_matches_the_plain_union_formula(seed):
     assert ev.overlap > 0.01 and ev.overlapping_pairs > 10
 
 
+def test_empty_cells_read_in_bands_count_as_one_pass(monkeypatch):
+    from compact_distributions.cvt import evaluate as ev_mod
+
+    rng = np.random.default_rng(3)
+    labels = rng.integers(-1, 300, size=(37, 53)).astype(np.int32)
+    lab = labels.ravel()
+
+    def whole(n):
+        return int((np.bincount(lab[lab >= 0], minlength=n)[:n] == 0).sum())
+
+    monkeypatch.setattr(ev_mod, "EMPTY_BAND", 100)  # 20 bands, the last one short
+    assert empty_cells(labels, 400) == whole(400) > 100
+    assert empty_cells(labels, 250) == whole(250) < 5  # labels beyond N count for no site
+
+
 def test_empty_cells_and_nothing_placed():
     labels = np.array([[0, 0, 2], [-1, 2, 2]], dtype=np.int32)
     assert empty_cells(labels, 4) == 2  # sites 1 and 3

@@ -127,6 +127,17 @@ def test_neighbours_keep_a_hexagonal_lattice_whole():
     assert len(a) == 3 * k * k - 4 * k + 1  # the edges of a k x k hexagonal patch
 
 
+def test_neighbours_of_more_points_than_int32_pairs_hold():
+    # 48 400 points: a pair's key a·n + b passes 2**31 (qhull gives int32 indices)
+    k = 220
+    i, j = np.meshgrid(np.arange(k), np.arange(k))
+    rng = np.random.default_rng(0)
+    pts = np.stack([i.ravel(), j.ravel()], axis=1) + rng.uniform(-0.2, 0.2, (k * k, 2))
+    a, b = neighbour_pairs(pts)
+    assert (a < b).all() and np.hypot(*(pts[a] - pts[b]).T).max() < 1.6
+    assert len(a) > 1.9 * k * (k - 1)
+
+
 def test_overlapping_neighbours_are_zero_apart():
     boxes = np.array([shapely.box(0, 0, 10, 10), shapely.box(8, 0, 18, 10)])
     assert grout(boxes)[0] == 0.0
