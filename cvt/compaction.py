@@ -358,6 +358,67 @@ def _face_gaps(unit, dx, dy, ra, rb, ca, sa, cb, sb):
     return fx, fy, g
 
 
+def _reach_classes(reach: np.ndarray) -> list[np.ndarray]:
+    """The indices of ``reach`` grouped into classes whose reaches lie within a factor 2:
+    a query sized by its class's largest reach, not by the largest of all, keeps the
+    candidates of small elements few where sizes vary (a density)."""
+    level = np.floor(np.log2(reach / reach.min())).astype(np.int64)
+    order = np.argsort(level, kind="stable")
+    cuts = np.flatnonzero(np.diff(level[order])) + 1
+    return np.split(order, cuts)
+
+
+def _near_tree(points, reach, tree, extra):
+    """(k, m): every point k and item m of ``tree`` with |points[k] − item| <= reach[k] +
+    extra (and some farther ones), ordered by k then m."""
+    ks, ms = [], []
+    for cls in _reach_classes(reach):
+        found = cKDTree(points[cls]).sparse_distance_matrix(
+            tree, reach[cls].max() + extra, output_type="ndarray"
+        )
+        ks.append(cls[found["i"]])
+        ms.append(found["j"])
+    k, m = np.concatenate(ks), np.concatenate(ms)
+    order = np.lexsort((m, k))
+    return k[order], m[order]
+
+
+def _segment_trees(segs: np.ndarray) -> list:
+    """[(indices, kd-tree of their midpoints, largest half-length)] for the short pieces
+    (a wall's staircase: 1-2 px) and the long ones apart: a query about a piece's
+    midpoint must reach its half-length further, and most pieces are short."""
+    half = 0.5 * np.hypot(segs[:, 2] - segs[:, 0], segs[:, 3] - segs[:, 1])
+    short = half <= 1.0
+    out = []
+    for members in (np.flatnonzero(short), np.flatnonzero(~short)):
+        if len(members):
+            mid = 0.5 * (segs[members, :2] + segs[members, 2:])
+            out.append((members, cKDTree(mid), float(half[members].max())))
+    return out
+
+
+def _pairs_within(points, reach, extra):
+    """(P, 2) index pairs a < b with |points[a] − points[b]| <= reach[a] + reach[b] +
+    extra (and some farther ones), ordered by a then b: class by class of reach, so one
+    large element does not widen the query of every small one."""
+    classes = _reach_classes(reach)
+    trees = [cKDTree(points[cls]) for cls in classes]
+    tops = [reach[cls].max() for cls in classes]
+    a_s, b_s = [], []
+    for x, (cx, tx) in enumerate(zip(classes, trees, strict=True)):
+        got = tx.query_pairs(2 * tops[x] + extra, output_type="ndarray")
+        a_s.append(cx[got[:, 0]])
+        b_s.append(cx[got[:, 1]])
+        for y in range(x + 1, len(classes)):
+            found = tx.sparse_distance_matrix(trees[y], tops[x] + tops[y] + extra, output_type="ndarray")
+            a_s.append(cx[found["i"]])
+            b_s.append(classes[y][found["j"]])
+    a, b = np.concatenate(a_s), np.concatenate(b_s)
+    a, b = np.minimum(a, b), np.maximum(a, b)
+    order = np.lexsort((b, a))
+    return np.stack([a[order], b[order]], axis=1)
+
+
 def _near_pairs(unit, c, r, cos, sin, budget, gap, prev):
     """Pairs whose gap could close to < gap this round; their n and current gap."""
     act = np.flatnonzero(r > 0)
@@ -365,8 +426,7 @@ def _near_pairs(unit, c, r, cos, sin, budget, gap, prev):
         e = np.zeros(0)
         return np.zeros(0, np.int64), np.zeros(0, np.int64), e, e, e
     reach = unit.rho * r[act] + budget[act]
-    tree = cKDTree(c[act])
-    ij = tree.query_pairs(2 * reach.max() + gap + _SELECT, output_type="ndarray")
+    ij = _pairs_within(c[act], reach, gap + _SELECT)
     i, j = act[ij[:, 0]], act[ij[:, 1]]
     d = np.hypot(*(c[j] - c[i]).T)
     enough = gap + budget[i] + budget[j] + _SELECT
@@ -475,15 +535,20 @@ def _closest_on_segment(px, py, qx, qy, x, y):
     return px + t * ex, py + t * ey
 
 
-def _near_segments(unit, c, r, cos, sin, budget, half, segs, seg_tree, prev):
+def _near_segments(unit, c, r, cos, sin, budget, half, segs, seg_trees, prev):
     act = np.flatnonzero(r > 0)
     empty = np.zeros(0)
     if len(act) == 0 or len(segs) == 0:
         return np.zeros(0, np.int64), np.zeros(0, np.int64), empty, empty, empty
     reach = unit.rho * r[act] + budget[act]
-    cut = reach.max() + SEGMENT_LENGTH / 2 + half + _SELECT
-    m = cKDTree(c[act]).sparse_distance_matrix(seg_tree, cut, output_type="ndarray")
-    e, s = act[m["i"]], m["j"]
+    ks, ss = [], []
+    for members, tree, half_length in seg_trees:
+        k, m = _near_tree(c[act], reach, tree, half_length + half + _SELECT)
+        ks.append(k)
+        ss.append(members[m])
+    k, s = np.concatenate(ks), np.concatenate(ss)
+    order = np.lexsort((s, k))
+    e, s = act[k[order]], s[order]
     px, py, qx, qy = segs[s, 0], segs[s, 1], segs[s, 2], segs[s, 3]
     x, y = c[e, 0], c[e, 1]
     kx, ky = _closest_on_segment(px, py, qx, qy, x, y)
@@ -1011,7 +1076,7 @@ def compact(
     segs = boundary_segments(mask)
     if walls is not None and walls.any():
         segs = np.concatenate([segs, wall_segments(walls)])
-    seg_tree = cKDTree(0.5 * (segs[:, :2] + segs[:, 2:]))
+    seg_trees = _segment_trees(segs)
     prev_p = prev_s = None
     result = CompactionResult(c, r, th, 0, 0.0)
     options = {"presolve": "off", **(lp_options or {})}
@@ -1026,7 +1091,7 @@ def compact(
             up = np.clip(max_sizes - r, 0.0, up)
         budget = math.sqrt(2) * delta + unit.rho * up
         i, j, px, py, _ = _near_pairs(unit, c, r, cos, sin, budget, gap, prev_p)
-        e, s, sx, sy, _ = _near_segments(unit, c, r, cos, sin, budget, 0.5 * gap, segs, seg_tree, prev_s)
+        e, s, sx, sy, _ = _near_segments(unit, c, r, cos, sin, budget, 0.5 * gap, segs, seg_trees, prev_s)
         seg_m = np.minimum(sx * segs[s, 0] + sy * segs[s, 1], sx * segs[s, 2] + sy * segs[s, 3])
         rows = _Rows(
             i,
