@@ -39,10 +39,33 @@ _MARGIN = 1e-3  # px kept beyond the gap
 
 def wall_lines(walls: np.ndarray):
     """The centre lines of thin walls as shapely geometries: merged lines, plus a point
-    for each wall pixel that touches no other."""
+    for each wall pixel that touches no other.
+
+    Parameters
+    ----------
+    walls : (H, W) bool ndarray
+        Thin walls.
+
+    Returns
+    -------
+    ndarray of shapely geometries
+    """
+    steps, points = _wall_pieces(walls)
+    parts = []
+    if len(steps):
+        # the steps meet only at their ends: they are merged as they are, with no noding union
+        parts.append(shapely.get_parts(shapely.line_merge(shapely.multilinestrings(steps))))
+    if len(points):
+        parts.append(points)
+    return np.concatenate(parts) if parts else np.zeros(0, dtype=object)
+
+
+def _wall_pieces(walls: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """The walls' centre lines in pieces: unit steps between the centres of 4-connected
+    wall pixels and on to the border (lines), and lone wall pixels (points)."""
     segs = wall_segments(walls)
     if len(segs) == 0:
-        return np.zeros(0, dtype=object)
+        return np.zeros(0, dtype=object), np.zeros(0, dtype=object)
     # a wall that meets the picture's border is carried on to it: a cut tile, unlike a
     # whole one, could otherwise bend round the wall's end in the half pixel left there
     h, w = walls.shape
@@ -56,14 +79,7 @@ def wall_lines(walls: np.ndarray):
     segs = np.concatenate([segs, *ends])
     long = segs[:, 0] != segs[:, 2]
     long |= segs[:, 1] != segs[:, 3]
-    parts = []
-    if long.any():
-        pieces = shapely.linestrings(segs[long].reshape(-1, 2, 2))
-        merged = shapely.line_merge(shapely.union_all(pieces))
-        parts.append(shapely.get_parts(merged))
-    if (~long).any():
-        parts.append(shapely.points(segs[~long, :2]))
-    return np.concatenate(parts)
+    return shapely.linestrings(segs[long].reshape(-1, 2, 2)), shapely.points(segs[~long, :2])
 
 
 def _grown(polygons: np.ndarray, factor: float) -> np.ndarray:
@@ -134,15 +150,9 @@ def cut_to_walls(
         tiles = present[near[members]]
         whole = np.array([out[k] for k in tiles], dtype=object)
         cand = shapely.intersection(grown[members], frame)
-        # less the walls near each tile (their lines clipped to its box, grown by G/2)
-        li_t, li = line_tree.query(cand, predicate="dwithin", distance=half)
-        box = shapely.box(*(shapely.bounds(cand[li_t]) + np.array([-1, -1, 1, 1]) * 2 * half).T)
-        cand = _robust(
-            shapely.difference,
-            cand,
-            _grouped_buffer(shapely.intersection(lines[li], box), li_t, len(members), half),
-        )
-        # less each other tile near it grown by G: one vectorised difference per neighbour rank
+        # less each other tile near it grown by G (one vectorised difference per neighbour
+        # rank), then the walls near it: taken in this order each difference meets a
+        # simpler outline
         ci, oi = tile_tree.query(cand, predicate="intersects")
         other = oi != tiles[ci]
         order = np.argsort(ci[other], kind="stable")
@@ -151,6 +161,14 @@ def cut_to_walls(
         for r in range(rank.max() + 1 if len(ci) else 0):
             at = rank == r
             cand[ci[at]] = _robust(shapely.difference, cand[ci[at]], padded[oi[at]])
+        # the walls: their lines clipped to each tile's box, grown by G/2
+        li_t, li = line_tree.query(cand, predicate="dwithin", distance=half)
+        box = shapely.box(*(shapely.bounds(cand[li_t]) + np.array([-1, -1, 1, 1]) * 2 * half).T)
+        cand = _robust(
+            shapely.difference,
+            cand,
+            _grouped_buffer(shapely.intersection(lines[li], box), li_t, len(members), half),
+        )
         cut = _robust(shapely.union, _piece_holding(cand, whole), whole)
         bigger = shapely.area(cut) > shapely.area(whole) * (1 + 1e-9)
         bigger &= shapely.get_type_id(cut) == 3  # one polygon (a failed step gives none)
