@@ -54,7 +54,9 @@ def wall_lines(walls: np.ndarray):
     parts = []
     if len(steps):
         # the steps meet only at their ends: they are merged as they are, with no noding union
-        parts.append(shapely.get_parts(shapely.line_merge(shapely.multilinestrings(steps))))
+        merged = shapely.line_merge(shapely.multilinestrings(steps))
+        # less the vertices where a line runs straight on: the same lines, fewer to test
+        parts.append(shapely.get_parts(shapely.simplify(merged, 0.0, preserve_topology=False)))
     if len(points):
         parts.append(points)
     return np.concatenate(parts) if parts else np.zeros(0, dtype=object)
@@ -128,8 +130,9 @@ def cut_to_walls(
     if len(lines) == 0 or len(present) == 0:
         return out, 0
     geoms = geoms_all[present]
-    line_tree = shapely.STRtree(lines)
-    near = np.unique(line_tree.query(geoms, predicate="dwithin", distance=reach * spacing)[0])
+    # the lines query the tiles rather than the other way round: GEOS then prepares each
+    # long line once instead of walking it for every tile
+    near = np.unique(shapely.STRtree(geoms).query(lines, predicate="dwithin", distance=reach * spacing)[1])
     if len(near) == 0:
         return out, 0
     grown = _grown(geoms[near], enlarge)
@@ -162,7 +165,7 @@ def cut_to_walls(
             at = rank == r
             cand[ci[at]] = _robust(shapely.difference, cand[ci[at]], padded[oi[at]])
         # the walls: their lines clipped to each tile's box, grown by G/2
-        li_t, li = line_tree.query(cand, predicate="dwithin", distance=half)
+        li, li_t = shapely.STRtree(cand).query(lines, predicate="dwithin", distance=half)
         box = shapely.box(*(shapely.bounds(cand[li_t]) + np.array([-1, -1, 1, 1]) * 2 * half).T)
         cand = _robust(
             shapely.difference,
@@ -214,15 +217,16 @@ def _grouped_buffer(geoms: np.ndarray, group: np.ndarray, n: int, distance: floa
 
 
 def _piece_holding(cand: np.ndarray, whole: np.ndarray) -> np.ndarray:
-    """Of each candidate, the piece that shares most area with the whole tile."""
+    """Of each candidate, the piece that holds a point inside the whole tile: what was
+    taken away comes at most ``_MARGIN`` into the whole tile, so one piece holds all of
+    it but that margin."""
     parts, index = shapely.get_parts(cand, return_index=True)
     out = np.array([shapely.Polygon()] * len(cand), dtype=object)
     if len(parts) == 0:
         return out
-    shared = shapely.area(shapely.intersection(parts, whole[index]))
-    order = np.lexsort((shared, index))
-    last = np.append(index[order][1:] != index[order][:-1], True)
-    out[index[order[last]]] = parts[order[last]]
+    inside = shapely.get_coordinates(shapely.point_on_surface(whole))
+    hit = shapely.contains_xy(parts, inside[index, 0], inside[index, 1])
+    out[index[hit]] = parts[hit]
     return out
 
 
