@@ -35,6 +35,7 @@ from .evaluate import straddling_tiles
 CUT_ENLARGE = 1.8  # a cut tile lies within its tile grown by this factor about its centre
 CUT_REACH = 1.0  # tiles this many element spacings or closer to a wall are cut to fit
 _MARGIN = 1e-3  # px kept beyond the gap
+CHUNK = 64  # steps of wall line per piece of its margin: small pieces, small differences
 
 
 def wall_lines(walls: np.ndarray):
@@ -144,6 +145,7 @@ def cut_to_walls(
     grown_tree = shapely.STRtree(grown)
     a, b = grown_tree.query(grown, predicate="dwithin", distance=full)
     turn = _turns(np.stack([a[a < b], b[a < b]], axis=1), len(near))
+    wall_margin = _margin_pieces(lines, half)
     frame = shapely.box(0.5 * gap, 0.5 * gap, w - 0.5 * gap, h - 0.5 * gap)
     padded = shapely.buffer(geoms_all, full, join_style="mitre")  # each tile's G-wide margin
     tile_tree = shapely.STRtree(padded)
@@ -164,14 +166,14 @@ def cut_to_walls(
         for r in range(rank.max() + 1 if len(ci) else 0):
             at = rank == r
             cand[ci[at]] = _robust(shapely.difference, cand[ci[at]], padded[oi[at]])
-        # the walls: their lines clipped to each tile's box, grown by G/2
-        li, li_t = shapely.STRtree(cand).query(lines, predicate="dwithin", distance=half)
-        box = shapely.box(*(shapely.bounds(cand[li_t]) + np.array([-1, -1, 1, 1]) * 2 * half).T)
-        cand = _robust(
-            shapely.difference,
-            cand,
-            _grouped_buffer(shapely.intersection(lines[li], box), li_t, len(members), half),
-        )
+        # the walls: the pieces of their G/2-wide margin that reach each tile
+        wi, wt = shapely.STRtree(cand).query(wall_margin, predicate="intersects")
+        order = np.argsort(wt, kind="stable")
+        wi, wt = wi[order], wt[order]
+        rank = np.arange(len(wt)) - np.searchsorted(wt, wt)
+        for r in range(rank.max() + 1 if len(wt) else 0):
+            at = rank == r
+            cand[wt[at]] = _robust(shapely.difference, cand[wt[at]], wall_margin[wi[at]])
         cut = _robust(shapely.union, _piece_holding(cand, whole), whole)
         bigger = shapely.area(cut) > shapely.area(whole) * (1 + 1e-9)
         bigger &= shapely.get_type_id(cut) == 3  # one polygon (a failed step gives none)
@@ -202,18 +204,25 @@ def _robust(operation, a: np.ndarray, b: np.ndarray) -> np.ndarray:
         return out
 
 
-def _grouped_buffer(geoms: np.ndarray, group: np.ndarray, n: int, distance: float) -> np.ndarray:
-    """One geometry per group 0..n-1: the union of ``geoms`` of that group grown by
-    ``distance`` (mitred joins and square caps: never less than ``distance`` anywhere;
-    empty where a group has none)."""
-    out = np.array([shapely.Polygon()] * n, dtype=object)
-    if len(geoms) == 0:
-        return out
-    have, compact_group = np.unique(group, return_inverse=True)
-    order = np.argsort(compact_group, kind="stable")
-    collections = shapely.geometrycollections(geoms[order], indices=compact_group[order])
-    out[have] = shapely.buffer(collections, distance, join_style="mitre", cap_style="square")
-    return out
+def _margin_pieces(lines: np.ndarray, distance: float, length: int = CHUNK) -> np.ndarray:
+    """The lines' margin of ``distance`` in pieces: each line cut into runs of at most
+    ``length`` steps, each run grown by ``distance`` (mitred joins, square caps).  The
+    lines turn only by right angles, where a square cap meets the next run as a mitred
+    join would, so the pieces cover the same ground as the whole lines grown."""
+    is_point = shapely.get_type_id(lines) == 0
+    coords, line = shapely.get_coordinates(lines[~is_point], return_index=True)
+    pos = np.arange(len(line)) - np.searchsorted(line, line)  # each vertex's place on its line
+    end = np.append(line[1:] != line[:-1], True)
+    run = pos // length
+    joint = (pos % length == 0) & (pos > 0)  # a vertex that ends one run and starts the next
+    first = ~(joint & end)  # a line's last vertex starts no run
+    key = np.concatenate([line[first] * len(line) + run[first], line[joint] * len(line) + run[joint] - 1])
+    at = np.concatenate([np.flatnonzero(first), np.flatnonzero(joint)])
+    order = np.lexsort((at, key))
+    _, runs = np.unique(key[order], return_inverse=True)
+    pieces = shapely.linestrings(coords[at[order]], indices=runs)
+    pieces = np.concatenate([pieces, lines[is_point]])
+    return shapely.buffer(pieces, distance, join_style="mitre", cap_style="square")
 
 
 def _piece_holding(cand: np.ndarray, whole: np.ndarray) -> np.ndarray:
