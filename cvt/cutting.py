@@ -145,6 +145,10 @@ def cut_to_walls(
     grown_tree = shapely.STRtree(grown)
     a, b = grown_tree.query(grown, predicate="dwithin", distance=full)
     turn = _turns(np.stack([a[a < b], b[a < b]], axis=1), len(near))
+    # a cut tile lies within its grown outline, so only a tile with a later partner in
+    # that graph can reach a later turn's tiles
+    later = np.zeros(len(near), dtype=bool)
+    later[a[turn[b] > turn[a]]] = True
     wall_margin = _margin_pieces(lines, half)
     frame = shapely.box(0.5 * gap, 0.5 * gap, w - 0.5 * gap, h - 0.5 * gap)
     padded = shapely.buffer(geoms_all, full, join_style="mitre")  # each tile's G-wide margin
@@ -181,8 +185,9 @@ def cut_to_walls(
         keep = keep[~straddling_tiles(list(cut[keep]), walls)]
         for k, g in zip(tiles[keep], cut[keep], strict=True):
             out[k] = g
-        if len(keep):  # a cut tile's margin grows with it
-            padded[tiles[keep]] = shapely.buffer(cut[keep], full, join_style="mitre")
+        seen = keep[later[members[keep]]]
+        if len(seen):  # a cut tile's margin grows with it
+            padded[tiles[seen]] = shapely.buffer(cut[seen], full, join_style="mitre")
             tile_tree = shapely.STRtree(padded)
         grew += len(keep)
     return out, grew
