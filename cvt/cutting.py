@@ -183,6 +183,7 @@ def cut_to_walls(
         bigger &= shapely.get_type_id(cut) == 3  # one polygon (a failed step gives none)
         keep = np.flatnonzero(bigger)
         keep = keep[~straddling_tiles(list(cut[keep]), walls)]
+        cut[keep] = _started_as(cut[keep], whole[keep])
         for k, g in zip(tiles[keep], cut[keep], strict=True):
             out[k] = g
         seen = keep[later[members[keep]]]
@@ -228,6 +229,32 @@ def _margin_pieces(lines: np.ndarray, distance: float, length: int = CHUNK) -> n
     pieces = shapely.linestrings(coords[at[order]], indices=runs)
     pieces = np.concatenate([pieces, lines[is_point]])
     return shapely.buffer(pieces, distance, join_style="mitre", cap_style="square")
+
+
+def _started_as(cut: np.ndarray, whole: np.ndarray) -> np.ndarray:
+    """Each cut tile's outline begun at its vertex nearest the whole tile's first one, so
+    that where it starts follows the tile rather than the order of the overlays (tiles
+    with holes are left as they are)."""
+    out = cut.copy()
+    plain = np.flatnonzero(shapely.get_num_interior_rings(cut) == 0)
+    if len(plain) == 0:
+        return out
+    coords, index = shapely.get_coordinates(shapely.get_exterior_ring(cut[plain]), return_index=True)
+    begin = np.searchsorted(index, np.arange(len(plain)))
+    n = np.diff(np.append(begin, len(index))) - 1  # vertices less the closing one
+    pos = np.arange(len(index)) - begin[index]
+    open_ = pos < n[index]
+    first = shapely.get_coordinates(shapely.get_point(shapely.get_exterior_ring(whole[plain]), 0))
+    d = ((coords - first[index]) ** 2).sum(axis=1)
+    d[~open_] = np.inf
+    order = np.lexsort((d, index))
+    start = np.zeros(len(plain), dtype=np.int64)
+    start[index[order[begin]]] = pos[order[begin]]
+    # the ring rolled: the open vertices from ``start``, then the first one again to close
+    k = np.where(open_, pos, 0)
+    src = begin[index] + (k + start[index]) % n[index]
+    out[plain] = shapely.polygons(shapely.linearrings(coords[src], indices=index))
+    return out
 
 
 def _piece_holding(cand: np.ndarray, whole: np.ndarray) -> np.ndarray:

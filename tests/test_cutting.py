@@ -208,3 +208,24 @@ def test_cut_tiles_keep_the_guarantees_beside_crossing_walls(gap, turn):
         for b in range(a + 1, len(out)):
             assert out[a].distance(out[b]) >= gap - 1e-9
             assert out[a].intersection(out[b]).area == 0.0
+
+
+def test_a_cut_outline_starts_nearest_its_whole_tiles_first_vertex():
+    from compact_distributions.cvt.cutting import _started_as
+
+    rng = np.random.default_rng(2)
+    cut, whole = [], []
+    for _ in range(20):
+        pts = rng.random((12, 2)) * 10
+        cut.append(shapely.convex_hull(shapely.multipoints(pts)))
+        whole.append(shapely.box(*(rng.random(2) * 3 + 3), 8, 8))
+    cut.append(shapely.box(0, 0, 9, 9).difference(shapely.box(4, 4, 5, 5)))  # a hole: left as it is
+    whole.append(shapely.box(1, 1, 2, 2))
+    cut, whole = np.array(cut), np.array(whole)
+    got = _started_as(cut, whole)
+    assert got[-1] is cut[-1]
+    for c, w, g in zip(cut[:-1], whole[:-1], got[:-1], strict=True):
+        assert g.is_valid and g.equals(c) and g.area == pytest.approx(c.area, rel=1e-12)
+        ring = np.asarray(c.exterior.coords)[:-1]
+        nearest = ring[np.argmin(((ring - w.exterior.coords[0]) ** 2).sum(axis=1))]
+        np.testing.assert_array_equal(g.exterior.coords[0], nearest)
