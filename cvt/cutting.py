@@ -12,7 +12,9 @@ the graph of grown tiles less than G apart): within one turn no two candidates c
 meet, so each turn is one vectorised pass of shapely over its tiles, and later turns see
 the earlier turns' cuts.  "At least G from" is kept by taking away the neighbours grown
 by G with mitred corners (never closer than G anywhere) plus a margin of ``_MARGIN`` for
-the rounding of shapely's overlay.
+the rounding of shapely's overlay.  The walls' G/2-wide margin is grown once, in runs
+of their centre lines with square ends: the lines turn only by right angles, where such
+ends meet as a mitred join would, so the runs cover what the whole lines would.
 
 A cut that would let a tile straddle a strong edge (its hull reaching round the end of
 a wall, :func:`cvt.evaluate.straddling_tiles`) is undone, and so is one where shapely
@@ -35,7 +37,7 @@ from .evaluate import straddling_tiles
 CUT_ENLARGE = 1.8  # a cut tile lies within its tile grown by this factor about its centre
 CUT_REACH = 1.0  # tiles this many element spacings or closer to a wall are cut to fit
 _MARGIN = 1e-3  # px kept beyond the gap
-CHUNK = 64  # steps of wall line per piece of its margin: small pieces, small differences
+_RUN = 64  # most steps of wall line in one piece of its margin (fewer, smaller differences)
 
 
 def wall_lines(walls: np.ndarray):
@@ -119,10 +121,31 @@ def cut_to_walls(
     enlarge: float = CUT_ENLARGE,
     reach: float = CUT_REACH,
 ) -> tuple[list, int]:
-    """``polygons`` (shapely, None where there is no tile; pairwise at least ``gap`` apart
-    and at least gap/2 from the walls' centre lines and the raster's border) with the
-    tiles within ``reach`` spacings of a wall cut to fit (module docstring).  ``walls``:
-    (H, W) bool thin walls.  Returns the new list and how many tiles grew."""
+    """The tiles within ``reach`` spacings of a wall cut to fit (module docstring).
+
+    Parameters
+    ----------
+    polygons : sequence of shapely Polygon or None
+        The tiles (None where there is none): pairwise at least ``gap`` apart and at least
+        gap/2 from the walls' centre lines and the raster's border.
+    walls : (H, W) bool ndarray
+        Thin walls.
+    gap : float
+        G, in pixels.
+    spacing : float
+        The element spacing, in pixels.
+    enlarge : float
+        A cut tile lies within its tile grown by this factor about its centre.
+    reach : float
+        Tiles this many spacings or closer to a wall's centre line are cut.
+
+    Returns
+    -------
+    list
+        The tiles, cut ones replaced.
+    int
+        How many tiles grew.
+    """
     out = list(polygons)
     h, w = walls.shape
     lines = wall_lines(walls)
@@ -210,7 +233,7 @@ def _robust(operation, a: np.ndarray, b: np.ndarray) -> np.ndarray:
         return out
 
 
-def _margin_pieces(lines: np.ndarray, distance: float, length: int = CHUNK) -> np.ndarray:
+def _margin_pieces(lines: np.ndarray, distance: float, length: int = _RUN) -> np.ndarray:
     """The lines' margin of ``distance`` in pieces: each line cut into runs of at most
     ``length`` steps, each run grown by ``distance`` (mitred joins, square caps).  The
     lines turn only by right angles, where a square cap meets the next run as a mitred
