@@ -12,7 +12,9 @@ the graph of grown tiles less than G apart): within one turn no two candidates c
 meet, so each turn is one vectorised pass of shapely over its tiles, and later turns see
 the earlier turns' cuts.  "At least G from" is kept by taking away the neighbours grown
 by G with mitred corners (never closer than G anywhere) plus a margin of ``_MARGIN`` for
-the rounding of shapely's overlay.
+the rounding of shapely's overlay.  The walls' G/2-wide margin is grown once, in runs
+of their centre lines with square ends: the lines turn only by right angles, where such
+ends meet as a mitred join would, so the runs cover what the whole lines would.
 
 A cut that would let a tile straddle a strong edge (its hull reaching round the end of
 a wall, :func:`cvt.evaluate.straddling_tiles`) is undone, and so is one where shapely
@@ -35,14 +37,40 @@ from .evaluate import straddling_tiles
 CUT_ENLARGE = 1.8  # a cut tile lies within its tile grown by this factor about its centre
 CUT_REACH = 1.0  # tiles this many element spacings or closer to a wall are cut to fit
 _MARGIN = 1e-3  # px kept beyond the gap
+_RUN = 64  # most steps of wall line in one piece of its margin (fewer, smaller differences)
 
 
 def wall_lines(walls: np.ndarray):
     """The centre lines of thin walls as shapely geometries: merged lines, plus a point
-    for each wall pixel that touches no other."""
+    for each wall pixel that touches no other.
+
+    Parameters
+    ----------
+    walls : (H, W) bool ndarray
+        Thin walls.
+
+    Returns
+    -------
+    ndarray of shapely geometries
+    """
+    steps, points = _wall_pieces(walls)
+    parts = []
+    if len(steps):
+        # the steps meet only at their ends: they are merged as they are, with no noding union
+        merged = shapely.line_merge(shapely.multilinestrings(steps))
+        # less the vertices where a line runs straight on: the same lines, fewer to test
+        parts.append(shapely.get_parts(shapely.simplify(merged, 0.0, preserve_topology=False)))
+    if len(points):
+        parts.append(points)
+    return np.concatenate(parts) if parts else np.zeros(0, dtype=object)
+
+
+def _wall_pieces(walls: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """The walls' centre lines in pieces: unit steps between the centres of 4-connected
+    wall pixels and on to the border (lines), and lone wall pixels (points)."""
     segs = wall_segments(walls)
     if len(segs) == 0:
-        return np.zeros(0, dtype=object)
+        return np.zeros(0, dtype=object), np.zeros(0, dtype=object)
     # a wall that meets the picture's border is carried on to it: a cut tile, unlike a
     # whole one, could otherwise bend round the wall's end in the half pixel left there
     h, w = walls.shape
@@ -56,14 +84,7 @@ def wall_lines(walls: np.ndarray):
     segs = np.concatenate([segs, *ends])
     long = segs[:, 0] != segs[:, 2]
     long |= segs[:, 1] != segs[:, 3]
-    parts = []
-    if long.any():
-        pieces = shapely.linestrings(segs[long].reshape(-1, 2, 2))
-        merged = shapely.line_merge(shapely.union_all(pieces))
-        parts.append(shapely.get_parts(merged))
-    if (~long).any():
-        parts.append(shapely.points(segs[~long, :2]))
-    return np.concatenate(parts)
+    return shapely.linestrings(segs[long].reshape(-1, 2, 2)), shapely.points(segs[~long, :2])
 
 
 def _grown(polygons: np.ndarray, factor: float) -> np.ndarray:
@@ -100,10 +121,31 @@ def cut_to_walls(
     enlarge: float = CUT_ENLARGE,
     reach: float = CUT_REACH,
 ) -> tuple[list, int]:
-    """``polygons`` (shapely, None where there is no tile; pairwise at least ``gap`` apart
-    and at least gap/2 from the walls' centre lines and the raster's border) with the
-    tiles within ``reach`` spacings of a wall cut to fit (module docstring).  ``walls``:
-    (H, W) bool thin walls.  Returns the new list and how many tiles grew."""
+    """The tiles within ``reach`` spacings of a wall cut to fit (module docstring).
+
+    Parameters
+    ----------
+    polygons : sequence of shapely Polygon or None
+        The tiles (None where there is none): pairwise at least ``gap`` apart and at least
+        gap/2 from the walls' centre lines and the raster's border.
+    walls : (H, W) bool ndarray
+        Thin walls.
+    gap : float
+        G, in pixels.
+    spacing : float
+        The element spacing, in pixels.
+    enlarge : float
+        A cut tile lies within its tile grown by this factor about its centre.
+    reach : float
+        Tiles this many spacings or closer to a wall's centre line are cut.
+
+    Returns
+    -------
+    list
+        The tiles, cut ones replaced.
+    int
+        How many tiles grew.
+    """
     out = list(polygons)
     h, w = walls.shape
     lines = wall_lines(walls)
@@ -112,8 +154,9 @@ def cut_to_walls(
     if len(lines) == 0 or len(present) == 0:
         return out, 0
     geoms = geoms_all[present]
-    line_tree = shapely.STRtree(lines)
-    near = np.unique(line_tree.query(geoms, predicate="dwithin", distance=reach * spacing)[0])
+    # the lines query the tiles rather than the other way round: GEOS then prepares each
+    # long line once instead of walking it for every tile
+    near = np.unique(shapely.STRtree(geoms).query(lines, predicate="dwithin", distance=reach * spacing)[1])
     if len(near) == 0:
         return out, 0
     grown = _grown(geoms[near], enlarge)
@@ -125,6 +168,11 @@ def cut_to_walls(
     grown_tree = shapely.STRtree(grown)
     a, b = grown_tree.query(grown, predicate="dwithin", distance=full)
     turn = _turns(np.stack([a[a < b], b[a < b]], axis=1), len(near))
+    # a cut tile lies within its grown outline, so only a tile with a later partner in
+    # that graph can reach a later turn's tiles
+    later = np.zeros(len(near), dtype=bool)
+    later[a[turn[b] > turn[a]]] = True
+    wall_margin = _margin_pieces(lines, half)
     frame = shapely.box(0.5 * gap, 0.5 * gap, w - 0.5 * gap, h - 0.5 * gap)
     padded = shapely.buffer(geoms_all, full, join_style="mitre")  # each tile's G-wide margin
     tile_tree = shapely.STRtree(padded)
@@ -134,15 +182,9 @@ def cut_to_walls(
         tiles = present[near[members]]
         whole = np.array([out[k] for k in tiles], dtype=object)
         cand = shapely.intersection(grown[members], frame)
-        # less the walls near each tile (their lines clipped to its box, grown by G/2)
-        li_t, li = line_tree.query(cand, predicate="dwithin", distance=half)
-        box = shapely.box(*(shapely.bounds(cand[li_t]) + np.array([-1, -1, 1, 1]) * 2 * half).T)
-        cand = _robust(
-            shapely.difference,
-            cand,
-            _grouped_buffer(shapely.intersection(lines[li], box), li_t, len(members), half),
-        )
-        # less each other tile near it grown by G: one vectorised difference per neighbour rank
+        # less each other tile near it grown by G (one vectorised difference per neighbour
+        # rank), then the walls near it: taken in this order each difference meets a
+        # simpler outline
         ci, oi = tile_tree.query(cand, predicate="intersects")
         other = oi != tiles[ci]
         order = np.argsort(ci[other], kind="stable")
@@ -151,15 +193,25 @@ def cut_to_walls(
         for r in range(rank.max() + 1 if len(ci) else 0):
             at = rank == r
             cand[ci[at]] = _robust(shapely.difference, cand[ci[at]], padded[oi[at]])
+        # the walls: the pieces of their G/2-wide margin that reach each tile
+        wi, wt = shapely.STRtree(cand).query(wall_margin, predicate="intersects")
+        order = np.argsort(wt, kind="stable")
+        wi, wt = wi[order], wt[order]
+        rank = np.arange(len(wt)) - np.searchsorted(wt, wt)
+        for r in range(rank.max() + 1 if len(wt) else 0):
+            at = rank == r
+            cand[wt[at]] = _robust(shapely.difference, cand[wt[at]], wall_margin[wi[at]])
         cut = _robust(shapely.union, _piece_holding(cand, whole), whole)
         bigger = shapely.area(cut) > shapely.area(whole) * (1 + 1e-9)
         bigger &= shapely.get_type_id(cut) == 3  # one polygon (a failed step gives none)
         keep = np.flatnonzero(bigger)
         keep = keep[~straddling_tiles(list(cut[keep]), walls)]
+        cut[keep] = _started_as(cut[keep], whole[keep])
         for k, g in zip(tiles[keep], cut[keep], strict=True):
             out[k] = g
-        if len(keep):  # a cut tile's margin grows with it
-            padded[tiles[keep]] = shapely.buffer(cut[keep], full, join_style="mitre")
+        seen = keep[later[members[keep]]]
+        if len(seen):  # a cut tile's margin grows with it
+            padded[tiles[seen]] = shapely.buffer(cut[seen], full, join_style="mitre")
             tile_tree = shapely.STRtree(padded)
         grew += len(keep)
     return out, grew
@@ -181,30 +233,64 @@ def _robust(operation, a: np.ndarray, b: np.ndarray) -> np.ndarray:
         return out
 
 
-def _grouped_buffer(geoms: np.ndarray, group: np.ndarray, n: int, distance: float) -> np.ndarray:
-    """One geometry per group 0..n-1: the union of ``geoms`` of that group grown by
-    ``distance`` (mitred joins and square caps: never less than ``distance`` anywhere;
-    empty where a group has none)."""
-    out = np.array([shapely.Polygon()] * n, dtype=object)
-    if len(geoms) == 0:
+def _margin_pieces(lines: np.ndarray, distance: float, length: int = _RUN) -> np.ndarray:
+    """The lines' margin of ``distance`` in pieces: each line cut into runs of at most
+    ``length`` steps, each run grown by ``distance`` (mitred joins, square caps).  The
+    lines turn only by right angles, where a square cap meets the next run as a mitred
+    join would, so the pieces cover the same ground as the whole lines grown."""
+    is_point = shapely.get_type_id(lines) == 0
+    coords, line = shapely.get_coordinates(lines[~is_point], return_index=True)
+    pos = np.arange(len(line)) - np.searchsorted(line, line)  # each vertex's place on its line
+    end = np.append(line[1:] != line[:-1], True)
+    run = pos // length
+    joint = (pos % length == 0) & (pos > 0)  # a vertex that ends one run and starts the next
+    first = ~(joint & end)  # a line's last vertex starts no run
+    key = np.concatenate([line[first] * len(line) + run[first], line[joint] * len(line) + run[joint] - 1])
+    at = np.concatenate([np.flatnonzero(first), np.flatnonzero(joint)])
+    order = np.lexsort((at, key))
+    _, runs = np.unique(key[order], return_inverse=True)
+    pieces = shapely.linestrings(coords[at[order]], indices=runs)
+    pieces = np.concatenate([pieces, lines[is_point]])
+    return shapely.buffer(pieces, distance, join_style="mitre", cap_style="square")
+
+
+def _started_as(cut: np.ndarray, whole: np.ndarray) -> np.ndarray:
+    """Each cut tile's outline begun at its vertex nearest the whole tile's first one, so
+    that where it starts follows the tile rather than the order of the overlays (tiles
+    with holes are left as they are)."""
+    out = cut.copy()
+    plain = np.flatnonzero(shapely.get_num_interior_rings(cut) == 0)
+    if len(plain) == 0:
         return out
-    have, compact_group = np.unique(group, return_inverse=True)
-    order = np.argsort(compact_group, kind="stable")
-    collections = shapely.geometrycollections(geoms[order], indices=compact_group[order])
-    out[have] = shapely.buffer(collections, distance, join_style="mitre", cap_style="square")
+    coords, index = shapely.get_coordinates(shapely.get_exterior_ring(cut[plain]), return_index=True)
+    begin = np.searchsorted(index, np.arange(len(plain)))
+    n = np.diff(np.append(begin, len(index))) - 1  # vertices less the closing one
+    pos = np.arange(len(index)) - begin[index]
+    open_ = pos < n[index]
+    first = shapely.get_coordinates(shapely.get_point(shapely.get_exterior_ring(whole[plain]), 0))
+    d = ((coords - first[index]) ** 2).sum(axis=1)
+    d[~open_] = np.inf
+    order = np.lexsort((d, index))
+    start = np.zeros(len(plain), dtype=np.int64)
+    start[index[order[begin]]] = pos[order[begin]]
+    # the ring rolled: the open vertices from ``start``, then the first one again to close
+    k = np.where(open_, pos, 0)
+    src = begin[index] + (k + start[index]) % n[index]
+    out[plain] = shapely.polygons(shapely.linearrings(coords[src], indices=index))
     return out
 
 
 def _piece_holding(cand: np.ndarray, whole: np.ndarray) -> np.ndarray:
-    """Of each candidate, the piece that shares most area with the whole tile."""
+    """Of each candidate, the piece that holds a point inside the whole tile: what was
+    taken away comes at most ``_MARGIN`` into the whole tile, so one piece holds all of
+    it but that margin."""
     parts, index = shapely.get_parts(cand, return_index=True)
     out = np.array([shapely.Polygon()] * len(cand), dtype=object)
     if len(parts) == 0:
         return out
-    shared = shapely.area(shapely.intersection(parts, whole[index]))
-    order = np.lexsort((shared, index))
-    last = np.append(index[order][1:] != index[order][:-1], True)
-    out[index[order[last]]] = parts[order[last]]
+    inside = shapely.get_coordinates(shapely.point_on_surface(whole))
+    hit = shapely.contains_xy(parts, inside[index, 0], inside[index, 1])
+    out[index[hit]] = parts[hit]
     return out
 
 

@@ -138,3 +138,94 @@ def test_geometric_median_minimises_the_mean_distance(monkeypatch, block, shuffl
         ).fun
         assert cost(got[g]) <= best + 1e-3
         assert cost(got[g]) <= cost(means[g]) + 1e-12  # never worse than the mean
+
+
+def wall_network(seed=3):
+    """(H, W) bool: 4-connected random walks (crossing, meeting the border, one closed
+    loop), and their centre lines built here step by step from the pixels."""
+    rng = np.random.default_rng(seed)
+    walls = np.zeros((H, W), dtype=bool)
+    for _ in range(4):
+        i, j = rng.integers(0, H), rng.integers(0, W)
+        for _ in range(60):
+            walls[i, j] = True
+            if rng.random() < 0.5:
+                j = min(max(j + rng.choice([-1, 1]), 0), W - 1)
+            else:
+                i = min(max(i + rng.choice([-1, 1]), 0), H - 1)
+    walls[30:37, 40] = walls[30:37, 46] = walls[30, 40:47] = walls[36, 40:47] = True  # a loop
+    steps = []
+    for i, j in zip(*np.nonzero(walls), strict=True):
+        c = (j + 0.5, i + 0.5)
+        if j + 1 < W and walls[i, j + 1]:
+            steps.append(shapely.LineString([c, (j + 1.5, i + 0.5)]))
+        if i + 1 < H and walls[i + 1, j]:
+            steps.append(shapely.LineString([c, (j + 0.5, i + 1.5)]))
+        if i in (0, H - 1):  # carried on to the border
+            steps.append(shapely.LineString([c, (j + 0.5, 0.0 if i == 0 else H)]))
+        if j in (0, W - 1):
+            steps.append(shapely.LineString([c, (0.0 if j == 0 else W, i + 0.5)]))
+        if not steps or not any(s.distance(shapely.Point(c)) == 0 for s in steps[-4:]):
+            steps.append(shapely.Point(c))
+    return walls, shapely.union_all(steps)
+
+
+def test_wall_lines_and_their_margin_pieces_are_the_walls():
+    """The merged lines are the pixel steps, and their margin in pieces (any run length)
+    covers the same ground as the steps grown one by one (square ends: right angles
+    only)."""
+    from compact_distributions.cvt.cutting import _margin_pieces, wall_lines
+
+    walls, truth = wall_network()
+    lines = wall_lines(walls)
+    assert shapely.union_all(lines).symmetric_difference(truth).length == pytest.approx(0.0, abs=1e-9)
+    d = 0.37
+    grown = shapely.buffer(shapely.get_parts(truth), d, cap_style="square", join_style="mitre")
+    want = shapely.union_all(grown)
+    for length in (1, 3, 64):
+        got = shapely.union_all(_margin_pieces(lines, d, length))
+        assert got.symmetric_difference(want).area < 1e-9
+
+
+@pytest.mark.parametrize("gap,turn", [(0.6, 0.2), (0.0, 0.5)])
+def test_cut_tiles_keep_the_guarantees_beside_crossing_walls(gap, turn):
+    """Junctions, ends, a loop and walls meeting the border: every cut tile checked against
+    the centre lines built from the pixels and every other tile (all pairs)."""
+    walls, truth = wall_network()
+    tiles = lattice_beside(truth, 3.0, gap, turn)
+    out, grew = cut_to_walls(tiles, walls, gap, spacing=3.0 + gap)
+    assert grew > 0
+    frame = shapely.box(gap / 2, gap / 2, W - gap / 2, H - gap / 2)
+    i, j = np.nonzero(walls)
+    centres = shapely.points(j + 0.5, i + 0.5)
+    for before, after in zip(tiles, out, strict=True):
+        assert after.is_valid and after.geom_type == "Polygon"
+        assert after.buffer(1e-9).covers(before)
+        assert after.distance(truth) >= gap / 2 - 1e-9
+        assert frame.buffer(1e-9).covers(after)
+        assert not shapely.contains(after.convex_hull.buffer(-1.0, join_style="mitre"), centres).any()
+    for a in range(len(out)):
+        for b in range(a + 1, len(out)):
+            assert out[a].distance(out[b]) >= gap - 1e-9
+            assert out[a].intersection(out[b]).area == 0.0
+
+
+def test_a_cut_outline_starts_nearest_its_whole_tiles_first_vertex():
+    from compact_distributions.cvt.cutting import _started_as
+
+    rng = np.random.default_rng(2)
+    cut, whole = [], []
+    for _ in range(20):
+        pts = rng.random((12, 2)) * 10
+        cut.append(shapely.convex_hull(shapely.multipoints(pts)))
+        whole.append(shapely.box(*(rng.random(2) * 3 + 3), 8, 8))
+    cut.append(shapely.box(0, 0, 9, 9).difference(shapely.box(4, 4, 5, 5)))  # a hole: left as it is
+    whole.append(shapely.box(1, 1, 2, 2))
+    cut, whole = np.array(cut), np.array(whole)
+    got = _started_as(cut, whole)
+    assert got[-1] is cut[-1]
+    for c, w, g in zip(cut[:-1], whole[:-1], got[:-1], strict=True):
+        assert g.is_valid and g.equals(c) and g.area == pytest.approx(c.area, rel=1e-12)
+        ring = np.asarray(c.exterior.coords)[:-1]
+        nearest = ring[np.argmin(((ring - w.exterior.coords[0]) ** 2).sum(axis=1))]
+        np.testing.assert_array_equal(g.exterior.coords[0], nearest)
