@@ -76,13 +76,17 @@ def test_elements_follow_the_edges(deg, element, period):
     m = make_mosaic(stripes(deg=deg), NUMPY, n_elements=200, element=element, iterations=6, use_density=False)
     err = angle_error_deg(m.angles, deg, period)
     assert err.mean() < 10.0, err.mean()
-    # the placed polygons carry the angle: a rectangle's long side lies along the stripes
+    # the placed polygons carry the angle: a whole rectangle's long side lies along the
+    # stripes (tiles cut to fit a wall have other outlines and are left out)
     if element == "rectangle":
-        poly = next(p for p in m.polygons if p is not None)
-        xy = np.asarray(poly.exterior.coords)[:4]
-        sides = np.diff(np.vstack([xy, xy[:1]]), axis=0)
-        long_side = sides[np.argmax(np.hypot(sides[:, 0], sides[:, 1]))]
-        assert angle_error_deg(np.arctan2(long_side[1], long_side[0]), deg, 180.0) < 12.0
+        whole = [p for p in m.polygons if p is not None and len(p.exterior.coords) == 5]
+        assert len(whole) >= 5
+        xy = np.array([np.asarray(p.exterior.coords)[:4] for p in whole])  # (T, 4, 2)
+        sides = np.roll(xy, -1, axis=1) - xy
+        longest = np.argmax(np.hypot(sides[..., 0], sides[..., 1]), axis=1)
+        long_side = sides[np.arange(len(whole)), longest]
+        err = angle_error_deg(np.arctan2(long_side[:, 1], long_side[:, 0]), deg, 180.0)
+        assert np.median(err) < 12.0, np.median(err)
 
 
 def test_without_field_every_element_is_upright():
