@@ -28,6 +28,7 @@ from compact_distributions.cvt.errors import InputError
 from compact_distributions.cvt.metrics import Metric
 from compact_distributions.cvt.moments import Moments, moments_from_labels
 from compact_distributions.cvt.problem import Grid
+from compact_distributions.cvt.resources import RUNTIME
 
 
 class Backend(ABC):
@@ -40,7 +41,7 @@ class Backend(ABC):
     bytes_per_site: float = 1_000
     # what its runtime adds to the process: PoCL and llvmpipe load LLVM (~100 MiB) and
     # build a kernel the first time (~120 MiB more); numpy and scipy add nothing
-    runtime_bytes: float = 240 * 2**20
+    runtime_bytes: float = RUNTIME
 
     @classmethod
     def memory_estimate(cls, width: int, height: int, n_elements: int) -> float:

@@ -15,10 +15,10 @@ reads the raster.  The block kernel sums its own block once per label in it as i
 the labels; after the per-pixel kernel, ``row_moments`` sums runs of equal labels per row
 segment.
 
-Two label kernels, the same search: ``label_blocks`` (one work-item per 8x8 block of
-pixels; the default on CPUs, where PoCL vectorises its inner loop over the block's pixels,
-4-5x faster than a work-item per pixel here) and ``label_pixels`` (one work-item per
-pixel; the default on GPUs).
+Two label kernels, the same search: ``label_blocks`` (one work-item per ``STRIP`` square
+blocks of 4, 8 or 16 px side by side in a row; the default on CPUs, where PoCL vectorises
+its inner loop over a block's pixels) and ``label_pixels`` (one work-item per pixel; the
+default on GPUs).
 
 Device choice, first that applies: the ``device`` option ("PLATFORM[:DEVICE]", indices
 or name fragments, as ``cvtbench run --device``), the ``PYOPENCL_CTX`` environment
@@ -141,8 +141,6 @@ def compile_problem(cl, dev) -> str | None:
     whose compiler then fails on every program (PoCL built with an LLVM that does not know
     the host processor stops with "unknown target CPU 'generic'"), so a device is tried
     with a one-line program before it is chosen."""
-    import warnings
-
     try:
         ctx = cl.Context([dev])
         with warnings.catch_warnings():
@@ -243,8 +241,7 @@ class OpenCLBackend(Backend):
         if block is None:  # CPUs vectorise over a block's pixels; GPUs want a pixel each
             block = 0 if self._device.type & cl.device_type.GPU else 8
         self.block = int(block)
-        self.strip = STRIP
-        self._programs: dict[tuple, tuple] = {}  # (kind, K, int64) -> (label, moments kernels)
+        self._programs: dict[tuple, tuple] = {}  # (kind, K, int64, block) -> (label, moments kernels)
         self._buffers: dict[str, object] = {}
         self._mask_source = None  # the mask array last uploaded (grids are immutable)
         self._mask_pixels = 0
@@ -276,16 +273,16 @@ class OpenCLBackend(Backend):
     # ---------------------------------------------------------------- programs
     def _kernels(self, metric: Metric, k: int):
         """The built (label, moments) kernels for this metric kind; built once."""
-        key = (metric.kind, k, self.int64_atomics, self.block, self.strip)
+        key = (metric.kind, k, self.int64_atomics, self.block)
         if key not in self._programs:
             cl = self._cl
             stride = 8 if metric.kind == "ellipse" else 4 + 2 * k
             opts = [
                 f"-DSTRIDE={stride}",
                 f"-DK={k}",
-                f"-DBW={self.block or 8}",  # label_pixels does not use them
+                f"-DBW={self.block or 8}",  # label_pixels uses none, but the program holds label_blocks too
                 f"-DBH={self.block or 8}",
-                f"-DSTRIP={self.strip}",
+                f"-DSTRIP={STRIP}",
             ]
             if metric.kind == "ellipse":
                 opts.append("-DMETRIC_ELLIPSE")
@@ -461,7 +458,7 @@ class OpenCLBackend(Backend):
         )
         local = self.local_size
         if self.block > 0:  # one work-item per STRIP blocks of a row
-            w, h = -(-w // (self.block * self.strip)), -(-h // self.block)
+            w, h = -(-w // (self.block * STRIP)), -(-h // self.block)
             local = BLOCK_GROUP if local is None else local
         if local is None:
             global_size = (w, h)

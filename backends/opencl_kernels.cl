@@ -2,9 +2,10 @@
 
    Compile-time defines, set by the host:
      METRIC_ELLIPSE        the metric is elliptic (l2, l2-axial); else polygonal
-     K                     number of facets of a polygonal metric (3 or 4 here)
+     K                     number of facets of a polygonal metric (any convex polygon)
      STRIDE                floats per site record (see below)
-     BW, BH                pixels per work-item of label_blocks (8 x 8; BW = 4, 8 or 16)
+     BW, BH                pixels of one block of label_blocks (BW = BH = 4, 8 or 16)
+     STRIP                 blocks side by side per work-item of label_blocks
      USE_INT64_ATOMICS     the device has cl_khr_int64_base_atomics; else the moment sums
                            are kept as split 32-bit counters (low word + carries)
 

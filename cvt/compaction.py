@@ -152,10 +152,11 @@ from .errors import InputError
 from .placement import parse_gap
 from .problem import Grid
 from .shapes import check_shape, element_ball
-from .validate import real_number, whole_number
+from .validate import one_of, real_number, whole_number
 
 SLACK = 1e-7  # px: every kept constraint holds with at least this much after a round
 SEGMENT_LENGTH = 32  # px: longest boundary piece
+SOLVERS = ("pdhg", "highs")  # a round's program: PDHG whole, or HiGHS per tile
 _SELECT = 1e-6  # px: extra reach when choosing near pairs and pieces
 _SAMPLES = 16  # directions sampled for curved shapes (then refined)
 _REFINE = 14  # golden-section steps of that refinement
@@ -368,19 +369,22 @@ def _reach_classes(reach: np.ndarray) -> list[np.ndarray]:
     return np.split(order, cuts)
 
 
-def _near_tree(points, reach, tree, extra):
-    """(k, m): every point k and item m of ``tree`` with |points[k] − item| <= reach[k] +
-    extra (and some farther ones), ordered by k then m."""
-    ks, ms = [], []
+def _near_items(points, reach, item_trees, extra):
+    """(k, i): every point k and item i with |points[k] − item| <= reach[k] + the item's
+    half-length + extra (and some farther ones), ordered by k then i.  ``item_trees``:
+    [(item indices, kd-tree of their midpoints, their largest half-length)]
+    (:func:`_segment_trees`).  The points are queried class by class of reach, each
+    class's tree built once."""
+    ks, items = [], []
     for cls in _reach_classes(reach):
-        found = cKDTree(points[cls]).sparse_distance_matrix(
-            tree, reach[cls].max() + extra, output_type="ndarray"
-        )
-        ks.append(cls[found["i"]])
-        ms.append(found["j"])
-    k, m = np.concatenate(ks), np.concatenate(ms)
-    order = np.lexsort((m, k))
-    return k[order], m[order]
+        tree, top = cKDTree(points[cls]), reach[cls].max()
+        for members, item_tree, half_length in item_trees:
+            found = tree.sparse_distance_matrix(item_tree, top + half_length + extra, output_type="ndarray")
+            ks.append(cls[found["i"]])
+            items.append(members[found["j"]])
+    k, i = np.concatenate(ks), np.concatenate(items)
+    order = np.lexsort((i, k))
+    return k[order], i[order]
 
 
 def _segment_trees(segs: np.ndarray) -> list:
@@ -541,14 +545,8 @@ def _near_segments(unit, c, r, cos, sin, budget, half, segs, seg_trees, prev):
     if len(act) == 0 or len(segs) == 0:
         return np.zeros(0, np.int64), np.zeros(0, np.int64), empty, empty, empty
     reach = unit.rho * r[act] + budget[act]
-    ks, ss = [], []
-    for members, tree, half_length in seg_trees:
-        k, m = _near_tree(c[act], reach, tree, half_length + half + _SELECT)
-        ks.append(k)
-        ss.append(members[m])
-    k, s = np.concatenate(ks), np.concatenate(ss)
-    order = np.lexsort((s, k))
-    e, s = act[k[order]], s[order]
+    k, s = _near_items(c[act], reach, seg_trees, half + _SELECT)
+    e = act[k]
     px, py, qx, qy = segs[s, 0], segs[s, 1], segs[s, 2], segs[s, 3]
     x, y = c[e, 0], c[e, 1]
     kx, ky = _closest_on_segment(px, py, qx, qy, x, y)
@@ -1037,8 +1035,7 @@ def compact(
     shrink = real_number(shrink, "shrink", minimum=0.0, below=1.0)
     tol = real_number(tol, "tol", minimum=0.0)
     move_cost = real_number(move_cost, "move_cost", minimum=0.0)
-    if solver not in ("pdhg", "highs"):
-        raise InputError(f"solver must be 'pdhg' or 'highs', got {solver!r}")
+    solver = one_of(solver, "solver", SOLVERS)
     iterations = whole_number(iterations, "iterations", minimum=1)
     threads = (
         (len(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity") else (os.cpu_count() or 1))

@@ -37,7 +37,7 @@ from .evaluate import straddling_tiles
 CUT_ENLARGE = 1.8  # a cut tile lies within its tile grown by this factor about its centre
 CUT_REACH = 1.0  # tiles this many element spacings or closer to a wall are cut to fit
 _MARGIN = 1e-3  # px kept beyond the gap
-_RUN = 64  # most steps of wall line in one piece of its margin (fewer, smaller differences)
+_RUN = 64  # most vertices of a wall line in one piece of its margin (fewer, smaller differences)
 
 
 def wall_lines(walls: np.ndarray):
@@ -111,6 +111,17 @@ def _turns(pairs: np.ndarray, n: int) -> np.ndarray:
             t += 1
         turn[v] = t
     return turn
+
+
+def _subtract_by_rank(cand: np.ndarray, target: np.ndarray, parts: np.ndarray) -> None:
+    """cand[target[k]] less parts[k] for every k, in place: one vectorised difference per
+    rank (a target's first part, its second, ...), each target's parts in the order given."""
+    order = np.argsort(target, kind="stable")
+    target, parts = target[order], parts[order]
+    rank = np.arange(len(target)) - np.searchsorted(target, target)
+    for r in range(rank.max() + 1 if len(target) else 0):
+        at = rank == r
+        cand[target[at]] = _robust(shapely.difference, cand[target[at]], parts[at])
 
 
 def cut_to_walls(
@@ -187,20 +198,10 @@ def cut_to_walls(
         # simpler outline
         ci, oi = tile_tree.query(cand, predicate="intersects")
         other = oi != tiles[ci]
-        order = np.argsort(ci[other], kind="stable")
-        ci, oi = ci[other][order], oi[other][order]
-        rank = np.arange(len(ci)) - np.searchsorted(ci, ci)
-        for r in range(rank.max() + 1 if len(ci) else 0):
-            at = rank == r
-            cand[ci[at]] = _robust(shapely.difference, cand[ci[at]], padded[oi[at]])
+        _subtract_by_rank(cand, ci[other], padded[oi[other]])
         # the walls: the pieces of their G/2-wide margin that reach each tile
         wi, wt = shapely.STRtree(cand).query(wall_margin, predicate="intersects")
-        order = np.argsort(wt, kind="stable")
-        wi, wt = wi[order], wt[order]
-        rank = np.arange(len(wt)) - np.searchsorted(wt, wt)
-        for r in range(rank.max() + 1 if len(wt) else 0):
-            at = rank == r
-            cand[wt[at]] = _robust(shapely.difference, cand[wt[at]], wall_margin[wi[at]])
+        _subtract_by_rank(cand, wt, wall_margin[wi])
         cut = _robust(shapely.union, _piece_holding(cand, whole), whole)
         bigger = shapely.area(cut) > shapely.area(whole) * (1 + 1e-9)
         bigger &= shapely.get_type_id(cut) == 3  # one polygon (a failed step gives none)
@@ -235,7 +236,7 @@ def _robust(operation, a: np.ndarray, b: np.ndarray) -> np.ndarray:
 
 def _margin_pieces(lines: np.ndarray, distance: float, length: int = _RUN) -> np.ndarray:
     """The lines' margin of ``distance`` in pieces: each line cut into runs of at most
-    ``length`` steps, each run grown by ``distance`` (mitred joins, square caps).  The
+    ``length`` vertices (straight stretches between turns), each run grown by ``distance`` (mitred joins, square caps).  The
     lines turn only by right angles, where a square cap meets the next run as a mitred
     join would, so the pieces cover the same ground as the whole lines grown."""
     is_point = shapely.get_type_id(lines) == 0

@@ -22,6 +22,7 @@ from dataclasses import dataclass
 import numpy as np
 import shapely
 
+from compact_distributions.cvt.pixels import PIXEL_BAND, index_ranges
 from compact_distributions.cvt.problem import Grid
 
 
@@ -66,7 +67,7 @@ def region_polygon(grid: Grid):
     return shapely.union_all(boxes)
 
 
-EMPTY_BAND = 1 << 22  # pixels read at once by empty_cells: no raster-sized temporaries
+EMPTY_BAND = PIXEL_BAND  # pixels read at once by empty_cells: no raster-sized temporaries
 
 
 def empty_cells(labels: np.ndarray, n_elements: int) -> int:
@@ -285,12 +286,7 @@ def pixels_under(elements, width: int, height: int) -> tuple[np.ndarray, np.ndar
     if len(other):
         order = np.argsort(tile, kind="stable")  # each tile's segments are in pixel order already
         tile, first, length = tile[order], first[order], length[order]
-    return idx[np.repeat(tile, length)], _expand(first, length)
-
-
-def _expand(first: np.ndarray, length: np.ndarray) -> np.ndarray:
-    """first[k], first[k] + 1, ..., first[k] + length[k] - 1 for each k, concatenated."""
-    return np.repeat(first - np.cumsum(length) + length, length) + np.arange(int(length.sum()))
+    return idx[np.repeat(tile, length)], index_ranges(first, length)
 
 
 def _box_segments(geoms, tiles, i0, i1, j0, j1, width):
@@ -299,7 +295,7 @@ def _box_segments(geoms, tiles, i0, i1, j0, j1, width):
     ny = np.maximum(i1[tiles] - i0[tiles] + 1, 0)
     counts = nx * ny
     tile = np.repeat(tiles, counts)
-    offset = _expand(np.zeros(len(tiles), dtype=np.int64), counts)
+    offset = index_ranges(np.zeros(len(tiles), dtype=np.int64), counts)
     k = np.repeat(np.arange(len(tiles)), counts)
     jj = j0[tile] + offset % nx[k]
     ii = i0[tile] + offset // nx[k]
@@ -313,7 +309,7 @@ def _chord_segments(geoms, tiles, i0, i1, j0, j1, width):
     base = np.cumsum(rows) - rows  # a (tile, row) pair's key: base[tile] + row - i0
     n_keys = int(rows.sum())
     key_tile = np.repeat(tiles, rows)
-    key_row = i0[key_tile] + _expand(np.zeros(len(tiles), dtype=np.int64), rows)
+    key_row = i0[key_tile] + index_ranges(np.zeros(len(tiles), dtype=np.int64), rows)
     coords, ci = shapely.get_coordinates(geoms[tiles], return_index=True)
     unsure = np.zeros(n_keys, dtype=bool)
     # a row through a vertex (within the margin) is left to shapely
@@ -330,7 +326,7 @@ def _chord_segments(geoms, tiles, i0, i1, j0, j1, width):
     e_i1 = np.minimum(np.floor(hi - 0.5).astype(np.int64), i1[tiles[t]])
     n_cross = np.maximum(e_i1 - e_i0 + 1, 0)
     edge = np.repeat(np.arange(len(t)), n_cross)
-    row = e_i0[edge] + _expand(np.zeros(len(t), dtype=np.int64), n_cross)
+    row = e_i0[edge] + index_ranges(np.zeros(len(t), dtype=np.int64), n_cross)
     key = base[t[edge]] + row - i0[tiles[t[edge]]]
     dy = c[edge, 1] - a[edge, 1]
     flat = np.abs(dy) < _FLAT_EDGE
@@ -365,7 +361,7 @@ def _chord_segments(geoms, tiles, i0, i1, j0, j1, width):
     right_n = np.where(empty, 0, np.maximum(hi_cand - hi_sure, 0))
     n_test = left_n + right_n
     test_key = np.repeat(np.arange(n_keys), n_test)
-    step = _expand(np.zeros(n_keys, dtype=np.int64), n_test)
+    step = index_ranges(np.zeros(n_keys, dtype=np.int64), n_test)
     jj = np.where(
         step < left_n[test_key], lo_cand[test_key] + step, hi_sure[test_key] + 1 + step - left_n[test_key]
     )

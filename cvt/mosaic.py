@@ -52,7 +52,7 @@ from .image_fields import (
 )
 from .metrics import make_metric
 from .moments import Moments, moments_from_runs
-from .pixels import pixel_index
+from .pixels import index_ranges, pixel_index
 from .placement import parse_gap
 from .problem import Grid, Problem, parse_size
 from .registry import resolve_method
@@ -189,27 +189,28 @@ def label_runs(labels: np.ndarray):
     return flat, starts, start, end, flat[start]
 
 
-def kept_runs(labels: np.ndarray, sites, runs=None) -> np.ndarray:
-    """Which row runs of ``labels`` :func:`split_cells` keeps.
+def kept_runs(labels: np.ndarray, sites) -> tuple[tuple, np.ndarray]:
+    """The row runs of ``labels`` and which of them :func:`split_cells` keeps.
 
     Parameters
     ----------
     labels, sites
         As for :func:`split_cells`.
-    runs : tuple, optional
-        :func:`label_runs` of ``labels``, where already at hand.
 
     Returns
     -------
-    (R,) bool array
-        Per run of :func:`label_runs`: inside the region and in its cell's kept piece.
+    runs : tuple
+        :func:`label_runs` of ``labels``.
+    kept : (R,) bool array
+        Per run: inside the region and in its cell's kept piece.
     """
     from scipy.sparse import coo_matrix
     from scipy.sparse.csgraph import connected_components
 
     h, w = labels.shape
     n = len(sites)
-    flat, starts, start, end, lab = label_runs(labels) if runs is None else runs
+    runs = label_runs(labels)
+    flat, starts, start, end, lab = runs
     inside = lab >= 0
     # Two runs of one cell in adjacent rows touch where their columns overlap, and the
     # overlap begins at the start of one of them: looking straight up and down from
@@ -230,7 +231,7 @@ def kept_runs(labels: np.ndarray, sites, runs=None) -> np.ndarray:
     top &= inside
     suspect = np.bincount(lab[top], minlength=n) > 1
     if not suspect.any():
-        return inside
+        return runs, inside
     # pieces of the suspect cells only: connected components of their runs
     of_suspect = np.append(suspect, False)[lab]  # label -1 reads the appended False
     node = np.flatnonzero(of_suspect)
@@ -262,12 +263,7 @@ def kept_runs(labels: np.ndarray, sites, runs=None) -> np.ndarray:
     kept_piece[keep_piece[keep_piece >= 0]] = True
     kept = inside.copy()
     kept[node] = kept_piece[piece]
-    return kept
-
-
-def _split_runs(labels: np.ndarray, sites):
-    runs = label_runs(labels)
-    return runs, kept_runs(labels, sites, runs)
+    return runs, kept
 
 
 def split_cells(labels: np.ndarray, sites) -> np.ndarray:
@@ -292,12 +288,11 @@ def split_cells(labels: np.ndarray, sites) -> np.ndarray:
         ``labels`` itself where every cell is one piece, else a copy with the pixels of
         the pieces not kept set to -1.
     """
-    (_, _, start, end, lab), kept = _split_runs(labels, sites)
+    (_, _, start, end, lab), kept = kept_runs(labels, sites)
     drop = np.flatnonzero((lab >= 0) & ~kept)
     if len(drop) == 0:
         return labels
-    length = end[drop] - start[drop]
-    pixels = np.repeat(start[drop] - np.cumsum(length) + length, length) + np.arange(int(length.sum()))
+    pixels = index_ranges(start[drop], end[drop] - start[drop])
     out = labels.copy()
     out.reshape(-1)[pixels] = -1
     return out
@@ -316,7 +311,7 @@ def split_moments(labels: np.ndarray, sites) -> Moments:
     Moments
         Bit-identical to ``moments_from_labels(split_cells(labels, sites), N)``.
     """
-    (_, _, start, end, lab), kept = _split_runs(labels, sites)
+    (_, _, start, end, lab), kept = kept_runs(labels, sites)
     return moments_from_runs(start, end, np.where(kept, lab, -1), labels.shape[1], len(sites))
 
 
@@ -457,7 +452,7 @@ def _weiszfeld(points: np.ndarray, sizes: np.ndarray, start: np.ndarray, steps: 
 def ellipse_rows(polygons, element: str, aspect: float) -> np.ndarray | None:
     """(N, 5) exact ellipses (cx, cy, rx, ry, degrees) of circle and ellipse tiles, read
     from their polygons (centre, size from the area, angle from the first vertex), NaN
-    where a tile is not a whole ellipse (clipped by a method) or missing; None for
+    where a tile is not a whole ellipse (clipped by a method or cut to fit a wall) or missing; None for
     polygonal shapes."""
     import shapely
 

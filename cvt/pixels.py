@@ -1,9 +1,11 @@
 """The one pixel lookup of the suite: which raster pixel holds a point (fields,
-placement, colours and pictures use it)."""
+placement, colours and pictures use it), and the one expansion of runs of indices."""
 
 from __future__ import annotations
 
 import numpy as np
+
+PIXEL_BAND = 1 << 22  # pixels handled at once where a raster-sized temporary is avoided
 
 
 def pixel_index(points, width: int, height: int) -> tuple[np.ndarray, np.ndarray]:
@@ -14,4 +16,11 @@ def pixel_index(points, width: int, height: int) -> tuple[np.ndarray, np.ndarray
     return i, j
 
 
-__all__ = ["pixel_index"]
+def index_ranges(starts, counts) -> np.ndarray:
+    """The indices starts[i] .. starts[i] + counts[i] - 1, for every i in turn (runs of
+    pixels or vertices expanded to their indices, whole-array)."""
+    offsets = np.cumsum(counts) - counts
+    return np.repeat(np.asarray(starts) - offsets, counts) + np.arange(int(np.sum(counts)))
+
+
+__all__ = ["PIXEL_BAND", "pixel_index", "index_ranges"]

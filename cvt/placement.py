@@ -68,6 +68,7 @@ import numpy as np
 
 from .errors import InputError
 from .metrics import Metric, compile_sites
+from .pixels import PIXEL_BAND
 from .problem import MAX_SIDE, Grid, in_own_cell
 from .shapes import check_shape, element_ball, element_polygons, shape_record
 from .validate import one_of, real_number
@@ -470,7 +471,7 @@ def _inscribed_centres(labels, shape: str, aspect, n: int) -> np.ndarray:
     key = np.where(outside, n, lab) if outside.any() else lab  # outside: one spare bin
     best = np.full(n + 1, -1, dtype=d.dtype)
     np.maximum.at(best, key, d)
-    rows = max(1, (1 << 22) // max(w, 1)) * w  # compared a slice at a time: no raster-sized gather
+    rows = max(1, PIXEL_BAND // max(w, 1)) * w  # compared a slice at a time: no raster-sized gather
     top = np.concatenate(
         [np.flatnonzero(d[i : i + rows] == best[key[i : i + rows]]) + i for i in range(0, len(d), rows)]
     )

@@ -20,7 +20,7 @@ import numpy as np
 import shapely
 
 from .errors import InputError
-from .pixels import pixel_index
+from .pixels import index_ranges, pixel_index
 
 DARK = "#202020"  # outside the region, and joints between elements
 PAPER = "#f4f1ea"  # inside the region, where no element is
@@ -94,12 +94,6 @@ def fill_rows(fills, n: int) -> np.ndarray:
     return np.array([rgb8(fills[k]) for k in range(n)], dtype=np.int64).reshape(n, 3)
 
 
-def _ranges(starts, counts) -> np.ndarray:
-    """The indices starts[i] .. starts[i] + counts[i] - 1, for every i in turn."""
-    offsets = np.cumsum(counts) - counts
-    return np.repeat(np.asarray(starts) - offsets, counts) + np.arange(int(np.sum(counts)))
-
-
 def _exteriors(polygons: np.ndarray):
     """The exterior rings of shapely ``polygons`` (not closed): their vertices as one
     (P, 2) array and each ring's vertex count."""
@@ -151,7 +145,7 @@ def _ring_table(elements, which=None):
     count = np.concatenate([p[1] for p in parts])
     xy = np.concatenate([p[2] for p in parts])
     order = np.argsort(element, kind="stable")
-    return xy[_ranges((np.cumsum(count) - count)[order], count[order])], element[order], count[order]
+    return xy[index_ranges((np.cumsum(count) - count)[order], count[order])], element[order], count[order]
 
 
 def format_rows(template: str, columns) -> list[str]:
@@ -179,7 +173,7 @@ def _ring_texts(xy, count, template_of) -> np.ndarray:
     out = np.empty(len(count), dtype=object)
     for v in np.unique(count).tolist():
         rings = np.flatnonzero(count == v)
-        pts = xy[_ranges(starts[rings], count[rings])].reshape(len(rings), 2 * v)
+        pts = xy[index_ranges(starts[rings], count[rings])].reshape(len(rings), 2 * v)
         out[rings] = [t[:-1] for t in format_rows(template_of(v) + "\n", list(pts.T))]
     return out
 

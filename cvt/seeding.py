@@ -27,7 +27,7 @@ def initial_sites(problem: Problem) -> np.ndarray:
     # the region's pixel indices; without a mask, the raster's are 0 .. W·H - 1 and are
     # not made (choosing among a count draws the same as among that many indices)
     inside = None if grid.mask is None else np.flatnonzero(grid.mask.ravel())
-    count = grid.pixel_count
+    count = grid.width * grid.height if inside is None else len(inside)
     if problem.density is None:
         picks = rng.choice(count if inside is None else inside, size=n, replace=False)
         return _pixels_to_points(picks, grid.width, rng)
