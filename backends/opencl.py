@@ -32,6 +32,7 @@ from __future__ import annotations
 import math
 import os
 import warnings
+from contextlib import nullcontext
 from pathlib import Path
 
 import numpy as np
@@ -40,6 +41,7 @@ from compact_distributions.cvt.errors import BackendUnavailable, InputError
 from compact_distributions.cvt.metrics import Metric, compile_sites
 from compact_distributions.cvt.moments import Moments
 from compact_distributions.cvt.problem import Grid
+from compact_distributions.cvt.quiet import c_output_silenced
 
 from .base import Backend
 
@@ -293,8 +295,12 @@ class OpenCLBackend(Backend):
             except OSError as exc:
                 raise BackendUnavailable(f"opencl: kernel source missing: {exc}") from None
             try:
-                with warnings.catch_warnings():
-                    warnings.simplefilter("ignore")  # compiler chatter is not an error
+                # compiler chatter is not an error, and PoCL's compiler prints its own on
+                # descriptor 2 ("N warnings generated"); a failed build keeps its log in
+                # the error.  PYOPENCL_COMPILER_OUTPUT=1 shows it.
+                shown = os.environ.get("PYOPENCL_COMPILER_OUTPUT") == "1"
+                with warnings.catch_warnings(), nullcontext() if shown else c_output_silenced(2):
+                    warnings.simplefilter("ignore")
                     prg = cl.Program(self._context, source).build(options=opts)
             except cl.Error as exc:
                 log = " ".join(str(exc).split())[:400]

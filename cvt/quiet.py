@@ -62,31 +62,34 @@ def configure(verbose: bool = False) -> None:
 
 
 @contextlib.contextmanager
-def c_stdout_silenced():
-    """File descriptor 1 (what C libraries print to) points at /dev/null inside the block."""
+def c_output_silenced(*fds: int):
+    """File descriptors ``fds`` (default 1: what C libraries print to) point at /dev/null
+    inside the block; a descriptor that is closed or captured is left as it is."""
+    saved = []
     try:
-        sys.stdout.flush()
-        saved = os.dup(1)
-    except (OSError, ValueError, AttributeError):  # no descriptor 1 (closed, or a captured stream)
-        yield
-        return
-    try:
-        with open(os.devnull, "wb") as null:
-            os.dup2(null.fileno(), 1)
+        for fd in fds or (1,):
+            (sys.stdout if fd == 1 else sys.stderr).flush()
+            try:
+                saved.append((fd, os.dup(fd)))
+            except (OSError, ValueError, AttributeError):  # no such descriptor
+                continue
+            with open(os.devnull, "wb") as null:
+                os.dup2(null.fileno(), fd)
         yield
     finally:
-        os.dup2(saved, 1)
-        os.close(saved)
+        for fd, copy in saved:
+            os.dup2(copy, fd)
+            os.close(copy)
 
 
 def quiet_highs():
     """A ``highspy.Highs`` solver that prints nothing (no banner, no log)."""
     import highspy
 
-    with c_stdout_silenced():
+    with c_output_silenced(1):
         h = highspy.Highs()
     h.setOptionValue("output_flag", False)
     return h
 
 
-__all__ = ["configure", "c_stdout_silenced", "quiet_highs"]
+__all__ = ["configure", "c_output_silenced", "quiet_highs"]

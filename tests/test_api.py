@@ -72,6 +72,40 @@ def test_version():
     assert cd.__version__ == version("compact-distributions")
 
 
+def test_c_output_silenced_points_descriptors_at_nothing(capfd):
+    """What a C library writes to descriptors 1 and 2 inside the block is gone; after it
+    both write again (the mechanism that quiets HiGHS' banner and PoCL's compiler)."""
+    import os
+
+    from compact_distributions.cvt.quiet import c_output_silenced
+
+    with c_output_silenced(1, 2):
+        os.write(1, b"banner\n")
+        os.write(2, b"3 warnings generated.\n")
+    os.write(1, b"after-out\n")
+    os.write(2, b"after-err\n")
+    out, err = capfd.readouterr()
+    assert out == "after-out\n" and err == "after-err\n"
+
+
+def test_a_cold_opencl_build_prints_nothing(tmp_path, ocl):
+    """A first kernel build (an empty kernel cache) writes nothing on the terminal."""
+    import os
+
+    env = {**os.environ, "POCL_CACHE_DIR": str(tmp_path / "cache")}
+    env.pop("PYOPENCL_COMPILER_OUTPUT", None)
+    done = subprocess.run(
+        [sys.executable, "-m", "compact_distributions.bench.cli", "run", "--backend", "opencl"]
+        + ["--elements", "60", "--size", "64", "--iterations", "2", "--quiet", "--out", str(tmp_path / "r")],
+        capture_output=True,
+        text=True,
+        timeout=300,
+        env=env,
+    )
+    assert done.returncode == 0, done.stderr
+    assert done.stdout == "" and done.stderr == ""
+
+
 def test_compaction_prints_nothing_of_its_solver(tmp_path):
     done = cvtbench(
         "run",
