@@ -97,7 +97,15 @@ def _no_device(text: str) -> BackendUnavailable:
     return BackendUnavailable(f"opencl: {problem}" if problem else f"opencl: {text}")
 
 
+# PoCL's CPU device runs a kernel on one worker thread per core; left to the scheduler,
+# two workers often share a core and a Lloyd step then takes twice as long.  Pinned, one
+# per core, steps take the same time every time.  A user's own setting wins.
+POCL_PINNING = ("POCL_AFFINITY", "1")
+
+
 def _platforms(cl) -> list:
+    # read by PoCL when it starts its devices, at the process's first platform query
+    os.environ.setdefault(*POCL_PINNING)
     try:
         platforms = cl.get_platforms()
     except cl.Error as exc:  # no ICD loader / no platform: PLATFORM_NOT_FOUND_KHR

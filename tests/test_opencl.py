@@ -10,6 +10,7 @@ GPUs) and both moment paths (64-bit atomics, split 32-bit counters) are checked.
 
 import json
 import math
+import os
 
 import numpy as np
 import pytest
@@ -486,3 +487,21 @@ def test_speed_ratio_medians_and_rounds(monkeypatch, capsys):
     assert timing.main(args + ["--size", "48", "--warmup", "1", "--repeats", "2", "--rounds", "1"]) == 0
     out = capsys.readouterr().out
     assert out.count("ratio") == 2 and "l2, N = 30, 48²: opencl" in out
+
+
+def test_pocl_workers_are_pinned_unless_the_user_says_otherwise(monkeypatch):
+    """PoCL reads POCL_AFFINITY when the platforms are first listed: the backend sets it
+    to pin one worker per core before that, and leaves a user's own value alone."""
+    import types
+
+    from compact_distributions.backends import opencl
+
+    seen = []
+    cl = types.SimpleNamespace(
+        Error=Exception, get_platforms=lambda: seen.append(os.environ.get("POCL_AFFINITY")) or [1]
+    )
+    monkeypatch.delenv("POCL_AFFINITY", raising=False)
+    opencl._platforms(cl)
+    monkeypatch.setenv("POCL_AFFINITY", "0")
+    opencl._platforms(cl)
+    assert seen == ["1", "0"]
