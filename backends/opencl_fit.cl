@@ -1,0 +1,251 @@
+/* The centre search of cvt.placement.fit_centres, one work-item per (start, cell):
+   OpenCLBackend.fit_search builds it once per ball kind and facet count.
+
+   Compile-time defines, set by the host:
+     METRIC_ELLIPSE   the element's ball is an ellipse; else a polygon
+     K                facets of a polygonal ball (1 for an ellipse: unused)
+
+   The search is the host's (cvt.placement._fit_search) step for step: from its start,
+   8 compass moves per repeat, a move kept when the element there grows by more than a
+   part in 1e9 and the centre stays in a pixel of its cell, up to 3 repeats per step
+   while the cell grows, steps 0.3, 0.15, 0.075 and 0.0375 of the size (at least 1 px).
+   Sizes are the host's expressions term for term in float64 with contraction off, so
+   every decision, centre and size is the host's bit for bit.  A trial stops reading its
+   cell's samples as soon as one brings its size down to the size it must beat (the
+   minimum is exact in any order), and it reads first the sample that stopped the last
+   trial: most trials stop at that one sample. */
+
+#pragma OPENCL EXTENSION cl_khr_fp64 : enable
+#pragma OPENCL FP_CONTRACT OFF
+
+#ifndef VW
+#define VW 4
+#endif
+#define GROWTH (1.0 + 1e-9)
+#define REPEATS 3
+
+__constant double STEPS[4] = {0.3, 0.15, 0.075, 0.0375};
+__constant long LANES[16] = {0, 1, 2, 3, 4, 5, 6, 7, 8, 9, 10, 11, 12, 13, 14, 15};
+__constant double MOVES[8][2] = {{1, 0}, {-1, 0}, {0, 1}, {0, -1}, {1, 1}, {1, -1}, {-1, 1}, {-1, -1}};
+
+typedef struct
+{
+    __global const float *qx, *qy; /* the cell's samples */
+    int count;
+    double ax, ay;                  /* the ball's anchor: its site */
+#ifdef METRIC_ELLIPSE
+    double q0, q1, q2, grout;       /* quadratic form (qxx, qxy, qyy), grout G/2 */
+    double gmax;                    /* above |grad(rho)| = |Q v| / rho: sqrt(lambda_max(Q)) */
+#else
+    double fx[K], fy[K], slack[K];  /* facets f_k = R(θ) n_k / h_k, G/2 |f_k| */
+#endif
+} cell_t;
+
+/* hypot(x, y) as the host's C library computes it (glibc 2.35 and later, its path
+   without fused multiply-add): sqrt(ax^2 + ay^2), corrected by its own rounding error
+   (Borges, "An improved algorithm for hypot(a, b)", 2019), so that ellipses with grout
+   get the host's sizes bit for bit; the device's own hypot where ax is huge or ay tiny
+   (never in a raster's cells). */
+#define HOST_HYPOT_DEF(NAME, T)                                                          \
+    inline T NAME(const T x, const T y)                                                  \
+    {                                                                                    \
+        const T fx = fabs(x), fy = fabs(y);                                              \
+        const T ax = fx < fy ? fy : fx, ay = fx < fy ? fx : fy;                          \
+        const T h = sqrt(ax * ax + ay * ay);                                             \
+        const T dy = h - ay, dx = h - ax;                                                \
+        const T t1 = h <= 2.0 * ay ? ax * (2.0 * dy - ax) : 2.0 * dx * (ax - 2.0 * ay);  \
+        const T t2 = h <= 2.0 * ay ? (dy - 2.0 * (ax - ay)) * dy                         \
+                                   : (4.0 * dx - ay) * ay + dx * dx;                     \
+        const T out = h - (t1 + t2) / (2.0 * h);                                         \
+        const T odd = ax > 0x1p511 || ay < 0x1p-511 ? hypot(x, y) : out;                 \
+        return ay <= ax * 0x1p-54 ? ax + ay : odd;                                       \
+    }
+
+/* The size at which the element centred at (px, py) reaches the sample (sx, sy) (the
+   host's _Gauge.reach); ``shift`` holds the polygon's per-facet terms of that centre.
+   One expression for one sample (T = double) and for VW samples (T = a vector type). */
+#ifdef METRIC_ELLIPSE
+#define REACH(NAME, T, HYPOT)                                                                \
+    inline T NAME(const cell_t *c, const T sx, const T sy, const double px, const double py, \
+                  const double *shift, const bool only_rho)                             \
+    {                                                                                   \
+        const T vx = sx - px, vy = sy - py;                                             \
+        const T gx = c->q0 * vx + c->q1 * vy; /* Q v = rho grad(rho) */                 \
+        const T gy = c->q1 * vx + c->q2 * vy;                                           \
+        const T dot = vx * gx + vy * gy;                                                \
+        const T rho = sqrt(dot > (T)0.0 ? dot : (T)0.0);                                \
+        if (c->grout <= 0.0 || only_rho)                                                \
+            return rho;                                                                 \
+        const T grad = rho > (T)0.0 ? HYPOT(gx, gy)    / rho : (T)0.0;                \
+        return rho - c->grout * grad;                                                   \
+    }
+#else
+#define REACH(NAME, T, HYPOT)                                                                \
+    inline T NAME(const cell_t *c, const T sx, const T sy, const double px, const double py, \
+                  const double *shift, const bool only_rho)                             \
+    {                                                                                   \
+        const T ux = sx - c->ax, uy = sy - c->ay;                                       \
+        T out = (c->fx[0] * ux + c->fy[0] * uy) - shift[0];                             \
+        for (int k = 1; k < K; ++k)                                                     \
+        {                                                                               \
+            const T e = (c->fx[k] * ux + c->fy[k] * uy) - shift[k];                     \
+            out = e > out ? e : out;                                                    \
+        }                                                                               \
+        return out;                                                                     \
+    }
+#endif
+#define CAT(a, b) a##b
+#define VEC(T, n) CAT(T, n)
+typedef VEC(double, VW) doublev;
+typedef VEC(long, VW) longv;
+#ifdef METRIC_ELLIPSE
+HOST_HYPOT_DEF(host_hypot_s, double)
+HOST_HYPOT_DEF(host_hypot_v, doublev)
+#endif
+REACH(reach, double, host_hypot_s)
+REACH(reach_v, doublev, host_hypot_v)
+
+/* The element's size at (px, py): the least reach over the cell's samples, or any value
+   <= ``beat`` once VW samples show it cannot exceed ``beat``; ``hint`` is the sample
+   read first, and becomes the nearest sample read.  The host pads each cell's samples
+   to a multiple of VW (repeating its last one: no minimum changes). */
+inline double least(const cell_t *c, const double px, const double py, const double beat, int *hint)
+{
+    double shift[K];
+#ifndef METRIC_ELLIPSE
+    for (int k = 0; k < K; ++k)
+        shift[k] = (c->fx[k] * (px - c->ax) + c->fy[k] * (py - c->ay)) + c->slack[k];
+#endif
+    const double m = reach(c, (double)c->qx[*hint], (double)c->qy[*hint], px, py, shift, false);
+    if (m <= beat)
+        return m;
+    doublev mv = (doublev)(m);
+    longv at = (longv)(*hint);
+    const longv lane = VEC(vload, VW)(0, LANES);
+    for (int j = 0; j < c->count; j += VW)
+    {
+        const doublev sx = VEC(convert_double, VW)(VEC(vload, VW)(0, c->qx + j));
+        const doublev sy = VEC(convert_double, VW)(VEC(vload, VW)(0, c->qy + j));
+#ifdef METRIC_ELLIPSE
+        if (c->grout > 0.0)
+        {
+            /* the grout term is >= 0 and at most G/2 |grad(rho)| <= G/2 sqrt(lambda_max(Q)):
+               rho alone may end the reading, or show that no sample of VW lowers the least */
+            const doublev rho = reach_v(c, sx, sy, px, py, shift, true);
+            if (any(rho <= beat))
+            {
+                mv = rho <= beat ? rho : mv;
+                at = rho <= beat ? lane + j : at;
+                break;
+            }
+            if (!any(rho - c->grout * c->gmax < mv))
+                continue;
+        }
+#endif
+        const doublev r = reach_v(c, sx, sy, px, py, shift, false);
+        const longv lower = r < mv;
+        mv = lower ? r : mv;
+        at = lower ? lane + j : at;
+        if (any(r <= beat))
+            break;
+    }
+    double best = mv.s0;
+    long where = at.s0;
+    for (int l = 1; l < VW; ++l)
+    {
+        const double v = ((double *)&mv)[l];
+        if (v < best)
+        {
+            best = v;
+            where = ((long *)&at)[l];
+        }
+    }
+    *hint = (int)where;
+    return best;
+}
+
+/* Whether (x, y) lies in a pixel labelled ``id`` (the host's own()). */
+inline bool own(__global const int *labels, const int w, const int h, const double x, const double y, const int id)
+{
+    if (!(x >= 0.0 && x < (double)w && y >= 0.0 && y < (double)h))
+        return false;
+    return labels[(long)(int)y * w + (int)x] == id;
+}
+
+__kernel void fit_search(const int w, const int h, __global const int *labels,
+                         __global const float *qx, __global const float *qy,
+                         __global const long *first, __global const int *counts,
+                         __global const int *ids, const int m,
+                         __global const double *anchor, /* (M, 2) */
+                         __global const double *coef,   /* (M, 2K) fx then fy; ellipse (M, 3) */
+                         __global const double *slack,  /* (K,) */
+                         const double grout,
+                         __global const double *starts, /* (2, M, 2) */
+                         __global double *centres,      /* (2, M, 2) */
+                         __global double *sizes)        /* (2, M) */
+{
+    const int g = get_global_id(0);
+    if (g >= 2 * m)
+        return;
+    const int i = g % m;
+    const int id = ids[i];
+    cell_t c;
+    c.qx = qx + first[i];
+    c.qy = qy + first[i];
+    c.count = counts[i];
+    c.ax = anchor[2 * i];
+    c.ay = anchor[2 * i + 1];
+#ifdef METRIC_ELLIPSE
+    c.q0 = coef[3 * i];
+    c.q1 = coef[3 * i + 1];
+    c.q2 = coef[3 * i + 2];
+    c.grout = grout;
+    {
+        const double mid = 0.5 * (c.q0 + c.q2), dev = 0.5 * (c.q0 - c.q2);
+        c.gmax = sqrt(mid + sqrt(dev * dev + c.q1 * c.q1)) * (1.0 + 1e-6); /* rounding kept above */
+    }
+#else
+    for (int k = 0; k < K; ++k)
+    {
+        c.fx[k] = coef[2 * K * i + k];
+        c.fy[k] = coef[2 * K * i + K + k];
+        c.slack[k] = slack[k];
+    }
+#endif
+    double cx = starts[2 * g], cy = starts[2 * g + 1];
+    int hint = 0;
+    double b = 0.0;
+    if (own(labels, w, h, cx, cy, id))
+    {
+        const double s = least(&c, cx, cy, -INFINITY, &hint);
+        b = s > 0.0 ? s : 0.0;
+    }
+    for (int f = 0; f < 4; ++f)
+    {
+        for (int r = 0; r < REPEATS; ++r)
+        {
+            const double step = STEPS[f] * (b > 1.0 ? b : 1.0);
+            bool grew = false;
+            for (int mv = 0; mv < 8; ++mv)
+            {
+                const double tx = cx + step * MOVES[mv][0], ty = cy + step * MOVES[mv][1];
+                if (!own(labels, w, h, tx, ty, id))
+                    continue;
+                const double beat = b * GROWTH;
+                const double s = least(&c, tx, ty, beat, &hint);
+                if (s > beat)
+                {
+                    cx = tx;
+                    cy = ty;
+                    b = s;
+                    grew = true;
+                }
+            }
+            if (!grew)
+                break;
+        }
+    }
+    centres[2 * g] = cx;
+    centres[2 * g + 1] = cy;
+    sizes[g] = b;
+}
