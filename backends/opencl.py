@@ -543,8 +543,17 @@ class OpenCLBackend(Backend):
         key = ("fit", ellipse, k, FIT_VECTOR)
         if key not in self._programs:
             opts = [f"-DK={k}", f"-DVW={FIT_VECTOR}"] + (["-DMETRIC_ELLIPSE"] if ellipse else [])
-            self._programs[key] = (cl.Kernel(self._build(FIT_KERNEL_FILE, opts), "fit_search"),)
-        (kernel,) = self._programs[key]
+            prg = self._build(FIT_KERNEL_FILE, opts)
+            self._programs[key] = (cl.Kernel(prg, "fit_search"), cl.Kernel(prg, "inscribed_starts"))
+        kernel, inscribed = self._programs[key]
+        # the kernel's depths are the host's bit for bit where the host's are exact: whole
+        # numbers (chessboard) or sums of squared quarters (spacings 1, 2, 1/2, ...)
+        kind, sy, sx = cells.depth
+        on_device = kind == "chessboard" or (float(4 * sy).is_integer() and float(4 * sx).is_integer())
+        starts = np.empty((2, len(cells.ids), 2))
+        starts[0] = cells.anchor
+        if not on_device:
+            starts[1] = cells.inscribed()
         m = len(cells.ids)
         h, w = cells.labels.shape
         centres, sizes = np.empty((2, m, 2)), np.empty((2, m))
@@ -554,7 +563,7 @@ class OpenCLBackend(Backend):
         offset = np.arange(int(counts.sum())) - np.repeat(first, counts)
         pick = np.repeat(cells.first, counts) + np.minimum(offset, np.repeat(cells.counts - 1, counts))
         del offset
-        flags = cl.mem_flags.READ_ONLY | cl.mem_flags.COPY_HOST_PTR
+        flags = cl.mem_flags.READ_WRITE | cl.mem_flags.COPY_HOST_PTR
         inputs = [
             cells.labels,
             cells.qx[pick],
@@ -565,11 +574,12 @@ class OpenCLBackend(Backend):
             cells.anchor,
             cells.coef,
             np.concatenate([cells.slack, [0.0]]),  # never empty
-            cells.starts,
+            starts,
         ]
         bufs = [cl.Buffer(self._context, flags, hostbuf=np.ascontiguousarray(a)) for a in inputs]
         out_c = cl.Buffer(self._context, cl.mem_flags.WRITE_ONLY, centres.nbytes)
         out_s = cl.Buffer(self._context, cl.mem_flags.WRITE_ONLY, sizes.nbytes)
+        scratch = cl.Buffer(self._context, cl.mem_flags.READ_WRITE, 8 * len(pick) if on_device else 8)
         try:
             labels, qx, qy, first, counts, ids, anchor, coef, slack, starts = bufs
             kernel.set_args(
@@ -591,11 +601,19 @@ class OpenCLBackend(Backend):
                 out_s,
             )
             local = FIT_GROUP
+            if on_device:
+                inscribed.set_args(
+                    np.int32(w), np.int32(h), labels, qx, qy, first, counts, ids, np.int32(m),
+                    np.int32(kind == "chessboard"), np.float64(sy), np.float64(sx), anchor, scratch, starts,
+                )  # fmt: skip
+                cl.enqueue_nd_range_kernel(
+                    self._queue, inscribed, (-(-m // INSCRIBED_GROUP) * INSCRIBED_GROUP,), (INSCRIBED_GROUP,)
+                )
             cl.enqueue_nd_range_kernel(self._queue, kernel, (-(-2 * m // local) * local,), (local,))
             self._read(centres, out_c)
             self._read(sizes, out_s)
         finally:
-            for buf in (*bufs, out_c, out_s):
+            for buf in (*bufs, out_c, out_s, scratch):
                 buf.release()
         return centres, sizes
 
@@ -622,6 +640,7 @@ class OpenCLBackend(Backend):
 
 FIT_KERNEL_FILE = Path(__file__).with_name("opencl_fit.cl")
 FIT_VECTOR = 4  # samples read at once by a work-item of the fit kernel (2, 4, 8 or 16)
+INSCRIBED_GROUP = 16
 FIT_GROUP = 16  # work-items per group of the fit kernel: cells of unlike cost spread over the cores
 
 

@@ -249,3 +249,113 @@ __kernel void fit_search(const int w, const int h, __global const int *labels,
     centres[2 * g + 1] = cy;
     sizes[g] = b;
 }
+
+/* The pixel of cell ``id`` on the near side of contour sample (sx, sy): the edge's
+   midpoint lies between two pixels, exactly one of them the cell's. */
+inline int2 sample_pixel(__global const int *labels, const int w, const int id, const float sx, const float sy)
+{
+    const int x = (int)floor(sx), y = (int)floor(sy);
+    if (sx == (float)x) /* a vertical edge x = c, between pixels c - 1 and c of row y */
+        return (int2)(x > 0 && labels[(long)y * w + x - 1] == id ? x - 1 : x, y);
+    return (int2)(x, y > 0 && labels[(long)(y - 1) * w + x] == id ? y - 1 : y);
+}
+
+/* How far pixel p lies from pixel z: max(|dx|, |dy|) (chessboard), else the squared
+   Euclidean distance with rows ``sy`` and columns ``sx`` apart, as the host's transform
+   forms it ((dy sy)^2 + (dx sx)^2). */
+inline double depth_to(const int2 p, const int2 z, const int chess, const double sy, const double sx)
+{
+    const int dx = abs(p.x - z.x), dy = abs(p.y - z.y);
+    if (chess)
+        return (double)(dx > dy ? dx : dy);
+    const double a = (double)dy * sy, b = (double)dx * sx;
+    return a * a + b * b;
+}
+
+/* The depth of pixel p (its distance to the nearest of the cell's ``count`` sample
+   pixels ``z``, as depth_to measures it), or any value < ``beat`` (<= ``beat`` when
+   ``tie``) once one sample pixel shows that p cannot reach ``beat``.  The reading starts
+   at ``hint`` and goes round from there (neighbours in the list are neighbours on the
+   contour); ``hint`` becomes the nearest read. */
+inline double depth_of(const int2 p, __global const int2 *z, const int count, const int chess,
+                       const double sy, const double sx, const double beat, const bool tie, int *hint)
+{
+    const int from = *hint;
+    double d = depth_to(p, z[from], chess, sy, sx);
+    for (int t = 1; t < count && (d > beat || (tie && d == beat)); ++t)
+    {
+        const int j = from + t < count ? from + t : from + t - count;
+        const double e = depth_to(p, z[j], chess, sy, sx);
+        if (e < d)
+        {
+            d = e;
+            *hint = j;
+        }
+    }
+    return d;
+}
+
+/* The second start of the search, one work-item per cell: the centre of the first pixel,
+   in raster order, of those of the cell farthest from any pixel that is not inside it
+   (a pixel whose 4 neighbours are all the cell's and in the raster): the host's
+   _inscribed_centres.  The nearest such pixel of a pixel of the cell is always one of
+   the cell's own pixels beside its contour, one per contour sample: a path from a
+   foreign pixel towards the cell's pixel enters the cell through one, no farther along
+   either axis, so the least over them is the transform's value bit for bit.  The depth
+   of the site's pixel (when it is the cell's) is a first bound; then each pixel of the
+   cell's box, in raster order, reads first the sample that decided the last one and
+   stops as soon as it cannot beat the bound (or tie it, before the bound's pixel). */
+__kernel void inscribed_starts(const int w, const int h, __global const int *labels,
+                               __global const float *qx, __global const float *qy,
+                               __global const long *first, __global const int *counts,
+                               __global const int *ids, const int m, const int chess,
+                               const double sy, const double sx,
+                               __global const double *anchor, /* (M, 2) */
+                               __global int2 *pixels,         /* (S,): scratch */
+                               __global double *starts)       /* (2, M, 2): writes the second */
+{
+    const int i = get_global_id(0);
+    if (i >= m)
+        return;
+    const int id = ids[i];
+    __global const float *cx = qx + first[i], *cy = qy + first[i];
+    __global int2 *z = pixels + first[i];
+    const int count = counts[i];
+    for (int j = 0; j < count; ++j)
+        z[j] = sample_pixel(labels, w, id, cx[j], cy[j]);
+    float x0 = cx[0], x1 = cx[0], y0 = cy[0], y1 = cy[0];
+    for (int j = 1; j < count; ++j)
+    {
+        x0 = cx[j] < x0 ? cx[j] : x0;
+        x1 = cx[j] > x1 ? cx[j] : x1;
+        y0 = cy[j] < y0 ? cy[j] : y0;
+        y1 = cy[j] > y1 ? cy[j] : y1;
+    }
+    const int c0 = max((int)floor(x0) - 1, 0), c1 = min((int)ceil(x1) + 1, w);
+    const int r0 = max((int)floor(y0) - 1, 0), r1 = min((int)ceil(y1) + 1, h);
+    int hint = 0;
+    double best = -1.0; /* the depth to beat; tied too until a pixel holds it */
+    bool held = false;
+    int2 at = (int2)(c0, r0);
+    if (own(labels, w, h, anchor[2 * i], anchor[2 * i + 1], id))
+    {
+        const int2 p = (int2)((int)anchor[2 * i], (int)anchor[2 * i + 1]);
+        best = depth_of(p, z, count, chess, sy, sx, -INFINITY, false, &hint);
+    }
+    for (int r = r0; r < r1; ++r)
+        for (int c = c0; c < c1; ++c)
+        {
+            if (labels[(long)r * w + c] != id)
+                continue;
+            const int2 p = (int2)(c, r);
+            const double d = depth_of(p, z, count, chess, sy, sx, best, !held, &hint);
+            if (d > best || (!held && d == best))
+            {
+                best = d;
+                held = true;
+                at = p;
+            }
+        }
+    starts[2 * (m + i)] = at.x + 0.5;
+    starts[2 * (m + i) + 1] = at.y + 0.5;
+}

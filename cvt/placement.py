@@ -441,6 +441,17 @@ def _squared_depth(inner, sy: float, sx: float):
     return out
 
 
+def depth_metric(shape: str, aspect) -> tuple[str, float, float]:
+    """The distance of :func:`_inscribed_centres` for elements of ``shape``: ("chessboard",
+    1, 1) for squares, else ("euclidean", sy, sx), rows sy and columns sx apart (1/β and β
+    for rectangles and ellipses, whose gauge is about hypot(β·dx, dy/β); 1 and 1 otherwise)."""
+    kind = shape_record(shape).distance
+    if kind == "chessboard":
+        return kind, 1.0, 1.0
+    beta = element_ball(shape, aspect).aspect if kind == "scaled" else 1.0
+    return "euclidean", 1.0 / beta, beta
+
+
 def _inscribed_centres(labels, shape: str, aspect, n: int) -> np.ndarray:
     """(n, 2) per cell, the centre of the pixel farthest from the cell's contour, by a
     distance transform in the element's own metric (chessboard for squares, Euclidean
@@ -457,14 +468,13 @@ def _inscribed_centres(labels, shape: str, aspect, n: int) -> np.ndarray:
     inner[:, :-1] &= labels[:, :-1] == labels[:, 1:]
     inner[[0, -1]] = False
     inner[:, [0, -1]] = False
-    kind = shape_record(shape).distance
+    kind, sy, sx = depth_metric(shape, aspect)
     if kind == "chessboard":
         dt = ndimage.distance_transform_cdt(inner, metric="chessboard")
     else:
-        beta = element_ball(shape, aspect).aspect if kind == "scaled" else 1.0  # gauge ~ hypot(β·dx, dy/β)
-        dt = _squared_depth(inner, 1.0 / beta, beta)
+        dt = _squared_depth(inner, sy, sx)
         if dt is None:  # cells too wide for the short transform: SciPy's
-            dt = ndimage.distance_transform_edt(inner, sampling=(1.0 / beta, beta))
+            dt = ndimage.distance_transform_edt(inner, sampling=(sy, sx))
     del inner
     lab, d = labels.ravel(), dt.ravel()
     outside = lab < 0
@@ -510,11 +520,12 @@ class FitCells:
     half : float
         G/2, the grout kept on each side.
     anchor : (M, 2) float64
-        Per cell its site (the polygon's facet terms are taken about it).
-    starts : (2, M, 2) float64
-        The search's starts: the sites, then the inscribed centres."""
+        Per cell its site (the polygon's facet terms are taken about it): the first
+        start of its search.
+    depth : tuple
+        The distance of the second start, :meth:`inscribed` (:func:`depth_metric`)."""
 
-    def __init__(self, labels, samples: _CellSamples, gauge: _Gauge, sites, inscribed):
+    def __init__(self, labels, samples: _CellSamples, gauge: _Gauge, sites, shape: str, aspect):
         self.samples, self.gauge = samples, gauge
         ids = samples.cells
         self.labels = np.ascontiguousarray(labels, dtype=np.int32)
@@ -528,7 +539,17 @@ class FitCells:
             self.coef, self.slack = np.ascontiguousarray(gauge.q[:, ids].T), np.zeros(0)
         self.sites = sites
         self.anchor = np.ascontiguousarray(sites[ids])
-        self.starts = np.stack([self.anchor, inscribed[ids]])
+        self.shape, self.aspect = shape, aspect
+        self.depth = depth_metric(shape, aspect)
+
+    def inscribed(self) -> np.ndarray:
+        """(M, 2) the second start of each cell's search: the centre of the pixel of the
+        cell farthest from its contour (:func:`_inscribed_centres`; the site where the cell
+        has no pixel)."""
+        out = _inscribed_centres(self.labels, self.shape, self.aspect, len(self.sites))[self.ids]
+        missing = ~np.isfinite(out).all(axis=1)
+        out[missing] = self.anchor[missing]
+        return out
 
 
 def search_on_host(cells: FitCells):
@@ -547,10 +568,11 @@ def search_on_host(cells: FitCells):
         The element's size there (0 where the start is not in a pixel of its cell)."""
     m = len(cells.ids)
     centres, sizes = np.empty((2, m, 2)), np.empty((2, m))
+    starts = np.stack([cells.anchor, cells.inscribed()])
     for which, x, y in cells.samples.blocks(_FIT_BLOCK):  # cells are independent: one block at a time
         ids = cells.ids[which]
         terms = cells.gauge.prepare(ids, x, y, cells.sites)
-        found = _fit_search(cells.labels, ids, terms, cells.gauge, cells.starts[:, which], cells.sites)
+        found = _fit_search(cells.labels, ids, terms, cells.gauge, starts[:, which], cells.sites)
         centres[:, which], sizes[:, which] = found
     return centres, sizes
 
@@ -588,10 +610,7 @@ def fit_centres(labels, sites, angles, shape: str, aspect, gap: float = 0.0, sea
     if len(samples.cells) == 0:
         return out_c, out_s
     gauge = _Gauge(compile_sites(ball_metric, sites, angles, None), 0.5 * gap)
-    start2 = _inscribed_centres(labels, shape, aspect, n)
-    missing = ~np.isfinite(start2).all(axis=1)
-    start2[missing] = sites[missing]
-    cells = FitCells(labels, samples, gauge, sites, start2)
+    cells = FitCells(labels, samples, gauge, sites, shape, aspect)
     (c_a, c_b), (s_a, s_b) = (search_on_host if search is None else search)(cells)
     second = s_b > s_a
     ids = samples.cells
@@ -638,6 +657,7 @@ __all__ = [
     "placement_sizes",
     "FITS",
     "FitCells",
+    "depth_metric",
     "search_on_host",
     "fit_centres",
     "place_elements",

@@ -530,6 +530,30 @@ def test_opencl_search_is_the_hosts_bit_for_bit(ocl, shape, aspect, gap):
         assert np.array_equal(got[0], want[0]) and np.array_equal(got[1], want[1])
 
 
+@pytest.mark.parametrize(
+    "shape,aspect", [("square", 1.0), ("circle", 1.0), ("rectangle", 0.5), ("ellipse", 2.0)]
+)
+def test_opencl_inscribed_starts_are_the_hosts_distance_transform(ocl, shape, aspect):
+    """The kernel's second starts (the deepest pixel of each cell, the first in raster
+    order) are the host's distance transform's, bit for bit: under a grout wider than
+    every cell no element grows, so each search ends where it starts."""
+    from compact_distributions.cvt import placement as pl
+    from compact_distributions.cvt.lloyd import final_labels, lloyd
+    from compact_distributions.cvt.metrics import compile_sites
+    from compact_distributions.cvt.shapes import element_ball
+
+    p = Problem(Grid(130, 97), 60, make_metric("linf"), seed=8)
+    r = lloyd(p, NumpyBackend(), 4)
+    for labels, at in ((final_labels(p, NumpyBackend(), r), r.sites), _hostile_labels()):
+        angles = np.zeros(len(at))
+        gauge = pl._Gauge(compile_sites(element_ball(shape, aspect), at, angles, None), 500.0)
+        cells = pl.FitCells(labels, pl._CellSamples(labels, len(at)), gauge, at, shape, aspect)
+        centres, sizes = ocl.fit_search(cells)
+        assert not sizes.any()
+        assert np.array_equal(centres[0], cells.anchor)
+        assert np.array_equal(centres[1], cells.inscribed())
+
+
 def test_no_cell_no_search():
     """A raster without cells places nothing and never calls the search."""
     from compact_distributions.cvt.placement import fit_centres
