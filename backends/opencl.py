@@ -557,19 +557,13 @@ class OpenCLBackend(Backend):
         m = len(cells.ids)
         h, w = cells.labels.shape
         centres, sizes = np.empty((2, m, 2)), np.empty((2, m))
-        # each cell's samples padded to whole vectors by its last one (no minimum changes)
-        counts = -(-cells.counts // FIT_VECTOR) * FIT_VECTOR
-        first = np.cumsum(counts) - counts
-        offset = np.arange(int(counts.sum())) - np.repeat(first, counts)
-        pick = np.repeat(cells.first, counts) + np.minimum(offset, np.repeat(cells.counts - 1, counts))
-        del offset
         flags = cl.mem_flags.READ_WRITE | cl.mem_flags.COPY_HOST_PTR
         inputs = [
             cells.labels,
-            cells.qx[pick],
-            cells.qy[pick],
-            first.astype(np.int64),
-            counts.astype(np.int32),
+            cells.qx,
+            cells.qy,
+            cells.first.astype(np.int64),
+            cells.counts.astype(np.int32),
             cells.ids.astype(np.int32),
             cells.anchor,
             cells.coef,
@@ -579,7 +573,7 @@ class OpenCLBackend(Backend):
         bufs = [cl.Buffer(self._context, flags, hostbuf=np.ascontiguousarray(a)) for a in inputs]
         out_c = cl.Buffer(self._context, cl.mem_flags.WRITE_ONLY, centres.nbytes)
         out_s = cl.Buffer(self._context, cl.mem_flags.WRITE_ONLY, sizes.nbytes)
-        scratch = cl.Buffer(self._context, cl.mem_flags.READ_WRITE, 8 * len(pick) if on_device else 8)
+        scratch = cl.Buffer(self._context, cl.mem_flags.READ_WRITE, 8 * len(cells.qx) if on_device else 8)
         try:
             labels, qx, qy, first, counts, ids, anchor, coef, slack, starts = bufs
             kernel.set_args(

@@ -107,8 +107,7 @@ REACH(reach_v, doublev, host_hypot_v)
 
 /* The element's size at (px, py): the least reach over the cell's samples, or any value
    <= ``beat`` once VW samples show it cannot exceed ``beat``; ``hint`` is the sample
-   read first, and becomes the nearest sample read.  The host pads each cell's samples
-   to a multiple of VW (repeating its last one: no minimum changes). */
+   read first, and becomes the nearest sample read. */
 inline double least(const cell_t *c, const double px, const double py, const double beat, int *hint)
 {
     double shift[K];
@@ -124,8 +123,24 @@ inline double least(const cell_t *c, const double px, const double py, const dou
     const longv lane = VEC(vload, VW)(0, LANES);
     for (int j = 0; j < c->count; j += VW)
     {
-        const doublev sx = VEC(convert_double, VW)(VEC(vload, VW)(0, c->qx + j));
-        const doublev sy = VEC(convert_double, VW)(VEC(vload, VW)(0, c->qy + j));
+        doublev sx, sy;
+        if (j + VW <= c->count)
+        {
+            sx = VEC(convert_double, VW)(VEC(vload, VW)(0, c->qx + j));
+            sy = VEC(convert_double, VW)(VEC(vload, VW)(0, c->qy + j));
+        }
+        else /* the last, short vector: its last sample repeated (no minimum changes) */
+        {
+            float tx[VW], ty[VW];
+            for (int l = 0; l < VW; ++l)
+            {
+                const int at = j + l < c->count ? j + l : c->count - 1;
+                tx[l] = c->qx[at];
+                ty[l] = c->qy[at];
+            }
+            sx = VEC(convert_double, VW)(VEC(vload, VW)(0, tx));
+            sy = VEC(convert_double, VW)(VEC(vload, VW)(0, ty));
+        }
 #ifdef METRIC_ELLIPSE
         if (c->grout > 0.0)
         {
