@@ -1,5 +1,7 @@
-/* The centre search of cvt.placement.fit_centres, one work-item per (start, cell):
-   OpenCLBackend.fit_search builds it once per ball kind and facet count.
+/* The fit of cvt.placement.fit_centres: inscribed_starts (one work-item per cell: the
+   second start of its search, see there), then fit_search (one work-item per start and
+   cell: the search).  OpenCLBackend.fit_search builds them once per ball kind and facet
+   count.
 
    Compile-time defines, set by the host:
      METRIC_ELLIPSE   the element's ball is an ellipse; else a polygon
