@@ -600,9 +600,7 @@ class OpenCLBackend(Backend):
                     np.int32(w), np.int32(h), labels, qx, qy, first, counts, ids, np.int32(m),
                     np.int32(kind == "chessboard"), np.float64(sy), np.float64(sx), anchor, scratch, starts,
                 )  # fmt: skip
-                cl.enqueue_nd_range_kernel(
-                    self._queue, inscribed, (-(-m // INSCRIBED_GROUP) * INSCRIBED_GROUP,), (INSCRIBED_GROUP,)
-                )
+                cl.enqueue_nd_range_kernel(self._queue, inscribed, (-(-m // local) * local,), (local,))
             cl.enqueue_nd_range_kernel(self._queue, kernel, (-(-2 * m // local) * local,), (local,))
             self._read(centres, out_c)
             self._read(sizes, out_s)
@@ -634,8 +632,7 @@ class OpenCLBackend(Backend):
 
 FIT_KERNEL_FILE = Path(__file__).with_name("opencl_fit.cl")
 FIT_VECTOR = 4  # samples read at once by a work-item of the fit kernel (2, 4, 8 or 16)
-INSCRIBED_GROUP = 16
-FIT_GROUP = 16  # work-items per group of the fit kernel: cells of unlike cost spread over the cores
+FIT_GROUP = 16  # work-items per group of the fit kernels: cells of unlike cost spread over the cores
 
 
 __all__ = [
