@@ -544,8 +544,8 @@ class OpenCLBackend(Backend):
         if key not in self._programs:
             opts = [f"-DK={k}", f"-DVW={FIT_VECTOR}"] + (["-DMETRIC_ELLIPSE"] if ellipse else [])
             prg = self._build(FIT_KERNEL_FILE, opts)
-            self._programs[key] = (cl.Kernel(prg, "fit_search"), cl.Kernel(prg, "inscribed_starts"))
-        kernel, inscribed = self._programs[key]
+            self._programs[key] = (cl.Kernel(prg, "fit_search"),)
+        (kernel,) = self._programs[key]
         # the kernel's depths are the host's bit for bit where the host's are exact: whole
         # numbers (chessboard) or sums of squared quarters (spacings 1, 2, 1/2, ...)
         kind, sy, sx = cells.depth
@@ -591,16 +591,14 @@ class OpenCLBackend(Backend):
                 slack,
                 np.float64(cells.half),
                 starts,
+                np.int32(0 if not on_device else 1 if kind == "chessboard" else 2),
+                np.float64(sy),
+                np.float64(sx),
+                scratch,
                 out_c,
                 out_s,
             )
             local = FIT_GROUP
-            if on_device:
-                inscribed.set_args(
-                    np.int32(w), np.int32(h), labels, qx, qy, first, counts, ids, np.int32(m),
-                    np.int32(kind == "chessboard"), np.float64(sy), np.float64(sx), anchor, scratch, starts,
-                )  # fmt: skip
-                cl.enqueue_nd_range_kernel(self._queue, inscribed, (-(-m // local) * local,), (local,))
             cl.enqueue_nd_range_kernel(self._queue, kernel, (-(-2 * m // local) * local,), (local,))
             self._read(centres, out_c)
             self._read(sizes, out_s)
@@ -632,7 +630,7 @@ class OpenCLBackend(Backend):
 
 FIT_KERNEL_FILE = Path(__file__).with_name("opencl_fit.cl")
 FIT_VECTOR = 4  # samples read at once by a work-item of the fit kernel (2, 4, 8 or 16)
-FIT_GROUP = 16  # work-items per group of the fit kernels: cells of unlike cost spread over the cores
+FIT_GROUP = 16  # work-items per group of the fit kernel: cells of unlike cost spread over the cores
 
 
 __all__ = [

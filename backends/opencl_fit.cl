@@ -1,7 +1,7 @@
-/* The fit of cvt.placement.fit_centres: inscribed_starts (one work-item per cell: the
-   second start of its search, see there), then fit_search (one work-item per start and
-   cell: the search).  OpenCLBackend.fit_search builds them once per ball kind and facet
-   count.
+/* The fit of cvt.placement.fit_centres, one work-item per start and cell (fit_search):
+   the second start of a cell's search where the host leaves it to the kernel
+   (inscribed_start), then the search.  OpenCLBackend.fit_search builds it once per ball
+   kind and facet count.
 
    Compile-time defines, set by the host:
      METRIC_ELLIPSE   the element's ball is an ellipse; else a polygon
@@ -189,84 +189,6 @@ inline bool own(__global const int *labels, const int w, const int h, const doub
     return labels[(long)(int)y * w + (int)x] == id;
 }
 
-__kernel void fit_search(const int w, const int h, __global const int *labels,
-                         __global const float *qx, __global const float *qy,
-                         __global const long *first, __global const int *counts,
-                         __global const int *ids, const int m,
-                         __global const double *anchor, /* (M, 2) */
-                         __global const double *coef,   /* (M, 2K) fx then fy; ellipse (M, 3) */
-                         __global const double *slack,  /* (K,) */
-                         const double grout,
-                         __global const double *starts, /* (2, M, 2) */
-                         __global double *centres,      /* (2, M, 2) */
-                         __global double *sizes)        /* (2, M) */
-{
-    const int g = get_global_id(0);
-    if (g >= 2 * m)
-        return;
-    const int i = g % m;
-    const int id = ids[i];
-    cell_t c;
-    c.qx = qx + first[i];
-    c.qy = qy + first[i];
-    c.count = counts[i];
-    c.ax = anchor[2 * i];
-    c.ay = anchor[2 * i + 1];
-#ifdef METRIC_ELLIPSE
-    c.q0 = coef[3 * i];
-    c.q1 = coef[3 * i + 1];
-    c.q2 = coef[3 * i + 2];
-    c.grout = grout;
-    {
-        const double mid = 0.5 * (c.q0 + c.q2), dev = 0.5 * (c.q0 - c.q2);
-        c.gmax = sqrt(mid + sqrt(dev * dev + c.q1 * c.q1)) * (1.0 + 1e-6); /* rounding kept above */
-    }
-#else
-    for (int k = 0; k < K; ++k)
-    {
-        c.fx[k] = coef[2 * K * i + k];
-        c.fy[k] = coef[2 * K * i + K + k];
-        c.slack[k] = slack[k];
-    }
-#endif
-    double cx = starts[2 * g], cy = starts[2 * g + 1];
-    int hint = 0;
-    double b = 0.0;
-    if (own(labels, w, h, cx, cy, id))
-    {
-        const double s = least(&c, cx, cy, -INFINITY, &hint);
-        b = s > 0.0 ? s : 0.0;
-    }
-    for (int f = 0; f < 4; ++f)
-    {
-        for (int r = 0; r < REPEATS; ++r)
-        {
-            const double step = STEPS[f] * (b > 1.0 ? b : 1.0);
-            bool grew = false;
-            for (int mv = 0; mv < 8; ++mv)
-            {
-                const double tx = cx + step * MOVES[mv][0], ty = cy + step * MOVES[mv][1];
-                if (!own(labels, w, h, tx, ty, id))
-                    continue;
-                const double beat = b * GROWTH;
-                const double s = least(&c, tx, ty, beat, &hint);
-                if (s > beat)
-                {
-                    cx = tx;
-                    cy = ty;
-                    b = s;
-                    grew = true;
-                }
-            }
-            if (!grew)
-                break;
-        }
-    }
-    centres[2 * g] = cx;
-    centres[2 * g + 1] = cy;
-    sizes[g] = b;
-}
-
 /* The pixel of cell ``id`` on the near side of contour sample (sx, sy): the edge's
    midpoint lies between two pixels, exactly one of them the cell's. */
 inline int2 sample_pixel(__global const int *labels, const int w, const int id, const float sx, const float sy)
@@ -312,7 +234,7 @@ inline double depth_of(const int2 p, __global const int2 *z, const int count, co
     return d;
 }
 
-/* The second start of the search, one work-item per cell: the centre of the first pixel,
+/* The second start of a cell's search: the centre of the first pixel,
    in raster order, of those of the cell farthest from any pixel that is not inside it
    (a pixel whose 4 neighbours are all the cell's and in the raster): the host's
    _inscribed_centres.  The nearest such pixel of a pixel of the cell is always one of
@@ -322,22 +244,12 @@ inline double depth_of(const int2 p, __global const int2 *z, const int count, co
    of the site's pixel (when it is the cell's) is a first bound; then each pixel of the
    cell's box, in raster order, reads first the sample that decided the last one and
    stops as soon as it cannot beat the bound (or tie it, before the bound's pixel). */
-__kernel void inscribed_starts(const int w, const int h, __global const int *labels,
-                               __global const float *qx, __global const float *qy,
-                               __global const long *first, __global const int *counts,
-                               __global const int *ids, const int m, const int chess,
-                               const double sy, const double sx,
-                               __global const double *anchor, /* (M, 2) */
-                               __global int2 *pixels,         /* (S,): scratch */
-                               __global double *starts)       /* (2, M, 2): writes the second */
+inline double2 inscribed_start(const int w, const int h, __global const int *labels,
+                               __global const float *cx, __global const float *cy, const int count,
+                               const int id, const int chess, const double sy, const double sx,
+                               const double ax, const double ay,
+                               __global int2 *z) /* (count,): scratch */
 {
-    const int i = get_global_id(0);
-    if (i >= m)
-        return;
-    const int id = ids[i];
-    __global const float *cx = qx + first[i], *cy = qy + first[i];
-    __global int2 *z = pixels + first[i];
-    const int count = counts[i];
     for (int j = 0; j < count; ++j)
         z[j] = sample_pixel(labels, w, id, cx[j], cy[j]);
     float x0 = cx[0], x1 = cx[0], y0 = cy[0], y1 = cy[0];
@@ -354,9 +266,9 @@ __kernel void inscribed_starts(const int w, const int h, __global const int *lab
     double best = -1.0; /* the depth to beat; tied too until a pixel holds it */
     bool held = false;
     int2 at = (int2)(c0, r0);
-    if (own(labels, w, h, anchor[2 * i], anchor[2 * i + 1], id))
+    if (own(labels, w, h, ax, ay, id))
     {
-        const int2 p = (int2)((int)anchor[2 * i], (int)anchor[2 * i + 1]);
+        const int2 p = (int2)((int)ax, (int)ay);
         best = depth_of(p, z, count, chess, sy, sx, -INFINITY, false, &hint);
     }
     for (int r = r0; r < r1; ++r)
@@ -373,6 +285,93 @@ __kernel void inscribed_starts(const int w, const int h, __global const int *lab
                 at = p;
             }
         }
-    starts[2 * (m + i)] = at.x + 0.5;
-    starts[2 * (m + i) + 1] = at.y + 0.5;
+    return (double2)(at.x + 0.5, at.y + 0.5);
+}
+
+__kernel void fit_search(const int w, const int h, __global const int *labels,
+                         __global const float *qx, __global const float *qy,
+                         __global const long *first, __global const int *counts,
+                         __global const int *ids, const int m,
+                         __global const double *anchor, /* (M, 2) */
+                         __global const double *coef,   /* (M, 2K) fx then fy; ellipse (M, 3) */
+                         __global const double *slack,  /* (K,) */
+                         const double grout,
+                         __global const double *starts, /* (2, M, 2): the second unless ``depth`` */
+                         const int depth,               /* 1 chessboard, 2 Euclidean: find the second */
+                         const double sy, const double sx,
+                         __global int2 *pixels,         /* (S,): scratch of inscribed_start */
+                         __global double *centres,      /* (2, M, 2) */
+                         __global double *sizes)        /* (2, M) */
+{
+    const int g = get_global_id(0);
+    if (g >= 2 * m)
+        return;
+    const int i = g % m;
+    const int id = ids[i];
+    cell_t c;
+    c.qx = qx + first[i];
+    c.qy = qy + first[i];
+    c.count = counts[i];
+    c.ax = anchor[2 * i];
+    c.ay = anchor[2 * i + 1];
+#ifdef METRIC_ELLIPSE
+    c.q0 = coef[3 * i];
+    c.q1 = coef[3 * i + 1];
+    c.q2 = coef[3 * i + 2];
+    c.grout = grout;
+    {
+        const double mid = 0.5 * (c.q0 + c.q2), dev = 0.5 * (c.q0 - c.q2);
+        c.gmax = sqrt(mid + sqrt(dev * dev + c.q1 * c.q1)) * (1.0 + 1e-6); /* rounding kept above */
+    }
+#else
+    for (int k = 0; k < K; ++k)
+    {
+        c.fx[k] = coef[2 * K * i + k];
+        c.fy[k] = coef[2 * K * i + K + k];
+        c.slack[k] = slack[k];
+    }
+#endif
+    double cx = starts[2 * g], cy = starts[2 * g + 1];
+    if (g >= m && depth)
+    {
+        const double2 p = inscribed_start(w, h, labels, c.qx, c.qy, c.count, id, depth == 1, sy, sx,
+                                          c.ax, c.ay, pixels + first[i]);
+        cx = p.x;
+        cy = p.y;
+    }
+    int hint = 0;
+    double b = 0.0;
+    if (own(labels, w, h, cx, cy, id))
+    {
+        const double s = least(&c, cx, cy, -INFINITY, &hint);
+        b = s > 0.0 ? s : 0.0;
+    }
+    for (int f = 0; f < 4; ++f)
+    {
+        for (int r = 0; r < REPEATS; ++r)
+        {
+            const double step = STEPS[f] * (b > 1.0 ? b : 1.0);
+            bool grew = false;
+            for (int mv = 0; mv < 8; ++mv)
+            {
+                const double tx = cx + step * MOVES[mv][0], ty = cy + step * MOVES[mv][1];
+                if (!own(labels, w, h, tx, ty, id))
+                    continue;
+                const double beat = b * GROWTH;
+                const double s = least(&c, tx, ty, beat, &hint);
+                if (s > beat)
+                {
+                    cx = tx;
+                    cy = ty;
+                    b = s;
+                    grew = true;
+                }
+            }
+            if (!grew)
+                break;
+        }
+    }
+    centres[2 * g] = cx;
+    centres[2 * g + 1] = cy;
+    sizes[g] = b;
 }
