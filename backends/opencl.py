@@ -531,7 +531,9 @@ class OpenCLBackend(Backend):
         """The centre search of ``cvt.placement.fit_centres`` in a kernel
         (``opencl_fit.cl``): one work-item per cell and start, the host's search step for
         step, so the centres and sizes are :func:`cvt.placement.search_on_host`'s bit for
-        bit (``Backend.fit_search`` says what goes in and out).  Needs float64 on the
+        bit (``Backend.fit_search`` says what goes in and out).  The second starts (each
+        cell's deepest pixel) are found by the kernel too where its depths are the host's
+        bit for bit, else by the host (``FitCells.inscribed``).  Needs float64 on the
         device; without it the host searches."""
         if "cl_khr_fp64" not in self._device.extensions:
             return super().fit_search(cells)
@@ -557,7 +559,7 @@ class OpenCLBackend(Backend):
         m = len(cells.ids)
         h, w = cells.labels.shape
         centres, sizes = np.empty((2, m, 2)), np.empty((2, m))
-        flags = cl.mem_flags.READ_WRITE | cl.mem_flags.COPY_HOST_PTR
+        flags = cl.mem_flags.READ_ONLY | cl.mem_flags.COPY_HOST_PTR
         inputs = [
             cells.labels,
             cells.qx,
