@@ -47,6 +47,8 @@ from .base import Backend
 
 KERNEL_FILE = Path(__file__).with_name("opencl_kernels.cl")
 SEGMENT = 64  # pixels of a row per work-item of the moments kernel
+RUN_SEGMENT = 256  # pixels of a row per work-item of row_runs
+RUN_CHUNK = 1024  # runs per work-item of suspect_runs
 ACC_BYTES = 64  # per site: five 64-bit sums in one cache line (the kernel file says why)
 STRIP = 4  # blocks side by side per work-item of label_blocks: they share their sums
 BLOCK_SIZES = (0, 4, 8, 16)  # label_blocks works a row of a block as one 4-, 8- or 16-wide vector
@@ -54,6 +56,11 @@ BLOCK_SIZES = (0, 4, 8, 16)  # label_blocks works a row of a block as one 4-, 8-
 # work-items at once, and its own choice (thousands of them) overflowed a thread's stack
 BLOCK_GROUP = (8, 1)
 REACH_MARGIN = 1e-4  # relative slack on the search bound against float32 rounding
+
+
+def _facet_count(metric: Metric) -> int:
+    """K of the kernels built for ``metric`` (0: an ellipse)."""
+    return 0 if metric.kind == "ellipse" else np.asarray(metric.normals).shape[0]
 
 
 def _import_pyopencl():
@@ -258,6 +265,8 @@ class OpenCLBackend(Backend):
         self.seed = bool(seed)
         self._labels_buf = None  # the buffer the last labels went to, and their (w, h)
         self._labels_raster = None
+        self._wall_kernels: dict[int, tuple] = {}  # program -> walled-cell kernels
+        self._run_room = 1 << 16  # runs the suspect_runs buffer holds; grows as needed
 
     # ------------------------------------------------------------------ device
     @classmethod
@@ -276,6 +285,7 @@ class OpenCLBackend(Backend):
             buf.release()
         self._buffers.clear()
         self._programs.clear()
+        self._wall_kernels.clear()
         self._mask_source = None
         self._labels_buf = self._labels_raster = None
         self._queue = self._context = None
@@ -499,16 +509,20 @@ class OpenCLBackend(Backend):
     # ----------------------------------------------------------------- moments
     def _moments(self, sites, angles, scales, metric: Metric, grid: Grid) -> Moments:
         """Labels and their integer moments on the device; reads back 5·N sums."""
+        acc_buf, _ = self._enqueue_moments(sites, angles, scales, metric, grid)
+        return self._read_moments(acc_buf, len(sites))
+
+    def _enqueue_moments(self, sites, angles, scales, metric: Metric, grid: Grid):
+        """Enqueue the labels and their sums: (sums buffer, labels buffer)."""
         cl = self._cl
         n = len(sites)
         acc_buf = self._buffer("moments", ACC_BYTES * n)
         cl.enqueue_fill_buffer(self._queue, acc_buf, np.uint32(0), 0, ACC_BYTES * n)
         if self.block > 0:  # the block kernel sums its own labels
-            self._run_labels(sites, angles, scales, metric, grid, acc_buf)
+            labels_buf, _ = self._run_labels(sites, angles, scales, metric, grid, acc_buf)
         else:
             labels_buf, _ = self._run_labels(sites, angles, scales, metric, grid)
-            k = 0 if metric.kind == "ellipse" else np.asarray(metric.normals).shape[0]
-            _, moments_kernel = self._kernels(metric, k)
+            _, moments_kernel = self._kernels(metric, _facet_count(metric))
             w, h = grid.width, grid.height
             moments_kernel.set_args(
                 np.int32(w), np.int32(h), np.int32(SEGMENT), labels_buf, np.int32(n), acc_buf
@@ -517,6 +531,9 @@ class OpenCLBackend(Backend):
                 cl.enqueue_nd_range_kernel(self._queue, moments_kernel, (-(-w // SEGMENT), h), None)
             except cl.Error as exc:
                 raise BackendUnavailable(f"opencl: moments kernel failed on {self.device()}: {exc}") from None
+        return acc_buf, labels_buf
+
+    def _read_moments(self, acc_buf, n: int) -> Moments:
         acc = np.empty((n, ACC_BYTES // 8), dtype=np.uint64)
         self._read(acc, acc_buf)
         if self.int64_atomics:
@@ -525,6 +542,66 @@ class OpenCLBackend(Backend):
             words = acc.view(np.uint32).astype(np.int64)
             sums = ((words[:, 8:13] << 32) | words[:, :5]).T
         return Moments(*(np.ascontiguousarray(row) for row in sums))
+
+    # ------------------------------------------------------------ walled cells
+    def _moments_with_runs(self, sites, angles, scales, metric: Metric, grid: Grid):
+        """The moments of the labels and the row runs of the cells that may be in pieces,
+        found on the device (``row_runs``, ``suspect_runs``): the host reads 5·N sums and
+        those runs, never the raster."""
+        cl = self._cl
+        n = len(sites)
+        w, h = grid.width, grid.height
+        acc_buf, labels_buf = self._enqueue_moments(sites, angles, scales, metric, grid)
+        program = self._kernels(metric, _facet_count(metric))[0].program
+        if program.int_ptr not in self._wall_kernels:
+            self._wall_kernels[program.int_ptr] = (
+                cl.Kernel(program, "row_runs"),
+                cl.Kernel(program, "suspect_runs"),
+            )
+        row_runs, suspect_runs = self._wall_kernels[program.int_ptr]
+        ends_buf = self._buffer("run_ends", 8 * n)
+        found_buf, kept_buf = self._buffer("runs_found", 4), self._buffer("runs_kept", 4)
+        found, kept = np.zeros(1, dtype=np.uint32), np.zeros(1, dtype=np.uint32)
+        try:
+            cl.enqueue_fill_buffer(self._queue, ends_buf, np.uint32(0), 0, 8 * n)
+            while True:
+                room = self._run_room
+                runs_buf = self._buffer("runs", 12 * room)
+                cl.enqueue_fill_buffer(self._queue, found_buf, np.uint32(0), 0, 4)
+                row_runs.set_args(
+                    np.int32(w),
+                    np.int32(h),
+                    np.int32(RUN_SEGMENT),
+                    labels_buf,
+                    ends_buf,
+                    found_buf,
+                    np.uint32(room),
+                    runs_buf,
+                )
+                cl.enqueue_nd_range_kernel(self._queue, row_runs, (-(-w // RUN_SEGMENT), h), None)
+                self._read(found, found_buf)
+                if found[0] <= room:
+                    break
+                # too many to hold: again, with room (the counts start again from zero)
+                self._run_room = int(found[0]) * 5 // 4
+                cl.enqueue_fill_buffer(self._queue, ends_buf, np.uint32(0), 0, 8 * n)
+            total = int(found[0])
+            out_buf = self._buffer("suspect_runs", 12 * total)
+            cl.enqueue_fill_buffer(self._queue, kept_buf, np.uint32(0), 0, 4)
+            suspect_runs.set_args(
+                np.uint32(total), np.uint32(RUN_CHUNK), runs_buf, ends_buf, kept_buf, out_buf
+            )
+            cl.enqueue_nd_range_kernel(self._queue, suspect_runs, (max(1, -(-total // RUN_CHUNK)),), None)
+            self._read(kept, kept_buf)
+        except cl.Error as exc:
+            raise BackendUnavailable(
+                f"opencl: walled-cell kernels failed on {self.device()}: {exc}"
+            ) from None
+        runs = np.empty((int(kept[0]), 3), dtype=np.int32)
+        if len(runs):
+            self._read(runs, out_buf)
+        start = runs[:, 0].astype(np.int64)
+        return self._read_moments(acc_buf, n), (start, start + runs[:, 1], runs[:, 2])
 
 
 __all__ = [

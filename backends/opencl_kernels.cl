@@ -602,3 +602,112 @@ __kernel void row_moments(const int width, const int height, const int seg,
     if (cur >= 0)
         flush_run(acc, n, cur, start, j1 - 1, i);
 }
+
+/* ------------------------------------------------------------------ walled cells */
+
+/* A walled step keeps one 4-connected piece of each cell (cvt.mosaic.split_cells).  A
+   cell whose row runs include only one "top" run (no pixel of it has its own label
+   straight above), or only one "bottom" run, is one piece: from any of its runs, steps to
+   a touching run above (below) end at that run.  row_runs lists the runs of the region
+   and counts both kinds per cell; suspect_runs keeps the runs of the cells with more
+   than one of each, and the host finds their pieces. */
+
+/* The end (exclusive) of the run of label l that begins at column j of row i; *up, *down:
+   whether a pixel of it has label l straight above, straight below. */
+inline int walk_run(__global const int *labels, const int width, const int height, const int i,
+                    const int j, const int l, int *up, int *down)
+{
+    __global const int *row = labels + (size_t)i * width;
+    /* off the raster, read the row itself and ignore what it says */
+    __global const int *above = i > 0 ? row - width : row;
+    __global const int *below = i + 1 < height ? row + width : row;
+    int u = 0, d = 0, e = j;
+    for (; e < width && row[e] == l; ++e) {
+        u |= above[e] == l;
+        d |= below[e] == l;
+    }
+    *up = u && i > 0;
+    *down = d && i + 1 < height;
+    return e;
+}
+
+/* One work-item per segment of `seg` pixels of a row takes the runs of the region that
+   begin in it (a run may reach past the segment's end): each as (first pixel, length,
+   label) at runs[3 k ..], k from the counter `found` (zeroed by the host; one atomic per
+   work-item reserves its place), and ends[2 l], ends[2 l + 1] count the top and bottom
+   runs of cell l (zeroed by the host).  Runs beyond `room` are counted, not written (the
+   host then asks again with more room). */
+__kernel void row_runs(const int width, const int height, const int seg,
+                       __global const int *labels, volatile __global uint *ends,
+                       volatile __global uint *found, const uint room, __global int *runs)
+{
+    const int i = get_global_id(1);
+    const int j0 = get_global_id(0) * seg;
+    if (i >= height || j0 >= width)
+        return;
+    const int j1 = j0 + seg < width ? j0 + seg : width;
+    __global const int *row = labels + (size_t)i * width;
+    uint mine = 0; /* runs of the region that begin in the segment */
+    int prev = j0 > 0 ? row[j0 - 1] : -1;
+    for (int j = j0; j < j1; ++j) {
+        const int l = row[j];
+        mine += l >= 0 && l != prev;
+        prev = l;
+    }
+    if (mine == 0)
+        return;
+    uint k = atomic_add(found, mine);
+    prev = j0 > 0 ? row[j0 - 1] : -1;
+    for (int j = j0; j < j1;) {
+        const int l = row[j];
+        if (l < 0 || l == prev) {
+            prev = l;
+            ++j;
+            continue;
+        }
+        int up, down;
+        const int e = walk_run(labels, width, height, i, j, l, &up, &down);
+        if (!up)
+            atomic_inc(ends + 2 * l);
+        if (!down)
+            atomic_inc(ends + 2 * l + 1);
+        if (k < room) {
+            runs[3 * k] = i * width + j;
+            runs[3 * k + 1] = e - j;
+            runs[3 * k + 2] = l;
+        }
+        ++k;
+        prev = l;
+        j = e;
+    }
+}
+
+/* The runs (as row_runs lists them) of the cells with more than one top and more than
+   one bottom run, copied to out[3 k ..], k from the counter `kept` (zeroed by the host);
+   one work-item per `chunk` runs, one atomic each. */
+__kernel void suspect_runs(const uint total, const uint chunk, __global const int *runs,
+                           __global const uint *ends, volatile __global uint *kept,
+                           __global int *out)
+{
+    const uint r0 = get_global_id(0) * chunk;
+    if (r0 >= total)
+        return;
+    const uint r1 = r0 + chunk < total ? r0 + chunk : total;
+    uint mine = 0;
+    for (uint r = r0; r < r1; ++r) {
+        const int l = runs[3 * r + 2];
+        mine += ends[2 * l] > 1 && ends[2 * l + 1] > 1;
+    }
+    if (mine == 0)
+        return;
+    uint k = atomic_add(kept, mine);
+    for (uint r = r0; r < r1; ++r) {
+        const int l = runs[3 * r + 2];
+        if (ends[2 * l] > 1 && ends[2 * l + 1] > 1) {
+            out[3 * k] = runs[3 * r];
+            out[3 * k + 1] = runs[3 * r + 1];
+            out[3 * k + 2] = l;
+            ++k;
+        }
+    }
+}
