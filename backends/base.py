@@ -82,27 +82,19 @@ class Backend(ABC):
         sites, angles, scales = self.check_inputs(sites, angles, scales, metric, grid)
         return self._moments(sites, angles, scales, metric, grid)
 
-    def moments_with_runs(self, sites, *, angles=None, scales=None, metric: Metric, grid: Grid):
-        """The moments of the labels and the row runs of every cell that may lie in pieces.
-
-        A walled step (:class:`cvt.mosaic.WalledBackend`) keeps one 4-connected piece of
-        each cell; a backend that can tell on its device which cells may be in pieces
-        saves the host from reading and scanning the whole raster.
-
-        Returns
-        -------
-        (Moments, (start, end, label)) or None
-            The moments as :meth:`moments` gives them, and (R,) int64 arrays of runs, in
-            any order: run k covers flat (row-major) pixels ``start[k]`` to
-            ``end[k] - 1`` of one row, all of label ``label[k]``; every run of a cell is
-            there or none is, and a cell none of whose runs are there is one piece.
-            None where the backend has no such path (the caller reads the labels).
-        """
+    def walled_moments(
+        self, sites, *, angles=None, scales=None, metric: Metric, grid: Grid
+    ) -> Moments | None:
+        """The moments of the labels with each cell cut to one 4-connected piece, as
+        ``moments_from_labels(cvt.mosaic.split_cells(labels, sites), N)`` gives them, or
+        None where the backend has no path of its own for them (the caller then splits
+        the labels on the host, as :class:`cvt.mosaic.WalledBackend` does): a backend
+        that finds the pieces on its device saves the host from reading the raster."""
         sites, angles, scales = self.check_inputs(sites, angles, scales, metric, grid)
-        return self._moments_with_runs(sites, angles, scales, metric, grid)
+        return self._walled_moments(sites, angles, scales, metric, grid)
 
-    def _moments_with_runs(self, sites, angles, scales, metric: Metric, grid: Grid):
-        """None: no device path (see :meth:`moments_with_runs`)."""
+    def _walled_moments(self, sites, angles, scales, metric: Metric, grid: Grid) -> Moments | None:
+        """None: no path of its own (see :meth:`walled_moments`)."""
         return None
 
     @abstractmethod

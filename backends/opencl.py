@@ -39,7 +39,8 @@ import numpy as np
 
 from compact_distributions.cvt.errors import BackendUnavailable, InputError
 from compact_distributions.cvt.metrics import Metric, compile_sites
-from compact_distributions.cvt.moments import Moments
+from compact_distributions.cvt.moments import Moments, moments_from_runs
+from compact_distributions.cvt.pixels import pixel_index
 from compact_distributions.cvt.problem import Grid
 from compact_distributions.cvt.quiet import c_output_silenced
 
@@ -49,6 +50,17 @@ KERNEL_FILE = Path(__file__).with_name("opencl_kernels.cl")
 SEGMENT = 64  # pixels of a row per work-item of the moments kernel
 RUN_SEGMENT = 256  # pixels of a row per work-item of row_runs
 RUN_CHUNK = 1024  # runs per work-item of suspect_runs
+WALL_KERNELS = (
+    "row_runs",
+    "suspect_runs",
+    "pieces_start",
+    "pieces_join",
+    "pieces_measure",
+    "pieces_largest",
+    "pieces_last",
+    "pieces_dropped",
+)
+MOMENT_FIELDS = ("count", "sx", "sy", "sxx", "syy")
 ACC_BYTES = 64  # per site: five 64-bit sums in one cache line (the kernel file says why)
 STRIP = 4  # blocks side by side per work-item of label_blocks: they share their sums
 BLOCK_SIZES = (0, 4, 8, 16)  # label_blocks works a row of a block as one 4-, 8- or 16-wide vector
@@ -544,64 +556,110 @@ class OpenCLBackend(Backend):
         return Moments(*(np.ascontiguousarray(row) for row in sums))
 
     # ------------------------------------------------------------ walled cells
-    def _moments_with_runs(self, sites, angles, scales, metric: Metric, grid: Grid):
-        """The moments of the labels and the row runs of the cells that may be in pieces,
-        found on the device (``row_runs``, ``suspect_runs``): the host reads 5·N sums and
-        those runs, never the raster."""
+    def _walled_moments(self, sites, angles, scales, metric: Metric, grid: Grid) -> Moments:
+        """The moments of the labels with each cell cut to the piece it keeps, found on
+        the device: ``row_runs`` lists the runs and counts each cell's top and bottom
+        runs, ``suspect_runs`` keeps the runs of the cells that may be in pieces, the
+        ``pieces_*`` kernels find their pieces and list the runs of those not kept; the
+        host reads 5·N sums and those runs (never the raster) and subtracts their sums."""
         cl = self._cl
         n = len(sites)
         w, h = grid.width, grid.height
         acc_buf, labels_buf = self._enqueue_moments(sites, angles, scales, metric, grid)
         program = self._kernels(metric, _facet_count(metric))[0].program
         if program.int_ptr not in self._wall_kernels:
-            self._wall_kernels[program.int_ptr] = (
-                cl.Kernel(program, "row_runs"),
-                cl.Kernel(program, "suspect_runs"),
-            )
-        row_runs, suspect_runs = self._wall_kernels[program.int_ptr]
+            self._wall_kernels[program.int_ptr] = {name: cl.Kernel(program, name) for name in WALL_KERNELS}
+        kern = self._wall_kernels[program.int_ptr]
+        queue = self._queue
+
+        def run(name, size, *args):
+            kern[name].set_args(*args)
+            cl.enqueue_nd_range_kernel(queue, kern[name], size, None)
+
+        def fill(buf, value, count):
+            cl.enqueue_fill_buffer(queue, buf, np.int32(value), 0, 4 * count)
+
         ends_buf = self._buffer("run_ends", 8 * n)
         found_buf, kept_buf = self._buffer("runs_found", 4), self._buffer("runs_kept", 4)
         found, kept = np.zeros(1, dtype=np.uint32), np.zeros(1, dtype=np.uint32)
+        rows = (-(-w // RUN_SEGMENT), h)
         try:
-            cl.enqueue_fill_buffer(self._queue, ends_buf, np.uint32(0), 0, 8 * n)
+            fill(ends_buf, 0, 2 * n)
             while True:
                 room = self._run_room
                 runs_buf = self._buffer("runs", 12 * room)
-                cl.enqueue_fill_buffer(self._queue, found_buf, np.uint32(0), 0, 4)
-                row_runs.set_args(
-                    np.int32(w),
-                    np.int32(h),
-                    np.int32(RUN_SEGMENT),
-                    labels_buf,
-                    ends_buf,
-                    found_buf,
-                    np.uint32(room),
-                    runs_buf,
-                )
-                cl.enqueue_nd_range_kernel(self._queue, row_runs, (-(-w // RUN_SEGMENT), h), None)
+                fill(found_buf, 0, 1)
+                args = (labels_buf, ends_buf, found_buf, np.uint32(room), runs_buf)
+                run("row_runs", rows, np.int32(w), np.int32(h), np.int32(RUN_SEGMENT), *args)
                 self._read(found, found_buf)
                 if found[0] <= room:
                     break
                 # too many to hold: again, with room (the counts start again from zero)
                 self._run_room = int(found[0]) * 5 // 4
-                cl.enqueue_fill_buffer(self._queue, ends_buf, np.uint32(0), 0, 8 * n)
+                fill(ends_buf, 0, 2 * n)
             total = int(found[0])
-            out_buf = self._buffer("suspect_runs", 12 * total)
-            cl.enqueue_fill_buffer(self._queue, kept_buf, np.uint32(0), 0, 4)
-            suspect_runs.set_args(
-                np.uint32(total), np.uint32(RUN_CHUNK), runs_buf, ends_buf, kept_buf, out_buf
+            listed_buf = self._buffer("suspect_runs", 12 * total)
+            fill(kept_buf, 0, 1)
+            chunks = (max(1, -(-total // RUN_CHUNK)),)
+            run(
+                "suspect_runs",
+                chunks,
+                np.uint32(total),
+                np.uint32(RUN_CHUNK),
+                runs_buf,
+                ends_buf,
+                kept_buf,
+                listed_buf,
             )
-            cl.enqueue_nd_range_kernel(self._queue, suspect_runs, (max(1, -(-total // RUN_CHUNK)),), None)
             self._read(kept, kept_buf)
+            m = int(kept[0])
+            if m == 0:
+                return self._read_moments(acc_buf, n)
+            i, j = pixel_index(sites, w, h)
+            site_at = self._upload("site_at", (i * w + j).astype(np.int32))
+            run_at = self._buffer("run_at", 4 * w * h)
+            parent, root = self._buffer("piece_parent", 4 * m), self._buffer("piece_root", 4 * m)
+            size, first = self._buffer("piece_size", 4 * m), self._buffer("piece_first", 4 * m)
+            site_piece, largest = self._buffer("site_piece", 4 * n), self._buffer("largest", 4 * n)
+            last = self._buffer("last_largest", 4 * n)
+            dropped_buf, n_dropped_buf = self._buffer("dropped", 12 * m), self._buffer("n_dropped", 4)
+            fill(size, 0, m)
+            fill(first, np.iinfo(np.int32).max, m)
+            fill(site_piece, -1, n)
+            fill(largest, 0, n)
+            fill(last, -1, n)
+            fill(n_dropped_buf, 0, 1)
+            um = np.uint32(m)
+            run("pieces_start", (m,), um, listed_buf, run_at, parent)
+            run("pieces_join", (m,), um, np.int32(w), listed_buf, labels_buf, run_at, parent)
+            run("pieces_measure", (m,), um, listed_buf, parent, root, size, first, site_at, site_piece)
+            run("pieces_largest", (m,), um, listed_buf, root, size, largest)
+            run("pieces_last", (m,), um, listed_buf, root, size, first, largest, last)
+            run(
+                "pieces_dropped",
+                (m,),
+                um,
+                listed_buf,
+                root,
+                first,
+                site_piece,
+                last,
+                n_dropped_buf,
+                dropped_buf,
+            )
+            n_dropped = np.zeros(1, dtype=np.uint32)
+            self._read(n_dropped, n_dropped_buf)
+            dropped = np.empty((int(n_dropped[0]), 3), dtype=np.int32)
+            if len(dropped):
+                self._read(dropped, dropped_buf)
         except cl.Error as exc:
             raise BackendUnavailable(
                 f"opencl: walled-cell kernels failed on {self.device()}: {exc}"
             ) from None
-        runs = np.empty((int(kept[0]), 3), dtype=np.int32)
-        if len(runs):
-            self._read(runs, out_buf)
-        start = runs[:, 0].astype(np.int64)
-        return self._read_moments(acc_buf, n), (start, start + runs[:, 1], runs[:, 2])
+        whole = self._read_moments(acc_buf, n)
+        start = dropped[:, 0].astype(np.int64)
+        gone = moments_from_runs(start, start + dropped[:, 1], dropped[:, 2], w, n)
+        return Moments(*(getattr(whole, f) - getattr(gone, f) for f in MOMENT_FIELDS))
 
 
 __all__ = [

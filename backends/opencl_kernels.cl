@@ -711,3 +711,133 @@ __kernel void suspect_runs(const uint total, const uint chunk, __global const in
         }
     }
 }
+
+/* The pieces of the listed cells (the runs suspect_runs kept, `m` of them, unordered),
+   and the runs of the pieces their cells do not keep.  Runs are joined where they touch
+   (same cell, adjacent rows, overlapping columns) by a union-find over run indices whose
+   roots are the smallest index of their piece, linked with atomic_min (Playne and
+   Hawick's concurrent union: a link that loses a race is retried from the new roots).
+   run_at[p]: the index of the listed run that begins at pixel p (only those are read). */
+
+inline int piece_root(volatile __global int *parent, int x)
+{
+    int p = parent[x];
+    while (p != x) {
+        x = p;
+        p = parent[x];
+    }
+    return x;
+}
+
+/* 1. each run its own piece, and its index at its first pixel */
+__kernel void pieces_start(const uint m, __global const int *runs, __global int *run_at,
+                           volatile __global int *parent)
+{
+    const uint k = get_global_id(0);
+    if (k >= m)
+        return;
+    run_at[runs[3 * k]] = (int)k;
+    parent[k] = (int)k;
+}
+
+/* 2. each run joins the runs of the row above that touch it: one per stretch of its own
+   label above it, found by walking left to the stretch's run start */
+__kernel void pieces_join(const uint m, const int width, __global const int *runs,
+                          __global const int *labels, __global const int *run_at,
+                          volatile __global int *parent)
+{
+    const uint k = get_global_id(0);
+    if (k >= m)
+        return;
+    const int p = runs[3 * k], len = runs[3 * k + 1], l = runs[3 * k + 2];
+    const int i = p / width, j = p - i * width;
+    if (i == 0)
+        return;
+    __global const int *above = labels + (size_t)(i - 1) * width;
+    for (int x = j; x < j + len; ++x) {
+        if (above[x] != l || (x > j && above[x - 1] == l))
+            continue;
+        int s = x;
+        while (s > 0 && above[s - 1] == l)
+            --s;
+        int a = (int)k, b = run_at[(i - 1) * width + s];
+        for (;;) {
+            a = piece_root(parent, a);
+            b = piece_root(parent, b);
+            if (a == b)
+                break;
+            const int hi = a > b ? a : b, lo = a > b ? b : a;
+            const int old = atomic_min(parent + hi, lo);
+            if (old == hi)
+                break;
+            a = old; /* hi was linked meanwhile: join its new root */
+            b = lo;
+        }
+    }
+}
+
+/* 3. per piece (at its root) its pixels and first pixel; per cell the piece that holds
+   its site's pixel (site_at[l], from the host) where the site is in its cell */
+__kernel void pieces_measure(const uint m, __global const int *runs, volatile __global int *parent,
+                             __global int *root, volatile __global int *size,
+                             volatile __global int *first, __global const int *site_at,
+                             __global int *site_piece)
+{
+    const uint k = get_global_id(0);
+    if (k >= m)
+        return;
+    const int p = runs[3 * k], len = runs[3 * k + 1], l = runs[3 * k + 2];
+    const int r = piece_root(parent, (int)k);
+    root[k] = r;
+    atomic_add(size + r, len);
+    atomic_min(first + r, p);
+    const int s = site_at[l];
+    if (p <= s && s < p + len)
+        site_piece[l] = r; /* one run holds the site's pixel: one writer */
+}
+
+/* 4. per cell the size of its largest piece */
+__kernel void pieces_largest(const uint m, __global const int *runs, __global const int *root,
+                             __global const int *size, volatile __global int *largest)
+{
+    const uint k = get_global_id(0);
+    if (k >= m || root[k] != (int)k)
+        return;
+    atomic_max(largest + runs[3 * k + 2], size[k]);
+}
+
+/* 5. per cell, of its largest pieces the one that begins last in raster order (pieces
+   begin at different pixels) */
+__kernel void pieces_last(const uint m, __global const int *runs, __global const int *root,
+                          __global const int *size, __global const int *first,
+                          __global const int *largest, volatile __global int *last)
+{
+    const uint k = get_global_id(0);
+    if (k >= m || root[k] != (int)k)
+        return;
+    const int l = runs[3 * k + 2];
+    if (size[k] == largest[l])
+        atomic_max(last + l, first[k]);
+}
+
+/* 6. the runs outside the piece their cell keeps (the site's piece, else the last of the
+   largest), listed as suspect_runs lists runs, at dropped[3 k ..] from the counter
+   `n_dropped` (zeroed by the host) */
+__kernel void pieces_dropped(const uint m, __global const int *runs, __global const int *root,
+                             __global const int *first, __global const int *site_piece,
+                             __global const int *last, volatile __global uint *n_dropped,
+                             __global int *dropped)
+{
+    const uint k = get_global_id(0);
+    if (k >= m)
+        return;
+    const int l = runs[3 * k + 2];
+    const int own = site_piece[l];
+    const int keep = own >= 0 ? first[own] : last[l];
+    if (first[root[k]] == keep)
+        return;
+    const uint d = atomic_inc(n_dropped);
+    dropped[3 * d] = runs[3 * k];
+    dropped[3 * d + 1] = runs[3 * k + 1];
+    dropped[3 * d + 2] = l;
+}

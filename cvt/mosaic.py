@@ -204,6 +204,9 @@ def kept_runs(labels: np.ndarray, sites) -> tuple[tuple, np.ndarray]:
     kept : (R,) bool array
         Per run: inside the region and in its cell's kept piece.
     """
+    from scipy.sparse import coo_matrix
+    from scipy.sparse.csgraph import connected_components
+
     h, w = labels.shape
     n = len(sites)
     runs = label_runs(labels)
@@ -211,113 +214,56 @@ def kept_runs(labels: np.ndarray, sites) -> tuple[tuple, np.ndarray]:
     inside = lab >= 0
     # Two runs of one cell in adjacent rows touch where their columns overlap, and the
     # overlap begins at the start of one of them: looking straight up and down from
-    # each start finds every touching pair (down only where the run below began
-    # further left, else looking up from it finds the pair).
+    # each start finds every touching pair, each once (down only where the run below
+    # began further left, else looking up from it finds the pair).
     second_row, last_row = np.searchsorted(start, [w, flat.size - w])
     up = np.zeros(len(start), dtype=bool)
     np.equal(flat[start[second_row:] - w], lab[second_row:], out=up[second_row:])
     below_px = start[:last_row] + w
     down = flat[below_px] == lab[:last_row]
     down &= ~starts[below_px]
-    below = np.searchsorted(start, below_px[down], side="right") - 1
+    r_down = np.flatnonzero(down)
+    below = np.searchsorted(start, below_px[r_down], side="right") - 1
     # a cell with one run that touches nothing above it is one piece: from every other
     # run, stepping to a touching run above ends there
     top = ~up
     top[below] = False
     top &= inside
     suspect = np.bincount(lab[top], minlength=n) > 1
-    kept = inside
-    if suspect.any():
-        of_suspect = np.flatnonzero(np.append(suspect, False)[lab])  # label -1 reads the appended False
-        kept = inside.copy()
-        kept[of_suspect] = kept_pieces(start[of_suspect], end[of_suspect], lab[of_suspect], sites, w, h)
-    return runs, kept
-
-
-def kept_pieces(start, end, run_labels, sites, width: int, height: int) -> np.ndarray:
-    """Which row runs lie in their cell's kept piece (the rule of :func:`split_cells`).
-
-    Parameters
-    ----------
-    start, end : (R,) int arrays
-        Run k covers flat (row-major) pixels ``start[k]`` to ``end[k] - 1`` of one row;
-        any order, and each cell given has all its runs here.
-    run_labels : (R,) int array
-        The cell of each run, in 0..N-1.
-    sites : (N, 2) array
-        The cells' sites, pixel units.
-    width, height : int
-        The raster's size.
-
-    Returns
-    -------
-    (R,) bool array
-        Per run: in the piece its cell keeps.
-    """
-    from scipy.sparse import coo_matrix
-    from scipy.sparse.csgraph import connected_components
-
-    n = len(sites)
-    start = np.asarray(start, dtype=np.int64)
-    run_labels = np.asarray(run_labels)
-    if len(start) == 0:
-        return np.zeros(0, dtype=bool)
-    # sorted by cell, row and column: the runs of a cell in one row are one stretch, a
-    # "group", and the group of the row above comes just before where it has runs (a
-    # cell's groups are height + 1 apart from the next cell's: its row 0 has none above)
-    row = start // width
-    group = run_labels.astype(np.int64) * (height + 1) + row
-    order = np.argsort(group * width + (start - row * width))
-    group, start, lab = group[order], start[order], run_labels[order]
-    col = start - row[order] * width
-    length = np.asarray(end, dtype=np.int64)[order] - start
-    stop = col + length
-    m = len(start)
-    new_group = np.empty(m, dtype=bool)
-    new_group[:1] = True
-    np.not_equal(group[1:], group[:-1], out=new_group[1:])
-    first_of = np.flatnonzero(new_group)  # each group's first run
-    of_group = np.cumsum(new_group) - 1
-    group_size = np.diff(np.append(first_of, m))
-    above = np.zeros(len(first_of), dtype=bool)  # the group of the row above has runs
-    above[1:] = group[first_of[1:]] == group[first_of[:-1]] + 1
-    # candidates: every run of the group above; they touch where their columns overlap
-    count = np.where(above[of_group], group_size[of_group - 1], 0)
-    lower = np.repeat(np.arange(m), count)
-    upper = index_ranges(first_of[of_group - 1], count)
-    touch = (col[upper] < stop[lower]) & (stop[upper] > col[lower])
-    graph = coo_matrix((np.ones(int(touch.sum()), dtype=np.int8), (lower[touch], upper[touch])), shape=(m, m))
+    if not suspect.any():
+        return runs, inside
+    # pieces of the suspect cells only: connected components of their runs
+    of_suspect = np.append(suspect, False)[lab]  # label -1 reads the appended False
+    node = np.flatnonzero(of_suspect)
+    node_of = np.cumsum(of_suspect) - 1  # a suspect run's node
+    r_up = np.flatnonzero(up & of_suspect)
+    above = np.searchsorted(start, start[r_up] - w, side="right") - 1
+    pair = of_suspect[r_down]
+    lower = node_of[np.concatenate([r_up, below[pair]])]
+    upper = node_of[np.concatenate([above, r_down[pair]])]
+    graph = coo_matrix((np.ones(len(lower), dtype=np.int8), (lower, upper)), shape=(len(node), len(node)))
     n_pieces, piece = connected_components(graph, directed=False)
     owner = np.zeros(n_pieces, dtype=np.int64)
-    owner[piece] = lab
-    size = np.bincount(piece, weights=length, minlength=n_pieces)
-    first = np.full(n_pieces, np.iinfo(np.int64).max, dtype=np.int64)
-    np.minimum.at(first, piece, start)
+    owner[piece] = lab[node]
+    size = np.bincount(piece, weights=end[node] - start[node], minlength=n_pieces)
+    first = np.full(n_pieces, flat.size, dtype=np.int64)
+    np.minimum.at(first, piece, start[node])
     # per cell its largest piece (of equal ones, the one that begins last in raster
-    # order: first pixels of pieces differ), then the site's own piece where the site
-    # is in its cell
-    largest = np.zeros(n, dtype=np.float64)
-    np.maximum.at(largest, owner, size)
-    tied = np.flatnonzero(size == largest[owner])
-    last = np.full(n, -1, dtype=np.int64)
-    np.maximum.at(last, owner[tied], first[tied])
-    chosen = tied[first[tied] == last[owner[tied]]]
+    # order), then the site's own piece where the site is in its cell
+    order = np.lexsort((first, size, owner))
+    last = np.append(owner[order][1:] != owner[order][:-1], True)
     keep_piece = np.full(n, -1, dtype=np.int64)
-    keep_piece[owner[chosen]] = chosen
-    new_cell = np.empty(m, dtype=bool)
-    new_cell[:1] = True
-    np.not_equal(lab[1:], lab[:-1], out=new_cell[1:])
-    cells = lab[new_cell]
-    i, j = pixel_index(np.asarray(sites, dtype=np.float64)[cells], width, height)
-    at = (cells.astype(np.int64) * (height + 1) + i) * width + j
-    # the run of the cell that begins last at or before the site's pixel
-    k = np.searchsorted(group * width + col, at, side="right") - 1
-    on = k >= 0
-    on[on] = (group[k[on]] * width + stop[k[on]] > at[on]) & (group[k[on]] == at[on] // width)
-    keep_piece[cells[on]] = piece[k[on]]
-    kept = np.empty(m, dtype=bool)
-    kept[order] = keep_piece[lab] == piece
-    return kept
+    keep_piece[owner[order[last]]] = order[last]
+    i, j = pixel_index(sites, w, h)
+    at = i * w + j
+    own = np.flatnonzero(suspect & (flat[at] == np.arange(n)))
+    site_run = np.searchsorted(start, at[own], side="right") - 1
+    keep_piece[own] = piece[node_of[site_run]]
+    kept_piece = np.zeros(n_pieces, dtype=bool)
+    kept_piece[keep_piece[keep_piece >= 0]] = True
+    kept = inside.copy()
+    kept[node] = kept_piece[piece]
+    return runs, kept
 
 
 def split_cells(labels: np.ndarray, sites) -> np.ndarray:
@@ -369,42 +315,15 @@ def split_moments(labels: np.ndarray, sites) -> Moments:
     return moments_from_runs(start, end, np.where(kept, lab, -1), labels.shape[1], len(sites))
 
 
-def split_moments_from_runs(moments: Moments, runs, sites, width: int, height: int) -> Moments:
-    """The moments of the split cells from those of the whole ones and the runs of the
-    cells that may be in pieces (:meth:`backends.base.Backend.moments_with_runs`).
-
-    Parameters
-    ----------
-    moments : Moments
-        Of the labels before the split.
-    runs : tuple of (R,) int arrays
-        (start, end, label) of every row run of each cell that may be in pieces, any order.
-    sites, width, height
-        As for :func:`kept_pieces`.
-
-    Returns
-    -------
-    Moments
-        Bit-identical to ``moments_from_labels(split_cells(labels, sites), N)``: the
-        runs of the pieces not kept are subtracted (integer sums, exact).
-    """
-    start, end, lab = runs
-    if len(start) == 0:
-        return moments
-    drop = ~kept_pieces(start, end, lab, sites, width, height)
-    gone = moments_from_runs(start[drop], end[drop], lab[drop], width, len(sites))
-    return Moments(*(getattr(moments, f) - getattr(gone, f) for f in ("count", "sx", "sy", "sxx", "syy")))
-
-
 class WalledBackend:
     """A live backend whose cells stop at walls: the labels of ``inner`` (any backend),
     each cell cut down to the piece on its site's side of the walls
     (:func:`split_cells`), and the moments of those labels.  Without this the cells of
     a Lloyd step ignore a thin wall (its pixels only leave the sums), so sites sit
     astride it and their tiles stay small; with it each centroid moves to its site's
-    side and cells line up along the wall.  An inner backend that finds the cells that
-    may be in pieces itself (``moments_with_runs``) keeps the raster on its device;
-    any other has its labels split on the host.  Everything else is the inner backend's."""
+    side and cells line up along the wall.  An inner backend that cuts the cells itself
+    (``walled_moments``, e.g. on its device) does; any other has its labels split here,
+    on the host.  Everything else is the inner backend's."""
 
     def __init__(self, inner):
         self.inner = inner
@@ -420,11 +339,9 @@ class WalledBackend:
         args = dict(angles=angles, scales=scales, metric=metric, grid=grid)
         if grid.mask is None:
             return self.inner.moments(sites, **args)
-        with_runs = getattr(self.inner, "moments_with_runs", None)
-        found = None if with_runs is None else with_runs(sites, **args)
-        if found is not None:
-            return split_moments_from_runs(*found, sites, grid.width, grid.height)
-        return split_moments(self.inner.label(sites, **args), sites)
+        own = getattr(self.inner, "walled_moments", None)
+        found = None if own is None else own(sites, **args)
+        return split_moments(self.inner.label(sites, **args), sites) if found is None else found
 
 
 # --------------------------------------------------------------------------- colours

@@ -1,5 +1,5 @@
-"""The walled Lloyd step's device path against the host's: a backend that lists the runs
-of the cells that may be in pieces (``moments_with_runs``, OpenCL) must give moments
+"""The walled Lloyd step's device path against the host's: a backend that cuts the cells
+itself (``walled_moments``: OpenCL finds the pieces on its device) must give moments
 bit-identical to ``moments_from_labels(split_cells(labels, sites))`` of its own labels,
 which the host path (:func:`cvt.mosaic.split_moments`, the one every backend can use)
 gives and a flood fill checks (tests/test_mosaic_edges.py).
@@ -18,18 +18,10 @@ from compact_distributions.backends.numpy_backend import NumpyBackend
 from compact_distributions.cvt.errors import BackendUnavailable, InputError
 from compact_distributions.cvt.metrics import make_metric
 from compact_distributions.cvt.moments import moments_from_labels
-from compact_distributions.cvt.mosaic import (
-    WalledBackend,
-    kept_pieces,
-    label_runs,
-    make_mosaic,
-    split_cells,
-    split_moments,
-    split_moments_from_runs,
-)
+from compact_distributions.cvt.mosaic import WalledBackend, make_mosaic, split_cells, split_moments
 from compact_distributions.cvt.problem import Grid
 
-from .test_mosaic_edges import flood_fill_split, hand_moments, random_cells
+from .test_mosaic_edges import flood_fill_split, hand_moments
 
 FIELDS = ("count", "sx", "sy", "sxx", "syy")
 
@@ -60,41 +52,11 @@ def walled_case(name, seed, w=251, h=189, n=400):
     return sites, dict(angles=angles, scales=scales, metric=make_metric(name, 0.5), grid=Grid(w, h, mask))
 
 
-def test_kept_pieces_match_a_flood_fill_on_the_runs_of_split_cells():
-    """kept_pieces alone, on runs in a shuffled order, against the flood fill."""
-    rng = np.random.default_rng(5)
-    for _ in range(300):
-        labels, sites = random_cells(rng)
-        _, _, start, end, lab = label_runs(labels)
-        inside = np.flatnonzero(lab >= 0)
-        if len(inside) == 0:
-            continue
-        shuffle = rng.permutation(inside)
-        kept = kept_pieces(
-            start[shuffle], end[shuffle], lab[shuffle], sites, labels.shape[1], labels.shape[0]
-        )
-        want = flood_fill_split(labels, sites).ravel()
-        np.testing.assert_array_equal(kept, want[start[shuffle]] >= 0)
-
-
-def test_kept_pieces_of_no_runs_is_empty():
-    none = np.zeros(0, dtype=np.int64)
-    assert kept_pieces(none, none, none, np.zeros((3, 2)), 4, 4).shape == (0,)
-
-
-def test_a_cells_last_row_and_the_next_cells_first_row_do_not_touch():
-    """Runs of cell 0 in the last row and of cell 1 in row 0 share columns; they are
-    different cells, so cell 1's two pieces stay two (its site keeps the right one)."""
-    labels = np.array([[1, 1, -1, 1], [0, 0, 0, 0], [0, 0, 0, 0]], dtype=np.int32)
-    sites = np.array([[1.5, 2.5], [3.5, 0.5]])
-    np.testing.assert_array_equal(split_cells(labels, sites)[0], [-1, -1, -1, 1])
-
-
-def test_the_host_path_needs_no_device_runs():
-    """The NumPy backend has no device path: WalledBackend reads its labels."""
+def test_the_host_path_needs_no_device_path():
+    """The NumPy backend has no path of its own: WalledBackend splits its labels."""
     sites, args = walled_case("l2", seed=1, w=60, h=50, n=30)
     numpy = NumpyBackend()
-    assert numpy.moments_with_runs(sites, **args) is None
+    assert numpy.walled_moments(sites, **args) is None
     labels = numpy.label(sites, **args)
     want = flood_fill_split(labels, sites)
     np.testing.assert_array_equal(
@@ -106,14 +68,7 @@ def test_bad_sites_are_an_input_error():
     sites, args = walled_case("l2", seed=1, w=60, h=50, n=30)
     sites[3, 0] = np.nan
     with pytest.raises(InputError):
-        NumpyBackend().moments_with_runs(sites, **args)
-
-
-def test_no_runs_leaves_the_moments_as_they_are():
-    mom = moments_from_labels(np.array([[0, 1], [1, -1]]), 2)
-    none = np.zeros(0, dtype=np.int64)
-    got = split_moments_from_runs(mom, (none, none, none), np.zeros((2, 2)), 2, 2)
-    np.testing.assert_array_equal(as_array(got), as_array(mom))
+        NumpyBackend().walled_moments(sites, **args)
 
 
 # ------------------------------------------------------------------------- OpenCL
@@ -152,24 +107,27 @@ def test_device_path_equals_the_host_split_of_the_device_labels(name, split, blo
 
 
 @needs_opencl
-def test_device_runs_are_every_run_of_each_cell_that_may_be_in_pieces():
-    """The runs listed are exactly the row runs of some cells; every cell in pieces is
-    among them, and some that are one piece are left out."""
-    sites, args = walled_case("linf", seed=4)
+def test_bad_sites_are_an_input_error_on_the_device_path():
+    sites, args = walled_case("l2", seed=1, w=60, h=50, n=30)
+    sites[3, 1] = np.inf
+    with OpenCLBackend() as ocl, pytest.raises(InputError):
+        ocl.walled_moments(sites, **args)
+
+
+@needs_opencl
+def test_cells_in_one_piece_need_no_pieces():
+    """Walls that end inside cells, none across: nothing is cut, the moments are the
+    labels' own (each cell one piece, several with more than one top run)."""
+    w, h = 120, 90
+    mask = np.ones((h, w), dtype=bool)
+    mask[40, 10:30] = mask[10:25, 70] = False
+    grid = Grid(w, h, mask)
+    sites = np.array([[20.0, 30.0], [20.0, 60.0], [80.0, 20.0], [90.0, 70.0]])
     with OpenCLBackend() as ocl:
-        labels = ocl.label(sites, **args)
-        mom, (start, end, lab) = ocl.moments_with_runs(sites, **args)
-    np.testing.assert_array_equal(as_array(mom), as_array(moments_from_labels(labels, len(sites))))
-    listed = np.unique(lab)
-    _, _, all_start, all_end, all_lab = label_runs(labels)
-    of_listed = np.isin(all_lab, listed)
-    order = np.argsort(start)
-    np.testing.assert_array_equal(start[order], all_start[of_listed])
-    np.testing.assert_array_equal(end[order], all_end[of_listed])
-    np.testing.assert_array_equal(lab[order], all_lab[of_listed])
-    pieces = np.array([ndimage.label(labels == c)[1] for c in range(len(sites))])
-    assert np.isin(np.flatnonzero(pieces > 1), listed).all()
-    assert len(listed) < (pieces > 0).sum()
+        labels = ocl.label(sites, metric=make_metric("l2"), grid=grid)
+        assert max(ndimage.label(labels == c)[1] for c in range(4)) == 1
+        got = ocl.walled_moments(sites, metric=make_metric("l2"), grid=grid)
+    np.testing.assert_array_equal(as_array(got), hand_moments(labels, 4))
 
 
 @needs_opencl
@@ -193,7 +151,7 @@ def test_a_walled_mosaic_has_the_same_sites_on_either_path(monkeypatch):
     with OpenCLBackend() as ocl:
         run = dict(n_elements=600, size=256, iterations=4, method="ours")
         fast = make_mosaic(SAMPLES_DIR / "scene.jpg", ocl, **run)
-        monkeypatch.setattr(OpenCLBackend, "_moments_with_runs", lambda self, *a: None)
+        monkeypatch.setattr(OpenCLBackend, "_walled_moments", lambda self, *a: None)
         host = make_mosaic(SAMPLES_DIR / "scene.jpg", ocl, **run)
     assert fast.problem.grid.mask is not None and not fast.problem.grid.mask.all()
     np.testing.assert_array_equal(fast.sites, host.sites)

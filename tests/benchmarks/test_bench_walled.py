@@ -31,7 +31,7 @@ PATHS = {
     "unwalled": lambda ocl, sites, args: ocl.moments(
         sites, **{**args, "grid": dataclasses.replace(args["grid"], mask=None)}
     ),
-    "walled, device runs": lambda ocl, sites, args: WalledBackend(ocl).moments(sites, **args),
+    "walled, on the device": lambda ocl, sites, args: WalledBackend(ocl).moments(sites, **args),
     "walled, host split": lambda ocl, sites, args: split_moments(ocl.label(sites, **args), sites),
 }
 
