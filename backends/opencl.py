@@ -15,6 +15,11 @@ reads the raster.  The block kernel sums its own block once per label in it as i
 the labels; after the per-pixel kernel, ``row_moments`` sums runs of equal labels per row
 segment.
 
+:meth:`OpenCLBackend.walled_moments` (the walled step of a mosaic) also cuts each cell to
+the one 4-connected piece that :func:`cvt.mosaic.split_cells` keeps, on the device: the
+runs of the cells that may be in pieces are listed, joined into pieces by a union-find,
+and only the runs of the pieces not kept come back, whose sums the host subtracts.
+
 Two label kernels, the same search: ``label_blocks`` (one work-item per ``STRIP`` square
 blocks of 4, 8 or 16 px side by side in a row; the default on CPUs, where PoCL vectorises
 its inner loop over a block's pixels) and ``label_pixels`` (one work-item per pixel; the
