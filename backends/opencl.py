@@ -34,6 +34,7 @@ refused with the compiler's reason).  Nothing is ever asked interactively.
 
 from __future__ import annotations
 
+import dataclasses
 import math
 import os
 import warnings
@@ -55,6 +56,10 @@ KERNEL_FILE = Path(__file__).with_name("opencl_kernels.cl")
 SEGMENT = 64  # pixels of a row per work-item of the moments kernel
 RUN_SEGMENT = 256  # pixels of a row per work-item of row_runs
 RUN_CHUNK = 1024  # runs per work-item of suspect_runs
+# work-groups of the walled-cell kernels, fixed: the numbers of runs change every step,
+# and PoCL builds a kernel anew for each work-group size it is left to choose
+RUN_GROUP = (1, 16)  # row_runs: segments x rows
+LIST_GROUP = 64  # the kernels over listed runs
 WALL_KERNELS = (
     "row_runs",
     "suspect_runs",
@@ -65,7 +70,6 @@ WALL_KERNELS = (
     "pieces_last",
     "pieces_dropped",
 )
-MOMENT_FIELDS = ("count", "sx", "sy", "sxx", "syy")
 ACC_BYTES = 64  # per site: five 64-bit sums in one cache line (the kernel file says why)
 STRIP = 4  # blocks side by side per work-item of label_blocks: they share their sums
 BLOCK_SIZES = (0, 4, 8, 16)  # label_blocks works a row of a block as one 4-, 8- or 16-wide vector
@@ -282,7 +286,7 @@ class OpenCLBackend(Backend):
         self.seed = bool(seed)
         self._labels_buf = None  # the buffer the last labels went to, and their (w, h)
         self._labels_raster = None
-        self._wall_kernels: dict[int, tuple] = {}  # program -> walled-cell kernels
+        self._wall_kernels: dict[int, dict] = {}  # program -> walled-cell kernels by name
         self._run_room = 1 << 16  # runs the suspect_runs buffer holds; grows as needed
 
     # ------------------------------------------------------------------ device
@@ -577,9 +581,13 @@ class OpenCLBackend(Backend):
         kern = self._wall_kernels[program.int_ptr]
         queue = self._queue
 
-        def run(name, size, *args):
+        def run(name, items, *args):  # a multiple of the work-group: the kernels skip the rest
             kern[name].set_args(*args)
-            cl.enqueue_nd_range_kernel(queue, kern[name], size, None)
+            if isinstance(items, tuple):
+                group, size = RUN_GROUP, tuple(-(-v // g) * g for v, g in zip(items, RUN_GROUP, strict=True))
+            else:
+                group, size = (LIST_GROUP,), (-(-items // LIST_GROUP) * LIST_GROUP,)
+            cl.enqueue_nd_range_kernel(queue, kern[name], size, group)
 
         def fill(buf, value, count):
             cl.enqueue_fill_buffer(queue, buf, np.int32(value), 0, 4 * count)
@@ -605,7 +613,7 @@ class OpenCLBackend(Backend):
             total = int(found[0])
             listed_buf = self._buffer("suspect_runs", 12 * total)
             fill(kept_buf, 0, 1)
-            chunks = (max(1, -(-total // RUN_CHUNK)),)
+            chunks = max(1, -(-total // RUN_CHUNK))
             run(
                 "suspect_runs",
                 chunks,
@@ -635,14 +643,14 @@ class OpenCLBackend(Backend):
             fill(last, -1, n)
             fill(n_dropped_buf, 0, 1)
             um = np.uint32(m)
-            run("pieces_start", (m,), um, listed_buf, run_at, parent)
-            run("pieces_join", (m,), um, np.int32(w), listed_buf, labels_buf, run_at, parent)
-            run("pieces_measure", (m,), um, listed_buf, parent, root, size, first, site_at, site_piece)
-            run("pieces_largest", (m,), um, listed_buf, root, size, largest)
-            run("pieces_last", (m,), um, listed_buf, root, size, first, largest, last)
+            run("pieces_start", m, um, listed_buf, run_at, parent)
+            run("pieces_join", m, um, np.int32(w), listed_buf, labels_buf, run_at, parent)
+            run("pieces_measure", m, um, listed_buf, parent, root, size, first, site_at, site_piece)
+            run("pieces_largest", m, um, listed_buf, root, size, largest)
+            run("pieces_last", m, um, listed_buf, root, size, first, largest, last)
             run(
                 "pieces_dropped",
-                (m,),
+                m,
                 um,
                 listed_buf,
                 root,
@@ -664,7 +672,7 @@ class OpenCLBackend(Backend):
         whole = self._read_moments(acc_buf, n)
         start = dropped[:, 0].astype(np.int64)
         gone = moments_from_runs(start, start + dropped[:, 1], dropped[:, 2], w, n)
-        return Moments(*(getattr(whole, f) - getattr(gone, f) for f in MOMENT_FIELDS))
+        return Moments(*(getattr(whole, f.name) - getattr(gone, f.name) for f in dataclasses.fields(Moments)))
 
 
 __all__ = [
