@@ -573,3 +573,50 @@ def test_nothing_placed_and_zero_rounds():
     c = np.array([[8.0, 8.0], [22.0, 22.0]])
     res = compact(c, [0.0, 0.0], [3.0, 3.0], "square", 1.0, grid, rounds=0)
     assert np.array_equal(res.centres, c) and np.array_equal(res.sizes, [3.0, 3.0])
+
+
+def test_tightest_pieces_keep_the_same_constraints():
+    """Piece rows of one element along one direction differ only in min(n·p, n·q): the
+    rows kept are one per (element, direction), each the least of its group (brute force
+    over the groups), and at random states every element's tightest piece slack is the
+    same with all rows as with those kept."""
+    from compact_distributions.cvt.compaction import _Rows
+
+    rng = np.random.default_rng(3)
+    m = 400
+    e = rng.integers(0, 30, m)
+    turn = rng.integers(0, 3, m) * (math.pi / 3)
+    sx, sy = np.cos(turn), np.sin(turn)
+    he, sm = 1.0 + 0.1 * e, rng.normal(0.0, 5.0, m)
+    empty_i, empty_f = np.zeros(0, dtype=np.int64), np.zeros(0)
+    rows = _Rows(empty_i, empty_i, *(empty_f,) * 4, e, np.arange(m), sx, sy, he, sm)
+    kept = rows.tightest_pieces()
+    groups = {}
+    for k in range(m):  # brute force: the least sm of each (element, direction)
+        key = (e[k], sx[k], sy[k])
+        groups[key] = min(groups.get(key, np.inf), sm[k])
+    assert len(kept.e) == len(groups)
+    assert np.all(np.diff(kept.s) > 0)  # rows stay in their order
+    for k in range(len(kept.e)):
+        assert kept.sm[k] == groups[(kept.e[k], kept.sx[k], kept.sy[k])]
+    for _ in range(5):
+        c, r = rng.normal(0.0, 3.0, (30, 2)), rng.random(30)
+        every, tight = rows.seg_slack(c, r, 0.5), kept.seg_slack(c, r, 0.5)
+        least_every, least_tight = np.full(30, np.inf), np.full(30, np.inf)
+        np.minimum.at(least_every, e, every)
+        np.minimum.at(least_tight, kept.e, tight)
+        assert np.array_equal(least_every, least_tight)
+    nan = _Rows(
+        empty_i, empty_i, *(empty_f,) * 4, e[:2], np.arange(2), np.full(2, np.nan), sy[:2], he[:2], sm[:2]
+    )
+    assert len(nan.tightest_pieces().e) == 2  # NaN directions are never equal: nothing merged
+
+
+def test_order_pairs_is_lexicographic():
+    """_order_pairs orders index pairs as np.lexsort does (by the first, then the second)."""
+    from compact_distributions.cvt.compaction import _order_pairs
+
+    rng = np.random.default_rng(5)
+    ab = np.unique(rng.integers(0, 1000, (5000, 2)), axis=0)[rng.permutation(4000)]
+    a, b = ab[:, 0], ab[:, 1]
+    assert np.array_equal(_order_pairs(a, b, 1000), np.lexsort((b, a)))
