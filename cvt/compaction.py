@@ -34,9 +34,9 @@ piece and its normal) and last round's n of that pair; curved shapes add 16 samp
 directions refined by a golden-section search.
 
 The program is solved (``solver``) either approximately as a whole, by a fixed number of
-steps (``iterations``, default 100) of the primal-dual hybrid gradient method (PDHG,
-Chambolle-Pock with diagonal steps) on all elements at once: sparse products and clipping
-in NumPy and scipy.sparse, the default; or exactly per tile by HiGHS' dual simplex
+steps (``iterations``, default 70) of the primal-dual hybrid gradient method (PDHG,
+Chambolle-Pock with diagonal steps, in Halpern's reflected form with restarts) on all
+elements at once: sparse products and clipping in NumPy and scipy.sparse, the default; or exactly per tile by HiGHS' dual simplex
 (``highspy``; ``solver="highs"``, and always when ``move_cost`` > 0): the program is split
 into square tiles of about ``tile_elements`` elements, a pair cut by a tile border becomes
 a wall between the two, each side keeping to its half of the current slack of (1) (the two
@@ -120,8 +120,16 @@ Four rounds of 100 steps: ~0.2 s CPU against ~0.8 s for the tiles, and 1.1 % mor
 about the tiles' coverage (-0.3 to +0.7 % of the area, by shape) for ~20 % less time.
 Primal/dual step ratio 4 (2 and 8 within 0.3 % of the area).  Measured no better:
 starting each round from last round's duals (mapped by pair), steps folded into the
-matrices, float32 products, relaxation 1.5 (~20 % fewer steps for the same gain).  Steps
-stop early only when converged (no column moving and no row short by more than 1e-10 px:
+matrices, float32 products, relaxation 1.5 (~20 % fewer steps for the same gain).
+Halpern's iteration on the reflected step (z ← w·(2T(z) − z) + (1 − w)·z₀, w = (k+1)/(k+2),
+anchored at the start and restarted from T(z) when the fixed-point residual has fallen
+5-fold; Lu & Yang's r2HPDHG) costs the same per step and needs fewer: after 70 steps
+per round it covers 0.08-0.34 % more area than 100 plain steps on every shape (4000
+elements, 1024², seeds 0-2) and 0.5 % more on a 20 000-tile walled mosaic; 60 steps are
+within -0.08 / +0.26 %, 50 within -0.3 / +0.16 %.  Anchored at the start it nears each
+round's optimum more closely; from an exact lattice that optimum is to stay, where plain
+PDHG's inexact steps broke the symmetry (a lattice shaken by 0.1 px grows as before).
+Steps stop early only when converged (T(z) = z and no row short by more than 1e-10 px:
 small programs, which then meet HiGHS' optimum).  PDHG is plain single-threaded NumPy
 and scipy.sparse: the result does not depend on ``threads``.
 
@@ -163,10 +171,11 @@ _REFINE = 14  # golden-section steps of that refinement
 _GOLD = (math.sqrt(5) - 1) / 2
 _TIE = 1e-6  # px: candidate directions this close count as equally good (> SLACK·√2)
 _TILES_PER_WORKER = 8  # fewer tiles per thread than this: not worth a thread
-_PDHG_ITERATIONS = 100  # PDHG steps per round
-_PDHG_CHECK = 20  # PDHG: steps between convergence checks
-_PDHG_STILL = 1e-10  # px: PDHG has converged when no column moves and no row is short by more
+_PDHG_ITERATIONS = 70  # PDHG steps per round
+_PDHG_STILL = 1e-10  # px: PDHG has converged when T(z) = z to this and no row is short by more
 _STEP_RATIO = 4.0  # PDHG: primal steps this much longer (dual ones shorter) than balanced
+_HALPERN_RESTART = 0.2  # PDHG: new anchor once the fixed-point residual falls by this factor
+_HALPERN_CHECK = 4  # PDHG: steps between evaluations of that residual
 
 
 @dataclass
@@ -882,7 +891,8 @@ def _solve_lp(
 def _solve_pdhg(rows: _Rows, act, c, r, gap, delta, lo_dr, hi_dr, weight, iterations, step_ratio):
     """The round's program (the same as :func:`_solve_lp`'s, untiled) solved
     approximately by ``iterations`` steps of the primal-dual hybrid gradient method
-    (Chambolle-Pock, diagonal steps of Pock & Chambolle 2011), all elements at once.
+    (Chambolle-Pock, diagonal steps of Pock & Chambolle 2011), all elements at once, in
+    Halpern's reflected form with restarts (r2HPDHG, Lu & Yang 2024; module docstring).
 
     Starts from x = 0, y = 0 (last round's duals, mapped by pair, were measured no
     better).  Returns Δc (N, 2), Δr (N,), the largest row violation left and the steps
@@ -930,38 +940,65 @@ def _solve_pdhg(rows: _Rows, act, c, r, gap, delta, lo_dr, hi_dr, weight, iterat
     row_sum = np.add.reduceat(absval, start[:-1]) if len(absval) else np.zeros(0)
     tau = step_ratio / np.maximum(col_sum, 1e-12)
     sigma = 1.0 / (step_ratio * np.maximum(row_sum, 1e-12))
-    x = np.zeros(ncol)
-    y = np.zeros(npair + nseg)
-    x_new, z = np.empty(ncol), np.empty(ncol)
+    # Halpern's iteration on the reflected PDHG step T (r2HPDHG, Lu & Yang 2024):
+    # z ← w·(2·T(z) − z) + (1 − w)·z₀ with w = (k + 1)/(k + 2), z₀ the anchor (the start,
+    # x = 0, y = 0, until a restart); the answer is the last T(z), which keeps the bounds
+    x, y = np.zeros(ncol), np.zeros(npair + nseg)
+    x0 = y0 = None  # the anchor: the start (0) until the first restart
+    xt, z, scratch = np.empty(ncol), np.empty(ncol), np.empty(ncol)
     aty = at @ y
-    x_seen = x.copy()
-    steps = 0
-    for steps in range(1, iterations + 1):  # a loop over steps of whole-array work
-        # x ← clip(x − τ(c − Aᵀy)); y ← max(0, y + σ(b − A(2x_new − x))), in place
-        # (np.clip with array bounds costs several of these passes)
-        np.subtract(aty, cost, out=x_new)
-        x_new *= tau
-        x_new += x
-        np.maximum(x_new, lo, out=x_new)  # np.clip's order: lo, then hi (lo <= hi)
-        np.minimum(x_new, hi, out=x_new)
-        np.multiply(x_new, 2.0, out=z)
+    inv_tau, inv_sigma = 1.0 / tau, 1.0 / sigma
+    first = None  # fixed-point residual |T(z) − z| after the last restart
+    k = steps = 0
+    for steps in range(1, iterations + 1):  # noqa: B007 (returned) a loop over whole-array steps
+        # T: x̃ = clip(x − τ(c − Aᵀy)); ỹ = max(0, y + σ(b − A(2x̃ − x))), in place (np.clip
+        # with array bounds costs several of these passes)
+        np.subtract(aty, cost, out=xt)
+        xt *= tau
+        xt += x
+        np.maximum(xt, lo, out=xt)  # np.clip's order: lo, then hi (lo <= hi)
+        np.minimum(xt, hi, out=xt)
+        np.multiply(xt, 2.0, out=z)
         z -= x
-        az = a @ z
-        np.subtract(b, az, out=az)
-        az *= sigma
-        y += az
-        np.maximum(y, 0.0, out=y)
-        x, x_new = x_new, x
+        yt = a @ z
+        np.subtract(b, yt, out=yt)
+        yt *= sigma
+        yt += y
+        np.maximum(yt, 0.0, out=yt)
+        residual = None
+        if first is None or steps % _HALPERN_CHECK == 0:
+            # the residual in T's own norm (1/τ, 1/σ), by ufuncs (a BLAS dot wakes its
+            # threads, which costs far more than the sum on a busy machine)
+            np.subtract(xt, x, out=scratch)
+            np.multiply(scratch, scratch, out=scratch)
+            scratch *= inv_tau
+            dy = yt - y
+            np.multiply(dy, dy, out=dy)
+            dy *= inv_sigma
+            residual = math.sqrt(float(scratch.sum()) + float(dy.sum()))
+            if first is None:
+                first = residual
+        if residual is not None and residual <= _HALPERN_RESTART * first:
+            # restart from T(z): the iteration then converges linearly on a program like
+            # this one, as PDHG with restarts does
+            x[:], y[:] = xt, yt
+            x0, y0 = xt.copy(), yt.copy()
+            first, k = None, 0
+        else:
+            w = (k + 1.0) / (k + 2.0)
+            np.multiply(z, w, out=x)  # z = 2x̃ − x
+            y *= -w
+            y += (2.0 * w) * yt
+            if x0 is not None:
+                x += (1.0 - w) * x0
+                y += (1.0 - w) * y0
+            k += 1
         aty = at @ y
-        if steps % _PDHG_CHECK == 0:
-            # a fixed point of the steps is the program's optimum: stop when x stands
-            # still and meets the rows (small programs; large ones use every step)
-            if (
-                np.max(np.abs(x - x_seen), initial=0.0) < _PDHG_STILL
-                and np.max(b - a @ x, initial=0.0) < _PDHG_STILL
-            ):
-                break
-            x_seen[:] = x
+        # a fixed point of T is the program's optimum: stop when T(z) = z and x̃ meets
+        # the rows (small programs; large ones use every step)
+        if residual is not None and residual < _PDHG_STILL and np.max(b - a @ xt, initial=0.0) < _PDHG_STILL:
+            break
+    x = xt
     dc = np.zeros((n, 2))
     dr = np.zeros(n)
     dc[act, 0], dc[act, 1], dr[act] = x[0::3], x[1::3], x[2::3]

@@ -210,9 +210,9 @@ def round_program(monkeypatch, shape, seed, n, region, gap):
 def test_pdhg_reaches_the_optimum_highs_finds(monkeypatch, shape, seed, region, gap):
     """PDHG on a round's whole program (no tiles) against HiGHS' dual simplex on the same
     program as one model: run to convergence, the same optimal area gain to 1e-6 and rows
-    met to 1e-7 px; after the default 100 steps, within 2 % of it; at any step count the
+    met to 1e-7 px; after the default steps, within 2 % of it; at any step count the
     moves and growths within their bounds exactly."""
-    from compact_distributions.cvt.compaction import _solve_lp, _solve_pdhg
+    from compact_distributions.cvt.compaction import _PDHG_ITERATIONS, _solve_lp, _solve_pdhg
 
     args = round_program(monkeypatch, shape, seed, 40, region, gap)
     rows, act, c, r, gap_, delta, lo_dr, hi_dr, weight = args[:9]
@@ -226,7 +226,7 @@ def test_pdhg_reaches_the_optimum_highs_finds(monkeypatch, shape, seed, region, 
     dc, dr, violation, steps = _solve_pdhg(rows, act, c, r, gap_, delta, lo_dr, hi_dr, weight, 200_000, 4.0)
     assert steps < 200_000  # converged, not stopped
     assert violation < 1e-7 and float(weight @ dr) == pytest.approx(best, rel=1e-6)
-    for iterations in (1, 7, 100):
+    for iterations in (1, 7, _PDHG_ITERATIONS):
         dc, dr, violation, _ = _solve_pdhg(
             rows, act, c, r, gap_, delta, lo_dr, hi_dr, weight, iterations, 4.0
         )
@@ -315,7 +315,10 @@ def test_circle_lattice_reaches_pi_over_4():
     """8 x 8 circles in a 128 px square, each allowed to grow to radius 8: the best is to
     fill the 16 px lattice cells, coverage π/4.  With a small price on moves (no drift
     off the lattice) compaction finds it exactly; without, within 1 %.  Free to grow
-    further, circles of unequal sizes pack more densely than the lattice."""
+    further from a lattice shaken by 0.1 px, circles of unequal sizes pack more densely
+    than the lattice (from the exact lattice every round's optimum is to stay: growth
+    needs moves that gain nothing at first, so a solver that nears the optimum stalls
+    there)."""
     grid = Grid(128, 128)
     c = lattice_sites(128, 128, 8)
     res = compact(
@@ -328,7 +331,8 @@ def test_circle_lattice_reaches_pi_over_4():
     assert_separated("circle", drift.centres, np.zeros(64), drift.sizes, grid, 0.0)
     cov = float(np.sum(math.pi * drift.sizes**2)) / 128**2
     assert math.pi / 4 * 0.99 < cov <= math.pi / 4 + 1e-9
-    free = compact(c, np.zeros(64), np.full(64, 5.0), "circle", 1.0, grid, rounds=8)
+    shaken = c + np.random.default_rng(1).uniform(-0.1, 0.1, c.shape)
+    free = compact(shaken, np.zeros(64), np.full(64, 5.0), "circle", 1.0, grid, rounds=8)
     assert_separated("circle", free.centres, np.zeros(64), free.sizes, grid, 0.0)
     assert float(np.sum(math.pi * free.sizes**2)) / 128**2 > math.pi / 4
 
