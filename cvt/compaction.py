@@ -316,32 +316,48 @@ def _pair_gap(unit, dx, dy, ri, rj, ci, si, cj, sj, nx, ny):
     return nx * dx + ny * dy - ri * unit.support(nx, ny, ci, si) - rj * unit.support(-nx, -ny, cj, sj)
 
 
-def _best_pair_directions(unit, c, r, cos, sin, i, j, prev_n, enough=None):
-    """Per pair: the unit n (from i to j) to separate them along, and their gap along it."""
+def _best_pair_directions(unit, c, r, cos, sin, i, j, prev_n, enough=None, along=None):
+    """Per pair: the unit n (from i to j) to separate them along, and their gap along it
+    (``along``: the gaps along the centre lines where the caller has them, NaN where the
+    centres coincide)."""
     dx, dy = c[j, 0] - c[i, 0], c[j, 1] - c[i, 1]
     d = np.hypot(dx, dy)
     with np.errstate(invalid="ignore", divide="ignore"):
         clx, cly = np.where(d > 0, dx / d, 1.0), np.where(d > 0, dy / d, 0.0)
-    # in order of preference: faces (walls to slide along), last round's n, centre line
-    cands_x, cands_y = [prev_n[:, 0:1], clx[:, None]], [prev_n[:, 1:2], cly[:, None]]
     args = tuple(v[:, None] for v in (dx, dy, r[i], r[j], cos[i], sin[i], cos[j], sin[j]))
     gap_of = lambda nx, ny, k: _pair_gap(unit, *(a[k] for a in args), nx, ny)  # noqa: E731
-    g = None
+    # in order of preference: faces (walls to slide along), last round's n, centre line
+    cands_x, cands_y, gaps = [], [], []
     if unit.kind == "polygon":
         dx_, dy_ = dx[:, None], dy[:, None]
         fx, fy, gi = _face_gaps(unit, dx_, dy_, *args[2:])
-        # j's faces seen from j: the gap along −g is the gap along g from j to i
-        gx, gy, gj = _face_gaps(unit, -dx_, -dy_, args[3], args[2], *args[6:], *args[4:6])
-        cands_x = [fx, -gx] + cands_x
-        cands_y = [fy, -gy] + cands_y
-        g = np.concatenate(
-            [
-                gi,
-                gj,
-                gap_of(np.concatenate(cands_x[2:], axis=1), np.concatenate(cands_y[2:], axis=1), slice(None)),
-            ],
-            axis=1,
-        )
+        cands_x.append(fx), cands_y.append(fy), gaps.append(gi)
+        # j's faces seen from j: the gap along −g is the gap along g from j to i.  Where j
+        # is turned as i is and the shape is centrally symmetric, j's faces are i's (its
+        # opposite normals), later in the order of preference and of the same gap (to
+        # rounding, far below _TIE): never chosen, so not evaluated
+        other = np.arange(len(i))
+        if unit.symmetric:
+            other = np.flatnonzero((cos[i] != cos[j]) | (sin[i] != sin[j]))
+        if len(other):
+            gx, gy, gj = np.full_like(fx, np.nan), np.full_like(fy, np.nan), np.full_like(gi, -np.inf)
+            ro, co, so = args[3][other], args[6][other], args[7][other]
+            gx[other], gy[other], gj[other] = _face_gaps(
+                unit, -dx_[other], -dy_[other], ro, args[2][other], co, so, args[4][other], args[5][other]
+            )
+            cands_x.append(-gx), cands_y.append(-gy), gaps.append(gj)
+    # last round's n: new pairs have none (NaN, never chosen)
+    known = np.flatnonzero(np.isfinite(prev_n[:, 0]))
+    g_prev = np.full((len(i), 1), np.nan)
+    g_prev[known] = gap_of(prev_n[known, 0:1], prev_n[known, 1:2], known)
+    if along is None:
+        g_line = gap_of(clx[:, None], cly[:, None], slice(None))
+    else:
+        g_line = along.copy()[:, None]
+        fresh = np.flatnonzero(~(d > 0))
+        g_line[fresh] = gap_of(clx[fresh, None], cly[fresh, None], fresh)
+    cands_x += [prev_n[:, 0:1], clx[:, None]]
+    cands_y += [prev_n[:, 1:2], cly[:, None]]
     curved = unit.kind == "ellipse" and unit.axes[0] != unit.axes[1]  # circles: centre line
     return _best_direction(
         gap_of,
@@ -349,7 +365,7 @@ def _best_pair_directions(unit, c, r, cos, sin, i, j, prev_n, enough=None):
         np.concatenate(cands_y, axis=1),
         np.arctan2(cly, clx) if curved else None,
         enough,
-        g,
+        np.concatenate([*gaps, g_prev, g_line], axis=1),
     )
 
 
@@ -361,7 +377,13 @@ def _face_gaps(unit, dx, dy, ra, rb, ca, sa, cb, sb):
     if unit.symmetric:
         h = fx.shape[1] // 2
         nd = fx[:, :h] * dx + fy[:, :h] * dy
-        hb = rb * unit.support(fx[:, :h], fy[:, :h], cb, sb)  # = rb·h_b(±n)
+        # = rb·h_b(±n): b turned as a is has a's offsets along a's normals (to rounding)
+        same = np.flatnonzero((ca[:, 0] == cb[:, 0]) & (sa[:, 0] == sb[:, 0]))
+        hb = np.empty_like(nd)
+        hb[same] = unit.offsets[:h]
+        turned = np.flatnonzero((ca[:, 0] != cb[:, 0]) | (sa[:, 0] != sb[:, 0]))
+        hb[turned] = unit.support(fx[turned, :h], fy[turned, :h], cb[turned], sb[turned])
+        hb *= rb
         g = np.concatenate([nd - hb, -nd - hb], axis=1) - ra * unit.offsets
     else:
         g = fx * dx + fy * dy - ra * unit.offsets - rb * unit.support(-fx, -fy, cb, sb)
@@ -459,7 +481,7 @@ def _near_pairs(unit, c, r, cos, sin, budget, gap, prev):
     keep = ~(along >= enough + _TIE)  # coincident centres (NaN) stay
     i, j, enough = i[keep], j[keep], enough[keep]
     prev_n = _lookup(prev, i * len(r) + j)
-    nx, ny, g = _best_pair_directions(unit, c, r, cos, sin, i, j, prev_n, enough)
+    nx, ny, g = _best_pair_directions(unit, c, r, cos, sin, i, j, prev_n, enough, along[keep])
     keep = g < enough
     return i[keep], j[keep], nx[keep], ny[keep], g[keep]
 
@@ -634,11 +656,32 @@ class _Rows:
         element share its face normals or an axis."""
         if len(self.e) < 2:
             return self
-        order = np.lexsort((self.sm, self.sy, self.sx, self.e))
-        e, sx, sy = self.e[order], self.sx[order], self.sy[order]
-        first = np.ones(len(order), dtype=bool)
-        first[1:] = (e[1:] != e[:-1]) | (sx[1:] != sx[:-1]) | (sy[1:] != sy[:-1])
-        ks = np.sort(order[first])
+        # group the rows by one int64 key, the element then a hash of n's bits (argsort of
+        # a nearly sorted key: a fraction of a four-key lexsort); the exact check below
+        # falls back to that lexsort if two directions of an element share a hash
+        bits = self.sx.view(np.int64) * np.int64(-7046029254386353131) + self.sy.view(np.int64)
+        key = (self.e.astype(np.int64) << 40) | ((bits >> 24) & ((1 << 40) - 1))
+        order = np.argsort(key, kind="stable")
+        k = key[order]
+        start = np.flatnonzero(np.concatenate([[True], k[1:] != k[:-1]]))
+        group = np.repeat(np.arange(len(start)), np.diff(np.append(start, len(k))))
+        sx, sy, sm = self.sx[order], self.sy[order], self.sm[order]
+        if (
+            np.array_equal(sx, sx[start][group])
+            and np.array_equal(sy, sy[start][group])
+            and np.isfinite(sm).all()
+        ):
+            least = sm == np.minimum.reduceat(sm, start)[group]
+            hit = np.flatnonzero(least)  # rows of a group in their order: the first wins
+            first = np.ones(len(hit), dtype=bool)
+            first[1:] = group[hit[1:]] != group[hit[:-1]]
+            ks = np.sort(order[hit[first]])
+        else:
+            order = np.lexsort((self.sm, self.sy, self.sx, self.e))
+            e, sx, sy = self.e[order], self.sx[order], self.sy[order]
+            first = np.ones(len(order), dtype=bool)
+            first[1:] = (e[1:] != e[:-1]) | (sx[1:] != sx[:-1]) | (sy[1:] != sy[:-1])
+            ks = np.sort(order[first])
         return _Rows(
             self.i,
             self.j,
@@ -943,7 +986,7 @@ def _solve_pdhg(rows: _Rows, act, c, r, gap, delta, lo_dr, hi_dr, weight, iterat
     # Halpern's iteration on the reflected PDHG step T (r2HPDHG, Lu & Yang 2024):
     # z ← w·(2·T(z) − z) + (1 − w)·z₀ with w = (k + 1)/(k + 2), z₀ the anchor (the start,
     # x = 0, y = 0, until a restart); the answer is the last T(z), which keeps the bounds
-    x, y = np.zeros(ncol), np.zeros(npair + nseg)
+    x, y, no_rows = np.zeros(ncol), np.zeros(npair + nseg), np.zeros(npair + nseg)
     x0 = y0 = None  # the anchor: the start (0) until the first restart
     xt, z, scratch = np.empty(ncol), np.empty(ncol), np.empty(ncol)
     aty = at @ y
@@ -964,7 +1007,7 @@ def _solve_pdhg(rows: _Rows, act, c, r, gap, delta, lo_dr, hi_dr, weight, iterat
         np.subtract(b, yt, out=yt)
         yt *= sigma
         yt += y
-        np.maximum(yt, 0.0, out=yt)
+        np.maximum(yt, no_rows, out=yt)  # against an array: a scalar 0 is ~4x slower
         residual = None
         if first is None or steps % _HALPERN_CHECK == 0:
             # the residual in T's own norm (1/τ, 1/σ), by ufuncs (a BLAS dot wakes its
