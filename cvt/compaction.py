@@ -601,27 +601,48 @@ def _near_segments(unit, c, r, cos, sin, budget, half, segs, seg_trees, prev):
     # in order of preference: the piece's own normal, the element's faces, last round's
     # n, the direction of the nearest point (beside a reflex corner of the region)
     cx_, cy_ = [(sx * flip)[:, None]], [(sy * flip)[:, None]]
+    args = tuple(v[:, None] for v in (px, py, qx, qy, x, y, r[e], cos[e], sin[e]))
+    gap_of = lambda nx, ny, k: _seg_gap(unit, *(a[k] for a in args), nx, ny)  # noqa: E731
+    gaps = [gap_of(cx_[0], cy_[0], slice(None))]
     if unit.kind == "polygon":
         fx, fy = unit.face_normals(cos[e], sin[e])
         cx_.append(fx)
         cy_.append(fy)
+        # along its own faces the element reaches out by the shape's offsets
+        p_, q_ = fx * args[0] + fy * args[1], fx * args[2] + fy * args[3]
+        gaps.append(np.minimum(p_, q_) - fx * args[4] - fy * args[5] - args[6] * unit.offsets)
+    # last round's n: new rows have none (NaN, never chosen)
+    known = np.flatnonzero(np.isfinite(prev_n[:, 0]))
+    g_prev = np.full((len(e), 1), np.nan)
+    g_prev[known] = gap_of(prev_n[known, 0:1], prev_n[known, 1:2], known)
+    gaps += [g_prev, gap_of(tx[:, None], ty[:, None], slice(None))]
     cx_ += [prev_n[:, 0:1], tx[:, None]]
     cy_ += [prev_n[:, 1:2], ty[:, None]]
-    args = tuple(v[:, None] for v in (px, py, qx, qy, x, y, r[e], cos[e], sin[e]))
     curved = unit.kind == "ellipse" and unit.axes[0] != unit.axes[1]  # circles: nearest point
     enough = half + budget[e] + _SELECT
     bx, by, best = _best_direction(
-        lambda nx, ny, k: _seg_gap(unit, *(a[k] for a in args), nx, ny),
+        gap_of,
         np.concatenate(cx_, axis=1),
         np.concatenate(cy_, axis=1),
         np.arctan2(ty, tx) if curved else None,
         enough,
+        np.concatenate(gaps, axis=1),
     )
     keep = best < enough
     return e[keep], s[keep], bx[keep], by[keep], best[keep]
 
 
 # --------------------------------------------------------------------- constraints
+def _mix(u: np.ndarray) -> np.ndarray:
+    """SplitMix64's finaliser of uint64 words (wrapping arithmetic): every input bit
+    moves the high bits, so a float's sign or exponent alone tells two hashes apart."""
+    u = u ^ (u >> np.uint64(30))
+    u = u * np.uint64(0xBF58476D1CE4E5B9)
+    u = u ^ (u >> np.uint64(27))
+    u = u * np.uint64(0x94D049BB133111EB)
+    return u ^ (u >> np.uint64(31))
+
+
 @dataclass
 class _Rows:
     """The round's constraints: (1) for pairs (i, j), (2) for (element e, piece)."""
@@ -659,8 +680,9 @@ class _Rows:
         # group the rows by one int64 key, the element then a hash of n's bits (argsort of
         # a nearly sorted key: a fraction of a four-key lexsort); the exact check below
         # falls back to that lexsort if two directions of an element share a hash
-        bits = self.sx.view(np.int64) * np.int64(-7046029254386353131) + self.sy.view(np.int64)
-        key = (self.e.astype(np.int64) << 40) | ((bits >> 24) & ((1 << 40) - 1))
+        # (+ 0.0 turns −0.0 into 0.0: equal directions, equal bits)
+        bits = _mix(_mix((self.sx + 0.0).view(np.uint64)) + (self.sy + 0.0).view(np.uint64))
+        key = (self.e.astype(np.uint64) << np.uint64(40)) | (bits >> np.uint64(24))
         order = np.argsort(key, kind="stable")
         k = key[order]
         start = np.flatnonzero(np.concatenate([[True], k[1:] != k[:-1]]))

@@ -616,6 +616,9 @@ def test_tightest_pieces_keep_the_same_constraints():
         empty_i, empty_i, *(empty_f,) * 4, e[:2], np.arange(2), np.full(2, np.nan), sy[:2], he[:2], sm[:2]
     )
     assert len(nan.tightest_pieces().e) == 2  # NaN directions are never equal: nothing merged
+    two, signed = np.zeros(2, dtype=np.int64), np.array([-0.0, 0.0])
+    zero = _Rows(empty_i, empty_i, *(empty_f,) * 4, two, np.arange(2), signed, np.ones(2), np.ones(2), sm[:2])
+    assert len(zero.tightest_pieces().e) == 1  # −0.0 and 0.0: one direction
 
 
 def test_order_pairs_is_lexicographic():
