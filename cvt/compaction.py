@@ -34,7 +34,7 @@ piece and its normal) and last round's n of that pair; curved shapes add 16 samp
 directions refined by a golden-section search.
 
 The program is solved (``solver``) either approximately as a whole, by a fixed number of
-steps (``iterations``, default 70) of the primal-dual hybrid gradient method (PDHG,
+steps (``iterations``, default 55) of the primal-dual hybrid gradient method (PDHG,
 Chambolle-Pock with diagonal steps, in Halpern's reflected form with restarts) on all
 elements at once: sparse products and clipping in NumPy and scipy.sparse, the default; or exactly per tile by HiGHS' dual simplex
 (``highspy``; ``solver="highs"``, and always when ``move_cost`` > 0): the program is split
@@ -118,17 +118,18 @@ Four rounds of 100 steps: ~0.2 s CPU against ~0.8 s for the tiles, and 1.1 % mor
 (Table 2's ours-compact rows 0.4-1.4 points more coverage); 64 000 squares at 4096²:
 ~3.6-4.4 s CPU against ~12 s, half of it building the rounds.  50 steps per round give
 about the tiles' coverage (-0.3 to +0.7 % of the area, by shape) for ~20 % less time.
-Primal/dual step ratio 4 (2 and 8 within 0.3 % of the area).  Measured no better:
-starting each round from last round's duals (mapped by pair), steps folded into the
-matrices, float32 products, relaxation 1.5 (~20 % fewer steps for the same gain).
-Halpern's iteration on the reflected step (z ← w·(2T(z) − z) + (1 − w)·z₀, w = (k+1)/(k+2),
-anchored at the start and restarted from T(z) when the fixed-point residual has fallen
-5-fold; Lu & Yang's r2HPDHG) costs the same per step and needs fewer: after 70 steps
-per round it covers 0.08-0.34 % more area than 100 plain steps on every shape (4000
-elements, 1024², seeds 0-2) and 0.5 % more on a 20 000-tile walled mosaic; 60 steps are
-within -0.08 / +0.26 %, 50 within -0.3 / +0.16 %.  Anchored at the start it nears each
-round's optimum more closely; from an exact lattice that optimum is to stay, where plain
-PDHG's inexact steps broke the symmetry (a lattice shaken by 0.1 px grows as before).
+Plain PDHG's best primal/dual step ratio was 4 (2 and 8 within 0.3 % of the area).
+Measured no better: starting each round from last round's duals (mapped by pair), steps
+folded into the matrices, float32 products, relaxation 1.5 (~20 % fewer steps for the
+same gain).  Halpern's iteration on the reflected step (z ← w·(2T(z) − z) + (1 − w)·z₀,
+w = (k+1)/(k+2), anchored at the start and restarted from T(z) when the fixed-point
+residual has fallen 5-fold; Lu & Yang's r2HPDHG) costs the same per step and needs
+fewer, with longer primal steps (ratio 8; 4 and 6 measured lower): 55 steps per round
+cover 0.13-0.31 % more area than 100 plain steps on every shape (4000 elements, 1024²,
+seeds 0-2) and 0.6 % more on a 20 000-tile walled mosaic (50 steps: +0.02 to +0.26 %,
+60: +0.18 to +0.36 %).  Anchored at the start it nears each round's optimum more
+closely; from an exact lattice that optimum is to stay, where plain PDHG's inexact
+steps broke the symmetry (a lattice shaken by 0.1 px grows as before).
 Steps stop early only when converged (T(z) = z and no row short by more than 1e-10 px:
 small programs, which then meet HiGHS' optimum).  PDHG is plain single-threaded NumPy
 and scipy.sparse: the result does not depend on ``threads``.
@@ -171,9 +172,9 @@ _REFINE = 14  # golden-section steps of that refinement
 _GOLD = (math.sqrt(5) - 1) / 2
 _TIE = 1e-6  # px: candidate directions this close count as equally good (> SLACK·√2)
 _TILES_PER_WORKER = 8  # fewer tiles per thread than this: not worth a thread
-_PDHG_ITERATIONS = 70  # PDHG steps per round
+_PDHG_ITERATIONS = 55  # PDHG steps per round
 _PDHG_STILL = 1e-10  # px: PDHG has converged when T(z) = z to this and no row is short by more
-_STEP_RATIO = 4.0  # PDHG: primal steps this much longer (dual ones shorter) than balanced
+_STEP_RATIO = 8.0  # PDHG: primal steps this much longer (dual ones shorter) than balanced
 _HALPERN_RESTART = 0.2  # PDHG: new anchor once the fixed-point residual falls by this factor
 _HALPERN_CHECK = 4  # PDHG: steps between evaluations of that residual
 

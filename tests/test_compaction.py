@@ -212,7 +212,7 @@ def test_pdhg_reaches_the_optimum_highs_finds(monkeypatch, shape, seed, region, 
     program as one model: run to convergence, the same optimal area gain to 1e-6 and rows
     met to 1e-7 px; after the default steps, within 2 % of it; at any step count the
     moves and growths within their bounds exactly."""
-    from compact_distributions.cvt.compaction import _PDHG_ITERATIONS, _solve_lp, _solve_pdhg
+    from compact_distributions.cvt.compaction import _PDHG_ITERATIONS, _STEP_RATIO, _solve_lp, _solve_pdhg
 
     args = round_program(monkeypatch, shape, seed, 40, region, gap)
     rows, act, c, r, gap_, delta, lo_dr, hi_dr, weight = args[:9]
@@ -223,12 +223,14 @@ def test_pdhg_reaches_the_optimum_highs_finds(monkeypatch, shape, seed, region, 
     assert failed == 0
     best = float(weight @ dr_opt)
     assert best > 0
-    dc, dr, violation, steps = _solve_pdhg(rows, act, c, r, gap_, delta, lo_dr, hi_dr, weight, 200_000, 4.0)
+    dc, dr, violation, steps = _solve_pdhg(
+        rows, act, c, r, gap_, delta, lo_dr, hi_dr, weight, 200_000, _STEP_RATIO
+    )
     assert steps < 200_000  # converged, not stopped
     assert violation < 1e-7 and float(weight @ dr) == pytest.approx(best, rel=1e-6)
     for iterations in (1, 7, _PDHG_ITERATIONS):
         dc, dr, violation, _ = _solve_pdhg(
-            rows, act, c, r, gap_, delta, lo_dr, hi_dr, weight, iterations, 4.0
+            rows, act, c, r, gap_, delta, lo_dr, hi_dr, weight, iterations, _STEP_RATIO
         )
         assert (np.abs(dc) <= delta[:, None]).all()
         assert ((dr >= lo_dr) & (dr <= hi_dr)).all()
