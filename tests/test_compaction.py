@@ -499,6 +499,37 @@ def test_boundary_segments_cover_the_region_border_exactly():
     assert shapely.length(lines).sum() == pytest.approx(border.length)
 
 
+def test_boundary_segments_of_a_whole_raster_are_its_sides():
+    """A mask with every pixel inside (a Grid's) gives its four sides cut into pieces of
+    at most ``length`` px, in the order of the pass over the pixels (a hand-written list;
+    the same sides as the mask with one pixel taken out, less that pixel's edges)."""
+    segs = boundary_segments(np.ones((40, 70), dtype=bool))
+    expected = [
+        *([x0, y, x1, y] for y in (0, 40) for x0, x1 in ((0, 32), (32, 64), (64, 70))),
+        *([x, y0, x, y1] for x in (0, 70) for y0, y1 in ((0, 32), (32, 40))),
+    ]
+    assert segs.dtype == np.float64 and np.array_equal(segs, np.array(expected, dtype=np.float64))
+    holed = np.ones((40, 70), dtype=bool)
+    holed[20, 30] = False  # the general pass: the sides, and the hole's four edges
+    other = boundary_segments(holed)
+    hole = np.array(
+        [[30, 20, 31, 20], [30, 21, 31, 21], [30, 20, 30, 21], [31, 20, 31, 21]], dtype=np.float64
+    )
+    assert np.array_equal(np.unique(other, axis=0), np.unique(np.concatenate([segs, hole]), axis=0))
+
+
+def test_product_is_the_sparse_product():
+    """The PDHG steps' product into a given array equals scipy's m @ v exactly."""
+    import scipy.sparse as sp
+
+    from compact_distributions.cvt.compaction import _product
+
+    m = sp.random(300, 200, density=0.03, format="csr", random_state=4)
+    v = np.random.default_rng(4).normal(size=200)
+    out = np.full(300, np.nan)  # whatever was there is overwritten
+    assert _product(m, v, out) is out and np.array_equal(out, m @ v)
+
+
 # ------------------------------------------------------------------ the better fit
 def test_fit_finds_the_largest_square_from_a_bad_site():
     """One 40 px square cell with its site in a corner: the largest square has half-side
