@@ -612,7 +612,8 @@ def _near_segments(unit, c, r, cos, sin, budget, half, segs, seg_trees, prev):
     # the piece's normal, turned towards the element's outside
     sx, sy = -(qy - py), qx - px
     sl = np.hypot(sx, sy)
-    sx, sy = sx / sl, sy / sl
+    with np.errstate(invalid="ignore", divide="ignore"):
+        sx, sy = sx / sl, sy / sl  # NaN for a point piece (a lone wall pixel): never chosen
     flip = np.where(sx * (kx - x) + sy * (ky - y) < 0, -1.0, 1.0)
     # in order of preference: the piece's own normal, the element's faces, last round's
     # n, the direction of the nearest point (beside a reflex corner of the region)
