@@ -50,6 +50,18 @@ def squares(request):
     return centres, sizes, Grid(size, size), n
 
 
+def _checked(benchmark, res, sizes, grid):
+    """Coverage before and after (disjoint squares: area = coverage), recorded with the
+    rounds; the compacted squares as polygons, checked to overlap nowhere."""
+    before = 4 * float(np.sum(sizes**2)) / grid.pixel_count
+    after = 4 * float(np.sum(res.sizes**2)) / grid.pixel_count
+    benchmark.extra_info.update(coverage_before=before, coverage_after=after, rounds=res.rounds)
+    ok = res.sizes > 0
+    els = element_polygons("square", 1.0, res.centres[ok], np.zeros(ok.sum()), res.sizes[ok])
+    assert largest_overlap(els) == 0.0
+    return before, after, els
+
+
 @pytest.mark.parametrize("solver", ["pdhg", "highs"])
 def test_bench_compaction_squares(benchmark, squares, request, solver):
     centres, sizes, grid, n = squares
@@ -64,13 +76,8 @@ def test_bench_compaction_squares(benchmark, squares, request, solver):
         rounds=5 if _enabled(request.config) else 1,
         iterations=1,
     )
-    before = 4 * float(np.sum(sizes**2)) / grid.pixel_count
-    after = 4 * float(np.sum(res.sizes**2)) / grid.pixel_count  # disjoint squares: area = coverage
-    benchmark.extra_info.update(coverage_before=before, coverage_after=after, rounds=res.rounds)
+    before, after, _ = _checked(benchmark, res, sizes, grid)
     assert before > 0.7 and after > before + 0.1
-    ok = res.sizes > 0
-    els = element_polygons("square", 1.0, res.centres[ok], np.zeros(ok.sum()), res.sizes[ok])
-    assert largest_overlap(els) == 0.0
     if _enabled(request.config):
         median = benchmark.stats.stats.median
         assert median < LIMIT_S, f"compaction of {n} squares took {median:.2f} s (median)"
@@ -114,13 +121,8 @@ def test_bench_compaction_among_walls(benchmark, walled, request):
         rounds=3 if _enabled(request.config) else 1,
         iterations=1,
     )
-    before = 4 * float(np.sum(sizes**2)) / grid.pixel_count
-    after = 4 * float(np.sum(res.sizes**2)) / grid.pixel_count
-    benchmark.extra_info.update(coverage_before=before, coverage_after=after, rounds=res.rounds)
+    before, after, els = _checked(benchmark, res, sizes, grid)
     assert after > before + 0.05
-    ok = res.sizes > 0
-    els = element_polygons("square", 1.0, res.centres[ok], np.zeros(ok.sum()), res.sizes[ok])
-    assert largest_overlap(els) == 0.0
     # no element reaches over a wall's centre line (compaction keeps half the gap, 0, off it)
     lines = shapely.multilinestrings(wall_segments(walls).reshape(-1, 2, 2))
     assert not shapely.intersects(shapely.union_all(shapely.buffer(els, -1e-6)), lines)
