@@ -49,6 +49,26 @@ def test_lab_round_trip():
     np.testing.assert_allclose(lab_to_srgb(srgb_to_lab(rgb)), rgb, atol=1e-9)
 
 
+def test_lab_of_a_picture_in_bands_is_lab_of_each_pixel(monkeypatch):
+    """A picture is converted a band of pixels at a time: bands of 7 pixels (ending
+    inside rows) give what one band of the whole picture gives, within rounding of
+    what each pixel gets alone, and the published white and black wherever they lie."""
+    from compact_distributions.cvt import colour
+
+    pic = np.random.default_rng(3).random((6, 5, 3))
+    pic[0, 0], pic[5, 4] = 1.0, 0.0
+    alone = np.array([[srgb_to_lab(pic[i, j]) for j in range(5)] for i in range(6)])
+    whole = srgb_to_lab(pic)
+    monkeypatch.setattr(colour, "LAB_BAND", 7)
+    got = srgb_to_lab(pic)
+    assert got.shape == (6, 5, 3) and np.array_equal(got, whole)
+    np.testing.assert_allclose(got, alone, rtol=0, atol=1e-12)
+    np.testing.assert_allclose(got[0, 0], (100, 0, 0), atol=1e-12)
+    np.testing.assert_allclose(got[5, 4], (0, 0, 0), atol=1e-12)
+    assert srgb_to_lab(np.zeros((0, 3))).shape == (0, 3)
+    assert np.isnan(srgb_to_lab(np.array([np.nan, 0.5, 0.5]))).any()
+
+
 # ----------------------------------------------------------------------- edges
 
 
