@@ -69,6 +69,26 @@ def test_lab_of_a_picture_in_bands_is_lab_of_each_pixel(monkeypatch):
     assert np.isnan(srgb_to_lab(np.array([np.nan, 0.5, 0.5]))).any()
 
 
+def test_colour_error_in_bands_is_the_mean_distance(monkeypatch):
+    """Mean ΔE*ab over (tile, pixel) pairs read a band at a time (bands of 5 pairs):
+    the plain per-pair distances' mean; NaN without a pair, NaN carried from a NaN fill."""
+    from compact_distributions.cvt import evaluate as ev
+
+    rng = np.random.default_rng(2)
+    lab = rng.random((4, 6, 3)) * 100
+    fills = rng.random((3, 3)) * 100
+    tiles = np.array([0, 0, 1, 1, 1, 2, 2, 2, 2, 0, 1, 2, 0])
+    pixels = rng.integers(0, 24, len(tiles))
+    plain = np.mean(
+        [np.linalg.norm(lab.reshape(-1, 3)[p] - fills[t]) for t, p in zip(tiles, pixels, strict=True)]
+    )
+    monkeypatch.setattr(ev, "ERROR_BAND", 5)
+    assert ev.colour_error(lab, fills, tiles, pixels) == pytest.approx(plain, rel=1e-14)
+    assert np.isnan(ev.colour_error(lab, fills, tiles[:0], pixels[:0]))
+    fills[1] = np.nan
+    assert np.isnan(ev.colour_error(lab, fills, tiles, pixels))
+
+
 # ----------------------------------------------------------------------- edges
 
 
