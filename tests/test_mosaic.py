@@ -131,6 +131,12 @@ def test_without_field_every_element_is_upright():
         stripes(deg=30.0), NUMPY, n_elements=120, iterations=2, use_field=False, use_density=False
     )
     assert np.all(m.angles == 0)
+    # every stage after the method is timed, and the picture's analysis before it
+    from compact_distributions.bench.results import stages_of
+
+    stages = stages_of(m.distribution)
+    for name in ("picture", "cutting", "fills", "evaluation"):
+        assert 0.0 <= stages[name] < m.method_seconds
 
 
 def test_smaller_elements_where_the_picture_has_detail():
