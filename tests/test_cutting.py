@@ -140,6 +140,28 @@ def test_geometric_median_minimises_the_mean_distance(monkeypatch, block, shuffl
         assert cost(got[g]) <= cost(means[g]) + 1e-12  # never worse than the mean
 
 
+@pytest.mark.parametrize("block", [None, 7])
+def test_geometric_median_reads_indexed_points_from_their_means(monkeypatch, block):
+    """Points read through ``index`` a block at a time and started at each group's mean
+    (start None): the same medians, to the last bit, as the points gathered first and
+    started at means summed plainly; a group without points stays at 0."""
+    if block is not None:
+        monkeypatch.setattr(mosaic, "MEDIAN_BLOCK", block)
+    rng = np.random.default_rng(6)
+    table = rng.random((50, 3)) * 100
+    sizes = [3, 0, 1, 12, 9]
+    groups = np.repeat(np.arange(len(sizes)), sizes)
+    index = rng.integers(0, 50, len(groups))
+    sums = np.stack(
+        [np.bincount(groups, weights=table[index, c], minlength=len(sizes)) for c in range(3)], axis=1
+    )
+    means = sums / np.maximum(np.bincount(groups, minlength=len(sizes)), 1)[:, None]
+    want = geometric_median(table[index], groups, means)
+    got = geometric_median(table, groups, None, index=index, groups=len(sizes))
+    assert np.array_equal(got, want) and np.array_equal(got[1], np.zeros(3))
+    assert np.isnan(geometric_median(np.full((2, 3), np.nan), np.zeros(2, dtype=int), None, groups=1)).all()
+
+
 def wall_network(seed=3):
     """(H, W) bool: 4-connected random walks (crossing, meeting the border, one closed
     loop), and their centre lines built here step by step from the pixels."""
