@@ -149,7 +149,6 @@ Where this departs from the issue's sketch
 from __future__ import annotations
 
 import math
-import os
 import time
 from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass, field
@@ -166,6 +165,7 @@ from .errors import InputError
 from .placement import parse_gap
 from .problem import Grid
 from .shapes import check_shape, element_ball
+from .threads import usable_cores
 from .validate import one_of, real_number, whole_number
 
 SLACK = 1e-7  # px: every kept constraint holds with at least this much after a round
@@ -1202,11 +1202,7 @@ def compact(
     move_cost = real_number(move_cost, "move_cost", minimum=0.0)
     solver = one_of(solver, "solver", SOLVERS)
     iterations = whole_number(iterations, "iterations", minimum=1)
-    threads = (
-        (len(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity") else (os.cpu_count() or 1))
-        if threads is None
-        else whole_number(threads, "threads", minimum=1)
-    )
+    threads = usable_cores() if threads is None else whole_number(threads, "threads", minimum=1)
     if max_growth is not None:
         max_growth = real_number(max_growth, "max_growth", above=0.0)
     if max_sizes is not None:

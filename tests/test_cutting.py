@@ -251,3 +251,25 @@ def test_a_cut_outline_starts_nearest_its_whole_tiles_first_vertex():
         ring = np.asarray(c.exterior.coords)[:-1]
         nearest = ring[np.argmin(((ring - w.exterior.coords[0]) ** 2).sum(axis=1))]
         np.testing.assert_array_equal(g.exterior.coords[0], nearest)
+
+
+def test_elementwise_on_threads_gives_each_elements_own_result(monkeypatch):
+    """Split across threads (four here, whatever the machine has), every element's
+    difference and buffer is the one shapely gives that element alone, in order."""
+    import shapely
+
+    from compact_distributions.cvt import threads
+
+    monkeypatch.setattr(threads, "usable_cores", lambda: 4)
+    rng = np.random.default_rng(3)
+    n = 4 * threads.PARALLEL_MIN + 5
+    centres = rng.uniform(0, 100, (n, 2))
+    a = shapely.buffer(shapely.points(centres), rng.uniform(1, 4, n))
+    b = shapely.box(*(centres + 0.5).T, *(centres + 6).T)  # a corner inside every disc
+    got = threads.elementwise(shapely.difference, a, b)
+    alone = [shapely.difference(x, y) for x, y in zip(a, b, strict=True)]
+    assert len(got) == n and all(shapely.equals_exact(g, e, 0) for g, e in zip(got, alone, strict=True))
+    assert all(shapely.area(g) < shapely.area(x) for g, x in zip(got, a, strict=True))
+    grown = threads.elementwise(shapely.buffer, b, distance=0.5, join_style="mitre")
+    assert np.allclose(shapely.area(grown), (5.5 + 1.0) ** 2)
+    assert threads.elementwise(shapely.area, a[:3]).shape == (3,)  # too few to split
