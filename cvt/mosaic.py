@@ -321,7 +321,9 @@ class WalledBackend:
     (:func:`split_cells`), and the moments of those labels.  Without this the cells of
     a Lloyd step ignore a thin wall (its pixels only leave the sums), so sites sit
     astride it and their tiles stay small; with it each centroid moves to its site's
-    side and cells line up along the wall.  Everything else is the inner backend's."""
+    side and cells line up along the wall.  An inner backend that cuts the cells itself
+    (``walled_moments``, e.g. on its device) does; any other has its labels split here,
+    on the host.  Everything else is the inner backend's."""
 
     def __init__(self, inner):
         self.inner = inner
@@ -334,10 +336,12 @@ class WalledBackend:
         return split_cells(labels, sites) if grid.mask is not None else labels
 
     def moments(self, sites, *, angles=None, scales=None, metric, grid):
+        args = dict(angles=angles, scales=scales, metric=metric, grid=grid)
         if grid.mask is None:
-            return self.inner.moments(sites, angles=angles, scales=scales, metric=metric, grid=grid)
-        labels = self.inner.label(sites, angles=angles, scales=scales, metric=metric, grid=grid)
-        return split_moments(labels, sites)
+            return self.inner.moments(sites, **args)
+        own = getattr(self.inner, "walled_moments", None)
+        found = None if own is None else own(sites, **args)
+        return split_moments(self.inner.label(sites, **args), sites) if found is None else found
 
 
 # --------------------------------------------------------------------------- colours
