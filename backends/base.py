@@ -83,6 +83,21 @@ class Backend(ABC):
         sites, angles, scales = self.check_inputs(sites, angles, scales, metric, grid)
         return self._moments(sites, angles, scales, metric, grid)
 
+    def walled_moments(
+        self, sites, *, angles=None, scales=None, metric: Metric, grid: Grid
+    ) -> Moments | None:
+        """The moments of the labels with each cell cut to one 4-connected piece, as
+        ``moments_from_labels(cvt.mosaic.split_cells(labels, sites), N)`` gives them, or
+        None where the backend has no path of its own for them (the caller then splits
+        the labels on the host, as :class:`cvt.mosaic.WalledBackend` does): a backend
+        that finds the pieces on its device saves the host from reading the raster."""
+        sites, angles, scales = self.check_inputs(sites, angles, scales, metric, grid)
+        return self._walled_moments(sites, angles, scales, metric, grid)
+
+    def _walled_moments(self, sites, angles, scales, metric: Metric, grid: Grid) -> Moments | None:
+        """None: no path of its own (see :meth:`walled_moments`)."""
+        return None
+
     @abstractmethod
     def _label(
         self, sites: np.ndarray, angles: np.ndarray, scales: np.ndarray, metric: Metric, grid: Grid

@@ -15,6 +15,11 @@ reads the raster.  The block kernel sums its own block once per label in it as i
 the labels; after the per-pixel kernel, ``row_moments`` sums runs of equal labels per row
 segment.
 
+:meth:`OpenCLBackend.walled_moments` (the walled step of a mosaic) also cuts each cell to
+the one 4-connected piece that :func:`cvt.mosaic.split_cells` keeps, on the device: the
+runs of the cells that may be in pieces are listed, joined into pieces by a union-find,
+and only the runs of the pieces not kept come back, whose sums the host subtracts.
+
 Two label kernels, the same search: ``label_blocks`` (one work-item per ``STRIP`` square
 blocks of 4, 8 or 16 px side by side in a row; the default on CPUs, where PoCL vectorises
 its inner loop over a block's pixels) and ``label_pixels`` (one work-item per pixel; the
@@ -29,6 +34,7 @@ refused with the compiler's reason).  Nothing is ever asked interactively.
 
 from __future__ import annotations
 
+import dataclasses
 import math
 import os
 import warnings
@@ -39,7 +45,8 @@ import numpy as np
 
 from compact_distributions.cvt.errors import BackendUnavailable, InputError
 from compact_distributions.cvt.metrics import Metric, compile_sites
-from compact_distributions.cvt.moments import Moments
+from compact_distributions.cvt.moments import Moments, moments_from_runs
+from compact_distributions.cvt.pixels import pixel_index
 from compact_distributions.cvt.problem import Grid
 from compact_distributions.cvt.quiet import c_output_silenced
 
@@ -47,6 +54,22 @@ from .base import Backend
 
 KERNEL_FILE = Path(__file__).with_name("opencl_kernels.cl")
 SEGMENT = 64  # pixels of a row per work-item of the moments kernel
+RUN_SEGMENT = 256  # pixels of a row per work-item of row_runs
+RUN_CHUNK = 1024  # runs per work-item of suspect_runs
+# work-groups of the walled-cell kernels, fixed: the numbers of runs change every step,
+# and PoCL builds a kernel anew for each work-group size it is left to choose
+RUN_GROUP = (1, 16)  # row_runs: segments x rows
+LIST_GROUP = 64  # the kernels over listed runs
+WALL_KERNELS = (
+    "row_runs",
+    "suspect_runs",
+    "pieces_start",
+    "pieces_join",
+    "pieces_measure",
+    "pieces_largest",
+    "pieces_last",
+    "pieces_dropped",
+)
 ACC_BYTES = 64  # per site: five 64-bit sums in one cache line (the kernel file says why)
 STRIP = 4  # blocks side by side per work-item of label_blocks: they share their sums
 BLOCK_SIZES = (0, 4, 8, 16)  # label_blocks works a row of a block as one 4-, 8- or 16-wide vector
@@ -54,6 +77,11 @@ BLOCK_SIZES = (0, 4, 8, 16)  # label_blocks works a row of a block as one 4-, 8-
 # work-items at once, and its own choice (thousands of them) overflowed a thread's stack
 BLOCK_GROUP = (8, 1)
 REACH_MARGIN = 1e-4  # relative slack on the search bound against float32 rounding
+
+
+def _facet_count(metric: Metric) -> int:
+    """K of the kernels built for ``metric`` (0: an ellipse)."""
+    return 0 if metric.kind == "ellipse" else np.asarray(metric.normals).shape[0]
 
 
 def _import_pyopencl():
@@ -258,6 +286,8 @@ class OpenCLBackend(Backend):
         self.seed = bool(seed)
         self._labels_buf = None  # the buffer the last labels went to, and their (w, h)
         self._labels_raster = None
+        self._wall_kernels: dict[int, dict] = {}  # program -> walled-cell kernels by name
+        self._run_room = 1 << 16  # runs the suspect_runs buffer holds; grows as needed
 
     # ------------------------------------------------------------------ device
     @classmethod
@@ -276,6 +306,7 @@ class OpenCLBackend(Backend):
             buf.release()
         self._buffers.clear()
         self._programs.clear()
+        self._wall_kernels.clear()
         self._mask_source = None
         self._labels_buf = self._labels_raster = None
         self._queue = self._context = None
@@ -499,16 +530,20 @@ class OpenCLBackend(Backend):
     # ----------------------------------------------------------------- moments
     def _moments(self, sites, angles, scales, metric: Metric, grid: Grid) -> Moments:
         """Labels and their integer moments on the device; reads back 5·N sums."""
+        acc_buf, _ = self._enqueue_moments(sites, angles, scales, metric, grid)
+        return self._read_moments(acc_buf, len(sites))
+
+    def _enqueue_moments(self, sites, angles, scales, metric: Metric, grid: Grid):
+        """Enqueue the labels and their sums: (sums buffer, labels buffer)."""
         cl = self._cl
         n = len(sites)
         acc_buf = self._buffer("moments", ACC_BYTES * n)
         cl.enqueue_fill_buffer(self._queue, acc_buf, np.uint32(0), 0, ACC_BYTES * n)
         if self.block > 0:  # the block kernel sums its own labels
-            self._run_labels(sites, angles, scales, metric, grid, acc_buf)
+            labels_buf, _ = self._run_labels(sites, angles, scales, metric, grid, acc_buf)
         else:
             labels_buf, _ = self._run_labels(sites, angles, scales, metric, grid)
-            k = 0 if metric.kind == "ellipse" else np.asarray(metric.normals).shape[0]
-            _, moments_kernel = self._kernels(metric, k)
+            _, moments_kernel = self._kernels(metric, _facet_count(metric))
             w, h = grid.width, grid.height
             moments_kernel.set_args(
                 np.int32(w), np.int32(h), np.int32(SEGMENT), labels_buf, np.int32(n), acc_buf
@@ -517,6 +552,9 @@ class OpenCLBackend(Backend):
                 cl.enqueue_nd_range_kernel(self._queue, moments_kernel, (-(-w // SEGMENT), h), None)
             except cl.Error as exc:
                 raise BackendUnavailable(f"opencl: moments kernel failed on {self.device()}: {exc}") from None
+        return acc_buf, labels_buf
+
+    def _read_moments(self, acc_buf, n: int) -> Moments:
         acc = np.empty((n, ACC_BYTES // 8), dtype=np.uint64)
         self._read(acc, acc_buf)
         if self.int64_atomics:
@@ -525,6 +563,116 @@ class OpenCLBackend(Backend):
             words = acc.view(np.uint32).astype(np.int64)
             sums = ((words[:, 8:13] << 32) | words[:, :5]).T
         return Moments(*(np.ascontiguousarray(row) for row in sums))
+
+    # ------------------------------------------------------------ walled cells
+    def _walled_moments(self, sites, angles, scales, metric: Metric, grid: Grid) -> Moments:
+        """The moments of the labels with each cell cut to the piece it keeps, found on
+        the device: ``row_runs`` lists the runs and counts each cell's top and bottom
+        runs, ``suspect_runs`` keeps the runs of the cells that may be in pieces, the
+        ``pieces_*`` kernels find their pieces and list the runs of those not kept; the
+        host reads 5·N sums and those runs (never the raster) and subtracts their sums."""
+        cl = self._cl
+        n = len(sites)
+        w, h = grid.width, grid.height
+        acc_buf, labels_buf = self._enqueue_moments(sites, angles, scales, metric, grid)
+        program = self._kernels(metric, _facet_count(metric))[0].program
+        if program.int_ptr not in self._wall_kernels:
+            self._wall_kernels[program.int_ptr] = {name: cl.Kernel(program, name) for name in WALL_KERNELS}
+        kern = self._wall_kernels[program.int_ptr]
+        queue = self._queue
+
+        def run(name, items, *args):  # a multiple of the work-group: the kernels skip the rest
+            kern[name].set_args(*args)
+            if isinstance(items, tuple):
+                group, size = RUN_GROUP, tuple(-(-v // g) * g for v, g in zip(items, RUN_GROUP, strict=True))
+            else:
+                group, size = (LIST_GROUP,), (-(-items // LIST_GROUP) * LIST_GROUP,)
+            cl.enqueue_nd_range_kernel(queue, kern[name], size, group)
+
+        def fill(buf, value, count):
+            cl.enqueue_fill_buffer(queue, buf, np.int32(value), 0, 4 * count)
+
+        ends_buf = self._buffer("run_ends", 8 * n)
+        found_buf, kept_buf = self._buffer("runs_found", 4), self._buffer("runs_kept", 4)
+        found, kept = np.zeros(1, dtype=np.uint32), np.zeros(1, dtype=np.uint32)
+        rows = (-(-w // RUN_SEGMENT), h)
+        try:
+            fill(ends_buf, 0, 2 * n)
+            while True:
+                room = self._run_room
+                runs_buf = self._buffer("runs", 12 * room)
+                fill(found_buf, 0, 1)
+                args = (labels_buf, ends_buf, found_buf, np.uint32(room), runs_buf)
+                run("row_runs", rows, np.int32(w), np.int32(h), np.int32(RUN_SEGMENT), *args)
+                self._read(found, found_buf)
+                if found[0] <= room:
+                    break
+                # too many to hold: again, with room (the counts start again from zero)
+                self._run_room = int(found[0]) * 5 // 4
+                fill(ends_buf, 0, 2 * n)
+            total = int(found[0])
+            listed_buf = self._buffer("suspect_runs", 12 * total)
+            fill(kept_buf, 0, 1)
+            chunks = max(1, -(-total // RUN_CHUNK))
+            run(
+                "suspect_runs",
+                chunks,
+                np.uint32(total),
+                np.uint32(RUN_CHUNK),
+                runs_buf,
+                ends_buf,
+                kept_buf,
+                listed_buf,
+            )
+            self._read(kept, kept_buf)
+            m = int(kept[0])
+            if m == 0:
+                return self._read_moments(acc_buf, n)
+            i, j = pixel_index(sites, w, h)
+            site_at = self._upload("site_at", (i * w + j).astype(np.int32))
+            run_at = self._buffer("run_at", 4 * w * h)
+            parent, root = self._buffer("piece_parent", 4 * m), self._buffer("piece_root", 4 * m)
+            size, first = self._buffer("piece_size", 4 * m), self._buffer("piece_first", 4 * m)
+            site_piece, largest = self._buffer("site_piece", 4 * n), self._buffer("largest", 4 * n)
+            last = self._buffer("last_largest", 4 * n)
+            dropped_buf, n_dropped_buf = self._buffer("dropped", 12 * m), self._buffer("n_dropped", 4)
+            fill(size, 0, m)
+            fill(first, np.iinfo(np.int32).max, m)
+            fill(site_piece, -1, n)
+            fill(largest, 0, n)
+            fill(last, -1, n)
+            fill(n_dropped_buf, 0, 1)
+            um = np.uint32(m)
+            run("pieces_start", m, um, listed_buf, run_at, parent)
+            run("pieces_join", m, um, np.int32(w), listed_buf, labels_buf, run_at, parent)
+            run("pieces_measure", m, um, listed_buf, parent, root, size, first, site_at, site_piece)
+            run("pieces_largest", m, um, listed_buf, root, size, largest)
+            run("pieces_last", m, um, listed_buf, root, size, first, largest, last)
+            run(
+                "pieces_dropped",
+                m,
+                um,
+                listed_buf,
+                root,
+                first,
+                site_piece,
+                last,
+                n_dropped_buf,
+                dropped_buf,
+            )
+            n_dropped = np.zeros(1, dtype=np.uint32)
+            self._read(n_dropped, n_dropped_buf)
+            dropped = np.empty((int(n_dropped[0]), 3), dtype=np.int32)
+            if len(dropped):
+                self._read(dropped, dropped_buf)
+        except cl.Error as exc:
+            raise BackendUnavailable(
+                f"opencl: walled-cell kernels failed on {self.device()}: {exc}"
+            ) from None
+        whole = self._read_moments(acc_buf, n)
+        start = dropped[:, 0].astype(np.int64)
+        gone = moments_from_runs(start, start + dropped[:, 1], dropped[:, 2], w, n)
+        return Moments(*(getattr(whole, f.name) - getattr(gone, f.name) for f in dataclasses.fields(Moments)))
 
     # --------------------------------------------------------------------- fit
     def fit_search(self, cells):

@@ -602,3 +602,242 @@ __kernel void row_moments(const int width, const int height, const int seg,
     if (cur >= 0)
         flush_run(acc, n, cur, start, j1 - 1, i);
 }
+
+/* ------------------------------------------------------------------ walled cells */
+
+/* A walled step keeps one 4-connected piece of each cell (cvt.mosaic.split_cells).  A
+   cell whose row runs include only one "top" run (no pixel of it has its own label
+   straight above), or only one "bottom" run, is one piece: from any of its runs, steps to
+   a touching run above (below) end at that run.  row_runs lists the runs of the region
+   and counts both kinds per cell; suspect_runs keeps the runs of the cells with more
+   than one of each, and the host finds their pieces. */
+
+/* The end (exclusive) of the run of label l that begins at column j of row i; *up, *down:
+   whether a pixel of it has label l straight above, straight below. */
+inline int walk_run(__global const int *labels, const int width, const int height, const int i,
+                    const int j, const int l, int *up, int *down)
+{
+    __global const int *row = labels + (size_t)i * width;
+    /* off the raster, read the row itself and ignore what it says */
+    __global const int *above = i > 0 ? row - width : row;
+    __global const int *below = i + 1 < height ? row + width : row;
+    int u = 0, d = 0, e = j;
+    for (; e < width && row[e] == l; ++e) {
+        u |= above[e] == l;
+        d |= below[e] == l;
+    }
+    *up = u && i > 0;
+    *down = d && i + 1 < height;
+    return e;
+}
+
+/* One work-item per segment of `seg` pixels of a row takes the runs of the region that
+   begin in it (a run may reach past the segment's end): each as (first pixel, length,
+   label) at runs[3 k ..], k from the counter `found` (zeroed by the host; one atomic per
+   work-item reserves its place), and ends[2 l], ends[2 l + 1] count the top and bottom
+   runs of cell l (zeroed by the host).  Runs beyond `room` are counted, not written (the
+   host then asks again with more room). */
+__kernel void row_runs(const int width, const int height, const int seg,
+                       __global const int *labels, volatile __global uint *ends,
+                       volatile __global uint *found, const uint room, __global int *runs)
+{
+    const int i = get_global_id(1);
+    const int j0 = get_global_id(0) * seg;
+    if (i >= height || j0 >= width)
+        return;
+    const int j1 = j0 + seg < width ? j0 + seg : width;
+    __global const int *row = labels + (size_t)i * width;
+    uint mine = 0; /* runs of the region that begin in the segment */
+    int prev = j0 > 0 ? row[j0 - 1] : -1;
+    for (int j = j0; j < j1; ++j) {
+        const int l = row[j];
+        mine += l >= 0 && l != prev;
+        prev = l;
+    }
+    if (mine == 0)
+        return;
+    uint k = atomic_add(found, mine);
+    prev = j0 > 0 ? row[j0 - 1] : -1;
+    for (int j = j0; j < j1;) {
+        const int l = row[j];
+        if (l < 0 || l == prev) {
+            prev = l;
+            ++j;
+            continue;
+        }
+        int up, down;
+        const int e = walk_run(labels, width, height, i, j, l, &up, &down);
+        if (!up)
+            atomic_inc(ends + 2 * l);
+        if (!down)
+            atomic_inc(ends + 2 * l + 1);
+        if (k < room) {
+            runs[3 * k] = i * width + j;
+            runs[3 * k + 1] = e - j;
+            runs[3 * k + 2] = l;
+        }
+        ++k;
+        prev = l;
+        j = e;
+    }
+}
+
+/* The runs (as row_runs lists them) of the cells with more than one top and more than
+   one bottom run, copied to out[3 k ..], k from the counter `kept` (zeroed by the host);
+   one work-item per `chunk` runs, one atomic each. */
+__kernel void suspect_runs(const uint total, const uint chunk, __global const int *runs,
+                           __global const uint *ends, volatile __global uint *kept,
+                           __global int *out)
+{
+    const uint r0 = get_global_id(0) * chunk;
+    if (r0 >= total)
+        return;
+    const uint r1 = r0 + chunk < total ? r0 + chunk : total;
+    uint mine = 0;
+    for (uint r = r0; r < r1; ++r) {
+        const int l = runs[3 * r + 2];
+        mine += ends[2 * l] > 1 && ends[2 * l + 1] > 1;
+    }
+    if (mine == 0)
+        return;
+    uint k = atomic_add(kept, mine);
+    for (uint r = r0; r < r1; ++r) {
+        const int l = runs[3 * r + 2];
+        if (ends[2 * l] > 1 && ends[2 * l + 1] > 1) {
+            out[3 * k] = runs[3 * r];
+            out[3 * k + 1] = runs[3 * r + 1];
+            out[3 * k + 2] = l;
+            ++k;
+        }
+    }
+}
+
+/* The pieces of the listed cells (the runs suspect_runs kept, `m` of them, unordered),
+   and the runs of the pieces their cells do not keep.  Runs are joined where they touch
+   (same cell, adjacent rows, overlapping columns) by a union-find over run indices whose
+   roots are the smallest index of their piece, linked with atomic_min (Playne and
+   Hawick's concurrent union: a link that loses a race is retried from the new roots).
+   run_at[p]: the index of the listed run that begins at pixel p (only those are read). */
+
+inline int piece_root(volatile __global int *parent, int x)
+{
+    int p = parent[x];
+    while (p != x) {
+        x = p;
+        p = parent[x];
+    }
+    return x;
+}
+
+/* 1. each run its own piece, and its index at its first pixel */
+__kernel void pieces_start(const uint m, __global const int *runs, __global int *run_at,
+                           volatile __global int *parent)
+{
+    const uint k = get_global_id(0);
+    if (k >= m)
+        return;
+    run_at[runs[3 * k]] = (int)k;
+    parent[k] = (int)k;
+}
+
+/* 2. each run joins the runs of the row above that touch it: one per stretch of its own
+   label above it, found by walking left to the stretch's run start */
+__kernel void pieces_join(const uint m, const int width, __global const int *runs,
+                          __global const int *labels, __global const int *run_at,
+                          volatile __global int *parent)
+{
+    const uint k = get_global_id(0);
+    if (k >= m)
+        return;
+    const int p = runs[3 * k], len = runs[3 * k + 1], l = runs[3 * k + 2];
+    const int i = p / width, j = p - i * width;
+    if (i == 0)
+        return;
+    __global const int *above = labels + (size_t)(i - 1) * width;
+    for (int x = j; x < j + len; ++x) {
+        if (above[x] != l || (x > j && above[x - 1] == l))
+            continue;
+        int s = x;
+        while (s > 0 && above[s - 1] == l)
+            --s;
+        int a = (int)k, b = run_at[(i - 1) * width + s];
+        for (;;) {
+            a = piece_root(parent, a);
+            b = piece_root(parent, b);
+            if (a == b)
+                break;
+            const int hi = a > b ? a : b, lo = a > b ? b : a;
+            const int old = atomic_min(parent + hi, lo);
+            if (old == hi)
+                break;
+            a = old; /* hi was linked meanwhile: join its new root */
+            b = lo;
+        }
+    }
+}
+
+/* 3. per piece (at its root) its pixels and first pixel; per cell the piece that holds
+   its site's pixel (site_at[l], from the host) where the site is in its cell */
+__kernel void pieces_measure(const uint m, __global const int *runs, volatile __global int *parent,
+                             __global int *root, volatile __global int *size,
+                             volatile __global int *first, __global const int *site_at,
+                             __global int *site_piece)
+{
+    const uint k = get_global_id(0);
+    if (k >= m)
+        return;
+    const int p = runs[3 * k], len = runs[3 * k + 1], l = runs[3 * k + 2];
+    const int r = piece_root(parent, (int)k);
+    root[k] = r;
+    atomic_add(size + r, len);
+    atomic_min(first + r, p);
+    const int s = site_at[l];
+    if (p <= s && s < p + len)
+        site_piece[l] = r; /* one run holds the site's pixel: one writer */
+}
+
+/* 4. per cell the size of its largest piece */
+__kernel void pieces_largest(const uint m, __global const int *runs, __global const int *root,
+                             __global const int *size, volatile __global int *largest)
+{
+    const uint k = get_global_id(0);
+    if (k >= m || root[k] != (int)k)
+        return;
+    atomic_max(largest + runs[3 * k + 2], size[k]);
+}
+
+/* 5. per cell, of its largest pieces the one that begins last in raster order (pieces
+   begin at different pixels) */
+__kernel void pieces_last(const uint m, __global const int *runs, __global const int *root,
+                          __global const int *size, __global const int *first,
+                          __global const int *largest, volatile __global int *last)
+{
+    const uint k = get_global_id(0);
+    if (k >= m || root[k] != (int)k)
+        return;
+    const int l = runs[3 * k + 2];
+    if (size[k] == largest[l])
+        atomic_max(last + l, first[k]);
+}
+
+/* 6. the runs outside the piece their cell keeps (the site's piece, else the last of the
+   largest), listed as suspect_runs lists runs, at dropped[3 k ..] from the counter
+   `n_dropped` (zeroed by the host) */
+__kernel void pieces_dropped(const uint m, __global const int *runs, __global const int *root,
+                             __global const int *first, __global const int *site_piece,
+                             __global const int *last, volatile __global uint *n_dropped,
+                             __global int *dropped)
+{
+    const uint k = get_global_id(0);
+    if (k >= m)
+        return;
+    const int l = runs[3 * k + 2];
+    const int own = site_piece[l];
+    const int keep = own >= 0 ? first[own] : last[l];
+    if (first[root[k]] == keep)
+        return;
+    const uint d = atomic_inc(n_dropped);
+    dropped[3 * d] = runs[3 * k];
+    dropped[3 * d + 1] = runs[3 * k + 1];
+    dropped[3 * d + 2] = l;
+}

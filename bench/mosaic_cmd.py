@@ -165,7 +165,7 @@ def mosaic_result_json(args, m, backend, stage_seconds: dict | None = None) -> d
 
     from compact_distributions.cvt.evaluate import empty_cells, evaluate
     from compact_distributions.cvt.problem import Grid
-    from compact_distributions.cvt.render import hex_colour
+    from compact_distributions.cvt.render import hex_colour, hex_colours
 
     from .outputs import command_line
     from .results import build_result
@@ -195,7 +195,7 @@ def mosaic_result_json(args, m, backend, stage_seconds: dict | None = None) -> d
         stage_seconds=stage_seconds,
         placed=m.polygons,
         image=m.source,
-        colours=[hex_colour(c) for c in m.colours],
+        colours=hex_colours(m.colours),
         grout=hex_colour(m.grout),
         contrast=m.contrast,
         colour_error=m.colour_error if np.isfinite(m.colour_error) else None,

@@ -25,30 +25,49 @@ _WHITE = _RGB_TO_XYZ.sum(axis=1)  # XYZ of sRGB white: the reference white
 _D = 6.0 / 29.0
 
 
+# pixels converted at once by srgb_to_lab: its temporaries stay in the processor's cache
+# (a picture-sized temporary would be written to memory and read back at every step)
+LAB_BAND = 1 << 15
+
+
 def srgb_to_lab(rgb) -> np.ndarray:
-    """(..., 3) sRGB in 0..1 -> (..., 3) CIELAB (L* 0..100)."""
+    """(..., 3) sRGB in 0..1 -> (..., 3) CIELAB (L* 0..100).
+
+    Parameters
+    ----------
+    rgb : (..., 3) array_like
+        sRGB values, 0..1.
+
+    Returns
+    -------
+    (..., 3) float64 array
+    """
     rgb = np.asarray(rgb, dtype=np.float64)
-    # in place where it can: a picture's temporaries are each as large as the picture
+    flat = rgb.reshape(-1, 3)
+    lab = np.empty(flat.shape)
+    for lo in range(0, len(flat), LAB_BAND):
+        _lab_band(flat[lo : lo + LAB_BAND], lab[lo : lo + LAB_BAND])
+    return lab.reshape(rgb.shape)
+
+
+def _lab_band(rgb: np.ndarray, lab: np.ndarray) -> None:
+    """:func:`srgb_to_lab` of (n, 3) ``rgb`` into ``lab``."""
     lin = rgb + 0.055
     lin /= 1.055
     np.power(lin, 2.4, out=lin)
     np.divide(rgb, 12.92, out=lin, where=rgb <= 0.04045)
     xyz = lin @ _RGB_TO_XYZ.T
     xyz /= _WHITE
-    del lin
     f = np.cbrt(xyz)
     small = xyz <= _D**3
     np.divide(xyz, 3 * _D * _D, out=f, where=small)
     np.add(f, 4.0 / 29.0, out=f, where=small)
-    del xyz
-    lab = np.empty_like(f)
-    np.multiply(f[..., 1], 116.0, out=lab[..., 0])
-    lab[..., 0] -= 16.0
-    np.subtract(f[..., 0], f[..., 1], out=lab[..., 1])
-    lab[..., 1] *= 500.0
-    np.subtract(f[..., 1], f[..., 2], out=lab[..., 2])
-    lab[..., 2] *= 200.0
-    return lab
+    np.multiply(f[:, 1], 116.0, out=lab[:, 0])
+    lab[:, 0] -= 16.0
+    np.subtract(f[:, 0], f[:, 1], out=lab[:, 1])
+    lab[:, 1] *= 500.0
+    np.subtract(f[:, 1], f[:, 2], out=lab[:, 2])
+    lab[:, 2] *= 200.0
 
 
 def lab_to_srgb(lab) -> np.ndarray:
@@ -67,4 +86,4 @@ def quantised(rgb) -> np.ndarray:
     return np.round(np.clip(np.asarray(rgb, dtype=np.float64), 0.0, 1.0) * 255.0) / 255.0
 
 
-__all__ = ["srgb_to_lab", "lab_to_srgb", "quantised"]
+__all__ = ["LAB_BAND", "srgb_to_lab", "lab_to_srgb", "quantised"]

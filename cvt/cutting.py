@@ -33,6 +33,7 @@ import shapely
 
 from .compaction import wall_segments
 from .evaluate import straddling_tiles
+from .threads import elementwise
 
 CUT_ENLARGE = 1.8  # a cut tile lies within its tile grown by this factor about its centre
 CUT_REACH = 1.0  # tiles this many element spacings or closer to a wall are cut to fit
@@ -185,7 +186,9 @@ def cut_to_walls(
     later[a[turn[b] > turn[a]]] = True
     wall_margin = _margin_pieces(lines, half)
     frame = shapely.box(0.5 * gap, 0.5 * gap, w - 0.5 * gap, h - 0.5 * gap)
-    padded = shapely.buffer(geoms_all, full, join_style="mitre")  # each tile's G-wide margin
+    padded = elementwise(
+        shapely.buffer, geoms_all, distance=full, join_style="mitre"
+    )  # each tile's G-wide margin
     tile_tree = shapely.STRtree(padded)
     grew = 0
     for t in range(turn.max() + 1):
@@ -212,7 +215,7 @@ def cut_to_walls(
             out[k] = g
         seen = keep[later[members[keep]]]
         if len(seen):  # a cut tile's margin grows with it
-            padded[tiles[seen]] = shapely.buffer(cut[seen], full, join_style="mitre")
+            padded[tiles[seen]] = elementwise(shapely.buffer, cut[seen], distance=full, join_style="mitre")
             tile_tree = shapely.STRtree(padded)
         grew += len(keep)
     return out, grew
@@ -223,7 +226,7 @@ def _robust(operation, a: np.ndarray, b: np.ndarray) -> np.ndarray:
     exception from nearly coincident edges) the result is an empty geometry, so that
     tile stays whole."""
     try:
-        return operation(a, b)
+        return elementwise(operation, a, b)
     except shapely.errors.GEOSException:
         out = np.empty(len(a), dtype=object)
         for k in range(len(a)):
@@ -252,7 +255,7 @@ def _margin_pieces(lines: np.ndarray, distance: float, length: int = _RUN) -> np
     _, runs = np.unique(key[order], return_inverse=True)
     pieces = shapely.linestrings(coords[at[order]], indices=runs)
     pieces = np.concatenate([pieces, lines[is_point]])
-    return shapely.buffer(pieces, distance, join_style="mitre", cap_style="square")
+    return elementwise(shapely.buffer, pieces, distance=distance, join_style="mitre", cap_style="square")
 
 
 def _started_as(cut: np.ndarray, whole: np.ndarray) -> np.ndarray:

@@ -235,19 +235,21 @@ def coverage_at_overlap_limit(
 
 
 # pixels_under decides with shapely only where a pixel centre lies within this many px of
-# a convex tile's outline, or on a row through a vertex or along a nearly horizontal
-# edge; elsewhere the row's chord decides (its ends are computed to far better than this)
+# a crossing of the tile's outline with the pixel's row, or on a row through a vertex or
+# along a nearly horizontal edge; elsewhere the row's crossings decide (they are computed
+# to far better than this)
 CHORD_MARGIN = 1e-5
-_FLAT_EDGE = 1e-3  # px of height below which an edge's chord ends are not trusted
+_FLAT_EDGE = 1e-3  # px of height below which an edge's crossings are not trusted
 
 
 def pixels_under(elements, width: int, height: int) -> tuple[np.ndarray, np.ndarray]:
     """Every pixel of a raster whose centre lies inside or on the outline of a tile.
 
-    Convex tiles are read row by row: the pixel centres between the ends of the row's
-    chord through the tile, less :data:`CHORD_MARGIN`, are in it, those beyond them plus
-    the margin are not, and shapely decides the rest (and every pixel of the bounding
-    box of other tiles).
+    Polygonal tiles are read row by row: the crossings of the row through the pixel
+    centres with the tile's rings, in order along the row, bound the spans inside it
+    (even-odd); the centres within a span less :data:`CHORD_MARGIN` are in the tile, those
+    farther than the margin from every span are not, and shapely decides the rest (and
+    every pixel of the bounding box of other tiles).
 
     Parameters
     ----------
@@ -272,21 +274,27 @@ def pixels_under(elements, width: int, height: int) -> tuple[np.ndarray, np.ndar
     j1 = np.clip(np.floor(b[:, 2] - 0.5), -1, width - 1).astype(np.int64)
     i1 = np.clip(np.floor(b[:, 3] - 0.5), -1, height - 1).astype(np.int64)
     shapely.prepare(geoms)
-    hull = shapely.convex_hull(geoms)
-    convex = (shapely.get_type_id(geoms) == 3) & (shapely.get_num_interior_rings(geoms) == 0)
-    convex &= shapely.get_type_id(hull) == 3
-    convex &= shapely.get_num_coordinates(hull) == shapely.get_num_coordinates(
-        geoms
-    )  # every vertex on the hull
-    segments = [_chord_segments(geoms, np.flatnonzero(convex), i0, i1, j0, j1, width)]
-    other = np.flatnonzero(~convex)
+    # even-odd spans are shapely's inside for one ring (crossing parity), and for holes
+    # and parts when they neither overlap nor leave the shell (a valid geometry)
+    kind = shapely.get_type_id(geoms)
+    spans = (kind == 3) & (shapely.get_num_interior_rings(geoms) == 0)
+    several = np.flatnonzero(((kind == 3) & ~spans) | (kind == 6))
+    spans[several] = shapely.is_valid(geoms[several])
+    segments = [_span_segments(geoms, np.flatnonzero(spans), i0, i1, j0, j1, width)]
+    other = np.flatnonzero(~spans)
     if len(other):
         segments.append(_box_segments(geoms, other, i0, i1, j0, j1, width))
     tile, first, length = (np.concatenate(parts) for parts in zip(*segments, strict=True))
-    if len(other):
-        order = np.argsort(tile, kind="stable")  # each tile's segments are in pixel order already
-        tile, first, length = tile[order], first[order], length[order]
-    return idx[np.repeat(tile, length)], index_ranges(first, length)
+    # by tile, then pixel (a tile's segments never overlap); they come in a few sorted
+    # runs, which a stable sort merges
+    order = np.argsort(tile * (width * height) + first, kind="stable")
+    tile, first, length = tile[order], first[order], length[order]
+    tiles, pixels = idx[np.repeat(tile, length)], index_ranges(first, length)
+    if np.any((tile[1:] == tile[:-1]) & (first[1:] < first[:-1] + length[:-1])):
+        # two crossings of a row at one point can leave a pixel both sure and a candidate
+        pair = np.unique(tiles * (width * height) + pixels)
+        tiles, pixels = pair // (width * height), pair % (width * height)
+    return tiles, pixels
 
 
 def _box_segments(geoms, tiles, i0, i1, j0, j1, width):
@@ -303,24 +311,30 @@ def _box_segments(geoms, tiles, i0, i1, j0, j1, width):
     return tile[inside], ii[inside] * width + jj[inside], np.ones(int(inside.sum()), dtype=np.int64)
 
 
-def _chord_segments(geoms, tiles, i0, i1, j0, j1, width):
-    """(tile, first flat pixel, length) of each row's pixels in each convex tile."""
+def _span_segments(geoms, tiles, i0, i1, j0, j1, width):
+    """(tile, first flat pixel, length) of the pixels of each row inside each polygonal
+    tile: the sure part of every span between crossings, and the pixels near a crossing
+    or on an unsure row that shapely finds in the tile."""
     rows = np.maximum(i1[tiles] - i0[tiles] + 1, 0)
     base = np.cumsum(rows) - rows  # a (tile, row) pair's key: base[tile] + row - i0
     n_keys = int(rows.sum())
     key_tile = np.repeat(tiles, rows)
     key_row = i0[key_tile] + index_ranges(np.zeros(len(tiles), dtype=np.int64), rows)
-    coords, ci = shapely.get_coordinates(geoms[tiles], return_index=True)
+    # every ring: exteriors, holes, the polygons of a multipolygon
+    parts, part_of = shapely.get_parts(geoms[tiles], return_index=True)
+    rings, ring_of = shapely.get_rings(parts, return_index=True)
+    coords, ci = shapely.get_coordinates(rings, return_index=True)
+    owner = part_of[ring_of[ci]]  # each vertex's place in ``tiles``
     unsure = np.zeros(n_keys, dtype=bool)
     # a row through a vertex (within the margin) is left to shapely
     yv = coords[:, 1]
     iv = np.round(yv - 0.5).astype(np.int64)
-    hit = (np.abs(iv + 0.5 - yv) < CHORD_MARGIN) & (iv >= i0[tiles[ci]]) & (iv <= i1[tiles[ci]])
-    unsure[base[ci[hit]] + iv[hit] - i0[tiles[ci[hit]]]] = True
-    # each edge's crossing with the rows it spans (the ring repeats its first vertex)
+    hit = (np.abs(iv + 0.5 - yv) < CHORD_MARGIN) & (iv >= i0[tiles[owner]]) & (iv <= i1[tiles[owner]])
+    unsure[base[owner[hit]] + iv[hit] - i0[tiles[owner[hit]]]] = True
+    # each edge's crossing with the rows it spans (a ring repeats its first vertex)
     same = ci[1:] == ci[:-1]
     a, c = coords[:-1][same], coords[1:][same]
-    t = ci[:-1][same]
+    t = owner[:-1][same]
     lo, hi = np.minimum(a[:, 1], c[:, 1]), np.maximum(a[:, 1], c[:, 1])
     e_i0 = np.maximum(np.ceil(lo - 0.5).astype(np.int64), i0[tiles[t]])
     e_i1 = np.minimum(np.floor(hi - 0.5).astype(np.int64), i1[tiles[t]])
@@ -334,42 +348,57 @@ def _chord_segments(geoms, tiles, i0, i1, j0, j1, width):
     steady = ~flat
     frac = (row[steady] + 0.5 - a[edge[steady], 1]) / dy[steady]
     x = a[edge[steady], 0] + frac * (c[edge[steady], 0] - a[edge[steady], 0])
+    key = key[steady]
+    count = np.bincount(key, minlength=n_keys)
+    unsure |= (count == 0) | (count % 2 == 1)
+    # a row with two crossings (every row of a convex tile) holds one span, between the
+    # two; the crossings of a row with more are sorted along it and paired in turn
     left = np.full(n_keys, np.inf)
     right = np.full(n_keys, -np.inf)
-    np.minimum.at(left, key[steady], x)
-    np.maximum.at(right, key[steady], x)
-    unsure |= ~np.isfinite(left)
-    # sure: centres within the chord less the margin; candidates: within it plus the margin
-    lo_sure = np.ceil(left + CHORD_MARGIN - 0.5)
-    hi_sure = np.floor(right - CHORD_MARGIN - 0.5)
-    lo_cand = np.ceil(left - CHORD_MARGIN - 0.5)
-    hi_cand = np.floor(right + CHORD_MARGIN - 0.5)
-    lo_cand[unsure] = j0[key_tile[unsure]]
-    hi_cand[unsure] = j1[key_tile[unsure]]
-    lo_sure[unsure] = width
-    hi_sure[unsure] = -1
-    lo_cand = np.clip(lo_cand, 0, width).astype(np.int64)
-    hi_cand = np.clip(hi_cand, -1, width - 1).astype(np.int64)
-    lo_sure = np.clip(lo_sure, 0, width).astype(np.int64)
-    hi_sure = np.clip(hi_sure, -1, width - 1).astype(np.int64)
-    empty = lo_sure > hi_sure
-    lo_sure[empty] = width  # so that min / max below ignore it
-    hi_sure[empty] = -1
-    # the candidates outside the sure span, tested by shapely; a convex tile's row holds
-    # a contiguous span, so the span is the sure one widened to the candidates found in
-    left_n = np.where(empty, np.maximum(hi_cand - lo_cand + 1, 0), np.maximum(lo_sure - lo_cand, 0))
-    right_n = np.where(empty, 0, np.maximum(hi_cand - hi_sure, 0))
-    n_test = left_n + right_n
-    test_key = np.repeat(np.arange(n_keys), n_test)
-    step = index_ranges(np.zeros(n_keys, dtype=np.int64), n_test)
-    jj = np.where(
-        step < left_n[test_key], lo_cand[test_key] + step, hi_sure[test_key] + 1 + step - left_n[test_key]
+    two = (count == 2) & ~unsure
+    pick = two[key]
+    np.minimum.at(left, key[pick], x[pick])
+    np.maximum.at(right, key[pick], x[pick])
+    pick = ~pick & ~unsure[key]
+    order = np.lexsort((x[pick], key[pick]))
+    more_x, more_key = x[pick][order], key[pick][order]
+    span_key = np.concatenate([np.flatnonzero(two), more_key[0::2]])
+    lo_x = np.concatenate([left[two], more_x[0::2]])
+    hi_x = np.concatenate([right[two], more_x[1::2]])
+    # sure: centres within the span less the margin; candidates: within the margin of an end
+    lo_sure = np.clip(np.ceil(lo_x + CHORD_MARGIN - 0.5), 0, width).astype(np.int64)
+    hi_sure = np.clip(np.floor(hi_x - CHORD_MARGIN - 0.5), -1, width - 1).astype(np.int64)
+    lo_cand = np.clip(np.ceil(lo_x - CHORD_MARGIN - 0.5), 0, width).astype(np.int64)
+    hi_cand = np.clip(np.floor(hi_x + CHORD_MARGIN - 0.5), -1, width - 1).astype(np.int64)
+    left_n = np.maximum(np.minimum(lo_sure, hi_cand + 1) - lo_cand, 0)
+    right_n = np.maximum(hi_cand - np.maximum(hi_sure, lo_cand - 1), 0)
+    doubt = np.flatnonzero(unsure)  # every pixel of these rows
+    row_n = np.maximum(j1[key_tile[doubt]] - j0[key_tile[doubt]] + 1, 0)
+    test_key = np.concatenate(
+        [np.repeat(span_key, left_n), np.repeat(span_key, right_n), np.repeat(doubt, row_n)]
     )
+    jj = np.concatenate(
+        [
+            index_ranges(lo_cand, left_n),
+            index_ranges(np.maximum(hi_sure, lo_cand - 1) + 1, right_n),
+            index_ranges(j0[key_tile[doubt]], row_n),
+        ]
+    )
+    if len(jj):  # each once: the ends of two spans can share a candidate
+        pair = np.unique(test_key * (width + 1) + jj)
+        test_key, jj = pair // (width + 1), pair % (width + 1)
     ok = shapely.intersects_xy(geoms[key_tile[test_key]], jj + 0.5, key_row[test_key] + 0.5)
-    np.minimum.at(lo_sure, test_key[ok], jj[ok])
-    np.maximum.at(hi_sure, test_key[ok], jj[ok])
     full = lo_sure <= hi_sure
-    return key_tile[full], key_row[full] * width + lo_sure[full], hi_sure[full] - lo_sure[full] + 1
+    return (
+        np.concatenate([key_tile[span_key[full]], key_tile[test_key[ok]]]),
+        np.concatenate(
+            [key_row[span_key[full]] * width + lo_sure[full], key_row[test_key[ok]] * width + jj[ok]]
+        ),
+        np.concatenate([hi_sure[full] - lo_sure[full] + 1, np.ones(int(ok.sum()), dtype=np.int64)]),
+    )
+
+
+ERROR_BAND = 1 << 15  # (tile, pixel) pairs read at once by colour_error: its temporaries stay in cache
 
 
 def colour_error(
@@ -379,10 +408,15 @@ def colour_error(
     (tile, pixel) pairs of :func:`pixels_under`; NaN when no tile holds a pixel."""
     if len(tiles) == 0:
         return float("nan")
-    diff = picture_lab.reshape(-1, 3)[pixels]
-    diff -= np.asarray(fills_lab)[tiles]
-    diff *= diff  # in place: these are as many as the tiled pixels
-    return float(np.sqrt(diff.sum(axis=1)).mean())
+    flat = picture_lab.reshape(-1, 3)
+    fills = np.asarray(fills_lab)
+    dist = np.empty(len(tiles))
+    for lo in range(0, len(tiles), ERROR_BAND):
+        diff = flat[pixels[lo : lo + ERROR_BAND]]
+        diff -= fills[tiles[lo : lo + ERROR_BAND]]
+        diff *= diff
+        np.sqrt(diff.sum(axis=1), out=dist[lo : lo + ERROR_BAND])
+    return float(dist.mean())
 
 
 STRADDLE_DEPTH = 1.0  # px of tile on each side of an edge for the tile to straddle it
@@ -584,6 +618,7 @@ __all__ = [
     "coverage_at_overlap",
     "coverage_at_overlap_limit",
     "pixels_under",
+    "ERROR_BAND",
     "colour_error",
     "STRADDLE_DEPTH",
     "straddling_tiles",

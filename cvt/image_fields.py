@@ -3,8 +3,9 @@
 The paper turns a picture into a mosaic whose element sizes follow a "density graph" and
 whose directions follow a "vector field", both taken from the picture, without saying
 how.  This module makes both from one filter, the colour structure tensor, computed
-with ``scipy.ndimage`` (Gaussian derivative and Gaussian smoothing filters; no
-hand-written convolution).
+with Gaussian derivative and Gaussian smoothing filters: ``scipy.ndimage``'s, with the
+pass down the columns done a band of rows at a time (:func:`gaussian_filter`, the same
+result bit for bit), and through the FFT for wide Gaussians (:func:`gaussian_smooth`).
 
 Why the structure tensor
 ------------------------
@@ -125,16 +126,97 @@ def structure_tensor(picture: np.ndarray, sigma: float = 1.0, window: float = 2.
     jyy = np.zeros_like(jxx)
     for c in range(chans.shape[2]):
         ch = chans[..., c]
-        gx = ndimage.gaussian_filter(ch, sigma, order=(0, 1), mode="nearest")
-        gy = ndimage.gaussian_filter(ch, sigma, order=(1, 0), mode="nearest")
+        gx = gaussian_filter(ch, sigma, order=(0, 1))
+        gy = gaussian_filter(ch, sigma, order=(1, 0))
         jxx += gx * gx
         jxy += gx * gy
         jyy += gy * gy
     if window > 0:
-        jxx = ndimage.gaussian_filter(jxx, window, mode="nearest")
-        jxy = ndimage.gaussian_filter(jxy, window, mode="nearest")
-        jyy = ndimage.gaussian_filter(jyy, window, mode="nearest")
+        jxx = gaussian_filter(jxx, window)
+        jxy = gaussian_filter(jxy, window)
+        jyy = gaussian_filter(jyy, window)
     return jxx, jxy, jyy
+
+
+def gaussian_weights(sigma: float, order: int = 0) -> np.ndarray:
+    """The Gaussian kernel (``order`` 0) or its derivative (1) of ``ndimage.gaussian_filter1d``,
+    sampled at -r .. r with r = round(4 sigma), computed as it computes it.
+
+    Parameters
+    ----------
+    sigma : float
+        Standard deviation in pixels, > 0.
+    order : int
+        0 or 1.
+
+    Returns
+    -------
+    (2r + 1,) float64 array
+    """
+    radius = int(4.0 * float(sigma) + 0.5)  # ndimage's truncation
+    x = np.arange(-radius, radius + 1)
+    sigma2 = sigma * sigma
+    phi = np.exp(-0.5 / sigma2 * x**2)
+    phi = phi / phi.sum()
+    if order == 0:
+        return phi
+    if order == 1:
+        return x * (1.0 / -sigma2) * phi
+    raise InputError(f"a Gaussian filter's order must be 0 or 1, got {order!r}")
+
+
+ROW_BAND = 32  # output rows filtered at once down the columns: the band's rows stay in cache
+
+
+def _filter_columns(image: np.ndarray, sigma: float, order: int) -> np.ndarray:
+    """``ndimage.gaussian_filter1d(image, sigma, axis=0, order=order, mode="nearest")``,
+    bit for bit: the same weights summed in the same order (ndimage folds a symmetric or
+    antisymmetric kernel about its centre), but over whole rows at a time, where ndimage
+    copies the picture column by column (strided reads)."""
+    weights = gaussian_weights(sigma, order)[::-1]  # ndimage correlates with the reversed kernel
+    r = len(weights) // 2
+    h = image.shape[0]
+    padded = np.concatenate([np.repeat(image[:1], r, axis=0), image, np.repeat(image[-1:], r, axis=0)])
+    fold = np.add if order == 0 else np.subtract
+    out = np.empty(image.shape)
+    tmp = np.empty((min(ROW_BAND, h),) + image.shape[1:])
+    for lo in range(0, h, ROW_BAND):
+        n = min(ROW_BAND, h - lo)
+        o, t, c = out[lo : lo + n], tmp[:n], lo + r
+        np.multiply(padded[c : c + n], weights[r], out=o)
+        for j in range(r, 0, -1):
+            fold(padded[c - j : c - j + n], padded[c + j : c + j + n], out=t)
+            t *= weights[r - j]
+            o += t
+    return out
+
+
+def gaussian_filter(image: np.ndarray, sigma: float, order: tuple[int, int] = (0, 0)) -> np.ndarray:
+    """``ndimage.gaussian_filter(image, sigma, order=order, mode="nearest")`` of a 2-D array,
+    bit for bit, several times faster on a large picture.
+
+    The pass down the columns (ndimage's slow one: it reads each column with a stride)
+    is :func:`_filter_columns`, the pass along the rows is ndimage's own.
+
+    Parameters
+    ----------
+    image : (H, W) float array
+    sigma : float
+        Standard deviation in pixels, the same along both axes (0: no filtering).
+    order : (int, int)
+        Derivative order along the rows' axis (y) and the columns' axis (x): 0 or 1 each.
+
+    Returns
+    -------
+    (H, W) float64 array
+    """
+    image = np.asarray(image, dtype=np.float64)
+    if image.ndim != 2:
+        raise InputError(f"gaussian_filter takes a 2-D array, got shape {image.shape}")
+    if sigma <= 1e-15:  # ndimage leaves an axis with no width alone, whatever its order
+        return image.copy()
+    down = _filter_columns(image, sigma, order[0])
+    return ndimage.gaussian_filter1d(down, sigma, axis=1, order=order[1], mode="nearest")
 
 
 def edge_orientation(jxx, jxy, jyy) -> tuple[np.ndarray, np.ndarray]:
@@ -178,7 +260,7 @@ def gaussian_smooth(image: np.ndarray, sigma: float) -> np.ndarray:
     (H, W) float64 array
     """
     if sigma < FFT_SIGMA:
-        return ndimage.gaussian_filter(image, sigma, mode="nearest")
+        return gaussian_filter(image, sigma)
     from scipy import fft
 
     radius = int(4.0 * sigma + 0.5)  # ndimage's truncation
@@ -187,10 +269,12 @@ def gaussian_smooth(image: np.ndarray, sigma: float) -> np.ndarray:
     kernel /= kernel.sum()
     h, w = image.shape
     size = (fft.next_fast_len(h + 4 * radius, real=True), fft.next_fast_len(w + 4 * radius, real=True))
-    spectrum = fft.rfft2(np.pad(np.asarray(image, dtype=np.float64), radius, mode="edge"), size)
+    # the transforms of the rows (then the columns) are independent: on every core, with
+    # the same result to the last bit
+    spectrum = fft.rfft2(np.pad(np.asarray(image, dtype=np.float64), radius, mode="edge"), size, workers=-1)
     spectrum *= fft.fft(kernel, size[0])[:, None]
     spectrum *= fft.rfft(kernel, size[1])[None, :]
-    out = fft.irfft2(spectrum, size)[2 * radius : 2 * radius + h, 2 * radius : 2 * radius + w]
+    out = fft.irfft2(spectrum, size, workers=-1)[2 * radius : 2 * radius + h, 2 * radius : 2 * radius + w]
     return np.ascontiguousarray(out)
 
 
@@ -231,7 +315,7 @@ def picture_fields(
     top = float(np.percentile(strength, 99)) if strength.size else 0.0
     edges = strength >= max(EDGE_FRACTION * top, EDGE_FLOOR)
     if edges.any():
-        _, (ii, jj) = ndimage.distance_transform_edt(~edges, return_indices=True)
+        ii, jj = ndimage.distance_transform_edt(~edges, return_distances=False, return_indices=True)
         carried = edge_angles[ii, jj]
         angles = smooth_angles(carried, FIELD_SMOOTHING * spacing, shape_record(element).side_period)
     else:
@@ -324,6 +408,9 @@ __all__ = [
     "PictureFields",
     "as_channels",
     "structure_tensor",
+    "gaussian_weights",
+    "ROW_BAND",
+    "gaussian_filter",
     "edge_orientation",
     "FFT_SIGMA",
     "gaussian_smooth",

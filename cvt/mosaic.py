@@ -321,7 +321,9 @@ class WalledBackend:
     (:func:`split_cells`), and the moments of those labels.  Without this the cells of
     a Lloyd step ignore a thin wall (its pixels only leave the sums), so sites sit
     astride it and their tiles stay small; with it each centroid moves to its site's
-    side and cells line up along the wall.  Everything else is the inner backend's."""
+    side and cells line up along the wall.  An inner backend that cuts the cells itself
+    (``walled_moments``, e.g. on its device) does; any other has its labels split here,
+    on the host.  Everything else is the inner backend's."""
 
     def __init__(self, inner):
         self.inner = inner
@@ -334,10 +336,12 @@ class WalledBackend:
         return split_cells(labels, sites) if grid.mask is not None else labels
 
     def moments(self, sites, *, angles=None, scales=None, metric, grid):
+        args = dict(angles=angles, scales=scales, metric=metric, grid=grid)
         if grid.mask is None:
-            return self.inner.moments(sites, angles=angles, scales=scales, metric=metric, grid=grid)
-        labels = self.inner.label(sites, angles=angles, scales=scales, metric=metric, grid=grid)
-        return split_moments(labels, sites)
+            return self.inner.moments(sites, **args)
+        own = getattr(self.inner, "walled_moments", None)
+        found = None if own is None else own(sites, **args)
+        return split_moments(self.inner.label(sites, **args), sites) if found is None else found
 
 
 # --------------------------------------------------------------------------- colours
@@ -358,13 +362,9 @@ def tile_colours(lab: np.ndarray, polygons, sites, tiles: np.ndarray, pixels: np
 
     h, w = lab.shape[:2]
     n = len(polygons)
-    flat = lab.reshape(-1, 3)
-    under = flat[pixels]
-    count = np.bincount(tiles, minlength=n).astype(np.float64)
-    sums = np.stack([np.bincount(tiles, weights=under[:, c], minlength=n) for c in range(3)], axis=1)
-    held = count > 0
-    fill = sums / np.where(held, count, 1.0)[:, None]
-    fill = geometric_median(under, tiles, fill)
+    held = np.bincount(tiles, minlength=n) > 0
+    # from each tile's mean; the pixels read from the picture a block of tiles at a time
+    fill = geometric_median(lab.reshape(-1, 3), tiles, None, index=pixels, groups=n)
     points = np.array(sites, dtype=np.float64).reshape(-1, 2).copy()
     thin = [k for k in np.flatnonzero(~held) if polygons[k] is not None and not polygons[k].is_empty]
     if thin:
@@ -381,7 +381,14 @@ def tile_colours(lab: np.ndarray, polygons, sites, tiles: np.ndarray, pixels: np
 MEDIAN_BLOCK = 65536
 
 
-def geometric_median(points: np.ndarray, group: np.ndarray, start: np.ndarray, steps: int = 16) -> np.ndarray:
+def geometric_median(
+    points: np.ndarray,
+    group: np.ndarray,
+    start: np.ndarray | None,
+    steps: int = 16,
+    index: np.ndarray | None = None,
+    groups: int | None = None,
+) -> np.ndarray:
     """Per group, the point with the least mean Euclidean distance to the group's points.
 
     Weiszfeld's iteration from ``start``; a step that lands on a point keeps its distance
@@ -391,28 +398,40 @@ def geometric_median(points: np.ndarray, group: np.ndarray, start: np.ndarray, s
     Parameters
     ----------
     points : (P, D) float array
-        The points.
+        The points (with ``index``: the rows they are read from).
     group : (P,) int array
         The group of each point, in 0..G-1 (fastest when sorted, as
         :func:`cvt.evaluate.pixels_under` gives them).
-    start : (G, D) float array
-        Where each group's iteration starts (the groups' means).
+    start : (G, D) float array or None
+        Where each group's iteration starts; None: at the group's mean (``groups`` then
+        gives G).
     steps : int
         Weiszfeld steps.
+    index : (P,) int array, optional
+        The points are ``points[index]``, read a block at a time (no copy of them all).
+    groups : int, optional
+        G, where ``start`` is None.
 
     Returns
     -------
     (G, D) float array
-        The medians; ``start`` for a group without points.
+        The medians; ``start`` (0 where it is None) for a group without points.
     """
     points = np.asarray(points, dtype=np.float64)
     group = np.asarray(group)
-    m = np.array(start, dtype=np.float64, copy=True)
+    if start is None:
+        m = np.zeros((int(groups), points.shape[1]))
+    else:
+        m = np.array(start, dtype=np.float64, copy=True)
     if len(group) == 0:
         return m
     if np.any(group[1:] < group[:-1]):
         order = np.argsort(group, kind="stable")
-        points, group = points[order], group[order]
+        group = group[order]
+        if index is None:
+            points = points[order]
+        else:
+            index = np.asarray(index)[order]
     counts = np.bincount(group, minlength=len(m))
     held = np.flatnonzero(counts)
     ends = np.cumsum(counts[held])
@@ -422,7 +441,15 @@ def geometric_median(points: np.ndarray, group: np.ndarray, start: np.ndarray, s
     for a, b in zip(bounds[:-1], bounds[1:], strict=True):
         first = ends[a - 1] if a else 0
         block = held[a:b]
-        m[block] = _weiszfeld(points[first : ends[b - 1]], counts[block], m[block], steps)
+        pts = points[first : ends[b - 1]] if index is None else points[index[first : ends[b - 1]]]
+        if start is None:  # each group's sum in its points' order, as one bincount of all
+            local = np.repeat(np.arange(len(block)), counts[block])
+            sums = np.stack(
+                [np.bincount(local, weights=pts[:, c], minlength=len(block)) for c in range(pts.shape[1])],
+                axis=1,
+            )
+            m[block] = sums / counts[block].astype(np.float64)[:, None]
+        m[block] = _weiszfeld(pts, counts[block], m[block], steps)
     return m
 
 
@@ -659,12 +686,14 @@ def make_mosaic(
         rgb, source = picture_array(image, at_least=(w, h), memory_limit=memory_limit)
     picture = resample(rgb, w, h)
     del rgb
+    t_picture = time.perf_counter()
     lab = srgb_to_lab(picture)
     spacing = math.sqrt(w * h / n_elements)
     gap = AUTO_GAP * spacing if gap is None else parse_gap(gap)
     fields = picture_fields(picture, spacing, element, contrast=contrast)
     # the edge map is made in any case: the straddling measure reads it
     edge_map = strong_edges(lab, edge_threshold, min_length=EDGE_MIN_LENGTH * spacing)
+    picture_seconds = time.perf_counter() - t_picture
     walls = bool(edges) and bool(edge_map.any())
     problem = Problem(
         Grid(w, h, ~edge_map if walls else None),
@@ -700,7 +729,12 @@ def make_mosaic(
     straddles = straddling_tiles(polygons, edge_map)
     error = colour_error(lab, fills_lab, tiles, pixels)
     t3 = time.perf_counter()
-    stages = {"cutting_seconds": t1 - t0, "fills_seconds": t2 - t1, "evaluation_seconds": t3 - t2}
+    stages = {
+        "picture_seconds": picture_seconds,  # Lab, density, field and strong edges of the picture
+        "cutting_seconds": t1 - t0,
+        "fills_seconds": t2 - t1,
+        "evaluation_seconds": t3 - t2,
+    }
     dist = dataclasses.replace(
         dist,
         elements=polygons,

@@ -69,6 +69,22 @@ def hex_colour(colour) -> str:
     return f"#{r:02x}{g:02x}{b:02x}"
 
 
+def hex_colours(fills) -> list[str]:
+    """:func:`hex_colour` of every colour of ``fills``, by one format call per block.
+
+    Parameters
+    ----------
+    fills : (N, 3) array or sequence of colours
+        As :func:`fill_rows` reads them.
+
+    Returns
+    -------
+    list of N '#rrggbb' strings
+    """
+    rgb = fill_rows(fills, len(fills))
+    return [line[:-1] for line in format_rows("#{:02x}{:02x}{:02x}\n", list(rgb.T))]
+
+
 def label_colours(n: int, seed: int = 12345) -> np.ndarray:
     """(n + 1, 3) uint8: distinct, well-spread colours per label; the last one (for -1,
     outside the region) is black."""
@@ -452,6 +468,7 @@ __all__ = [
     "parse_colour",
     "rgb8",
     "hex_colour",
+    "hex_colours",
     "label_colours",
     "cells_image",
     "draw_elements",

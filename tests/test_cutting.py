@@ -140,6 +140,28 @@ def test_geometric_median_minimises_the_mean_distance(monkeypatch, block, shuffl
         assert cost(got[g]) <= cost(means[g]) + 1e-12  # never worse than the mean
 
 
+@pytest.mark.parametrize("block", [None, 7])
+def test_geometric_median_reads_indexed_points_from_their_means(monkeypatch, block):
+    """Points read through ``index`` a block at a time and started at each group's mean
+    (start None): the same medians, to the last bit, as the points gathered first and
+    started at means summed plainly; a group without points stays at 0."""
+    if block is not None:
+        monkeypatch.setattr(mosaic, "MEDIAN_BLOCK", block)
+    rng = np.random.default_rng(6)
+    table = rng.random((50, 3)) * 100
+    sizes = [3, 0, 1, 12, 9]
+    groups = np.repeat(np.arange(len(sizes)), sizes)
+    index = rng.integers(0, 50, len(groups))
+    sums = np.stack(
+        [np.bincount(groups, weights=table[index, c], minlength=len(sizes)) for c in range(3)], axis=1
+    )
+    means = sums / np.maximum(np.bincount(groups, minlength=len(sizes)), 1)[:, None]
+    want = geometric_median(table[index], groups, means)
+    got = geometric_median(table, groups, None, index=index, groups=len(sizes))
+    assert np.array_equal(got, want) and np.array_equal(got[1], np.zeros(3))
+    assert np.isnan(geometric_median(np.full((2, 3), np.nan), np.zeros(2, dtype=int), None, groups=1)).all()
+
+
 def wall_network(seed=3):
     """(H, W) bool: 4-connected random walks (crossing, meeting the border, one closed
     loop), and their centre lines built here step by step from the pixels."""
@@ -229,3 +251,25 @@ def test_a_cut_outline_starts_nearest_its_whole_tiles_first_vertex():
         ring = np.asarray(c.exterior.coords)[:-1]
         nearest = ring[np.argmin(((ring - w.exterior.coords[0]) ** 2).sum(axis=1))]
         np.testing.assert_array_equal(g.exterior.coords[0], nearest)
+
+
+def test_elementwise_on_threads_gives_each_elements_own_result(monkeypatch):
+    """Split across threads (four here, whatever the machine has), every element's
+    difference and buffer is the one shapely gives that element alone, in order."""
+    import shapely
+
+    from compact_distributions.cvt import threads
+
+    monkeypatch.setattr(threads, "usable_cores", lambda: 4)
+    rng = np.random.default_rng(3)
+    n = 4 * threads.PARALLEL_MIN + 5
+    centres = rng.uniform(0, 100, (n, 2))
+    a = shapely.buffer(shapely.points(centres), rng.uniform(1, 4, n))
+    b = shapely.box(*(centres + 0.5).T, *(centres + 6).T)  # a corner inside every disc
+    got = threads.elementwise(shapely.difference, a, b)
+    alone = [shapely.difference(x, y) for x, y in zip(a, b, strict=True)]
+    assert len(got) == n and all(shapely.equals_exact(g, e, 0) for g, e in zip(got, alone, strict=True))
+    assert all(shapely.area(g) < shapely.area(x) for g, x in zip(got, a, strict=True))
+    grown = threads.elementwise(shapely.buffer, b, distance=0.5, join_style="mitre")
+    assert np.allclose(shapely.area(grown), (5.5 + 1.0) ** 2)
+    assert threads.elementwise(shapely.area, a[:3]).shape == (3,)  # too few to split

@@ -212,20 +212,75 @@ def tricky_tiles(rng, n, w, h):
     return out
 
 
+def assert_pixels_are_shapelys(tiles, w, h):
+    """pixels_under against shapely's intersects asked for every pixel centre of the
+    raster, tile by tile."""
+    yy, xx = np.mgrid[0:h, 0:w] + 0.5
+    got_tiles, got_pixels = pixels_under(tiles, w, h)
+    want_tiles, want_pixels = [], []
+    for k, t in enumerate(tiles):
+        if t is None or t.is_empty:
+            continue
+        inside = np.flatnonzero(shapely.intersects_xy(t, xx.ravel(), yy.ravel()))
+        want_tiles += [k] * len(inside)
+        want_pixels += list(inside)
+    np.testing.assert_array_equal(got_tiles, want_tiles)
+    np.testing.assert_array_equal(got_pixels, want_pixels)
+
+
 def test_pixels_under_matches_shapely_on_every_pixel():
     """Against shapely's intersects asked for every pixel centre of the raster, tile by tile."""
     rng = np.random.default_rng(8)
     w, h = 40, 30
-    yy, xx = np.mgrid[0:h, 0:w] + 0.5
     for _ in range(60):
         tiles = tricky_tiles(rng, int(rng.integers(1, 12)), w, h)
-        got_tiles, got_pixels = pixels_under(tiles, w, h)
-        want_tiles, want_pixels = [], []
-        for k, t in enumerate(tiles):
-            if t is None or t.is_empty:
-                continue
-            inside = np.flatnonzero(shapely.intersects_xy(t, xx.ravel(), yy.ravel()))
-            want_tiles += [k] * len(inside)
-            want_pixels += list(inside)
-        np.testing.assert_array_equal(got_tiles, want_tiles)
-        np.testing.assert_array_equal(got_pixels, want_pixels)
+        assert_pixels_are_shapelys(tiles, w, h)
+
+
+def non_convex_tiles(rng, w, h):
+    """Stars (some with their points on pixel centres), two-part multipolygons, a polygon
+    with two holes, tiles cut like a mosaic's (a box less rotated boxes), a bow-tie and
+    a multipolygon whose parts overlap (both invalid)."""
+    out = []
+    for _ in range(4):
+        cx, cy = rng.random(2) * [w, h]
+        n = int(rng.integers(5, 12))
+        ang = np.sort(rng.random(n)) * 2 * np.pi
+        rad = np.where(np.arange(n) % 2 == 0, 2 + rng.random(n) * 8, 0.5 + rng.random(n) * 2)
+        xy = np.column_stack([cx + rad * np.cos(ang), cy + rad * np.sin(ang)])
+        if rng.random() < 0.5:
+            xy = np.floor(xy) + 0.5
+        out.append(shapely.make_valid(shapely.Polygon(xy)))
+    cx, cy = rng.random(2) * [w, h]
+    out.append(
+        shapely.MultiPolygon(
+            [shapely.box(cx, cy, cx + 4, cy + 3), shapely.box(cx + 5.5, cy + 1, cx + 9, cy + 6)]
+        )
+    )
+    out.append(
+        shapely.box(cx - 8, cy - 8, cx + 8, cy + 8)
+        .difference(shapely.box(cx - 6, cy - 6, cx - 2, cy - 2))
+        .difference(shapely.box(cx + 1, cy + 1, cx + 5.5, cy + 4.5))
+    )
+    cut = shapely.box(cx - 6, cy - 6, cx + 6, cy + 6)
+    for _ in range(3):
+        bx, by = rng.random(2) * 12 - 6 + [cx, cy]
+        cut = cut.difference(shapely.affinity.rotate(shapely.box(bx, by, bx + 5, by + 5), rng.random() * 90))
+    out.append(cut)
+    out.append(shapely.Polygon([(cx, cy), (cx + 7, cy + 5), (cx + 7, cy), (cx, cy + 5)]))
+    out.append(
+        shapely.MultiPolygon(
+            [shapely.box(cx, cy, cx + 5, cy + 5), shapely.box(cx + 2, cy + 2, cx + 8, cy + 7)]
+        )
+    )
+    return out
+
+
+def test_pixels_under_matches_shapely_on_non_convex_tiles():
+    """The spans between a row's crossings of every ring, against shapely's intersects
+    asked for every pixel centre, on non-convex, holed, multi-part and invalid tiles."""
+    rng = np.random.default_rng(21)
+    w, h = 40, 30
+    for _ in range(40):
+        tiles = non_convex_tiles(rng, w, h) + tricky_tiles(rng, 3, w, h)
+        assert_pixels_are_shapelys(tiles, w, h)

@@ -17,7 +17,7 @@ from PIL import Image
 from compact_distributions.backends.numpy_backend import NumpyBackend
 from compact_distributions.bench.cli import main
 from compact_distributions.cvt.errors import InputError
-from compact_distributions.cvt.image_fields import gaussian_smooth, picture_fields
+from compact_distributions.cvt.image_fields import gaussian_filter, gaussian_smooth, picture_fields
 from compact_distributions.cvt.mosaic import make_mosaic, picture_array, raster_size, resample
 
 SVG = "{http://www.w3.org/2000/svg}"
@@ -62,6 +62,43 @@ def test_gaussian_smooth_is_ndimages_filter(shape, sigma):
     np.testing.assert_allclose(gaussian_smooth(image, sigma), want, rtol=0, atol=1e-12)
 
 
+@pytest.mark.parametrize(
+    "shape,sigma,order",
+    [
+        ((70, 45), 1.0, (0, 1)),
+        ((70, 45), 1.0, (1, 0)),
+        ((70, 45), 2.0, (0, 0)),
+        ((3, 50), 2.0, (1, 1)),  # fewer rows than the kernel's radius
+        ((1, 9), 1.5, (0, 0)),
+        ((33, 40), 7.9, (0, 0)),  # more rows than a band: bands of rows join without a seam
+    ],
+)
+def test_gaussian_filter_is_ndimages_filter_bit_for_bit(shape, sigma, order, monkeypatch):
+    """The structure tensor's filter: scipy's own gaussian_filter (mode nearest) is the
+    truth, to the last bit; bands of 4 rows so that band edges are crossed."""
+    from scipy import ndimage
+
+    from compact_distributions.cvt import image_fields
+
+    monkeypatch.setattr(image_fields, "ROW_BAND", 4)
+    image = np.random.default_rng(7).random(shape) * 50 - 10
+    want = ndimage.gaussian_filter(image, sigma, order=order, mode="nearest")
+    got = gaussian_filter(image, sigma, order=order)
+    assert got.shape == want.shape and np.array_equal(got, want)
+
+
+def test_gaussian_filter_refuses_what_it_cannot_filter():
+    with pytest.raises(InputError, match="2-D"):
+        gaussian_filter(np.zeros((4, 4, 3)), 1.0)
+    with pytest.raises(InputError, match="order"):
+        gaussian_filter(np.zeros((4, 4)), 1.0, order=(2, 0))
+    # NaN is carried, not hidden: the filtered pixels near it are NaN, as ndimage's
+    image = np.zeros((20, 20))
+    image[15, 15] = np.nan
+    out = gaussian_filter(image, 1.0)
+    assert np.isnan(out[15, 11]) and np.isnan(out[11, 15]) and not np.isnan(out[:10, :10]).any()
+
+
 def test_flat_picture_gives_uniform_density_and_zero_field():
     f = picture_fields(np.full((40, 50, 3), 0.4), spacing=5.0)
     assert np.ptp(f.density.values) == 0
@@ -94,6 +131,12 @@ def test_without_field_every_element_is_upright():
         stripes(deg=30.0), NUMPY, n_elements=120, iterations=2, use_field=False, use_density=False
     )
     assert np.all(m.angles == 0)
+    # every stage after the method is timed, and the picture's analysis before it
+    from compact_distributions.bench.results import stages_of
+
+    stages = stages_of(m.distribution)
+    for name in ("picture", "cutting", "fills", "evaluation"):
+        assert 0.0 <= stages[name] < m.method_seconds
 
 
 def test_smaller_elements_where_the_picture_has_detail():

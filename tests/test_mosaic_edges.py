@@ -49,6 +49,46 @@ def test_lab_round_trip():
     np.testing.assert_allclose(lab_to_srgb(srgb_to_lab(rgb)), rgb, atol=1e-9)
 
 
+def test_lab_of_a_picture_in_bands_is_lab_of_each_pixel(monkeypatch):
+    """A picture is converted a band of pixels at a time: bands of 7 pixels (ending
+    inside rows) give what one band of the whole picture gives, within rounding of
+    what each pixel gets alone, and the published white and black wherever they lie."""
+    from compact_distributions.cvt import colour
+
+    pic = np.random.default_rng(3).random((6, 5, 3))
+    pic[0, 0], pic[5, 4] = 1.0, 0.0
+    alone = np.array([[srgb_to_lab(pic[i, j]) for j in range(5)] for i in range(6)])
+    whole = srgb_to_lab(pic)
+    monkeypatch.setattr(colour, "LAB_BAND", 7)
+    got = srgb_to_lab(pic)
+    assert got.shape == (6, 5, 3) and np.array_equal(got, whole)
+    np.testing.assert_allclose(got, alone, rtol=0, atol=1e-12)
+    np.testing.assert_allclose(got[0, 0], (100, 0, 0), atol=1e-12)
+    np.testing.assert_allclose(got[5, 4], (0, 0, 0), atol=1e-12)
+    assert srgb_to_lab(np.zeros((0, 3))).shape == (0, 3)
+    assert np.isnan(srgb_to_lab(np.array([np.nan, 0.5, 0.5]))).any()
+
+
+def test_colour_error_in_bands_is_the_mean_distance(monkeypatch):
+    """Mean ΔE*ab over (tile, pixel) pairs read a band at a time (bands of 5 pairs):
+    the plain per-pair distances' mean; NaN without a pair, NaN carried from a NaN fill."""
+    from compact_distributions.cvt import evaluate as ev
+
+    rng = np.random.default_rng(2)
+    lab = rng.random((4, 6, 3)) * 100
+    fills = rng.random((3, 3)) * 100
+    tiles = np.array([0, 0, 1, 1, 1, 2, 2, 2, 2, 0, 1, 2, 0])
+    pixels = rng.integers(0, 24, len(tiles))
+    plain = np.mean(
+        [np.linalg.norm(lab.reshape(-1, 3)[p] - fills[t]) for t, p in zip(tiles, pixels, strict=True)]
+    )
+    monkeypatch.setattr(ev, "ERROR_BAND", 5)
+    assert ev.colour_error(lab, fills, tiles, pixels) == pytest.approx(plain, rel=1e-14)
+    assert np.isnan(ev.colour_error(lab, fills, tiles[:0], pixels[:0]))
+    fills[1] = np.nan
+    assert np.isnan(ev.colour_error(lab, fills, tiles, pixels))
+
+
 # ----------------------------------------------------------------------- edges
 
 

@@ -155,7 +155,10 @@ def test_density_caps_keep_the_sizes_the_density_asks_for():
     caps = density_caps(problem, centres, np.ones(len(polys)), "square", 1.0, 0.02)
     assert np.sum(4 * (caps / 1.02) ** 2) == pytest.approx(problem.grid.pixel_count)
     half_sides = np.sqrt(shapely.area(np.array(polys, dtype=object))) / 2
-    assert (half_sides <= caps * 1.01 + 0.05).mean() > 0.95  # the centres moved a little
+    # the centres moved a little: nine in ten within 1 % of the cap at their final
+    # centre, every one within 3 %
+    assert (half_sides <= caps * 1.01 + 0.05).mean() > 0.9
+    assert (half_sides <= caps * 1.03 + 0.05).all()
 
 
 def test_compacted_elements_follow_the_field_at_their_own_centres():

@@ -15,6 +15,7 @@ from compact_distributions.cvt.render import (
     draw_elements,
     element_coordinates,
     hex_colour,
+    hex_colours,
     label_colours,
     svg_lines,
 )
@@ -93,6 +94,19 @@ def test_svg_element_lines_are_the_plain_formatting():
                 d += f"M{pts[0]} L{' '.join(pts[1:])}Z"
         expected.append(f'<path id="e{k}" d="{d}" fill="{fill}"/>\n')
     assert len(expected) > 100 and lines == expected
+
+
+def test_hex_colours_are_the_plain_formatting():
+    """Every colour as '#rrggbb' at once, against the colour-by-colour formatting and
+    hand-written values at the 8-bit rounding's ties (half to even, as both round)."""
+    fills = np.random.default_rng(4).random((300, 3))
+    fills[0] = (0.0, 1.0, 0.5)
+    fills[1] = (0.5 / 255, 1.5 / 255, 2.5 / 255)
+    got = hex_colours(fills)
+    assert got == [hex_colour(c) for c in fills]
+    assert got[:2] == ["#00ff80", "#000202"]
+    assert hex_colours(np.zeros((0, 3))) == []
+    assert hex_colours(np.full((2, 3), 255, dtype=np.uint8)) == ["#ffffff", "#ffffff"]
 
 
 def test_result_json_lists_are_the_plain_json():

@@ -1,0 +1,178 @@
+"""The walled Lloyd step's device path against the host's: a backend that cuts the cells
+itself (``walled_moments``: OpenCL finds the pieces on its device) must give moments
+bit-identical to ``moments_from_labels(split_cells(labels, sites))`` of its own labels,
+which the host path (:func:`cvt.mosaic.split_moments`, the one every backend can use)
+gives and a flood fill checks (tests/test_mosaic_edges.py).
+
+The cases have walls that cut cells into several pieces, walls that end inside cells
+(cells that look split and are not), sites on the walls and off the raster, and varied
+angles and scales (a direction field and a density)."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+from scipy import ndimage
+
+from compact_distributions.backends.numpy_backend import NumpyBackend
+from compact_distributions.cvt.errors import BackendUnavailable, InputError
+from compact_distributions.cvt.metrics import make_metric
+from compact_distributions.cvt.moments import moments_from_labels
+from compact_distributions.cvt.mosaic import WalledBackend, make_mosaic, split_cells, split_moments
+from compact_distributions.cvt.problem import Grid
+
+from .test_mosaic_edges import flood_fill_split, hand_moments
+
+FIELDS = ("count", "sx", "sy", "sxx", "syy")
+
+
+def as_array(mom):
+    return np.stack([getattr(mom, f) for f in FIELDS])
+
+
+def walled_case(name, seed, w=251, h=189, n=400):
+    """Sites, angles, scales, metric and a region with walls: straight lines drawn across
+    the raster and short ones that end inside cells, 1 px wide, some sites on them."""
+    rng = np.random.default_rng(seed)
+    mask = np.ones((h, w), dtype=bool)
+    for k in range(14):
+        a = rng.random(2) * [w, h]
+        b = a + (rng.random(2) - 0.5) * ([2 * w, 2 * h] if k < 7 else [40, 40])
+        t = np.linspace(0, 1, int(np.hypot(*(b - a)) * 2) + 2)[:, None]
+        xs, ys = (a + t * (b - a)).T
+        keep = (xs >= 0) & (xs < w) & (ys >= 0) & (ys < h)
+        mask[ys[keep].astype(int), xs[keep].astype(int)] = False
+    sites = rng.random((n, 2)) * [w, h]
+    wi, wj = np.nonzero(~mask)
+    on_wall = rng.choice(len(wi), 20, replace=False)
+    sites[:20] = np.stack([wj[on_wall], wi[on_wall]], axis=1) + 0.5
+    sites[20] = (-3.0, h + 2.0)  # off the raster: its pixel is clamped to a corner
+    angles = rng.random(n) * 2 * np.pi
+    scales = 0.4 + 1.6 * rng.random(n)
+    return sites, dict(angles=angles, scales=scales, metric=make_metric(name, 0.5), grid=Grid(w, h, mask))
+
+
+def test_the_host_path_needs_no_device_path():
+    """The NumPy backend has no path of its own: WalledBackend splits its labels."""
+    sites, args = walled_case("l2", seed=1, w=60, h=50, n=30)
+    numpy = NumpyBackend()
+    assert numpy.walled_moments(sites, **args) is None
+    labels = numpy.label(sites, **args)
+    want = flood_fill_split(labels, sites)
+    np.testing.assert_array_equal(
+        as_array(WalledBackend(numpy).moments(sites, **args)), hand_moments(want, 30)
+    )
+
+
+def test_bad_sites_are_an_input_error():
+    sites, args = walled_case("l2", seed=1, w=60, h=50, n=30)
+    sites[3, 0] = np.nan
+    with pytest.raises(InputError):
+        NumpyBackend().walled_moments(sites, **args)
+
+
+# ------------------------------------------------------------------------- OpenCL
+
+try:
+    from compact_distributions.backends.opencl import OpenCLBackend
+
+    OpenCLBackend.probe()
+    OPENCL = None
+except BackendUnavailable as exc:
+    OPENCL = str(exc)
+needs_opencl = pytest.mark.skipif(OPENCL is not None, reason=f"OpenCL backend unavailable: {OPENCL}")
+
+
+@needs_opencl
+@pytest.mark.parametrize("block", [8, 0], ids=["blocks", "pixels"])
+@pytest.mark.parametrize("split", [False, True], ids=["native", "split32"])
+@pytest.mark.parametrize("name", ["l2", "linf", "triangle"])
+def test_device_path_equals_the_host_split_of_the_device_labels(name, split, block):
+    ocl = OpenCLBackend(split_atomics=split, block=block)
+    try:
+        for seed in range(3):
+            sites, args = walled_case(name, seed)
+            labels = ocl.label(sites, **args)
+            got = WalledBackend(ocl).moments(sites, **args)
+            cut = split_cells(labels, sites)
+            want = moments_from_labels(cut, len(sites))
+            np.testing.assert_array_equal(as_array(got), as_array(want))
+            np.testing.assert_array_equal(as_array(split_moments(labels, sites)), as_array(want))
+            # the case is what it claims: cells in pieces, several in three or more
+            pieces = [ndimage.label(labels == c)[1] for c in range(len(sites))]
+            assert sum(p > 1 for p in pieces) >= 10 and sum(p > 2 for p in pieces) >= 2
+            assert not np.array_equal(cut, labels)
+    finally:
+        ocl.close()
+
+
+@needs_opencl
+def test_bad_sites_are_an_input_error_on_the_device_path():
+    sites, args = walled_case("l2", seed=1, w=60, h=50, n=30)
+    sites[3, 1] = np.inf
+    with OpenCLBackend() as ocl, pytest.raises(InputError):
+        ocl.walled_moments(sites, **args)
+
+
+def run_ends(labels, cell):
+    """Top and bottom runs of a cell: runs with no pixel of the cell straight above,
+    straight below (counted pixel by pixel)."""
+    h, w = labels.shape
+    tops = bottoms = 0
+    for i in range(h):
+        j = 0
+        while j < w:
+            if labels[i, j] != cell:
+                j += 1
+                continue
+            e = j
+            while e < w and labels[i, e] == cell:
+                e += 1
+            tops += not (i > 0 and (labels[i - 1, j:e] == cell).any())
+            bottoms += not (i + 1 < h and (labels[i + 1, j:e] == cell).any())
+            j = e
+    return tops, bottoms
+
+
+@needs_opencl
+def test_a_cell_that_may_be_in_pieces_and_is_not_keeps_all_its_pixels():
+    """Two cups in one cell, one open below and one open above: two top and two bottom
+    runs, so the device looks for its pieces, and finds one."""
+    w, h = 120, 90
+    mask = np.ones((h, w), dtype=bool)
+    mask[30, 10:30] = mask[30:36, 10] = mask[30:36, 29] = False  # open below
+    mask[60, 35:51] = mask[55:61, 35] = mask[55:61, 50] = False  # open above
+    grid, l2 = Grid(w, h, mask), make_metric("l2")
+    sites = np.array([[30.0, 45.0], [90.0, 45.0]])
+    with OpenCLBackend() as ocl:
+        labels = ocl.label(sites, metric=l2, grid=grid)
+        got = ocl.walled_moments(sites, metric=l2, grid=grid)
+    assert run_ends(labels, 0) == (2, 2) and ndimage.label(labels == 0)[1] == 1
+    np.testing.assert_array_equal(as_array(got), hand_moments(labels, 2))
+
+
+@needs_opencl
+def test_more_runs_than_the_buffer_holds_are_asked_for_again():
+    sites, args = walled_case("l2", seed=2)
+    with OpenCLBackend() as ocl:
+        ocl._run_room = 8
+        got = WalledBackend(ocl).moments(sites, **args)
+        assert ocl._run_room > 8
+        want = split_moments(ocl.label(sites, **args), sites)
+    np.testing.assert_array_equal(as_array(got), as_array(want))
+
+
+@needs_opencl
+def test_a_walled_mosaic_has_the_same_sites_on_either_path(monkeypatch):
+    """Lloyd iterations of a walled mosaic (density, field, walls from the picture's
+    edges) land on identical sites whether OpenCL lists the runs or the host reads its
+    labels."""
+    from compact_distributions.bench.mosaic_cmd import SAMPLES_DIR
+
+    with OpenCLBackend() as ocl:
+        run = dict(n_elements=600, size=256, iterations=4, method="ours")
+        fast = make_mosaic(SAMPLES_DIR / "scene.jpg", ocl, **run)
+        monkeypatch.setattr(OpenCLBackend, "_walled_moments", lambda self, *a: None)
+        host = make_mosaic(SAMPLES_DIR / "scene.jpg", ocl, **run)
+    assert fast.problem.grid.mask is not None and not fast.problem.grid.mask.all()
+    np.testing.assert_array_equal(fast.sites, host.sites)
