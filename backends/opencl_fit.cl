@@ -27,7 +27,7 @@
 #define REPEATS 3
 
 __constant double STEPS[4] = {0.3, 0.15, 0.075, 0.0375};
-__constant long LANES[16] = {0, 1, 2, 3, 4, 5, 6, 7, 8, 9, 10, 11, 12, 13, 14, 15};
+__constant long FIT_LANES[16] = {0, 1, 2, 3, 4, 5, 6, 7, 8, 9, 10, 11, 12, 13, 14, 15};
 __constant double MOVES[8][2] = {{1, 0}, {-1, 0}, {0, 1}, {0, -1}, {1, 1}, {1, -1}, {-1, 1}, {-1, -1}};
 
 typedef struct
@@ -96,10 +96,10 @@ typedef struct
         return out;                                                                     \
     }
 #endif
-#define CAT(a, b) a##b
-#define VEC(T, n) CAT(T, n)
-typedef VEC(double, VW) doublev;
-typedef VEC(long, VW) longv;
+#define FIT_CAT(a, b) a##b
+#define FIT_VEC(T, n) FIT_CAT(T, n)
+typedef FIT_VEC(double, VW) doublev;
+typedef FIT_VEC(long, VW) longv;
 #ifdef METRIC_ELLIPSE
 HOST_HYPOT_DEF(host_hypot_s, double)
 HOST_HYPOT_DEF(host_hypot_v, doublev)
@@ -122,14 +122,14 @@ inline double least(const cell_t *c, const double px, const double py, const dou
         return m;
     doublev mv = (doublev)(m);
     longv at = (longv)(*hint);
-    const longv lane = VEC(vload, VW)(0, LANES);
+    const longv lane = FIT_VEC(vload, VW)(0, FIT_LANES);
     for (int j = 0; j < c->count; j += VW)
     {
         doublev sx, sy;
         if (j + VW <= c->count)
         {
-            sx = VEC(convert_double, VW)(VEC(vload, VW)(0, c->qx + j));
-            sy = VEC(convert_double, VW)(VEC(vload, VW)(0, c->qy + j));
+            sx = FIT_VEC(convert_double, VW)(FIT_VEC(vload, VW)(0, c->qx + j));
+            sy = FIT_VEC(convert_double, VW)(FIT_VEC(vload, VW)(0, c->qy + j));
         }
         else /* the last, short vector: its last sample repeated (no minimum changes) */
         {
@@ -140,8 +140,8 @@ inline double least(const cell_t *c, const double px, const double py, const dou
                 tx[l] = c->qx[at];
                 ty[l] = c->qy[at];
             }
-            sx = VEC(convert_double, VW)(VEC(vload, VW)(0, tx));
-            sy = VEC(convert_double, VW)(VEC(vload, VW)(0, ty));
+            sx = FIT_VEC(convert_double, VW)(FIT_VEC(vload, VW)(0, tx));
+            sy = FIT_VEC(convert_double, VW)(FIT_VEC(vload, VW)(0, ty));
         }
 #ifdef METRIC_ELLIPSE
         if (c->grout > 0.0)
