@@ -27,6 +27,7 @@ import numpy as np
 from compact_distributions.cvt.errors import InputError
 from compact_distributions.cvt.metrics import Metric
 from compact_distributions.cvt.moments import Moments, moments_from_labels
+from compact_distributions.cvt.placement import FitCells, search_on_host
 from compact_distributions.cvt.problem import Grid
 from compact_distributions.cvt.resources import RUNTIME
 
@@ -133,6 +134,25 @@ class Backend(ABC):
         if reason is not None:
             raise InputError(f"backend {self.variant!r}: {reason}")
         return sites, angles, scales
+
+    # ------------------------------------------------------------------ the fit
+    def fit_search(self, cells: FitCells):
+        """The centre search of ``cvt.placement.fit_centres`` over ``cells``: the host's
+        (:func:`cvt.placement.search_on_host`, the reference); a backend with a kernel for
+        it returns the same centres and sizes.
+
+        Parameters
+        ----------
+        cells : cvt.placement.FitCells
+            The cells, their contour samples, their elements' balls and starts.
+
+        Returns
+        -------
+        centres : (2, M, 2) float64
+            Where each cell's search ends, from each of its two starts.
+        sizes : (2, M) float64
+            The element's size there."""
+        return search_on_host(cells)
 
     # ------------------------------------------------------------------ lifetime
     def close(self) -> None:  # noqa: B027 - optional hook, nothing to release by default

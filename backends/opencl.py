@@ -674,6 +674,114 @@ class OpenCLBackend(Backend):
         gone = moments_from_runs(start, start + dropped[:, 1], dropped[:, 2], w, n)
         return Moments(*(getattr(whole, f.name) - getattr(gone, f.name) for f in dataclasses.fields(Moments)))
 
+    # --------------------------------------------------------------------- fit
+    def fit_search(self, cells):
+        """The centre search of ``cvt.placement.fit_centres`` in a kernel
+        (``opencl_fit.cl``): one work-item per cell and start, the host's search step for
+        step, so the centres and sizes are :func:`cvt.placement.search_on_host`'s bit for
+        bit (``Backend.fit_search`` says what goes in and out).  The second starts (each
+        cell's deepest pixel) are found by the kernel too where its depths are the host's
+        bit for bit, else by the host (``FitCells.inscribed``).  Needs float64 on the
+        device; without it the host searches."""
+        if "cl_khr_fp64" not in self._device.extensions:
+            return super().fit_search(cells)
+        if self._queue is None:
+            raise RuntimeError("opencl: this backend was closed; create a new one")
+        cl = self._cl
+        ellipse = cells.kind == "ellipse"
+        k = 1 if ellipse else len(cells.slack)
+        key = ("fit", ellipse, k, FIT_VECTOR)
+        if key not in self._programs:
+            opts = [f"-DK={k}", f"-DVW={FIT_VECTOR}"] + (["-DMETRIC_ELLIPSE"] if ellipse else [])
+            prg = self._build(FIT_KERNEL_FILE, opts)
+            self._programs[key] = (cl.Kernel(prg, "fit_search"),)
+        (kernel,) = self._programs[key]
+        # the kernel's depths are the host's bit for bit where the host's are exact: whole
+        # numbers (chessboard) or sums of squared quarters (spacings 1, 2, 1/2, ...)
+        kind, sy, sx = cells.depth
+        on_device = kind == "chessboard" or (float(4 * sy).is_integer() and float(4 * sx).is_integer())
+        starts = np.empty((2, len(cells.ids), 2))
+        starts[0] = cells.anchor
+        if not on_device:
+            starts[1] = cells.inscribed()
+        m = len(cells.ids)
+        h, w = cells.labels.shape
+        centres, sizes = np.empty((2, m, 2)), np.empty((2, m))
+        flags = cl.mem_flags.READ_ONLY | cl.mem_flags.COPY_HOST_PTR
+        inputs = [
+            cells.labels,
+            cells.qx,
+            cells.qy,
+            cells.first.astype(np.int64),
+            cells.counts.astype(np.int32),
+            cells.ids.astype(np.int32),
+            cells.anchor,
+            cells.coef,
+            np.concatenate([cells.slack, [0.0]]),  # never empty
+            starts,
+        ]
+        bufs = [cl.Buffer(self._context, flags, hostbuf=np.ascontiguousarray(a)) for a in inputs]
+        out_c = cl.Buffer(self._context, cl.mem_flags.WRITE_ONLY, centres.nbytes)
+        out_s = cl.Buffer(self._context, cl.mem_flags.WRITE_ONLY, sizes.nbytes)
+        scratch = cl.Buffer(self._context, cl.mem_flags.READ_WRITE, 8 * len(cells.qx) if on_device else 8)
+        try:
+            labels, qx, qy, first, counts, ids, anchor, coef, slack, starts = bufs
+            kernel.set_args(
+                np.int32(w),
+                np.int32(h),
+                labels,
+                qx,
+                qy,
+                first,
+                counts,
+                ids,
+                np.int32(m),
+                anchor,
+                coef,
+                slack,
+                np.float64(cells.half),
+                starts,
+                np.int32(0 if not on_device else 1 if kind == "chessboard" else 2),
+                np.float64(sy),
+                np.float64(sx),
+                scratch,
+                out_c,
+                out_s,
+            )
+            local = FIT_GROUP
+            cl.enqueue_nd_range_kernel(self._queue, kernel, (-(-2 * m // local) * local,), (local,))
+            self._read(centres, out_c)
+            self._read(sizes, out_s)
+        finally:
+            for buf in (*bufs, out_c, out_s, scratch):
+                buf.release()
+        return centres, sizes
+
+    def _build(self, path: Path, opts: list[str]):
+        """The program in ``path`` built with ``opts``, quietly (PoCL's own compiler
+        chatter goes to descriptor 2; PYOPENCL_COMPILER_OUTPUT=1 shows it); a failed build
+        raises BackendUnavailable with its log."""
+        cl = self._cl
+        try:
+            source = path.read_text()
+        except OSError as exc:
+            raise BackendUnavailable(f"opencl: kernel source missing: {exc}") from None
+        shown = os.environ.get("PYOPENCL_COMPILER_OUTPUT") == "1"
+        try:
+            with warnings.catch_warnings(), nullcontext() if shown else c_output_silenced(2):
+                warnings.simplefilter("ignore")
+                return cl.Program(self._context, source).build(options=opts)
+        except cl.Error as exc:
+            log = " ".join(str(exc).split())[:400]
+            raise BackendUnavailable(
+                f"opencl: kernel failed to build on {self.device()} ({' '.join(opts)}): {log}"
+            ) from None
+
+
+FIT_KERNEL_FILE = Path(__file__).with_name("opencl_fit.cl")
+FIT_VECTOR = 4  # samples read at once by a work-item of the fit kernel (2, 4, 8 or 16)
+FIT_GROUP = 16  # work-items per group of the fit kernel: cells of unlike cost spread over the cores
+
 
 __all__ = [
     "KERNEL_FILE",
@@ -688,4 +796,7 @@ __all__ = [
     "describe_device",
     "choose_device",
     "OpenCLBackend",
+    "FIT_KERNEL_FILE",
+    "FIT_VECTOR",
+    "FIT_GROUP",
 ]

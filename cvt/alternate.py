@@ -30,10 +30,13 @@ from .placement import FITS, fit_centres, placement_sizes
 from .validate import one_of
 
 
-def alternate_triangles(labels, sites, angles, aspect=None, gap: float = 0.0, fit: str = "centre"):
+def alternate_triangles(
+    labels, sites, angles, aspect=None, gap: float = 0.0, fit: str = "centre", search=None
+):
     """Per cell, the triangle's angle (θ or θ + π), centre and size: the orientation
-    whose element fits larger.  ``fit`` "centre" (:func:`cvt.placement.fit_centres`)
-    or "site".  Returns ``(angles, centres, sizes)`` as (N,), (N, 2), (N,)."""
+    whose element fits larger.  ``fit`` "centre" (:func:`cvt.placement.fit_centres`,
+    whose ``search`` this passes on) or "site".  Returns ``(angles, centres, sizes)`` as
+    (N,), (N, 2), (N,)."""
     one_of(fit, "fit", FITS)
     sites = np.asarray(sites, dtype=np.float64).reshape(-1, 2)
     n = len(sites)
@@ -42,7 +45,7 @@ def alternate_triangles(labels, sites, angles, aspect=None, gap: float = 0.0, fi
     for turn in (0.0, math.pi):
         a = theta + turn
         if fit == "centre":
-            c, s = fit_centres(labels, sites, a, "triangle", aspect, gap)
+            c, s = fit_centres(labels, sites, a, "triangle", aspect, gap, search=search)
         else:
             c, s = sites.copy(), placement_sizes(labels, sites, a, "triangle", aspect, gap)
         out.append((a, c, s))

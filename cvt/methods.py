@@ -234,6 +234,12 @@ class Method:
         return " ".join([self.name, *[p for p in parts if p]])
 
 
+def _backend_search(backend):
+    """The backend's centre search for ``cvt.placement.fit_centres`` (its ``fit_search``:
+    a kernel where it has one), None for the host's (a backend without one)."""
+    return getattr(backend, "fit_search", None)
+
+
 def run_ours(
     problem: Problem,
     backend,
@@ -262,7 +268,15 @@ def run_ours(
     labels = final_labels(problem, backend, res)
     t2 = time.perf_counter()
     elements = place_elements(
-        labels, res.sites, res.angles + turn, shape, problem.metric.aspect, problem.grid, gap, fit=fit
+        labels,
+        res.sites,
+        res.angles + turn,
+        shape,
+        problem.metric.aspect,
+        problem.grid,
+        gap,
+        fit=fit,
+        search=_backend_search(backend),
     )
     t3 = time.perf_counter()
     return Distribution(
@@ -376,9 +390,13 @@ def run_ours_compact(
     t2 = time.perf_counter()
     angles = res.angles + turn
     if alternate:
-        angles, centres, sizes = alternate_triangles(labels, res.sites, angles, aspect, gap)
+        angles, centres, sizes = alternate_triangles(
+            labels, res.sites, angles, aspect, gap, search=_backend_search(backend)
+        )
     else:
-        centres, sizes = fit_centres(labels, res.sites, angles, shape, aspect, gap)
+        centres, sizes = fit_centres(
+            labels, res.sites, angles, shape, aspect, gap, search=_backend_search(backend)
+        )
     t3 = time.perf_counter()
     caps = None
     if problem.density is not None and density_slack is not None:

@@ -441,6 +441,17 @@ def _squared_depth(inner, sy: float, sx: float):
     return out
 
 
+def depth_metric(shape: str, aspect) -> tuple[str, float, float]:
+    """The distance of :func:`_inscribed_centres` for elements of ``shape``: ("chessboard",
+    1, 1) for squares, else ("euclidean", sy, sx), rows sy and columns sx apart (1/β and β
+    for rectangles and ellipses, whose gauge is about hypot(β·dx, dy/β); 1 and 1 otherwise)."""
+    kind = shape_record(shape).distance
+    if kind == "chessboard":
+        return kind, 1.0, 1.0
+    beta = element_ball(shape, aspect).aspect if kind == "scaled" else 1.0
+    return "euclidean", 1.0 / beta, beta
+
+
 def _inscribed_centres(labels, shape: str, aspect, n: int) -> np.ndarray:
     """(n, 2) per cell, the centre of the pixel farthest from the cell's contour, by a
     distance transform in the element's own metric (chessboard for squares, Euclidean
@@ -457,14 +468,13 @@ def _inscribed_centres(labels, shape: str, aspect, n: int) -> np.ndarray:
     inner[:, :-1] &= labels[:, :-1] == labels[:, 1:]
     inner[[0, -1]] = False
     inner[:, [0, -1]] = False
-    kind = shape_record(shape).distance
+    kind, sy, sx = depth_metric(shape, aspect)
     if kind == "chessboard":
         dt = ndimage.distance_transform_cdt(inner, metric="chessboard")
     else:
-        beta = element_ball(shape, aspect).aspect if kind == "scaled" else 1.0  # gauge ~ hypot(β·dx, dy/β)
-        dt = _squared_depth(inner, 1.0 / beta, beta)
+        dt = _squared_depth(inner, sy, sx)
         if dt is None:  # cells too wide for the short transform: SciPy's
-            dt = ndimage.distance_transform_edt(inner, sampling=(1.0 / beta, beta))
+            dt = ndimage.distance_transform_edt(inner, sampling=(sy, sx))
     del inner
     lab, d = labels.ravel(), dt.ravel()
     outside = lab < 0
@@ -483,7 +493,91 @@ def _inscribed_centres(labels, shape: str, aspect, n: int) -> np.ndarray:
     return out
 
 
-def fit_centres(labels, sites, angles, shape: str, aspect, gap: float = 0.0):
+class FitCells:
+    """What the centre search of :func:`fit_centres` reads: the cells that own contour
+    samples, their samples, their element's ball and the two starts of each cell.
+
+    A backend's ``fit_search(cells)`` takes this record and returns what
+    :func:`search_on_host` (the reference) returns, bit for bit.
+
+    Attributes
+    ----------
+    labels : (H, W) int32
+        The label raster, -1 outside the region.
+    ids : (M,) int
+        The label of each cell searched (every cell that owns a contour sample).
+    first, counts : (M,) int64
+        Where each cell's samples start in ``qx``, ``qy`` and how many it has (>= 1).
+    qx, qy : (S,) float32
+        The contour samples (:func:`contour_samples`, exact half-integers), by cell.
+    kind : str
+        "polygon" or "ellipse": the element's ball.
+    coef : (M, 2K) or (M, 3) float64
+        Per cell its ball: the facets f_k = R(θ) n_k / h_k as all x then all y
+        components, or the quadratic form (qxx, qxy, qyy) of an ellipse.
+    slack : (K,) float64
+        G/2·|f_k| per facet (polygons; empty for an ellipse).
+    half : float
+        G/2, the grout kept on each side.
+    anchor : (M, 2) float64
+        Per cell its site (the polygon's facet terms are taken about it): the first
+        start of its search.
+    depth : tuple
+        The distance of the second start, :meth:`inscribed` (:func:`depth_metric`)."""
+
+    def __init__(self, labels, samples: _CellSamples, gauge: _Gauge, sites, shape: str, aspect):
+        self.samples, self.gauge = samples, gauge
+        ids = samples.cells
+        self.labels = np.ascontiguousarray(labels, dtype=np.int32)
+        self.ids, self.first, self.counts = ids, samples.first, samples.counts
+        self.qx, self.qy = samples.qx, samples.qy
+        self.kind, self.half = gauge.kind, gauge.half
+        if gauge.kind == "polygon":
+            self.coef = np.concatenate([gauge.fx[:, ids].T, gauge.fy[:, ids].T], axis=1)
+            self.slack = gauge.slack
+        else:
+            self.coef, self.slack = np.ascontiguousarray(gauge.q[:, ids].T), np.zeros(0)
+        self.sites = sites
+        self.anchor = np.ascontiguousarray(sites[ids])
+        self.shape, self.aspect = shape, aspect
+        self.depth = depth_metric(shape, aspect)
+
+    def inscribed(self) -> np.ndarray:
+        """(M, 2) the second start of each cell's search: the centre of the pixel of the
+        cell farthest from its contour (:func:`_inscribed_centres`; the site where the cell
+        has no pixel)."""
+        out = _inscribed_centres(self.labels, self.shape, self.aspect, len(self.sites))[self.ids]
+        missing = ~np.isfinite(out).all(axis=1)
+        out[missing] = self.anchor[missing]
+        return out
+
+
+def search_on_host(cells: FitCells):
+    """The centre search of :func:`fit_centres` in NumPy, the reference for backends.
+
+    Parameters
+    ----------
+    cells : FitCells
+        The cells, their samples, balls and starts.
+
+    Returns
+    -------
+    centres : (2, M, 2) float64
+        Where each cell's search ends, from each start.
+    sizes : (2, M) float64
+        The element's size there (0 where the start is not in a pixel of its cell)."""
+    m = len(cells.ids)
+    centres, sizes = np.empty((2, m, 2)), np.empty((2, m))
+    starts = np.stack([cells.anchor, cells.inscribed()])
+    for which, x, y in cells.samples.blocks(_FIT_BLOCK):  # cells are independent: one block at a time
+        ids = cells.ids[which]
+        terms = cells.gauge.prepare(ids, x, y, cells.sites)
+        found = _fit_search(cells.labels, ids, terms, cells.gauge, starts[:, which], cells.sites)
+        centres[:, which], sizes[:, which] = found
+    return centres, sizes
+
+
+def fit_centres(labels, sites, angles, shape: str, aspect, gap: float = 0.0, search=None):
     """``fit="centre"``: move each element's centre inside its cell to the position
     where the same rule allows the largest size.
 
@@ -498,11 +592,13 @@ def fit_centres(labels, sites, angles, shape: str, aspect, gap: float = 0.0):
     1024², N = 4000, seed 1: square coverage 0.769 searching from the site alone, 0.780
     from both starts (circles 0.723 / 0.728, triangles 0.516 / 0.522).
 
-    Cells are independent, so the search runs on blocks of cells of like sample counts
-    (:meth:`_CellSamples.blocks`), both starts at once; a trial is first bounded from a
-    few samples of its cell (:func:`_fit_search`), and only a trial that may grow costs
-    one subtraction and one max per facet and sample of its cell (:class:`_Gauge`).
-    Memory does not grow with N beyond the samples themselves."""
+    ``search``: the search itself, a callable that takes a :class:`FitCells` and returns
+    what :func:`search_on_host` returns (a backend's ``fit_search``); None: that one.
+    On the host, cells are independent, so the search runs on blocks of cells of like
+    sample counts (:meth:`_CellSamples.blocks`), both starts at once; a trial is first
+    bounded from a few samples of its cell (:func:`_fit_search`), and only a trial that
+    may grow costs one subtraction and one max per facet and sample of its cell
+    (:class:`_Gauge`).  Memory does not grow with N beyond the samples themselves."""
     labels = np.asarray(labels)
     sites = np.asarray(sites, dtype=np.float64).reshape(-1, 2)
     n = len(sites)
@@ -514,21 +610,17 @@ def fit_centres(labels, sites, angles, shape: str, aspect, gap: float = 0.0):
     if len(samples.cells) == 0:
         return out_c, out_s
     gauge = _Gauge(compile_sites(ball_metric, sites, angles, None), 0.5 * gap)
-    start2 = _inscribed_centres(labels, shape, aspect, n)
-    missing = ~np.isfinite(start2).all(axis=1)
-    start2[missing] = sites[missing]
-    for which, x, y in samples.blocks(_FIT_BLOCK):  # cells are independent: one block at a time
-        ids = samples.cells[which]
-        terms = gauge.prepare(ids, x, y, sites)
-        (c_a, c_b), (s_a, s_b) = _fit_search(labels, ids, terms, gauge, [sites[ids], start2[ids]], sites)
-        second = s_b > s_a
-        out_c[ids] = np.where(second[:, None], c_b, c_a)
-        out_s[ids] = np.where(second, s_b, s_a)
+    cells = FitCells(labels, samples, gauge, sites, shape, aspect)
+    (c_a, c_b), (s_a, s_b) = (search_on_host if search is None else search)(cells)
+    second = s_b > s_a
+    ids = samples.cells
+    out_c[ids] = np.where(second[:, None], c_b, c_a)
+    out_s[ids] = np.where(second, s_b, s_a)
     return out_c, out_s
 
 
 def place_elements(
-    labels, sites, angles, shape: str, aspect, grid: Grid, gap: float = 0.0, fit: str = "site"
+    labels, sites, angles, shape: str, aspect, grid: Grid, gap: float = 0.0, fit: str = "site", search=None
 ) -> list:
     """One shapely Polygon per site (``None`` where the cell is empty or too small):
     the ``shape`` element, rotated by the site's angle, centred at the site, at the
@@ -536,7 +628,8 @@ def place_elements(
 
     ``labels`` is the final (H, W) int32 label raster of these sites (-1 outside the
     region); ``aspect`` is β of rectangles and ellipses; ``gap`` the grout width in px;
-    ``fit`` "site" (centred at the site, the default) or "centre" (:func:`fit_centres`)."""
+    ``fit`` "site" (centred at the site, the default) or "centre" (:func:`fit_centres`,
+    with its ``search``)."""
     one_of(fit, "fit", FITS)
     labels = np.asarray(labels)
     if labels.shape != grid.shape:
@@ -547,7 +640,7 @@ def place_elements(
     n = len(sites)
     angles = np.zeros(n) if angles is None else np.broadcast_to(np.asarray(angles, np.float64), (n,))
     if fit == "centre":
-        centres, sizes = fit_centres(labels, sites, angles, shape, aspect, gap)
+        centres, sizes = fit_centres(labels, sites, angles, shape, aspect, gap, search=search)
     else:
         centres, sizes = sites, placement_sizes(labels, sites, angles, shape, aspect, gap)
     placed = np.flatnonzero(sizes > 0)
@@ -563,6 +656,9 @@ __all__ = [
     "contour_samples",
     "placement_sizes",
     "FITS",
+    "FitCells",
+    "depth_metric",
+    "search_on_host",
     "fit_centres",
     "place_elements",
 ]

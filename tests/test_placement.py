@@ -432,6 +432,12 @@ def _search_by_hand(ball, samples, start, angle, half, labels, i):
     return centre, best
 
 
+@pytest.fixture(params=["host", "opencl"])
+def search(request):
+    """The centre search of fit_centres: the host's (None), or the OpenCL kernel's."""
+    return None if request.param == "host" else request.getfixturevalue("ocl").fit_search
+
+
 @pytest.mark.parametrize(
     "metric,shape,gap,field",
     [
@@ -443,10 +449,11 @@ def _search_by_hand(ball, samples, start, angle, half, labels, i):
         ("l2", "ellipse", 1.0, "circular"),
     ],
 )
-def test_centre_fit_matches_a_search_cell_by_cell(metric, shape, gap, field):
-    """fit_centres (blocks of cells, the samples' projections folded in once) gives the
-    sizes of a pattern search written out per cell with the textbook gauge, from the same
-    two starts, to rounding; the centres too, except where both starts reach one size."""
+def test_centre_fit_matches_a_search_cell_by_cell(metric, shape, gap, field, search):
+    """fit_centres (blocks of cells, the samples' projections folded in once; or a
+    backend's kernel) gives the sizes of a pattern search written out per cell with the
+    textbook gauge, from the same two starts, to rounding; the centres too, except where
+    both starts reach one size."""
     from compact_distributions.cvt.lloyd import final_labels, lloyd
     from compact_distributions.cvt.placement import _inscribed_centres, fit_centres
     from compact_distributions.cvt.shapes import element_ball
@@ -457,7 +464,7 @@ def test_centre_fit_matches_a_search_cell_by_cell(metric, shape, gap, field):
     b = NumpyBackend()
     r = lloyd(p, b, 4)
     lab = final_labels(p, b, r)
-    centres, sizes = fit_centres(lab, r.sites, r.angles, shape, p.metric.aspect, gap)
+    centres, sizes = fit_centres(lab, r.sites, r.angles, shape, p.metric.aspect, gap, search=search)
     starts = _inscribed_centres(lab, shape, p.metric.aspect, len(r.sites))
     ball = element_ball(shape, p.metric.aspect)
     assert (sizes > 0).sum() >= 20
@@ -469,6 +476,113 @@ def test_centre_fit_matches_a_search_cell_by_cell(metric, shape, gap, field):
         assert sizes[i] == pytest.approx(max(s1, s2), rel=1e-9, abs=1e-9)
         if abs(s1 - s2) > 1e-9 * max(s1, s2):
             assert centres[i] == pytest.approx(c2 if s2 > s1 else c1, abs=1e-9)
+
+
+def _hostile_labels():
+    """A label raster with what a search can meet: a region with holes (-1), one-pixel
+    cells, a cell split in two pieces, a long thin cell, a cell of many samples (not a
+    whole number of a kernel's vectors), and sites outside their own cells."""
+    rng = np.random.default_rng(7)
+    lab = np.full((61, 83), -1, dtype=np.int32)
+    lab[2:40, 3:30] = 0  # a big cell: 130 samples
+    lab[10:20, 10:20] = -1  # with a hole
+    lab[5, 40], lab[50, 70] = 1, 1  # one cell in two one-pixel pieces
+    lab[45:47, 5:80] = 2  # long and thin
+    lab[0:30, 35:83] = np.kron(rng.integers(3, 9, (5, 8)), np.ones((6, 6), np.int32))  # ragged cells
+    lab[31:44, 33:60] = 9
+    lab[60, 82] = 10  # a corner pixel
+    sites = np.array(
+        [[15.0, 21.0], [40.5, 5.5], [40.0, 46.0], [50.2, 12.7], [60.0, 15.0], [45.0, 3.0], [70.5, 20.5],
+         [36.0, 1.0], [80.0, 28.0], [45.0, 37.0], [82.5, 60.5], [1.0, 1.0]]
+    )  # fmt: skip
+    return lab, sites
+
+
+@pytest.mark.parametrize(
+    "shape,aspect,gap",
+    [
+        ("square", 1.0, 0.0),
+        ("rectangle", 0.5, 1.0),
+        ("triangle", 1.0, 0.7),
+        ("hexagon", 1.0, 0.0),
+        ("octagon", 1.0, 2.0),
+        ("circle", 1.0, 0.0),
+        ("ellipse", 0.4, 1.3),
+    ],
+)
+def test_opencl_search_is_the_hosts_bit_for_bit(ocl, shape, aspect, gap):
+    """The OpenCL kernel's search ends where the host's does, bit for bit (centres and
+    sizes), on relaxed cells under a field and on hostile ones; every value finite."""
+    from compact_distributions.cvt.lloyd import final_labels, lloyd
+    from compact_distributions.cvt.placement import fit_centres
+
+    grid = Grid(150, 110)
+    p = Problem(grid, 90, make_metric("l2"), field=DirectionField.named("circular", 150, 110), seed=3)
+    r = lloyd(p, NumpyBackend(), 5)
+    lab, sites = _hostile_labels()
+    angles = np.random.default_rng(1).uniform(0, 3, len(sites))
+    relaxed = final_labels(p, NumpyBackend(), r)
+    for labels, at, theta, placed in ((relaxed, r.sites, r.angles, 80), (lab, sites, angles, 2)):
+        want = fit_centres(labels, at, theta, shape, aspect, gap)
+        got = fit_centres(labels, at, theta, shape, aspect, gap, search=ocl.fit_search)
+        assert np.isfinite(got[0]).all() and np.isfinite(got[1]).all()
+        assert (want[1] > 0).sum() >= placed
+        assert np.array_equal(got[0], want[0]) and np.array_equal(got[1], want[1])
+
+
+@pytest.mark.parametrize(
+    "shape,aspect", [("square", 1.0), ("circle", 1.0), ("rectangle", 0.5), ("ellipse", 2.0)]
+)
+def test_opencl_inscribed_starts_are_the_hosts_distance_transform(ocl, shape, aspect):
+    """The kernel's second starts (the deepest pixel of each cell, the first in raster
+    order) are the host's distance transform's, bit for bit: under a grout wider than
+    every cell no element grows, so each search ends where it starts."""
+    from compact_distributions.cvt import placement as pl
+    from compact_distributions.cvt.lloyd import final_labels, lloyd
+    from compact_distributions.cvt.metrics import compile_sites
+    from compact_distributions.cvt.shapes import element_ball
+
+    p = Problem(Grid(130, 97), 60, make_metric("linf"), seed=8)
+    r = lloyd(p, NumpyBackend(), 4)
+    for labels, at in ((final_labels(p, NumpyBackend(), r), r.sites), _hostile_labels()):
+        angles = np.zeros(len(at))
+        gauge = pl._Gauge(compile_sites(element_ball(shape, aspect), at, angles, None), 500.0)
+        cells = pl.FitCells(labels, pl._CellSamples(labels, len(at)), gauge, at, shape, aspect)
+        centres, sizes = ocl.fit_search(cells)
+        assert not sizes.any()
+        assert np.array_equal(centres[0], cells.anchor)
+        assert np.array_equal(centres[1], cells.inscribed())
+
+
+def test_no_cell_no_search():
+    """A raster without cells places nothing and never calls the search."""
+    from compact_distributions.cvt.placement import fit_centres
+
+    def refuse(cells):
+        raise AssertionError("searched")
+
+    centres, sizes = fit_centres(
+        np.full((9, 9), -1, np.int32), [[4.0, 4.0]], None, "square", 1.0, search=refuse
+    )
+    assert np.array_equal(centres, [[4.0, 4.0]]) and np.array_equal(sizes, [0.0])
+
+
+def test_ours_compact_fits_with_its_backends_search():
+    """ours-compact and ours-fit hand the fit to their backend's ``fit_search``."""
+    from compact_distributions.cvt.methods import run_ours_compact
+    from compact_distributions.cvt.placement import search_on_host
+
+    class Counting(NumpyBackend):
+        calls = 0
+
+        def fit_search(self, cells):
+            Counting.calls += 1
+            return search_on_host(cells)
+
+    p = Problem(Grid(64, 48), 30, make_metric("linf"), seed=1)
+    compact = run_ours_compact(p, Counting(), iterations=2)
+    run_ours(p, Counting(), iterations=2, fit="centre")
+    assert Counting.calls == 2 and sum(e is not None for e in compact.elements) > 20
 
 
 # --- the parts the fit is built from, against plain NumPy ---------------------------------

@@ -1,5 +1,6 @@
 """Speed of the stages of ``ours-compact`` after the Lloyd step, at growing N: the fit
-(``cvt.placement.fit_centres``) and compaction (``cvt.compaction.compact``), each timed
+(``cvt.placement.fit_centres``, with the OpenCL kernel's search as ours-compact runs it
+on that backend, and with the host's) and compaction (``cvt.compaction.compact``), each timed
 alone on the same relaxed cells, beside the 20 Lloyd iterations that made them.
 
 The cells come from 20 OpenCL linf Lloyd steps (squares, no density, no field; raster
@@ -69,23 +70,33 @@ def _rounds(config, n) -> int:
     return (3 if n <= 16000 else 1) if _enabled(config) else 1
 
 
-def test_bench_fit(benchmark, relaxed, request):
+@pytest.mark.parametrize("where", ["opencl", "host"])
+def test_bench_fit(benchmark, relaxed, ocl, where, fitted, request):
+    """The fit as ours-compact runs it on OpenCL (its kernel's search: ``fit``), and with
+    the host's search (``fit-host``); the same centres and sizes bit for bit.  The
+    kernel is built before the timing (a first call builds it once per process)."""
     problem, sites, labels, lloyd_s = relaxed
     n = len(sites)
+    search = ocl.fit_search if where == "opencl" else None
+    stage = "fit" if where == "opencl" else "fit-host"
     benchmark.group = f"stages after Lloyd, squares N={n} {problem.grid.width}²"
-    benchmark.extra_info.update(stage="fit", n_elements=n, lloyd_seconds=lloyd_s)
+    benchmark.extra_info.update(stage=stage, n_elements=n, lloyd_seconds=lloyd_s)
+    if search is not None:
+        fit_centres(labels, sites, np.zeros(n), "square", 1.0, search=search)  # builds the kernel
     centres, sizes = benchmark.pedantic(
         fit_centres,
         args=(labels, sites, np.zeros(n), "square", 1.0),
+        kwargs={"search": search},
         rounds=_rounds(request.config, n),
         iterations=1,
     )
+    assert np.array_equal(centres, fitted[0]) and np.array_equal(sizes, fitted[1])
     # every fitted square lies in its own cell up to the half pixel of the placement rule
     assert np.isfinite(centres).all() and (sizes > 0).mean() > 0.99
     coverage = 4 * float(np.sum(sizes**2)) / problem.grid.pixel_count
     assert 0.7 < coverage < 1.0
     if _enabled(request.config):
-        TIMES[n, "fit"] = benchmark.stats.stats.median
+        TIMES[n, stage] = benchmark.stats.stats.median
         TIMES[n, "lloyd"] = lloyd_s
 
 
