@@ -84,6 +84,12 @@ def _facet_count(metric: Metric) -> int:
     return 0 if metric.kind == "ellipse" else np.asarray(metric.normals).shape[0]
 
 
+def _fit_key(ellipse: bool, k: int) -> tuple:
+    """The key of the program that holds the fit kernel for a ball kind and facet count
+    (an ellipse's fit uses no K)."""
+    return ("fit", True) if ellipse else ("fit", False, k)
+
+
 def _import_pyopencl():
     try:
         import pyopencl as cl
@@ -279,7 +285,8 @@ class OpenCLBackend(Backend):
         if block is None:  # CPUs vectorise over a block's pixels; GPUs want a pixel each
             block = 0 if self._device.type & cl.device_type.GPU else 8
         self.block = int(block)
-        self._programs: dict[tuple, tuple] = {}  # (kind, K, int64, block) -> (label, moments kernels)
+        # (kind, K, int64, block) -> (label, moments kernels); _fit_key -> the fit's program
+        self._programs: dict[tuple, object] = {}
         self._buffers: dict[str, object] = {}
         self._mask_source = None  # the mask array last uploaded (grids are immutable)
         self._mask_pixels = 0
@@ -287,6 +294,8 @@ class OpenCLBackend(Backend):
         self._labels_buf = None  # the buffer the last labels went to, and their (w, h)
         self._labels_raster = None
         self._wall_kernels: dict[int, dict] = {}  # program -> walled-cell kernels by name
+        self._fit_kernels: dict[tuple, object] = {}  # _fit_key -> fit kernel
+        self._fits_on_device = "cl_khr_fp64" in self._device.extensions
         self._run_room = 1 << 16  # runs the suspect_runs buffer holds; grows as needed
 
     # ------------------------------------------------------------------ device
@@ -307,6 +316,7 @@ class OpenCLBackend(Backend):
         self._buffers.clear()
         self._programs.clear()
         self._wall_kernels.clear()
+        self._fit_kernels.clear()
         self._mask_source = None
         self._labels_buf = self._labels_raster = None
         self._queue = self._context = None
@@ -329,23 +339,15 @@ class OpenCLBackend(Backend):
                 opts.append("-DMETRIC_ELLIPSE")
             if self.int64_atomics:
                 opts.append("-DUSE_INT64_ATOMICS")
-            try:
-                source = KERNEL_FILE.read_text()
-            except OSError as exc:
-                raise BackendUnavailable(f"opencl: kernel source missing: {exc}") from None
-            try:
-                # compiler chatter is not an error, and PoCL's compiler prints its own on
-                # descriptor 2 ("N warnings generated"); a failed build keeps its log in
-                # the error.  PYOPENCL_COMPILER_OUTPUT=1 shows it.
-                shown = os.environ.get("PYOPENCL_COMPILER_OUTPUT") == "1"
-                with warnings.catch_warnings(), nullcontext() if shown else c_output_silenced(2):
-                    warnings.simplefilter("ignore")
-                    prg = cl.Program(self._context, source).build(options=opts)
-            except cl.Error as exc:
-                log = " ".join(str(exc).split())[:400]
-                raise BackendUnavailable(
-                    f"opencl: kernel failed to build on {self.device()} ({' '.join(opts)}): {log}"
-                ) from None
+            # the element fit's kernel rides in the same program where it can run (it
+            # needs float64): one build instead of two, and the second costs most of a
+            # fit at a few thousand elements
+            files = [KERNEL_FILE, FIT_KERNEL_FILE] if self._fits_on_device else [KERNEL_FILE]
+            if self._fits_on_device:
+                opts.append(f"-DVW={FIT_VECTOR}")
+            prg = self._build(files, opts)
+            if self._fits_on_device:
+                self._programs[_fit_key(metric.kind == "ellipse", k)] = prg
             label_name = "label_blocks" if self.block > 0 else "label_pixels"
             self._programs[key] = (cl.Kernel(prg, label_name), cl.Kernel(prg, "row_moments"))
         return self._programs[key]
@@ -683,19 +685,20 @@ class OpenCLBackend(Backend):
         cell's deepest pixel) are found by the kernel too where its depths are the host's
         bit for bit, else by the host (``FitCells.inscribed``).  Needs float64 on the
         device; without it the host searches."""
-        if "cl_khr_fp64" not in self._device.extensions:
+        if not self._fits_on_device:
             return super().fit_search(cells)
         if self._queue is None:
             raise RuntimeError("opencl: this backend was closed; create a new one")
         cl = self._cl
         ellipse = cells.kind == "ellipse"
         k = 1 if ellipse else len(cells.slack)
-        key = ("fit", ellipse, k, FIT_VECTOR)
-        if key not in self._programs:
+        key = _fit_key(ellipse, k)
+        if key not in self._programs:  # no label program of this shape built the fit's
             opts = [f"-DK={k}", f"-DVW={FIT_VECTOR}"] + (["-DMETRIC_ELLIPSE"] if ellipse else [])
-            prg = self._build(FIT_KERNEL_FILE, opts)
-            self._programs[key] = (cl.Kernel(prg, "fit_search"),)
-        (kernel,) = self._programs[key]
+            self._programs[key] = self._build([FIT_KERNEL_FILE], opts)
+        if key not in self._fit_kernels:
+            self._fit_kernels[key] = cl.Kernel(self._programs[key], "fit_search")
+        kernel = self._fit_kernels[key]
         # the kernel's depths are the host's bit for bit where the host's are exact: whole
         # numbers (chessboard) or sums of squared quarters (spacings 1, 2, 1/2, ...)
         kind, sy, sx = cells.depth
@@ -757,13 +760,14 @@ class OpenCLBackend(Backend):
                 buf.release()
         return centres, sizes
 
-    def _build(self, path: Path, opts: list[str]):
-        """The program in ``path`` built with ``opts``, quietly (PoCL's own compiler
-        chatter goes to descriptor 2; PYOPENCL_COMPILER_OUTPUT=1 shows it); a failed build
-        raises BackendUnavailable with its log."""
+    def _build(self, paths: list[Path], opts: list[str]):
+        """The program of the kernel files ``paths`` (one after the other) built with
+        ``opts``, quietly (PoCL's own compiler chatter goes to descriptor 2;
+        PYOPENCL_COMPILER_OUTPUT=1 shows it); a failed build raises BackendUnavailable
+        with its log."""
         cl = self._cl
         try:
-            source = path.read_text()
+            source = "\n".join(path.read_text() for path in paths)
         except OSError as exc:
             raise BackendUnavailable(f"opencl: kernel source missing: {exc}") from None
         shown = os.environ.get("PYOPENCL_COMPILER_OUTPUT") == "1"
