@@ -530,6 +530,27 @@ def test_product_is_the_sparse_product():
     assert _product(m, v, out) is out and np.array_equal(out, m @ v)
 
 
+def test_product_falls_back_when_scipys_kernel_is_gone(monkeypatch):
+    """A scipy without the private CSR kernel (or with a changed one) gives the public
+    product, not an error."""
+    import sys
+
+    import scipy.sparse as sp
+
+    from compact_distributions.cvt import compaction
+
+    compaction._csr_matvec.cache_clear()
+    monkeypatch.setitem(sys.modules, "scipy.sparse._sparsetools", None)  # import fails
+    try:
+        assert compaction._csr_matvec() is None
+        m = sp.random(50, 40, density=0.1, format="csr", random_state=5)
+        v = np.random.default_rng(5).normal(size=40)
+        out = np.full(50, np.nan)
+        assert np.array_equal(compaction._product(m, v, out), m @ v)
+    finally:
+        compaction._csr_matvec.cache_clear()
+
+
 # ------------------------------------------------------------------ the better fit
 def test_fit_finds_the_largest_square_from_a_bad_site():
     """One 40 px square cell with its site in a corner: the largest square has half-side
