@@ -7,8 +7,8 @@ Each configuration is a real command run in its own process, as a user runs it:
 16 px per element, as Table 2: 512², 1024², 2048², 4096²), on each backend asked for.
 From each run it keeps the whole command's wall time and peak memory (the process's
 maximum resident set, from ``os.wait4``) and the wall time of every stage that
-``result.json`` records in ``stage_seconds`` (a mosaic's picture analysis, Lloyd, final labels, fit, compaction,
-cutting, fills, evaluation, writing).
+``result.json`` records in ``stage_seconds`` (a mosaic's picture analysis, Lloyd, final
+labels, fit, compaction, cutting, fills, evaluation, writing).
 
 Writes ``OUT/pipeline.md``, ``OUT/pipeline.csv`` and ``OUT/pipeline.png`` (log-log:
 seconds against N per stage, and peak memory against N), and ``OUT/raw/pipeline*/``;
