@@ -596,7 +596,9 @@ class OpenCLBackend(Backend):
             cl.enqueue_fill_buffer(queue, counts_buf, np.uint32(0), 0, 12)
             rows = (-(-w // RUN_SEGMENT), h)
             args = (labels_buf, ends_buf, counts_buf, np.uint32(room), runs_buf)
-            self._wall_kernel(metric, "row_runs", rows, np.int32(w), np.int32(h), np.int32(RUN_SEGMENT), *args)
+            self._wall_kernel(
+                metric, "row_runs", rows, np.int32(w), np.int32(h), np.int32(RUN_SEGMENT), *args
+            )
             chunks = max(1, -(-room // RUN_CHUNK))
             args = (np.uint32(room), np.uint32(RUN_CHUNK), runs_buf, ends_buf, counts_buf, listed_buf)
             self._wall_kernel(metric, "suspect_runs", chunks, *args)
@@ -651,6 +653,7 @@ class OpenCLBackend(Backend):
         start = dropped[:, 0].astype(np.int64)
         gone = moments_from_runs(start, start + dropped[:, 1], dropped[:, 2], w, n)
         return Moments(*(getattr(whole, f.name) - getattr(gone, f.name) for f in dataclasses.fields(Moments)))
+
 
 __all__ = [
     "KERNEL_FILE",
