@@ -634,7 +634,16 @@ class OpenCLBackend(Backend):
             size, first = self._buffer("piece_size", 4 * m), self._buffer("piece_first", 4 * m)
             site_piece, largest = self._buffer("site_piece", 4 * n), self._buffer("largest", 4 * n)
             last, dropped_buf = self._buffer("last_largest", 4 * n), self._buffer("dropped", 12 * m)
-            run("pieces_start", m, listed_buf, run_at, parent, size, first, site_piece, largest, last)
+            # the slots the pieces kernels fill, per piece and per listed cell, start empty
+            for buf, value, count in (
+                (size, 0, m),
+                (first, np.iinfo(np.int32).max, m),
+                (site_piece, -1, n),
+                (largest, 0, n),
+                (last, -1, n),
+            ):
+                cl.enqueue_fill_buffer(self._queue, buf, np.int32(value), 0, 4 * count)
+            run("pieces_start", m, listed_buf, run_at, parent)
             run("pieces_join", m, np.int32(w), listed_buf, labels_buf, run_at, parent)
             run("pieces_measure", m, listed_buf, parent, root, size, first, site_at, site_piece)
             run("pieces_largest", m, listed_buf, root, size, largest)

@@ -767,25 +767,15 @@ inline int piece_root(volatile __global int *parent, int x)
     return x;
 }
 
-/* 1. each run its own piece, and its index at its first pixel; the slots the next
-   kernels fill, per piece and per listed cell, start empty (the runs of a cell all write
-   the same values) */
+/* 1. each run its own piece, and its index at its first pixel */
 __kernel void pieces_start(const uint m, __global const int *runs, __global int *run_at,
-                           volatile __global int *parent, __global int *size,
-                           __global int *first, __global int *site_piece,
-                           __global int *largest, __global int *last)
+                           volatile __global int *parent)
 {
     const uint k = get_global_id(0);
     if (k >= m)
         return;
-    const int l = runs[3 * k + 2];
     run_at[runs[3 * k]] = (int)k;
     parent[k] = (int)k;
-    size[k] = 0;
-    first[k] = 0x7fffffff;
-    site_piece[l] = -1;
-    largest[l] = 0;
-    last[l] = -1;
 }
 
 /* 2. each run joins the runs of the row above that touch it: one per stretch of its own
