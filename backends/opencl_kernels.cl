@@ -610,7 +610,7 @@ __kernel void row_moments(const int width, const int height, const int seg,
    straight above), or only one "bottom" run, is one piece: from any of its runs, steps to
    a touching run above (below) end at that run.  row_runs lists the runs of the region
    and counts both kinds per cell; suspect_runs keeps the runs of the cells with more
-   than one of each, and the host finds their pieces. */
+   than one of each, and the pieces_* kernels find their pieces. */
 
 /* 16 labels of a row from column j (j may be -1); columns off the row read -1 */
 inline int16 row16(__global const int *row, const int j, const int width)
