@@ -567,67 +567,66 @@ class OpenCLBackend(Backend):
         return Moments(*(np.ascontiguousarray(row) for row in sums))
 
     # ------------------------------------------------------------ walled cells
+    def _wall_kernel(self, metric: Metric, name: str, items, *args) -> None:
+        """Enqueue walled-cell kernel ``name`` over ``items`` (a (segments, rows) pair, or
+        a number of listed runs), padded to a multiple of its fixed work-group: the
+        kernels skip the rest."""
+        cl = self._cl
+        program = self._kernels(metric, _facet_count(metric))[0].program
+        if program.int_ptr not in self._wall_kernels:
+            self._wall_kernels[program.int_ptr] = {n: cl.Kernel(program, n) for n in WALL_KERNELS}
+        kernel = self._wall_kernels[program.int_ptr][name]
+        kernel.set_args(*args)
+        if isinstance(items, tuple):
+            group, size = RUN_GROUP, tuple(-(-v // g) * g for v, g in zip(items, RUN_GROUP, strict=True))
+        else:
+            group, size = (LIST_GROUP,), (-(-items // LIST_GROUP) * LIST_GROUP,)
+        cl.enqueue_nd_range_kernel(self._queue, kernel, size, group)
+
+    def _suspect_runs(self, metric: Metric, labels_buf, w: int, h: int, n: int):
+        """List the runs of the labels in ``labels_buf`` (``row_runs``) and those of the
+        cells that may be in pieces (``suspect_runs``), with one wait: (runs found, runs
+        kept, counts buffer, all runs, kept runs, per-cell top and bottom run counts).
+        The counts buffer holds (found, kept, dropped); the pieces kernels add the last."""
+        cl, queue = self._cl, self._queue
+        ends_buf, counts_buf = self._buffer("run_ends", 8 * n), self._buffer("run_counts", 12)
+        counts = np.zeros(3, dtype=np.uint32)
+        while True:
+            room = self._run_room
+            runs_buf, listed_buf = self._buffer("runs", 12 * room), self._buffer("suspect_runs", 12 * room)
+            cl.enqueue_fill_buffer(queue, ends_buf, np.uint32(0), 0, 8 * n)
+            cl.enqueue_fill_buffer(queue, counts_buf, np.uint32(0), 0, 12)
+            rows = (-(-w // RUN_SEGMENT), h)
+            args = (labels_buf, ends_buf, counts_buf, np.uint32(room), runs_buf)
+            self._wall_kernel(
+                metric, "row_runs", rows, np.int32(w), np.int32(h), np.int32(RUN_SEGMENT), *args
+            )
+            chunks = max(1, -(-room // RUN_CHUNK))
+            args = (np.uint32(room), np.uint32(RUN_CHUNK), runs_buf, ends_buf, counts_buf, listed_buf)
+            self._wall_kernel(metric, "suspect_runs", chunks, *args)
+            self._read(counts, counts_buf)
+            if counts[0] <= room:
+                return int(counts[0]), int(counts[1]), counts_buf, runs_buf, listed_buf, ends_buf
+            # too many to hold: again, with room (the counts start again from zero)
+            self._run_room = int(counts[0]) * 5 // 4
+
     def _walled_moments(self, sites, angles, scales, metric: Metric, grid: Grid) -> Moments:
         """The moments of the labels with each cell cut to the piece it keeps, found on
         the device: ``row_runs`` lists the runs and counts each cell's top and bottom
         runs, ``suspect_runs`` keeps the runs of the cells that may be in pieces, the
         ``pieces_*`` kernels find their pieces and list the runs of those not kept; the
-        host reads 5·N sums and those runs (never the raster) and subtracts their sums."""
+        host reads 5·N sums and those runs (never the raster) and subtracts their sums.
+        The host waits twice: for the number of kept runs, and for the results."""
         cl = self._cl
         n = len(sites)
         w, h = grid.width, grid.height
         acc_buf, labels_buf = self._enqueue_moments(sites, angles, scales, metric, grid)
-        program = self._kernels(metric, _facet_count(metric))[0].program
-        if program.int_ptr not in self._wall_kernels:
-            self._wall_kernels[program.int_ptr] = {name: cl.Kernel(program, name) for name in WALL_KERNELS}
-        kern = self._wall_kernels[program.int_ptr]
-        queue = self._queue
 
-        def run(name, items, *args):  # a multiple of the work-group: the kernels skip the rest
-            kern[name].set_args(*args)
-            if isinstance(items, tuple):
-                group, size = RUN_GROUP, tuple(-(-v // g) * g for v, g in zip(items, RUN_GROUP, strict=True))
-            else:
-                group, size = (LIST_GROUP,), (-(-items // LIST_GROUP) * LIST_GROUP,)
-            cl.enqueue_nd_range_kernel(queue, kern[name], size, group)
+        def run(name, m, *args):
+            self._wall_kernel(metric, name, m, np.uint32(m), *args)
 
-        def fill(buf, value, count):
-            cl.enqueue_fill_buffer(queue, buf, np.int32(value), 0, 4 * count)
-
-        ends_buf = self._buffer("run_ends", 8 * n)
-        found_buf, kept_buf = self._buffer("runs_found", 4), self._buffer("runs_kept", 4)
-        found, kept = np.zeros(1, dtype=np.uint32), np.zeros(1, dtype=np.uint32)
-        rows = (-(-w // RUN_SEGMENT), h)
         try:
-            fill(ends_buf, 0, 2 * n)
-            while True:
-                room = self._run_room
-                runs_buf = self._buffer("runs", 12 * room)
-                fill(found_buf, 0, 1)
-                args = (labels_buf, ends_buf, found_buf, np.uint32(room), runs_buf)
-                run("row_runs", rows, np.int32(w), np.int32(h), np.int32(RUN_SEGMENT), *args)
-                self._read(found, found_buf)
-                if found[0] <= room:
-                    break
-                # too many to hold: again, with room (the counts start again from zero)
-                self._run_room = int(found[0]) * 5 // 4
-                fill(ends_buf, 0, 2 * n)
-            total = int(found[0])
-            listed_buf = self._buffer("suspect_runs", 12 * total)
-            fill(kept_buf, 0, 1)
-            chunks = max(1, -(-total // RUN_CHUNK))
-            run(
-                "suspect_runs",
-                chunks,
-                np.uint32(total),
-                np.uint32(RUN_CHUNK),
-                runs_buf,
-                ends_buf,
-                kept_buf,
-                listed_buf,
-            )
-            self._read(kept, kept_buf)
-            m = int(kept[0])
+            _, m, counts_buf, _, listed_buf, _ = self._suspect_runs(metric, labels_buf, w, h, n)
             if m == 0:
                 return self._read_moments(acc_buf, n)
             i, j = pixel_index(sites, w, h)
@@ -636,42 +635,32 @@ class OpenCLBackend(Backend):
             parent, root = self._buffer("piece_parent", 4 * m), self._buffer("piece_root", 4 * m)
             size, first = self._buffer("piece_size", 4 * m), self._buffer("piece_first", 4 * m)
             site_piece, largest = self._buffer("site_piece", 4 * n), self._buffer("largest", 4 * n)
-            last = self._buffer("last_largest", 4 * n)
-            dropped_buf, n_dropped_buf = self._buffer("dropped", 12 * m), self._buffer("n_dropped", 4)
-            fill(size, 0, m)
-            fill(first, np.iinfo(np.int32).max, m)
-            fill(site_piece, -1, n)
-            fill(largest, 0, n)
-            fill(last, -1, n)
-            fill(n_dropped_buf, 0, 1)
-            um = np.uint32(m)
-            run("pieces_start", m, um, listed_buf, run_at, parent)
-            run("pieces_join", m, um, np.int32(w), listed_buf, labels_buf, run_at, parent)
-            run("pieces_measure", m, um, listed_buf, parent, root, size, first, site_at, site_piece)
-            run("pieces_largest", m, um, listed_buf, root, size, largest)
-            run("pieces_last", m, um, listed_buf, root, size, first, largest, last)
-            run(
-                "pieces_dropped",
-                m,
-                um,
-                listed_buf,
-                root,
-                first,
-                site_piece,
-                last,
-                n_dropped_buf,
-                dropped_buf,
-            )
-            n_dropped = np.zeros(1, dtype=np.uint32)
-            self._read(n_dropped, n_dropped_buf)
-            dropped = np.empty((int(n_dropped[0]), 3), dtype=np.int32)
-            if len(dropped):
-                self._read(dropped, dropped_buf)
+            last, dropped_buf = self._buffer("last_largest", 4 * n), self._buffer("dropped", 12 * m)
+            # the slots the pieces kernels fill, per piece and per listed cell, start empty
+            for buf, value, count in (
+                (size, 0, m),
+                (first, np.iinfo(np.int32).max, m),
+                (site_piece, -1, n),
+                (largest, 0, n),
+                (last, -1, n),
+            ):
+                cl.enqueue_fill_buffer(self._queue, buf, np.int32(value), 0, 4 * count)
+            run("pieces_start", m, listed_buf, run_at, parent)
+            run("pieces_join", m, np.int32(w), listed_buf, labels_buf, run_at, parent)
+            run("pieces_measure", m, listed_buf, parent, root, size, first, site_at, site_piece)
+            run("pieces_largest", m, listed_buf, root, size, largest)
+            run("pieces_last", m, listed_buf, root, size, first, largest, last)
+            run("pieces_dropped", m, listed_buf, root, first, site_piece, last, counts_buf, dropped_buf)
+            # all of them in one wait: at most m runs are dropped
+            counts, dropped = np.empty(3, dtype=np.uint32), np.empty((m, 3), dtype=np.int32)
+            cl.enqueue_copy(self._queue, counts, counts_buf, is_blocking=False)
+            cl.enqueue_copy(self._queue, dropped, dropped_buf, is_blocking=False)
+            whole = self._read_moments(acc_buf, n)  # in order: the copies above are done
         except cl.Error as exc:
             raise BackendUnavailable(
                 f"opencl: walled-cell kernels failed on {self.device()}: {exc}"
             ) from None
-        whole = self._read_moments(acc_buf, n)
+        dropped = dropped[: counts[2]]
         start = dropped[:, 0].astype(np.int64)
         gone = moments_from_runs(start, start + dropped[:, 1], dropped[:, 2], w, n)
         return Moments(*(getattr(whole, f.name) - getattr(gone, f.name) for f in dataclasses.fields(Moments)))

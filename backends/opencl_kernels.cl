@@ -610,36 +610,43 @@ __kernel void row_moments(const int width, const int height, const int seg,
    straight above), or only one "bottom" run, is one piece: from any of its runs, steps to
    a touching run above (below) end at that run.  row_runs lists the runs of the region
    and counts both kinds per cell; suspect_runs keeps the runs of the cells with more
-   than one of each, and the host finds their pieces. */
+   than one of each, and the pieces_* kernels find their pieces. */
 
-/* The end (exclusive) of the run of label l that begins at column j of row i; *up, *down:
-   whether a pixel of it has label l straight above, straight below. */
-inline int walk_run(__global const int *labels, const int width, const int height, const int i,
-                    const int j, const int l, int *up, int *down)
+/* 16 labels of a row from column j (j may be -1); columns off the row read -1 */
+inline int16 row16(__global const int *row, const int j, const int width)
 {
-    __global const int *row = labels + (size_t)i * width;
-    /* off the raster, read the row itself and ignore what it says */
-    __global const int *above = i > 0 ? row - width : row;
-    __global const int *below = i + 1 < height ? row + width : row;
-    int u = 0, d = 0, e = j;
-    for (; e < width && row[e] == l; ++e) {
-        u |= above[e] == l;
-        d |= below[e] == l;
-    }
-    *up = u && i > 0;
-    *down = d && i + 1 < height;
-    return e;
+    if (j >= 0 && j + 16 <= width)
+        return vload16(0, row + j);
+    int v[16];
+    for (int q = 0; q < 16; ++q)
+        v[q] = j + q >= 0 && j + q < width ? row[j + q] : -1;
+    return vload16(0, v);
 }
 
-/* One work-item per segment of `seg` pixels of a row takes the runs of the region that
-   begin in it (a run may reach past the segment's end): each as (first pixel, length,
-   label) at runs[3 k ..], k from the counter `found` (zeroed by the host; one atomic per
-   work-item reserves its place), and ends[2 l], ends[2 l + 1] count the top and bottom
-   runs of cell l (zeroed by the host).  Runs beyond `room` are counted, not written (the
-   host then asks again with more room). */
+/* the lanes of a comparison's result (-1 where true) as the bits of an integer */
+inline uint lane_bits(const int16 m)
+{
+    const int16 w = m & (int16)(1, 2, 4, 8, 16, 32, 64, 128, 256, 512, 1024, 2048, 4096, 8192,
+                                16384, 32768);
+    const int8 a = w.lo | w.hi;
+    const int4 b = a.lo | a.hi;
+    const int2 c = b.lo | b.hi;
+    return (uint)(c.x | c.y);
+}
+
+/* One work-item per segment of `seg` pixels of a row (a multiple of 16) takes the runs of
+   the region that begin in it (a run may reach past the segment's end): each as (first
+   pixel, length, label) at runs[3 k ..], k from the counter counts[0] (zeroed by the host;
+   one atomic per work-item reserves its place), and ends[2 l], ends[2 l + 1] count the
+   top and bottom runs of cell l (zeroed by the host).  Runs beyond `room` are counted,
+   not written (the host then asks again with more room).
+
+   The row is read 16 pixels at a time: where the label changes, and where a pixel has
+   its own label straight above and below, as bits; a run's part of a chunk is a range
+   of bits, so the work per chunk is per run, not per pixel. */
 __kernel void row_runs(const int width, const int height, const int seg,
                        __global const int *labels, volatile __global uint *ends,
-                       volatile __global uint *found, const uint room, __global int *runs)
+                       volatile __global uint *counts, const uint room, __global int *runs)
 {
     const int i = get_global_id(1);
     const int j0 = get_global_id(0) * seg;
@@ -647,48 +654,79 @@ __kernel void row_runs(const int width, const int height, const int seg,
         return;
     const int j1 = j0 + seg < width ? j0 + seg : width;
     __global const int *row = labels + (size_t)i * width;
+    __global const int *above = row - width, *below = row + width; /* read only in the raster */
     uint mine = 0; /* runs of the region that begin in the segment */
-    int prev = j0 > 0 ? row[j0 - 1] : -1;
-    for (int j = j0; j < j1; ++j) {
-        const int l = row[j];
-        mine += l >= 0 && l != prev;
-        prev = l;
+    for (int j = j0; j < j1; j += 16) {
+        const int16 l = row16(row, j, width);
+        const uint begin = lane_bits((l >= 0) & (l != row16(row, j - 1, width)));
+        mine += popcount(j1 - j < 16 ? begin & ((1u << (j1 - j)) - 1) : begin);
     }
     if (mine == 0)
         return;
-    uint k = atomic_add(found, mine);
-    prev = j0 > 0 ? row[j0 - 1] : -1;
-    for (int j = j0; j < j1;) {
-        const int l = row[j];
-        if (l < 0 || l == prev) {
-            prev = l;
-            ++j;
-            continue;
+    uint k = atomic_add(counts, mine);
+    int cur = -1, start = 0; /* the open run: its label (-1: none of ours) and first pixel */
+    uint up = 0, down = 0;   /* whether a pixel of it has its label above, below */
+    for (int j = j0;; j += 16) {
+        if (j >= width || (j >= j1 && cur < 0)) {
+            if (cur >= 0) { /* the run reaches the row's end */
+                if (!up)
+                    atomic_inc(ends + 2 * cur);
+                if (!down)
+                    atomic_inc(ends + 2 * cur + 1);
+                if (k < room) {
+                    runs[3 * k] = i * width + start;
+                    runs[3 * k + 1] = width - start;
+                    runs[3 * k + 2] = cur;
+                }
+            }
+            break;
         }
-        int up, down;
-        const int e = walk_run(labels, width, height, i, j, l, &up, &down);
-        if (!up)
-            atomic_inc(ends + 2 * l);
-        if (!down)
-            atomic_inc(ends + 2 * l + 1);
-        if (k < room) {
-            runs[3 * k] = i * width + j;
-            runs[3 * k + 1] = e - j;
-            runs[3 * k + 2] = l;
+        const int16 l = row16(row, j, width);
+        uint change = lane_bits(l != row16(row, j - 1, width));
+        const uint same_up = i > 0 ? lane_bits(row16(above, j, width) == l) : 0;
+        const uint same_down = i + 1 < height ? lane_bits(row16(below, j, width) == l) : 0;
+        int lab[16];
+        vstore16(l, 0, lab);
+        uint from = 0xffffu; /* the bits of the chunk from the open run's first lane on */
+        while (change) {
+            const int t = 31 - clz(change & -change);
+            change &= change - 1;
+            if (cur >= 0) { /* the open run ends before lane t */
+                const uint part = from & ((1u << t) - 1);
+                if (!(up || (same_up & part)))
+                    atomic_inc(ends + 2 * cur);
+                if (!(down || (same_down & part)))
+                    atomic_inc(ends + 2 * cur + 1);
+                if (k < room) {
+                    runs[3 * k] = i * width + start;
+                    runs[3 * k + 1] = j + t - start;
+                    runs[3 * k + 2] = cur;
+                }
+                ++k;
+            }
+            cur = j + t < j1 ? lab[t] : -1; /* runs that begin past the segment are not ours */
+            start = j + t;
+            up = down = 0;
+            from = 0xffffu & ~((1u << t) - 1);
+            if (cur < 0 && j + t >= j1)
+                break;
         }
-        ++k;
-        prev = l;
-        j = e;
+        if (cur >= 0) {
+            up = up || (same_up & from);
+            down = down || (same_down & from);
+        }
     }
 }
 
-/* The runs (as row_runs lists them) of the cells with more than one top and more than
-   one bottom run, copied to out[3 k ..], k from the counter `kept` (zeroed by the host);
-   one work-item per `chunk` runs, one atomic each. */
-__kernel void suspect_runs(const uint total, const uint chunk, __global const int *runs,
-                           __global const uint *ends, volatile __global uint *kept,
+/* The runs (as row_runs lists them: counts[0] of them, `room` at most) of the cells with
+   more than one top and more than one bottom run, copied to out[3 k ..], k from the
+   counter counts[1] (zeroed by the host); one work-item per `chunk` runs, one atomic
+   each.  The count is read here, not by the host: no wait between the kernels. */
+__kernel void suspect_runs(const uint room, const uint chunk, __global const int *runs,
+                           __global const uint *ends, volatile __global uint *counts,
                            __global int *out)
 {
+    const uint total = counts[0] < room ? counts[0] : room;
     const uint r0 = get_global_id(0) * chunk;
     if (r0 >= total)
         return;
@@ -700,7 +738,7 @@ __kernel void suspect_runs(const uint total, const uint chunk, __global const in
     }
     if (mine == 0)
         return;
-    uint k = atomic_add(kept, mine);
+    uint k = atomic_add(counts + 1, mine);
     for (uint r = r0; r < r1; ++r) {
         const int l = runs[3 * r + 2];
         if (ends[2 * l] > 1 && ends[2 * l + 1] > 1) {
@@ -822,10 +860,10 @@ __kernel void pieces_last(const uint m, __global const int *runs, __global const
 
 /* 6. the runs outside the piece their cell keeps (the site's piece, else the last of the
    largest), listed as suspect_runs lists runs, at dropped[3 k ..] from the counter
-   `n_dropped` (zeroed by the host) */
+   counts[2] (zeroed by the host) */
 __kernel void pieces_dropped(const uint m, __global const int *runs, __global const int *root,
                              __global const int *first, __global const int *site_piece,
-                             __global const int *last, volatile __global uint *n_dropped,
+                             __global const int *last, volatile __global uint *counts,
                              __global int *dropped)
 {
     const uint k = get_global_id(0);
@@ -836,7 +874,7 @@ __kernel void pieces_dropped(const uint m, __global const int *runs, __global co
     const int keep = own >= 0 ? first[own] : last[l];
     if (first[root[k]] == keep)
         return;
-    const uint d = atomic_inc(n_dropped);
+    const uint d = atomic_inc(counts + 2);
     dropped[3 * d] = runs[3 * k];
     dropped[3 * d + 1] = runs[3 * k + 1];
     dropped[3 * d + 2] = l;

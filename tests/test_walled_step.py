@@ -134,6 +134,52 @@ def run_ends(labels, cell):
     return tops, bottoms
 
 
+def runs_of(labels):
+    """(first pixel, length, label) of every run of the region, row by row (NumPy)."""
+    h, w = labels.shape
+    left = np.concatenate([np.full((h, 1), -2), labels[:, :-1]], axis=1)
+    right = np.concatenate([labels[:, 1:], np.full((h, 1), -2)], axis=1)
+    first = np.flatnonzero((labels >= 0) & (labels != left))
+    last = np.flatnonzero((labels >= 0) & (labels != right))
+    return {(int(p), int(q - p + 1), int(labels.flat[p])) for p, q in zip(first, last, strict=True)}
+
+
+@needs_opencl
+@pytest.mark.parametrize("width", [700, 512, 37])
+def test_device_runs_and_their_top_and_bottom_counts_are_numpy_s(width):
+    """row_runs reads rows 16 labels at a time in 256-px segments: runs of 1 to 600 px
+    (within a chunk, across chunks and segments, to the row's end), outside pixels,
+    widths a multiple of 16 or not.  Its runs are NumPy's, its per-cell top and bottom
+    counts those counted pixel by pixel, and suspect_runs keeps the runs of the cells
+    with more than one of each (all but a block)."""
+    rng = np.random.default_rng(width)
+    h, n = 40, 7
+    rows = []
+    for _ in range(h):
+        row = []
+        while len(row) < width:
+            row += [int(rng.integers(-1, n - 1))] * int(rng.choice([1, 2, 5, 15, 16, 17, 40, 300, 600]))
+        rows.append(row[:width])
+    labels = np.array(rows, dtype=np.int32)
+    labels[5:15, 3:30] = n - 1  # one block: one top and one bottom run
+    with OpenCLBackend() as ocl:
+        buf = ocl._upload("labels_under_test", labels)
+        found, kept, _, runs_buf, listed_buf, ends_buf = ocl._suspect_runs(
+            make_metric("l2"), buf, width, h, n
+        )
+        runs, listed = np.empty((found, 3), dtype=np.int32), np.empty((kept, 3), dtype=np.int32)
+        ends = np.empty((n, 2), dtype=np.uint32)
+        for out, src in ((runs, runs_buf), (listed, listed_buf), (ends, ends_buf)):
+            ocl._read(out, src)
+    want = runs_of(labels)
+    assert len(runs) == len(want) and set(map(tuple, runs.tolist())) == want
+    np.testing.assert_array_equal(ends, [run_ends(labels, c) for c in range(n)])
+    suspect = [c for c in range(n) if min(run_ends(labels, c)) > 1]
+    assert n - 1 not in suspect and len(suspect) >= 3
+    assert set(map(tuple, listed.tolist())) == {r for r in want if r[2] in suspect}
+    assert len(listed) == kept
+
+
 @needs_opencl
 def test_a_cell_that_may_be_in_pieces_and_is_not_keeps_all_its_pixels():
     """Two cups in one cell, one open below and one open above: two top and two bottom
