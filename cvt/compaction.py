@@ -34,7 +34,7 @@ piece and its normal) and last round's n of that pair; curved shapes add 16 samp
 directions refined by a golden-section search.
 
 The program is solved (``solver``) either approximately as a whole, by a fixed number of
-steps (``iterations``, default 55) of the primal-dual hybrid gradient method (PDHG,
+steps (``iterations``, default 70) of the primal-dual hybrid gradient method (PDHG,
 Chambolle-Pock with diagonal steps, in Halpern's reflected form with restarts) on all
 elements at once: sparse products and clipping in NumPy and scipy.sparse, the default; or exactly per tile by HiGHS' dual simplex
 (``highspy``; ``solver="highs"``, and always when ``move_cost`` > 0): the program is split
@@ -124,10 +124,12 @@ folded into the matrices, float32 products, relaxation 1.5 (~20 % fewer steps fo
 same gain).  Halpern's iteration on the reflected step (z ← w·(2T(z) − z) + (1 − w)·z₀,
 w = (k+1)/(k+2), anchored at the start and restarted from T(z) when the fixed-point
 residual has fallen 5-fold; Lu & Yang's r2HPDHG) costs the same per step and needs
-fewer, with longer primal steps (ratio 8; 4 and 6 measured lower): 55 steps per round
-cover 0.13-0.31 % more area than 100 plain steps on every shape (4000 elements, 1024²,
-seeds 0-2) and 0.6 % more on a 20 000-tile walled mosaic (50 steps: +0.02 to +0.26 %,
-60: +0.18 to +0.36 %).  Anchored at the start it nears each round's optimum more
+fewer: 70 steps per round at ratio 4 cover more area than 100 plain steps on every
+shape (4000 elements, 1024², seeds 0-1: rectangles +0.0 to +0.1 points of coverage,
+ellipses +0.5, the others +0.1 to +0.2) and 0.5 % more on a 20 000-tile walled mosaic.
+Longer primal steps (ratio 8) with 55 steps gained on squares but lost 0.9 points on
+rectangles (β = 0.5) and 0.3 on ellipses; at ratio 4, 55-65 steps lose 0.1-0.3 points
+to 70.  Anchored at the start it nears each round's optimum more
 closely; from an exact lattice that optimum is to stay, where plain PDHG's inexact
 steps broke the symmetry (a lattice shaken by 0.1 px grows as before).
 Steps stop early only when converged (T(z) = z and no row short by more than 1e-10 px:
@@ -173,9 +175,9 @@ _REFINE = 14  # golden-section steps of that refinement
 _GOLD = (math.sqrt(5) - 1) / 2
 _TIE = 1e-6  # px: candidate directions this close count as equally good (> SLACK·√2)
 _TILES_PER_WORKER = 8  # fewer tiles per thread than this: not worth a thread
-_PDHG_ITERATIONS = 55  # PDHG steps per round
+_PDHG_ITERATIONS = 70  # PDHG steps per round
 _PDHG_STILL = 1e-10  # px: PDHG has converged when T(z) = z to this and no row is short by more
-_STEP_RATIO = 8.0  # PDHG: primal steps this much longer (dual ones shorter) than balanced
+_STEP_RATIO = 4.0  # PDHG: primal steps this much longer (dual ones shorter) than balanced
 _HALPERN_RESTART = 0.2  # PDHG: new anchor once the fixed-point residual falls by this factor
 _HALPERN_CHECK = 4  # PDHG: steps between evaluations of that residual
 
