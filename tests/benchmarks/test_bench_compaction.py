@@ -62,19 +62,32 @@ def _checked(benchmark, res, sizes, grid):
     return before, after, els
 
 
+def _compacted(benchmark, request, group, rounds, centres, sizes, grid, **options):
+    """``compact`` of the squares timed by the benchmark (``rounds`` rounds where
+    benchmarks are enabled, once otherwise), its options in the benchmark's record."""
+    n = len(sizes)
+    benchmark.group = group
+    benchmark.extra_info.update(
+        kind="compaction",
+        shape="square",
+        n_elements=n,
+        size=grid.width,
+        **{k: str(v) for k, v in options.items()},
+    )
+    return benchmark.pedantic(
+        compact,
+        args=(centres, np.zeros(n), sizes, "square", 1.0, grid),
+        kwargs=options,
+        rounds=rounds if _enabled(request.config) else 1,
+        iterations=1,
+    )
+
+
 @pytest.mark.parametrize("solver", ["pdhg", "highs"])
 def test_bench_compaction_squares(benchmark, squares, request, solver):
     centres, sizes, grid, n = squares
-    benchmark.group = f"compaction square N={n} {grid.width}²"
-    benchmark.extra_info.update(
-        kind="compaction", shape="square", n_elements=n, size=grid.width, solver=solver
-    )
-    res = benchmark.pedantic(
-        compact,
-        args=(centres, np.zeros(n), sizes, "square", 1.0, grid),
-        kwargs={"solver": solver},
-        rounds=5 if _enabled(request.config) else 1,
-        iterations=1,
+    res = _compacted(
+        benchmark, request, f"compaction square N={n} {grid.width}²", 5, centres, sizes, grid, solver=solver
     )
     before, after, _ = _checked(benchmark, res, sizes, grid)
     assert before > 0.7 and after > before + 0.1
@@ -112,15 +125,8 @@ def walled(request):
 
 def test_bench_compaction_among_walls(benchmark, walled, request):
     centres, sizes, grid, walls, n = walled
-    benchmark.group = f"compaction square among walls N={n} {grid.width}²"
-    benchmark.extra_info.update(kind="compaction", shape="square", n_elements=n, size=grid.width, walls=True)
-    res = benchmark.pedantic(
-        compact,
-        args=(centres, np.zeros(n), sizes, "square", 1.0, grid),
-        kwargs={"walls": walls},
-        rounds=3 if _enabled(request.config) else 1,
-        iterations=1,
-    )
+    group = f"compaction square among walls N={n} {grid.width}²"
+    res = _compacted(benchmark, request, group, 3, centres, sizes, grid, walls=walls)
     before, after, els = _checked(benchmark, res, sizes, grid)
     assert after > before + 0.05
     # no element reaches over a wall's centre line (compaction keeps half the gap, 0, off it)
