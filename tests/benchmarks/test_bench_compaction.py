@@ -64,7 +64,8 @@ def _checked(benchmark, res, sizes, grid):
 
 def _compacted(benchmark, request, group, rounds, centres, sizes, grid, **options):
     """``compact`` of the squares timed by the benchmark (``rounds`` rounds where
-    benchmarks are enabled, once otherwise), its options in the benchmark's record."""
+    benchmarks are enabled, once otherwise), its options in the benchmark's record (an
+    array one as True)."""
     n = len(sizes)
     benchmark.group = group
     benchmark.extra_info.update(
@@ -72,7 +73,7 @@ def _compacted(benchmark, request, group, rounds, centres, sizes, grid, **option
         shape="square",
         n_elements=n,
         size=grid.width,
-        **{k: str(v) for k, v in options.items()},
+        **{k: v if isinstance(v, str) else True for k, v in options.items()},
     )
     return benchmark.pedantic(
         compact,
