@@ -8,12 +8,41 @@ faster, with the same result: each element's operation is independent of the oth
 from __future__ import annotations
 
 import os
+import threading
 from concurrent.futures import ThreadPoolExecutor
 
 import numpy as np
 
 # below this many elements a split costs more than it saves
 PARALLEL_MIN = 64
+
+# one pool for the process, made on first use: a mosaic makes hundreds of these calls.
+# A forked child (a Dask worker) does not inherit the parent's threads, so it starts
+# without a pool and makes its own.
+_pool: ThreadPoolExecutor | None = None
+_pool_workers = 0
+_pool_lock = threading.Lock()
+
+
+def _forget_pool() -> None:
+    global _pool, _pool_workers
+    _pool, _pool_workers = None, 0
+
+
+if hasattr(os, "register_at_fork"):
+    os.register_at_fork(after_in_child=_forget_pool)
+
+
+def _shared_pool(workers: int) -> ThreadPoolExecutor:
+    """The process's pool, with at least ``workers`` threads."""
+    global _pool, _pool_workers
+    with _pool_lock:
+        if _pool is None or _pool_workers < workers:
+            old = _pool
+            _pool, _pool_workers = ThreadPoolExecutor(workers, thread_name_prefix="elementwise"), workers
+            if old is not None:
+                old.shutdown(wait=False)
+        return _pool
 
 
 def usable_cores() -> int:
@@ -31,7 +60,8 @@ def elementwise(operation, *arrays: np.ndarray, **kwargs) -> np.ndarray:
     ----------
     operation : callable
         Takes equal-length 1-d arrays and returns one result per element; it must
-        release the GIL to gain anything (shapely's functions do).
+        release the GIL to gain anything (shapely's functions do), and must not call
+        ``elementwise`` itself (its slices run on the same pool).
     *arrays : 1-d ndarrays of one length
         The operands.
     **kwargs
@@ -48,8 +78,8 @@ def elementwise(operation, *arrays: np.ndarray, **kwargs) -> np.ndarray:
         return operation(*arrays, **kwargs)
     bounds = np.linspace(0, n, workers + 1).astype(np.int64)
     slices = [slice(a, b) for a, b in zip(bounds[:-1], bounds[1:], strict=True)]
-    with ThreadPoolExecutor(workers) as pool:
-        parts = list(pool.map(lambda s: operation(*(a[s] for a in arrays), **kwargs), slices))
+    pool = _shared_pool(workers)
+    parts = list(pool.map(lambda s: operation(*(a[s] for a in arrays), **kwargs), slices))
     return np.concatenate(parts)
 
 

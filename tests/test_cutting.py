@@ -273,3 +273,49 @@ def test_elementwise_on_threads_gives_each_elements_own_result(monkeypatch):
     grown = threads.elementwise(shapely.buffer, b, distance=0.5, join_style="mitre")
     assert np.allclose(shapely.area(grown), (5.5 + 1.0) ** 2)
     assert threads.elementwise(shapely.area, a[:3]).shape == (3,)  # too few to split
+
+
+def _area_sum_in_child(queue):
+    import shapely
+
+    from compact_distributions.cvt import threads
+
+    discs = shapely.buffer(shapely.points(np.zeros((4 * threads.PARALLEL_MIN, 2))), 1.0, quad_segs=1)
+    queue.put(float(np.sum(threads.elementwise(shapely.area, discs))))
+
+
+def test_elementwise_keeps_one_pool_and_a_forked_child_makes_its_own(monkeypatch):
+    """Calls share the process's worker threads; a child forked after them (as a Dask or
+    multiprocessing worker is) still gets its answer instead of waiting on threads it did
+    not inherit."""
+    import multiprocessing
+    import threading
+
+    import shapely
+
+    from compact_distributions.cvt import threads
+
+    if "fork" not in multiprocessing.get_all_start_methods():
+        pytest.skip("this platform cannot fork")
+    monkeypatch.setattr(threads, "usable_cores", lambda: 2)
+    monkeypatch.setattr(threads, "_pool", None)  # a pool of two, made here
+    monkeypatch.setattr(threads, "_pool_workers", 0)
+    seen = set()
+
+    def who(x):
+        seen.add(threading.current_thread().name)
+        return shapely.area(x)
+
+    discs = shapely.buffer(shapely.points(np.zeros((4 * threads.PARALLEL_MIN, 2))), 1.0, quad_segs=1)
+    for _ in range(3):
+        assert np.allclose(threads.elementwise(who, discs), 2.0)  # a diamond of diagonal 2
+    assert 1 <= len(seen) <= 2 and all(name.startswith("elementwise") for name in seen)
+    context = multiprocessing.get_context("fork")
+    queue = context.Queue()
+    child = context.Process(target=_area_sum_in_child, args=(queue,))
+    child.start()
+    child.join(timeout=60)
+    if child.is_alive():
+        child.kill()
+        pytest.fail("elementwise in a forked child did not finish")
+    assert child.exitcode == 0 and queue.get(timeout=5) == pytest.approx(2.0 * 4 * threads.PARALLEL_MIN)
