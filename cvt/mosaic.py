@@ -59,6 +59,7 @@ from .registry import resolve_method
 from .render import draw_elements, ellipse_parameters, parse_colour, svg_lines
 from .resources import mosaic_estimate
 from .shapes import ELEMENT_SHAPES, element_ball, resolve_shapes, shape_record, unit_outline
+from .threads import side_by_side
 from .validate import live_backend, real_number, whole_number
 
 # The method that places the tiles when none is named: compaction, whose tiles share their
@@ -687,12 +688,18 @@ def make_mosaic(
     picture = resample(rgb, w, h)
     del rgb
     t_picture = time.perf_counter()
-    lab = srgb_to_lab(picture)
     spacing = math.sqrt(w * h / n_elements)
     gap = AUTO_GAP * spacing if gap is None else parse_gap(gap)
-    fields = picture_fields(picture, spacing, element, contrast=contrast)
-    # the edge map is made in any case: the straddling measure reads it
-    edge_map = strong_edges(lab, edge_threshold, min_length=EDGE_MIN_LENGTH * spacing)
+
+    # the fields and the edge map read the picture apart (the edges in CIELAB): side by
+    # side on two cores.  The edge map is made in any case: the straddling measure reads it
+    def lab_and_edges():
+        lab = srgb_to_lab(picture)
+        return lab, strong_edges(lab, edge_threshold, min_length=EDGE_MIN_LENGTH * spacing)
+
+    fields, (lab, edge_map) = side_by_side(
+        lambda: picture_fields(picture, spacing, element, contrast=contrast), lab_and_edges
+    )
     picture_seconds = time.perf_counter() - t_picture
     walls = bool(edges) and bool(edge_map.any())
     problem = Problem(

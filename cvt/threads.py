@@ -83,4 +83,32 @@ def elementwise(operation, *arrays: np.ndarray, **kwargs) -> np.ndarray:
     return np.concatenate(parts)
 
 
-__all__ = ["PARALLEL_MIN", "usable_cores", "elementwise"]
+def side_by_side(*calls):
+    """The results of independent zero-argument ``calls``, run at the same time: the
+    first in this thread, the others on the process's pool (for whole-array NumPy and
+    SciPy work, which lets go of the GIL while it computes).
+
+    Parameters
+    ----------
+    *calls : callables
+        Each takes no argument; none may depend on another's effects, nor call
+        :func:`elementwise` or ``side_by_side`` (they share the pool).
+
+    Returns
+    -------
+    list
+        ``[call() for call in calls]``; an exception in any call is raised here.
+    """
+    cores = usable_cores()
+    if len(calls) < 2 or cores < 2:
+        return [call() for call in calls]
+    pool = _shared_pool(cores)
+    later = [pool.submit(call) for call in calls[1:]]
+    try:
+        first = calls[0]()
+    finally:
+        done = [f.result() for f in later]  # waits for the others even when the first failed
+    return [first, *done]
+
+
+__all__ = ["PARALLEL_MIN", "usable_cores", "elementwise", "side_by_side"]

@@ -319,3 +319,25 @@ def test_elementwise_keeps_one_pool_and_a_forked_child_makes_its_own(monkeypatch
         child.kill()
         pytest.fail("elementwise in a forked child did not finish")
     assert child.exitcode == 0 and queue.get(timeout=5) == pytest.approx(2.0 * 4 * threads.PARALLEL_MIN)
+
+
+def test_side_by_side_runs_the_calls_at_once_and_returns_them_in_order(monkeypatch):
+    """The first call waits for a signal only the second gives: both must run at the same
+    time.  Results come back in the order given; an error in any call is raised."""
+    import threading
+
+    from compact_distributions.cvt import threads
+
+    monkeypatch.setattr(threads, "usable_cores", lambda: 2)
+    signal = threading.Event()
+    got = threads.side_by_side(lambda: signal.wait(timeout=30) and "first", lambda: signal.set() or "second")
+    assert got == ["first", "second"]
+    assert threads.side_by_side(lambda: 1) == [1]
+
+    def broken():
+        raise ValueError("broken call")
+
+    with pytest.raises(ValueError, match="broken call"):
+        threads.side_by_side(lambda: 1, broken)
+    monkeypatch.setattr(threads, "usable_cores", lambda: 1)  # one core: one after the other
+    assert threads.side_by_side(lambda: 3, lambda: 4) == [3, 4]
