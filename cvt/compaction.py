@@ -248,9 +248,10 @@ class _Unit:
             np.maximum(out, v[k, 0] * ux + v[k, 1] * uy, out=out)
         return out
 
-    def face_normals(self, cos, sin):
-        """(..., K) x and y of the outward face normals, turned by θ."""
-        nx, ny = self.normals[:, 0], self.normals[:, 1]
+    def face_normals(self, cos, sin, count=None):
+        """(..., K) x and y of the outward face normals, turned by θ (``count``: the
+        first ``count`` of them only)."""
+        nx, ny = self.normals[:count, 0], self.normals[:count, 1]
         c, s = cos[..., None], sin[..., None]
         return c * nx - s * ny, s * nx + c * ny
 
@@ -285,20 +286,18 @@ def _refine_angles(gap_at, phi, width):
     return best, np.maximum(ga, gb)
 
 
-def _best_direction(gap_of, nx, ny, curved_from=None, enough=None, g=None):
-    """Per row, the preferred candidate direction (columns of ``nx``, ``ny``, in order of
-    preference) and its gap.  For curved shapes (``curved_from``: a reference angle per
-    row) the rows whose gap is below ``enough`` also try _SAMPLES directions within ±90°
-    of it, refined by golden section, taken when clearly better.  ``gap_of(nx, ny, rows)``
-    evaluates the rows ``rows`` (a slice or indices), broadcasting over columns; ``g``:
-    the candidates' gaps where the caller has them already."""
-    if g is None:
-        g = gap_of(nx, ny, slice(None))
+def _best_direction(gap_of, g, direction_of, curved_from=None, enough=None):
+    """Per row, the preferred candidate direction (columns of the candidates' gaps ``g``,
+    in order of preference) and its gap.  ``direction_of(k)``: the direction (x, y) of
+    each row's candidate k (built only for the one chosen, not for every candidate).
+    For curved shapes (``curved_from``: a reference angle per row) the rows whose gap is
+    below ``enough`` also try _SAMPLES directions within ±90° of it, refined by golden
+    section, taken when clearly better.  ``gap_of(nx, ny, rows)`` evaluates the rows
+    ``rows`` (a slice or indices), broadcasting over columns."""
     g = np.where(np.isfinite(g), g, -np.inf)  # last round's n is NaN for new rows
     k, best = _argmax_rows(g)
-    rows = np.arange(len(k))
-    bx, by = nx[rows, k], ny[rows, k]
-    sub = np.flatnonzero(best < enough) if curved_from is not None else rows[:0]
+    bx, by = direction_of(k)
+    sub = np.flatnonzero(best < enough) if curved_from is not None else np.zeros(0, np.int64)
     if len(sub):  # rows far apart already are left out of the program: no need to refine
         off = np.linspace(-math.pi / 2, math.pi / 2, _SAMPLES)
         phis = curved_from[sub, None] + off[None, :]
@@ -330,68 +329,86 @@ def _best_pair_directions(unit, c, r, cos, sin, i, j, prev_n, enough=None, along
         clx, cly = np.where(d > 0, dx / d, 1.0), np.where(d > 0, dy / d, 0.0)
     args = tuple(v[:, None] for v in (dx, dy, r[i], r[j], cos[i], sin[i], cos[j], sin[j]))
     gap_of = lambda nx, ny, k: _pair_gap(unit, *(a[k] for a in args), nx, ny)  # noqa: E731
-    # in order of preference: faces (walls to slide along), last round's n, centre line
-    cands_x, cands_y, gaps = [], [], []
-    if unit.kind == "polygon":
-        dx_, dy_ = dx[:, None], dy[:, None]
-        fx, fy, gi = _face_gaps(unit, dx_, dy_, *args[2:])
-        cands_x.append(fx), cands_y.append(fy), gaps.append(gi)
+    # the candidates' gaps in order of preference, written into one array: faces (walls
+    # to slide along; i's, then j's), last round's n, centre line
+    faces = len(unit.normals) if unit.kind == "polygon" else 0
+    other = np.arange(len(i))
+    if faces and unit.symmetric:
         # j's faces seen from j: the gap along −g is the gap along g from j to i.  Where j
         # is turned as i is and the shape is centrally symmetric, j's faces are i's (its
         # opposite normals), later in the order of preference and of the same gap (to
         # rounding, far below _TIE): never chosen, so not evaluated
-        other = np.arange(len(i))
-        if unit.symmetric:
-            other = np.flatnonzero((cos[i] != cos[j]) | (sin[i] != sin[j]))
-        if len(other):
-            gx, gy, gj = np.full_like(fx, np.nan), np.full_like(fy, np.nan), np.full_like(gi, -np.inf)
-            ro, co, so = args[3][other], args[6][other], args[7][other]
-            gx[other], gy[other], gj[other] = _face_gaps(
-                unit, -dx_[other], -dy_[other], ro, args[2][other], co, so, args[4][other], args[5][other]
-            )
-            cands_x.append(-gx), cands_y.append(-gy), gaps.append(gj)
+        other = np.flatnonzero((cos[i] != cos[j]) | (sin[i] != sin[j]))
+    j_faces = faces if len(other) else 0
+    g = np.empty((len(i), faces + j_faces + 2))
+    if faces:
+        dx_, dy_ = dx[:, None], dy[:, None]
+        _face_gaps(unit, dx_, dy_, *args[2:], out=g[:, :faces])
+    if j_faces:
+        g[:, faces : faces + j_faces] = -np.inf
+        ro, co, so = args[3][other], args[6][other], args[7][other]
+        g[other, faces : faces + j_faces] = _face_gaps(
+            unit, -dx_[other], -dy_[other], ro, args[2][other], co, so, args[4][other], args[5][other]
+        )
     # last round's n: new pairs have none (NaN, never chosen)
-    known = np.flatnonzero(np.isfinite(prev_n[:, 0]))
-    g_prev = np.full((len(i), 1), np.nan)
-    g_prev[known] = gap_of(prev_n[known, 0:1], prev_n[known, 1:2], known)
-    if along is None:
-        g_line = gap_of(clx[:, None], cly[:, None], slice(None))
+    if np.isfinite(prev_n[:, 0]).any():
+        g[:, -2] = gap_of(prev_n[:, 0:1], prev_n[:, 1:2], slice(None))[:, 0]
     else:
-        g_line = along.copy()[:, None]
+        g[:, -2] = np.nan
+    if along is None:
+        g[:, -1] = gap_of(clx[:, None], cly[:, None], slice(None))[:, 0]
+    else:
+        g[:, -1] = along
         fresh = np.flatnonzero(~(d > 0))
-        g_line[fresh] = gap_of(clx[fresh, None], cly[fresh, None], fresh)
-    cands_x += [prev_n[:, 0:1], clx[:, None]]
-    cands_y += [prev_n[:, 1:2], cly[:, None]]
+        g[fresh, -1] = gap_of(clx[fresh, None], cly[fresh, None], fresh)[:, 0]
+
+    def direction_of(k):
+        """The direction of candidate k of each pair: a face normal of i, minus one of
+        j, last round's n or the centre line."""
+        last = k == faces + j_faces + 1
+        bx, by = np.where(last, clx, prev_n[:, 0]), np.where(last, cly, prev_n[:, 1])
+        on_face = np.flatnonzero(k < faces + j_faces)
+        if len(on_face):
+            m = k[on_face]
+            of_j = m >= faces
+            m = np.where(of_j, m - faces, m)
+            owner = np.where(of_j, j[on_face], i[on_face])
+            co, so = cos[owner], sin[owner]
+            nx, ny = unit.normals[m, 0], unit.normals[m, 1]
+            sign = np.where(of_j, -1.0, 1.0)  # (as face_normals turns them)
+            bx[on_face], by[on_face] = sign * (co * nx - so * ny), sign * (so * nx + co * ny)
+        return bx, by
+
     curved = unit.kind == "ellipse" and unit.axes[0] != unit.axes[1]  # circles: centre line
-    return _best_direction(
-        gap_of,
-        np.concatenate(cands_x, axis=1),
-        np.concatenate(cands_y, axis=1),
-        np.arctan2(cly, clx) if curved else None,
-        enough,
-        np.concatenate([*gaps, g_prev, g_line], axis=1),
-    )
+    return _best_direction(gap_of, g, direction_of, np.arctan2(cly, clx) if curved else None, enough)
 
 
-def _face_gaps(unit, dx, dy, ra, rb, ca, sa, cb, sb):
-    """Face normals n_k of polygon a (turned by its angle) and the gaps along them from a
-    to b (``dx``, ``dy``: b's centre minus a's): h_a(n_k) is a constant of the shape,
-    and for a centrally symmetric shape the opposite normal's gap needs no new support."""
-    fx, fy = unit.face_normals(ca[:, 0], sa[:, 0])
+def _face_gaps(unit, dx, dy, ra, rb, ca, sa, cb, sb, out=None):
+    """The gaps along the face normals n_k of polygon a (turned by its angle) from a to b
+    (``dx``, ``dy``: b's centre minus a's), into ``out`` where given: h_a(n_k) is a
+    constant of the shape, and for a centrally symmetric shape the opposite normal's gap
+    needs no new support."""
+    if out is None:
+        out = np.empty((len(ra), len(unit.normals)))
     if unit.symmetric:
-        h = fx.shape[1] // 2
-        nd = fx[:, :h] * dx + fy[:, :h] * dy
+        h = out.shape[1] // 2
+        fx, fy = unit.face_normals(ca[:, 0], sa[:, 0], h)
+        nd = fx * dx + fy * dy
         # = rb·h_b(±n): b turned as a is has a's offsets along a's normals (to rounding)
         same = np.flatnonzero((ca[:, 0] == cb[:, 0]) & (sa[:, 0] == sb[:, 0]))
         hb = np.empty_like(nd)
         hb[same] = unit.offsets[:h]
         turned = np.flatnonzero((ca[:, 0] != cb[:, 0]) | (sa[:, 0] != sb[:, 0]))
-        hb[turned] = unit.support(fx[turned, :h], fy[turned, :h], cb[turned], sb[turned])
+        hb[turned] = unit.support(fx[turned], fy[turned], cb[turned], sb[turned])
         hb *= rb
-        g = np.concatenate([nd - hb, -nd - hb], axis=1) - ra * unit.offsets
+        np.subtract(nd, hb, out=out[:, :h])
+        np.negative(nd, out=out[:, h:])
+        out[:, h:] -= hb
+        out -= ra * unit.offsets
     else:
-        g = fx * dx + fy * dy - ra * unit.offsets - rb * unit.support(-fx, -fy, cb, sb)
-    return fx, fy, g
+        fx, fy = unit.face_normals(ca[:, 0], sa[:, 0])
+        out[:] = fx * dx + fy * dy - ra * unit.offsets - rb * unit.support(-fx, -fy, cb, sb)
+    return out
 
 
 def _reach_classes(reach: np.ndarray) -> list[np.ndarray]:
@@ -635,13 +652,14 @@ def _near_segments(unit, c, r, cos, sin, budget, half, segs, seg_trees, prev):
     cy_ += [prev_n[:, 1:2], ty[:, None]]
     curved = unit.kind == "ellipse" and unit.axes[0] != unit.axes[1]  # circles: nearest point
     enough = half + budget[e] + _SELECT
+    nx, ny = np.concatenate(cx_, axis=1), np.concatenate(cy_, axis=1)
+    rows = np.arange(len(e))
     bx, by, best = _best_direction(
         gap_of,
-        np.concatenate(cx_, axis=1),
-        np.concatenate(cy_, axis=1),
+        np.concatenate(gaps, axis=1),
+        lambda k: (nx[rows, k], ny[rows, k]),
         np.arctan2(ty, tx) if curved else None,
         enough,
-        np.concatenate(gaps, axis=1),
     )
     keep = best < enough
     return e[keep], s[keep], bx[keep], by[keep], best[keep]
@@ -1055,7 +1073,10 @@ def _solve_pdhg(rows: _Rows, act, c, r, gap, delta, lo_dr, hi_dr, weight, iterat
     # x = 0, y = 0, until a restart); the answer is the last T(z), which keeps the bounds
     x, y, no_rows = np.zeros(ncol), np.zeros(npair + nseg), np.zeros(npair + nseg)
     x0 = y0 = None  # the anchor: the start (0) until the first restart
-    xt, z, scratch, yt = np.empty(ncol), np.empty(ncol), np.empty(ncol), np.empty(npair + nseg)
+    # every step works in these buffers: a fresh array per step would be fresh memory
+    # from the system each time (page faults cost about as much as the arithmetic)
+    xt, z, scratch = np.empty(ncol), np.empty(ncol), np.empty(ncol)
+    yt, y_scratch = np.empty(npair + nseg), np.empty(npair + nseg)
     aty = at @ y
     inv_tau, inv_sigma = 1.0 / tau, 1.0 / sigma
     first = None  # fixed-point residual |T(z) − z| after the last restart
@@ -1082,7 +1103,7 @@ def _solve_pdhg(rows: _Rows, act, c, r, gap, delta, lo_dr, hi_dr, weight, iterat
             np.subtract(xt, x, out=scratch)
             np.multiply(scratch, scratch, out=scratch)
             scratch *= inv_tau
-            dy = yt - y
+            dy = np.subtract(yt, y, out=y_scratch)
             np.multiply(dy, dy, out=dy)
             dy *= inv_sigma
             residual = math.sqrt(float(scratch.sum()) + float(dy.sum()))
@@ -1098,10 +1119,10 @@ def _solve_pdhg(rows: _Rows, act, c, r, gap, delta, lo_dr, hi_dr, weight, iterat
             w = (k + 1.0) / (k + 2.0)
             np.multiply(z, w, out=x)  # z = 2x̃ − x
             y *= -w
-            y += (2.0 * w) * yt
+            y += np.multiply(yt, 2.0 * w, out=y_scratch)
             if x0 is not None:
-                x += (1.0 - w) * x0
-                y += (1.0 - w) * y0
+                x += np.multiply(x0, 1.0 - w, out=scratch)
+                y += np.multiply(y0, 1.0 - w, out=y_scratch)
             k += 1
         _product(at, y, aty)
         # a fixed point of T is the program's optimum: stop when T(z) = z and x̃ meets
