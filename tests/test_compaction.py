@@ -519,15 +519,21 @@ def test_boundary_segments_of_a_whole_raster_are_its_sides():
 
 
 def test_product_is_the_sparse_product():
-    """The PDHG steps' product into a given array equals scipy's m @ v exactly."""
+    """The PDHG steps' products into a given array equal scipy's m @ v and m.T @ w
+    exactly, and m.T @ w equals the product by the transposed copy (m.T.tocsr()) that
+    the steps used before, bit for bit."""
     import scipy.sparse as sp
 
     from compact_distributions.cvt.compaction import _product
 
     m = sp.random(300, 200, density=0.03, format="csr", random_state=4)
     v = np.random.default_rng(4).normal(size=200)
+    w = np.random.default_rng(5).normal(size=300)
     out = np.full(300, np.nan)  # whatever was there is overwritten
     assert _product(m, v, out) is out and np.array_equal(out, m @ v)
+    out_t = np.full(200, np.nan)
+    assert _product(m, w, out_t, transpose=True) is out_t
+    assert np.array_equal(out_t, m.T @ w) and np.array_equal(out_t, m.T.tocsr() @ w)
 
 
 def test_product_falls_back_when_scipys_kernel_is_gone(monkeypatch):
@@ -547,6 +553,8 @@ def test_product_falls_back_when_scipys_kernel_is_gone(monkeypatch):
         v = np.random.default_rng(5).normal(size=40)
         out = np.full(50, np.nan)
         assert np.array_equal(compaction._product(m, v, out), m @ v)
+        w = np.random.default_rng(6).normal(size=50)
+        assert np.array_equal(compaction._product(m, w, np.full(40, np.nan), transpose=True), m.T @ w)
     finally:
         compaction._csr_matvec.cache_clear()
 
