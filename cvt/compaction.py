@@ -293,8 +293,8 @@ def _best_direction(gap_of, g, direction_of, curved_from=None, enough=None):
     For curved shapes (``curved_from``: a reference angle per row) the rows whose gap is
     below ``enough`` also try _SAMPLES directions within ±90° of it, refined by golden
     section, taken when clearly better.  ``gap_of(nx, ny, rows)`` evaluates the rows
-    ``rows`` (a slice or indices), broadcasting over columns."""
-    g = np.where(np.isfinite(g), g, -np.inf)  # last round's n is NaN for new rows
+    ``rows`` (a slice or indices), broadcasting over columns.  ``g`` is overwritten."""
+    np.copyto(g, -np.inf, where=~np.isfinite(g))  # last round's n is NaN for new rows
     k, best = _argmax_rows(g)
     bx, by = direction_of(k)
     sub = np.flatnonzero(best < enough) if curved_from is not None else np.zeros(0, np.int64)
@@ -319,12 +319,15 @@ def _pair_gap(unit, dx, dy, ri, rj, ci, si, cj, sj, nx, ny):
     return nx * dx + ny * dy - ri * unit.support(nx, ny, ci, si) - rj * unit.support(-nx, -ny, cj, sj)
 
 
-def _best_pair_directions(unit, c, r, cos, sin, i, j, prev_n, enough=None, along=None):
+def _best_pair_directions(unit, c, r, cos, sin, i, j, prev_n, enough=None, along=None, offsets=None):
     """Per pair: the unit n (from i to j) to separate them along, and their gap along it
     (``along``: the gaps along the centre lines where the caller has them, NaN where the
-    centres coincide)."""
-    dx, dy = c[j, 0] - c[i, 0], c[j, 1] - c[i, 1]
-    d = np.hypot(dx, dy)
+    centres coincide; ``offsets``: c[j] − c[i] as (x, y, length) where the caller has
+    them)."""
+    if offsets is None:
+        dx, dy = c[j, 0] - c[i, 0], c[j, 1] - c[i, 1]
+        offsets = dx, dy, np.hypot(dx, dy)
+    dx, dy, d = offsets
     with np.errstate(invalid="ignore", divide="ignore"):
         clx, cly = np.where(d > 0, dx / d, 1.0), np.where(d > 0, dy / d, 0.0)
     args = tuple(v[:, None] for v in (dx, dy, r[i], r[j], cos[i], sin[i], cos[j], sin[j]))
@@ -397,7 +400,10 @@ def _face_gaps(unit, dx, dy, ra, rb, ca, sa, cb, sb, out=None):
         # = rb·h_b(±n): b turned as a is has a's offsets along a's normals (to rounding)
         same = np.flatnonzero((ca[:, 0] == cb[:, 0]) & (sa[:, 0] == sb[:, 0]))
         hb = np.empty_like(nd)
-        hb[same] = unit.offsets[:h]
+        if len(same) == len(hb):  # all turned alike (no field): one broadcast
+            hb[:] = unit.offsets[:h]
+        else:
+            hb[same] = unit.offsets[:h]
         turned = np.flatnonzero((ca[:, 0] != cb[:, 0]) | (sa[:, 0] != sb[:, 0]))
         hb[turned] = unit.support(fx[turned], fy[turned], cb[turned], sb[turned])
         hb *= rb
@@ -421,15 +427,21 @@ def _reach_classes(reach: np.ndarray) -> list[np.ndarray]:
     return np.split(order, cuts)
 
 
-def _near_items(points, reach, item_trees, extra):
+def _point_trees(points, reach) -> list:
+    """[(indices, kd-tree of their points, their largest reach)] per class of reach
+    (:func:`_reach_classes`): built once per round, queried for the near pairs and for
+    the near pieces."""
+    return [(cls, cKDTree(points[cls]), reach[cls].max()) for cls in _reach_classes(reach)]
+
+
+def _near_items(point_trees, item_trees, extra):
     """(k, i): every point k and item i with |points[k] − item| <= reach[k] + the item's
-    half-length + extra (and some farther ones), ordered by k then i.  ``item_trees``:
-    [(item indices, kd-tree of their midpoints, their largest half-length)]
-    (:func:`_segment_trees`).  The points are queried class by class of reach, each
-    class's tree built once."""
+    half-length + extra (and some farther ones), ordered by k then i.  ``point_trees``:
+    the points by class of reach (:func:`_point_trees`); ``item_trees``: [(item
+    indices, kd-tree of their midpoints, their largest half-length)]
+    (:func:`_segment_trees`)."""
     ks, items = [], []
-    for cls in _reach_classes(reach):
-        tree, top = cKDTree(points[cls]), reach[cls].max()
+    for cls, tree, top in point_trees:
         for members, item_tree, half_length in item_trees:
             found = tree.sparse_distance_matrix(item_tree, top + half_length + extra, output_type="ndarray")
             ks.append(cls[found["i"]])
@@ -459,13 +471,12 @@ def _segment_trees(segs: np.ndarray) -> list:
     return out
 
 
-def _pairs_within(points, reach, extra):
-    """(P, 2) index pairs a < b with |points[a] − points[b]| <= reach[a] + reach[b] +
-    extra (and some farther ones), ordered by a then b: class by class of reach, so one
-    large element does not widen the query of every small one."""
-    classes = _reach_classes(reach)
-    trees = [cKDTree(points[cls]) for cls in classes]
-    tops = [reach[cls].max() for cls in classes]
+def _pairs_within(point_trees, count, extra):
+    """(P, 2) index pairs a < b of the ``count`` points with |points[a] − points[b]| <=
+    reach[a] + reach[b] + extra (and some farther ones), ordered by a then b: class by
+    class of reach (``point_trees``: :func:`_point_trees`), so one large element does
+    not widen the query of every small one."""
+    classes, trees, tops = zip(*point_trees, strict=True)
     a_s, b_s = [], []
     for x, (cx, tx) in enumerate(zip(classes, trees, strict=True)):
         got = tx.query_pairs(2 * tops[x] + extra, output_type="ndarray")
@@ -477,32 +488,34 @@ def _pairs_within(points, reach, extra):
             b_s.append(classes[y][found["j"]])
     a, b = np.concatenate(a_s), np.concatenate(b_s)
     a, b = np.minimum(a, b), np.maximum(a, b)
-    order = _order_pairs(a, b, len(points))
+    order = _order_pairs(a, b, count)
     return np.stack([a[order], b[order]], axis=1)
 
 
-def _near_pairs(unit, c, r, cos, sin, budget, gap, prev):
-    """Pairs whose gap could close to < gap this round; their n and current gap."""
-    act = np.flatnonzero(r > 0)
+def _near_pairs(unit, c, r, cos, sin, budget, gap, prev, act, point_trees):
+    """Pairs whose gap could close to < gap this round; their n and current gap
+    (``act``: the elements with a size, ``point_trees``: their centres by class of reach
+    ρ·r + budget, :func:`_point_trees`)."""
     if len(act) < 2:
         e = np.zeros(0)
         return np.zeros(0, np.int64), np.zeros(0, np.int64), e, e, e
-    reach = unit.rho * r[act] + budget[act]
-    ij = _pairs_within(c[act], reach, gap + _SELECT)
+    ij = _pairs_within(point_trees, len(act), gap + _SELECT)
     i, j = act[ij[:, 0]], act[ij[:, 1]]
-    d = np.hypot(*(c[j] - c[i]).T)
+    dx, dy = c[j, 0] - c[i, 0], c[j, 1] - c[i, 1]
+    d = np.hypot(dx, dy)
     enough = gap + budget[i] + budget[j] + _SELECT
     keep = d < unit.rho * (r[i] + r[j]) + enough
-    i, j, d, enough = i[keep], j[keep], d[keep], enough[keep]
+    i, j, dx, dy, d, enough = i[keep], j[keep], dx[keep], dy[keep], d[keep], enough[keep]
     # the centre line is one of the candidates and the one chosen is within _TIE of the
     # best: pairs already far enough apart along it are left out without the others
-    dx, dy = c[j, 0] - c[i, 0], c[j, 1] - c[i, 1]
     with np.errstate(invalid="ignore", divide="ignore"):
         along = _pair_gap(unit, dx, dy, r[i], r[j], cos[i], sin[i], cos[j], sin[j], dx / d, dy / d)
     keep = ~(along >= enough + _TIE)  # coincident centres (NaN) stay
     i, j, enough = i[keep], j[keep], enough[keep]
     prev_n = _lookup(prev, i * len(r) + j)
-    nx, ny, g = _best_pair_directions(unit, c, r, cos, sin, i, j, prev_n, enough, along[keep])
+    nx, ny, g = _best_pair_directions(
+        unit, c, r, cos, sin, i, j, prev_n, enough, along[keep], (dx[keep], dy[keep], d[keep])
+    )
     keep = g < enough
     return i[keep], j[keep], nx[keep], ny[keep], g[keep]
 
@@ -607,13 +620,11 @@ def _closest_on_segment(px, py, qx, qy, x, y):
     return px + t * ex, py + t * ey
 
 
-def _near_segments(unit, c, r, cos, sin, budget, half, segs, seg_trees, prev):
-    act = np.flatnonzero(r > 0)
+def _near_segments(unit, c, r, cos, sin, budget, half, segs, seg_trees, prev, act, point_trees):
     empty = np.zeros(0)
     if len(act) == 0 or len(segs) == 0:
         return np.zeros(0, np.int64), np.zeros(0, np.int64), empty, empty, empty
-    reach = unit.rho * r[act] + budget[act]
-    k, s = _near_items(c[act], reach, seg_trees, half + _SELECT)
+    k, s = _near_items(point_trees, seg_trees, half + _SELECT)
     e = act[k]
     px, py, qx, qy = segs[s, 0], segs[s, 1], segs[s, 2], segs[s, 3]
     x, y = c[e, 0], c[e, 1]
@@ -1295,8 +1306,13 @@ def compact(
         if max_sizes is not None:
             up = np.clip(max_sizes - r, 0.0, up)
         budget = math.sqrt(2) * delta + unit.rho * up
-        i, j, px, py, _ = _near_pairs(unit, c, r, cos, sin, budget, gap, prev_p)
-        e, s, sx, sy, _ = _near_segments(unit, c, r, cos, sin, budget, 0.5 * gap, segs, seg_trees, prev_s)
+        act = np.flatnonzero(r > 0)
+        # one kd-tree of the centres (per class of reach) for the pairs and the pieces
+        trees = _point_trees(c[act], unit.rho * r[act] + budget[act]) if len(act) else []
+        i, j, px, py, _ = _near_pairs(unit, c, r, cos, sin, budget, gap, prev_p, act, trees)
+        e, s, sx, sy, _ = _near_segments(
+            unit, c, r, cos, sin, budget, 0.5 * gap, segs, seg_trees, prev_s, act, trees
+        )
         seg_m = np.minimum(sx * segs[s, 0] + sy * segs[s, 1], sx * segs[s, 2] + sy * segs[s, 3])
         rows = _Rows(
             i,
