@@ -293,14 +293,27 @@ def _refine_angles(gap_at, phi, width):
     return best, np.maximum(ga, gb)
 
 
-def _best_direction(gap_of, g, direction_of, curved_from=None, enough=None):
+def _gaps_of_rows(gap, unit, args):
+    """``gap_for(rows)``: the gap function (nx, ny) of those rows (a slice or indices),
+    broadcasting over columns; ``gap``: :func:`_pair_gap` or :func:`_seg_gap`, ``args``:
+    its per-row arguments as (rows, 1) columns, gathered once per call of gap_for (the
+    curved shapes' refinement evaluates the same rows some thirty times)."""
+
+    def gap_for(rows):
+        picked = tuple(a[rows] for a in args)
+        return lambda nx, ny: gap(unit, *picked, nx, ny)
+
+    return gap_for
+
+
+def _best_direction(gap_for, g, direction_of, curved_from=None, enough=None):
     """Per row, the preferred candidate direction (columns of the candidates' gaps ``g``,
     in order of preference) and its gap.  ``direction_of(k)``: the direction (x, y) of
     each row's candidate k (built only for the one chosen, not for every candidate).
     For curved shapes (``curved_from``: a reference angle per row) the rows whose gap is
     below ``enough`` also try _SAMPLES directions within ±90° of it, refined by golden
-    section, taken when clearly better.  ``gap_of(nx, ny, rows)`` evaluates the rows
-    ``rows`` (a slice or indices), broadcasting over columns.  ``g`` is overwritten."""
+    section, taken when clearly better.  ``gap_for``: :func:`_gaps_of_rows`.  ``g`` is
+    overwritten."""
     np.copyto(g, -np.inf, where=~np.isfinite(g))  # last round's n is NaN for new rows
     k, best = _argmax_rows(g)
     bx, by = direction_of(k)
@@ -308,9 +321,10 @@ def _best_direction(gap_of, g, direction_of, curved_from=None, enough=None):
     if len(sub):  # rows far apart already are left out of the program: no need to refine
         off = np.linspace(-math.pi / 2, math.pi / 2, _SAMPLES)
         phis = curved_from[sub, None] + off[None, :]
-        ks, _ = _argmax_rows(gap_of(np.cos(phis), np.sin(phis), sub))
+        gap_of = gap_for(sub)
+        ks, _ = _argmax_rows(gap_of(np.cos(phis), np.sin(phis)))
         phi, gref = _refine_angles(
-            lambda p: gap_of(np.cos(p)[:, None], np.sin(p)[:, None], sub)[:, 0],
+            lambda p: gap_of(np.cos(p)[:, None], np.sin(p)[:, None])[:, 0],
             phis[np.arange(len(sub)), ks],
             off[1] - off[0],
         )
@@ -338,7 +352,8 @@ def _best_pair_directions(unit, c, r, cos, sin, i, j, prev_n, enough=None, along
     with np.errstate(invalid="ignore", divide="ignore"):
         clx, cly = np.where(d > 0, dx / d, 1.0), np.where(d > 0, dy / d, 0.0)
     args = tuple(v[:, None] for v in (dx, dy, r[i], r[j], cos[i], sin[i], cos[j], sin[j]))
-    gap_of = lambda nx, ny, k: _pair_gap(unit, *(a[k] for a in args), nx, ny)  # noqa: E731
+    gap_for = _gaps_of_rows(_pair_gap, unit, args)
+    gap_of = gap_for(slice(None))
     # the candidates' gaps in order of preference, written into one array: faces (walls
     # to slide along; i's, then j's), last round's n, centre line
     faces = len(unit.normals) if unit.kind == "polygon" else 0
@@ -362,15 +377,15 @@ def _best_pair_directions(unit, c, r, cos, sin, i, j, prev_n, enough=None, along
         )
     # last round's n: new pairs have none (NaN, never chosen)
     if np.isfinite(prev_n[:, 0]).any():
-        g[:, -2] = gap_of(prev_n[:, 0:1], prev_n[:, 1:2], slice(None))[:, 0]
+        g[:, -2] = gap_of(prev_n[:, 0:1], prev_n[:, 1:2])[:, 0]
     else:
         g[:, -2] = np.nan
     if along is None:
-        g[:, -1] = gap_of(clx[:, None], cly[:, None], slice(None))[:, 0]
+        g[:, -1] = gap_of(clx[:, None], cly[:, None])[:, 0]
     else:
         g[:, -1] = along
         fresh = np.flatnonzero(~(d > 0))
-        g[fresh, -1] = gap_of(clx[fresh, None], cly[fresh, None], fresh)[:, 0]
+        g[fresh, -1] = gap_for(fresh)(clx[fresh, None], cly[fresh, None])[:, 0]
 
     def direction_of(k):
         """The direction of candidate k of each pair: a face normal of i, minus one of
@@ -390,7 +405,7 @@ def _best_pair_directions(unit, c, r, cos, sin, i, j, prev_n, enough=None, along
         return bx, by
 
     curved = unit.kind == "ellipse" and unit.axes[0] != unit.axes[1]  # circles: centre line
-    return _best_direction(gap_of, g, direction_of, np.arctan2(cly, clx) if curved else None, enough)
+    return _best_direction(gap_for, g, direction_of, np.arctan2(cly, clx) if curved else None, enough)
 
 
 def _face_gaps(unit, dx, dy, ra, rb, ca, sa, cb, sb, out=None):
@@ -657,8 +672,9 @@ def _near_segments(unit, c, r, cos, sin, budget, half, segs, seg_trees, prev, ac
     # n, the direction of the nearest point (beside a reflex corner of the region)
     cx_, cy_ = [(sx * flip)[:, None]], [(sy * flip)[:, None]]
     args = tuple(v[:, None] for v in (px, py, qx, qy, x, y, r[e], cos[e], sin[e]))
-    gap_of = lambda nx, ny, k: _seg_gap(unit, *(a[k] for a in args), nx, ny)  # noqa: E731
-    gaps = [gap_of(cx_[0], cy_[0], slice(None))]
+    gap_for = _gaps_of_rows(_seg_gap, unit, args)
+    gap_of = gap_for(slice(None))
+    gaps = [gap_of(cx_[0], cy_[0])]
     if unit.kind == "polygon":
         fx, fy = unit.face_normals(cos[e], sin[e])
         cx_.append(fx)
@@ -669,8 +685,8 @@ def _near_segments(unit, c, r, cos, sin, budget, half, segs, seg_trees, prev, ac
     # last round's n: new rows have none (NaN, never chosen)
     known = np.flatnonzero(np.isfinite(prev_n[:, 0]))
     g_prev = np.full((len(e), 1), np.nan)
-    g_prev[known] = gap_of(prev_n[known, 0:1], prev_n[known, 1:2], known)
-    gaps += [g_prev, gap_of(tx[:, None], ty[:, None], slice(None))]
+    g_prev[known] = gap_for(known)(prev_n[known, 0:1], prev_n[known, 1:2])
+    gaps += [g_prev, gap_of(tx[:, None], ty[:, None])]
     cx_ += [prev_n[:, 0:1], tx[:, None]]
     cy_ += [prev_n[:, 1:2], ty[:, None]]
     curved = unit.kind == "ellipse" and unit.axes[0] != unit.axes[1]  # circles: nearest point
@@ -678,7 +694,7 @@ def _near_segments(unit, c, r, cos, sin, budget, half, segs, seg_trees, prev, ac
     nx, ny = np.concatenate(cx_, axis=1), np.concatenate(cy_, axis=1)
     rows = np.arange(len(e))
     bx, by, best = _best_direction(
-        gap_of,
+        gap_for,
         np.concatenate(gaps, axis=1),
         lambda k: (nx[rows, k], ny[rows, k]),
         np.arctan2(ty, tx) if curved else None,
