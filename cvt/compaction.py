@@ -248,6 +248,12 @@ class _Unit:
             np.maximum(out, v[k, 0] * ux + v[k, 1] * uy, out=out)
         return out
 
+    def face_normal(self, m, cos, sin):
+        """x and y of face normal ``m[k]`` of element k turned by θ_k (``cos``, ``sin``):
+        the numbers of :meth:`face_normals`, one per element."""
+        nx, ny = self.normals[m, 0], self.normals[m, 1]
+        return cos * nx - sin * ny, sin * nx + cos * ny
+
     def face_normals(self, cos, sin, count=None):
         """(..., K) x and y of the outward face normals, turned by θ (``count``: the
         first ``count`` of them only)."""
@@ -400,10 +406,9 @@ def _best_pair_directions(unit, c, r, cos, sin, i, j, prev_n, enough=None, along
             of_j = m >= faces
             m = np.where(of_j, m - faces, m)
             owner = np.where(of_j, j[on_face], i[on_face])
-            co, so = cos[owner], sin[owner]
-            nx, ny = unit.normals[m, 0], unit.normals[m, 1]
-            sign = np.where(of_j, -1.0, 1.0)  # (as face_normals turns them)
-            bx[on_face], by[on_face] = sign * (co * nx - so * ny), sign * (so * nx + co * ny)
+            fx, fy = unit.face_normal(m, cos[owner], sin[owner])
+            sign = np.where(of_j, -1.0, 1.0)
+            bx[on_face], by[on_face] = sign * fx, sign * fy
         return bx, by
 
     curved = unit.kind == "ellipse" and unit.axes[0] != unit.axes[1]  # circles: centre line
@@ -678,36 +683,39 @@ def _near_segments(unit, c, r, cos, sin, budget, half, segs, seg_trees, prev, ac
     flip = np.where(sx * (kx - x) + sy * (ky - y) < 0, -1.0, 1.0)
     # in order of preference: the piece's own normal, the element's faces, last round's
     # n, the direction of the nearest point (beside a reflex corner of the region)
-    cx_, cy_ = [(sx * flip)[:, None]], [(sy * flip)[:, None]]
+    # (the candidates' gaps written into one array, their directions built only for the
+    # one chosen)
+    nsx, nsy = sx * flip, sy * flip
     args = tuple(v[:, None] for v in (px, py, qx, qy, x, y, r[e], cos[e], sin[e]))
     gap_for = _gaps_of_rows(_seg_gap, unit, args)
     gap_of = gap_for(slice(None))
-    gaps = [gap_of(cx_[0], cy_[0])]
-    if unit.kind == "polygon":
+    faces = len(unit.normals) if unit.kind == "polygon" else 0
+    g = np.empty((len(e), faces + 3))
+    g[:, 0] = gap_of(nsx[:, None], nsy[:, None])[:, 0]
+    if faces:
         fx, fy = unit.face_normals(cos[e], sin[e])
-        cx_.append(fx)
-        cy_.append(fy)
         # along its own faces the element reaches out by the shape's offsets
         p_, q_ = fx * args[0] + fy * args[1], fx * args[2] + fy * args[3]
-        gaps.append(np.minimum(p_, q_) - fx * args[4] - fy * args[5] - args[6] * unit.offsets)
+        g[:, 1 : 1 + faces] = np.minimum(p_, q_) - fx * args[4] - fy * args[5] - args[6] * unit.offsets
     # last round's n: new rows have none (NaN, never chosen)
     known = np.flatnonzero(np.isfinite(prev_n[:, 0]))
-    g_prev = np.full((len(e), 1), np.nan)
-    g_prev[known] = gap_for(known)(prev_n[known, 0:1], prev_n[known, 1:2])
-    gaps += [g_prev, gap_of(tx[:, None], ty[:, None])]
-    cx_ += [prev_n[:, 0:1], tx[:, None]]
-    cy_ += [prev_n[:, 1:2], ty[:, None]]
+    g[:, -2] = np.nan
+    g[known, -2] = gap_for(known)(prev_n[known, 0:1], prev_n[known, 1:2])[:, 0]
+    g[:, -1] = gap_of(tx[:, None], ty[:, None])[:, 0]
+
+    def direction_of(k):
+        """The direction of candidate k of each row: the piece's normal, a face normal,
+        last round's n or the nearest point's."""
+        bx = np.where(k == 0, nsx, np.where(k == faces + 2, tx, prev_n[:, 0]))
+        by = np.where(k == 0, nsy, np.where(k == faces + 2, ty, prev_n[:, 1]))
+        on_face = np.flatnonzero((k >= 1) & (k <= faces))
+        if len(on_face):
+            bx[on_face], by[on_face] = unit.face_normal(k[on_face] - 1, cos[e[on_face]], sin[e[on_face]])
+        return bx, by
+
     curved = unit.kind == "ellipse" and unit.axes[0] != unit.axes[1]  # circles: nearest point
     enough = half + budget[e] + _SELECT
-    nx, ny = np.concatenate(cx_, axis=1), np.concatenate(cy_, axis=1)
-    rows = np.arange(len(e))
-    bx, by, best = _best_direction(
-        gap_for,
-        np.concatenate(gaps, axis=1),
-        lambda k: (nx[rows, k], ny[rows, k]),
-        np.arctan2(ty, tx) if curved else None,
-        enough,
-    )
+    bx, by, best = _best_direction(gap_for, g, direction_of, np.arctan2(ty, tx) if curved else None, enough)
     keep = best < enough
     return _select(keep, e, s, bx, by, best)
 
