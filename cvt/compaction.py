@@ -254,10 +254,14 @@ class _Unit:
         nx, ny = self.normals[m, 0], self.normals[m, 1]
         return cos * nx - sin * ny, sin * nx + cos * ny
 
-    def face_normals(self, cos, sin, count=None):
+    def face_normals(self, cos, sin, count=None, faces_first=False):
         """(..., K) x and y of the outward face normals, turned by θ (``count``: the
-        first ``count`` of them only)."""
+        first ``count`` of them only; ``faces_first``: (K, ...) instead, the same
+        numbers)."""
         nx, ny = self.normals[:count, 0], self.normals[:count, 1]
+        if faces_first:
+            nx, ny = (v.reshape(-1, *([1] * np.ndim(cos))) for v in (nx, ny))
+            return cos * nx - sin * ny, sin * nx + cos * ny
         c, s = cos[..., None], sin[..., None]
         return c * nx - s * ny, s * nx + c * ny
 
@@ -374,14 +378,13 @@ def _best_pair_directions(unit, c, r, cos, sin, i, j, prev_n, enough=None, along
         other = np.flatnonzero((cos[i] != cos[j]) | (sin[i] != sin[j]))
     j_faces = faces if len(other) else 0
     g = np.empty((len(i), faces + j_faces + 2))
+    ri, rj, ci, si, cj, sj = (a[:, 0] for a in args[2:])
     if faces:
-        dx_, dy_ = dx[:, None], dy[:, None]
-        _face_gaps(unit, dx_, dy_, *args[2:], out=g[:, :faces])
+        _face_gaps(unit, dx, dy, ri, rj, ci, si, cj, sj, out=g[:, :faces])
     if j_faces:
         g[:, faces : faces + j_faces] = -np.inf
-        ro, co, so = args[3][other], args[6][other], args[7][other]
         g[other, faces : faces + j_faces] = _face_gaps(
-            unit, -dx_[other], -dy_[other], ro, args[2][other], co, so, args[4][other], args[5][other]
+            unit, -dx[other], -dy[other], rj[other], ri[other], cj[other], sj[other], ci[other], si[other]
         )
     # last round's n: new pairs have none (NaN, never chosen)
     if np.isfinite(prev_n[:, 0]).any():
@@ -416,33 +419,36 @@ def _best_pair_directions(unit, c, r, cos, sin, i, j, prev_n, enough=None, along
 
 
 def _face_gaps(unit, dx, dy, ra, rb, ca, sa, cb, sb, out=None):
-    """The gaps along the face normals n_k of polygon a (turned by its angle) from a to b
-    (``dx``, ``dy``: b's centre minus a's), into ``out`` where given: h_a(n_k) is a
-    constant of the shape, and for a centrally symmetric shape the opposite normal's gap
-    needs no new support."""
+    """The gaps (rows, K) along the face normals n_k of polygon a (turned by its angle)
+    from a to b (``dx``, ``dy``: b's centre minus a's; one entry per row), into ``out``
+    where given: h_a(n_k) is a constant of the shape, and for a centrally symmetric
+    shape the opposite normal's gap needs no new support.  Worked face by face along
+    the rows (a row's few faces as numpy's inner loop cost several times more)."""
     if out is None:
         out = np.empty((len(ra), len(unit.normals)))
+    by_face = out.T
+    offsets = unit.offsets[:, None]
     if unit.symmetric:
-        h = out.shape[1] // 2
-        fx, fy = unit.face_normals(ca[:, 0], sa[:, 0], h)
+        h = len(by_face) // 2
+        fx, fy = unit.face_normals(ca, sa, h, faces_first=True)
         nd = fx * dx + fy * dy
         # = rb·h_b(±n): b turned as a is has a's offsets along a's normals (to rounding)
-        same = np.flatnonzero((ca[:, 0] == cb[:, 0]) & (sa[:, 0] == sb[:, 0]))
+        same = np.flatnonzero((ca == cb) & (sa == sb))
         hb = np.empty_like(nd)
-        if len(same) == len(hb):  # all turned alike (no field): one broadcast
-            hb[:] = unit.offsets[:h]
+        if len(same) == len(ra):  # all turned alike (no field): one broadcast
+            hb[:] = offsets[:h]
         else:
-            hb[same] = unit.offsets[:h]
-        turned = np.flatnonzero((ca[:, 0] != cb[:, 0]) | (sa[:, 0] != sb[:, 0]))
-        hb[turned] = unit.support(fx[turned], fy[turned], cb[turned], sb[turned])
+            hb[:, same] = offsets[:h]
+        turned = np.flatnonzero((ca != cb) | (sa != sb))
+        hb[:, turned] = unit.support(fx[:, turned], fy[:, turned], cb[turned], sb[turned])
         hb *= rb
-        np.subtract(nd, hb, out=out[:, :h])
-        np.negative(nd, out=out[:, h:])
-        out[:, h:] -= hb
-        out -= ra * unit.offsets
+        np.subtract(nd, hb, out=by_face[:h])
+        np.negative(nd, out=by_face[h:])
+        by_face[h:] -= hb
+        by_face -= ra * offsets
     else:
-        fx, fy = unit.face_normals(ca[:, 0], sa[:, 0])
-        out[:] = fx * dx + fy * dy - ra * unit.offsets - rb * unit.support(-fx, -fy, cb, sb)
+        fx, fy = unit.face_normals(ca, sa, faces_first=True)
+        by_face[:] = fx * dx + fy * dy - ra * offsets - rb * unit.support(-fx, -fy, cb, sb)
     return out
 
 
@@ -692,11 +698,11 @@ def _near_segments(unit, c, r, cos, sin, budget, half, segs, seg_trees, prev, ac
     faces = len(unit.normals) if unit.kind == "polygon" else 0
     g = np.empty((len(e), faces + 3))
     g[:, 0] = gap_of(nsx[:, None], nsy[:, None])[:, 0]
-    if faces:
-        fx, fy = unit.face_normals(cos[e], sin[e])
+    if faces:  # worked face by face along the rows, as in _face_gaps
+        fx, fy = unit.face_normals(cos[e], sin[e], faces_first=True)
         # along its own faces the element reaches out by the shape's offsets
-        p_, q_ = fx * args[0] + fy * args[1], fx * args[2] + fy * args[3]
-        g[:, 1 : 1 + faces] = np.minimum(p_, q_) - fx * args[4] - fy * args[5] - args[6] * unit.offsets
+        p_, q_ = fx * px + fy * py, fx * qx + fy * qy
+        g[:, 1 : 1 + faces].T[:] = np.minimum(p_, q_) - fx * x - fy * y - r[e] * unit.offsets[:, None]
     # last round's n: new rows have none (NaN, never chosen)
     known = np.flatnonzero(np.isfinite(prev_n[:, 0]))
     g[:, -2] = np.nan
