@@ -487,14 +487,15 @@ def _near_items(point_trees, item_trees, extra):
             ks.append(cls[found["i"]])
             items.append(members[found["j"]])
     k, i = np.concatenate(ks), np.concatenate(items)
-    order = _order_pairs(k, i, 1 + max((m.max(initial=0) for m, _, _ in item_trees), default=0))
-    return k[order], i[order]
+    return _sorted_pairs(k, i, 1 + max((m.max(initial=0) for m, _, _ in item_trees), default=0))
 
 
-def _order_pairs(a, b, nb):
-    """The order of the (unique) index pairs (a, b), b < ``nb``, by a then b: one argsort
-    of a·nb + b, the same order as np.lexsort((b, a)) in under half its time."""
-    return np.argsort(a.astype(np.int64) * nb + b)
+def _sorted_pairs(a, b, nb):
+    """The index pairs (a, b), b < ``nb``, sorted by a then b (as np.lexsort((b, a))
+    orders them): the keys a·nb + b sorted and split again, in a quarter of the time
+    of an argsort of the keys and the two gathers."""
+    key = np.sort(a.astype(np.int64) * nb + b)
+    return key // nb, key % nb
 
 
 def _segment_trees(segs: np.ndarray) -> list:
@@ -512,7 +513,7 @@ def _segment_trees(segs: np.ndarray) -> list:
 
 
 def _pairs_within(point_trees, count, extra):
-    """(P, 2) index pairs a < b of the ``count`` points with |points[a] − points[b]| <=
+    """Index pairs (a, b), a < b, of the ``count`` points with |points[a] − points[b]| <=
     reach[a] + reach[b] + extra (and some farther ones), ordered by a then b: class by
     class of reach (``point_trees``: :func:`_point_trees`), so one large element does
     not widen the query of every small one."""
@@ -527,9 +528,7 @@ def _pairs_within(point_trees, count, extra):
             a_s.append(cx[found["i"]])
             b_s.append(classes[y][found["j"]])
     a, b = np.concatenate(a_s), np.concatenate(b_s)
-    a, b = np.minimum(a, b), np.maximum(a, b)
-    order = _order_pairs(a, b, count)
-    return np.stack([a[order], b[order]], axis=1)
+    return _sorted_pairs(np.minimum(a, b), np.maximum(a, b), count)
 
 
 def _near_pairs(unit, c, r, cos, sin, budget, gap, prev, act, point_trees):
@@ -539,8 +538,8 @@ def _near_pairs(unit, c, r, cos, sin, budget, gap, prev, act, point_trees):
     if len(act) < 2:
         e = np.zeros(0)
         return np.zeros(0, np.int64), np.zeros(0, np.int64), e, e, e
-    ij = _pairs_within(point_trees, len(act), gap + _SELECT)
-    i, j = act[ij[:, 0]], act[ij[:, 1]]
+    a, b = _pairs_within(point_trees, len(act), gap + _SELECT)
+    i, j = act[a], act[b]
     dx, dy = c[j, 0] - c[i, 0], c[j, 1] - c[i, 1]
     d = np.hypot(dx, dy)
     enough = gap + budget[i] + budget[j] + _SELECT

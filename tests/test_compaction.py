@@ -683,11 +683,17 @@ def test_tightest_pieces_keep_the_same_constraints():
     assert len(zero.tightest_pieces().e) == 1  # −0.0 and 0.0: one direction
 
 
-def test_order_pairs_is_lexicographic():
-    """_order_pairs orders index pairs as np.lexsort does (by the first, then the second)."""
-    from compact_distributions.cvt.compaction import _order_pairs
+def test_sorted_pairs_are_lexicographic():
+    """_sorted_pairs sorts index pairs as np.lexsort does (by the first, then the
+    second), equal pairs included."""
+    from compact_distributions.cvt.compaction import _sorted_pairs
 
     rng = np.random.default_rng(5)
     ab = np.unique(rng.integers(0, 1000, (5000, 2)), axis=0)[rng.permutation(4000)]
+    ab = np.concatenate([ab, ab[:50]])  # some twice
     a, b = ab[:, 0], ab[:, 1]
-    assert np.array_equal(_order_pairs(a, b, 1000), np.lexsort((b, a)))
+    order = np.lexsort((b, a))
+    sa, sb = _sorted_pairs(a, b, 1000)
+    assert np.array_equal(sa, a[order]) and np.array_equal(sb, b[order])
+    empty = np.zeros(0, np.int64)
+    assert all(len(v) == 0 for v in _sorted_pairs(empty, empty, 1))
