@@ -571,9 +571,10 @@ def _lookup(prev, keys):
     if prev is None or len(prev[0]) == 0:
         return out
     pk, pn = prev
-    pos = np.clip(np.searchsorted(pk, keys), 0, len(pk) - 1)
-    hit = pk[pos] == keys
-    out[hit] = pn[pos[hit]]
+    pos = np.searchsorted(pk, keys)
+    np.minimum(pos, len(pk) - 1, out=pos)
+    hit = np.flatnonzero(pk.take(pos) == keys)
+    out[hit] = pn[pos.take(hit)]
     return out
 
 
@@ -1101,7 +1102,9 @@ def _solve_pdhg(rows: _Rows, act, c, r, gap, delta, lo_dr, hi_dr, weight, iterat
     import scipy.sparse as sp
 
     n = len(r)
-    col = np.full(n, -1, dtype=np.int64)
+    # int32 column numbers and row starts: scipy keeps a CSR matrix's indices in int32
+    # where they fit, and would otherwise copy them
+    col = np.full(n, -1, dtype=np.int32)
     col[act] = np.arange(len(act))
     ncol = 3 * len(act)
     npair, nseg = len(rows.i), len(rows.e)
@@ -1123,6 +1126,8 @@ def _solve_pdhg(rows: _Rows, act, c, r, gap, delta, lo_dr, hi_dr, weight, iterat
         ]
     )
     start = np.concatenate([np.arange(0, 6 * npair + 1, 6), 6 * npair + np.arange(3, 3 * nseg + 1, 3)])
+    if 6 * npair + 3 * nseg < 2**31 and ncol < 2**31:
+        start = start.astype(np.int32)
     a = sp.csr_matrix((value, index, start), shape=(npair + nseg, ncol))
     # the current state (x = 0) is feasible
     b = np.minimum(-np.concatenate([rows.pair_slack(c, r, gap), rows.seg_slack(c, r, 0.5 * gap)]), 0.0)
