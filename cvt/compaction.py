@@ -129,9 +129,14 @@ shape (4000 elements, 1024², seeds 0-1: rectangles +0.0 to +0.1 points of cover
 ellipses +0.5, the others +0.1 to +0.2) and 0.5 % more on a 20 000-tile walled mosaic.
 Longer primal steps (ratio 8) with 55 steps gained on squares but lost 0.9 points on
 rectangles (β = 0.5) and 0.3 on ellipses; at ratio 4, 55-65 steps lose 0.1-0.3 points
-to 70.  Anchored at the start it nears each round's optimum more
-closely; from an exact lattice that optimum is to stay, where plain PDHG's inexact
-steps broke the symmetry (a lattice shaken by 0.1 px grows as before).
+to 70.  PDLP's adaptive primal weight (the ratio moved at each restart halfway, in
+logarithm, to the primal over the dual movement since the last one, kept in [2.5, 16],
+carried from round to round) gained 0.01-0.15 points on every shape at 70 steps, but
+did not buy steps: against the fixed ratio at 70 it lost up to 0.22 points at 60 steps
+(circles, octagons) and 0.04 at 65 (hexagons) (seeds 0-2, alternating triangles
+included).  Anchored at the start it nears each round's optimum more closely; from
+an exact lattice that optimum is to stay, where plain PDHG's inexact steps broke the
+symmetry (a lattice shaken by 0.1 px grows as before).
 Steps stop early only when converged (T(z) = z and no row short by more than 1e-10 px:
 small programs, which then meet HiGHS' optimum).  PDHG is plain single-threaded NumPy
 and scipy.sparse: the result does not depend on ``threads``.
