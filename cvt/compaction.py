@@ -129,9 +129,14 @@ shape (4000 elements, 1024², seeds 0-1: rectangles +0.0 to +0.1 points of cover
 ellipses +0.5, the others +0.1 to +0.2) and 0.5 % more on a 20 000-tile walled mosaic.
 Longer primal steps (ratio 8) with 55 steps gained on squares but lost 0.9 points on
 rectangles (β = 0.5) and 0.3 on ellipses; at ratio 4, 55-65 steps lose 0.1-0.3 points
-to 70.  Anchored at the start it nears each round's optimum more
-closely; from an exact lattice that optimum is to stay, where plain PDHG's inexact
-steps broke the symmetry (a lattice shaken by 0.1 px grows as before).
+to 70.  PDLP's adaptive primal weight (the ratio moved at each restart halfway, in
+logarithm, to the primal over the dual movement since the last one, kept in [2.5, 16],
+carried from round to round) gained 0.01-0.15 points on every shape at 70 steps, but
+did not buy steps: against the fixed ratio at 70 it lost up to 0.22 points at 60 steps
+(circles, octagons) and 0.04 at 65 (hexagons) (seeds 0-2, alternating triangles
+included).  Anchored at the start it nears each round's optimum more closely; from
+an exact lattice that optimum is to stay, where plain PDHG's inexact steps broke the
+symmetry (a lattice shaken by 0.1 px grows as before).
 Steps stop early only when converged (T(z) = z and no row short by more than 1e-10 px:
 small programs, which then meet HiGHS' optimum).  PDHG is plain single-threaded NumPy
 and scipy.sparse: the result does not depend on ``threads``.
@@ -248,9 +253,20 @@ class _Unit:
             np.maximum(out, v[k, 0] * ux + v[k, 1] * uy, out=out)
         return out
 
-    def face_normals(self, cos, sin):
-        """(..., K) x and y of the outward face normals, turned by θ."""
-        nx, ny = self.normals[:, 0], self.normals[:, 1]
+    def face_normal(self, m, cos, sin):
+        """x and y of face normal ``m[k]`` of element k turned by θ_k (``cos``, ``sin``):
+        the numbers of :meth:`face_normals`, one per element."""
+        nx, ny = self.normals[m, 0], self.normals[m, 1]
+        return cos * nx - sin * ny, sin * nx + cos * ny
+
+    def face_normals(self, cos, sin, count=None, faces_first=False):
+        """(..., K) x and y of the outward face normals, turned by θ (``count``: the
+        first ``count`` of them only; ``faces_first``: (K, ...) instead, the same
+        numbers)."""
+        nx, ny = self.normals[:count, 0], self.normals[:count, 1]
+        if faces_first:
+            nx, ny = (v.reshape(-1, *([1] * np.ndim(cos))) for v in (nx, ny))
+            return cos * nx - sin * ny, sin * nx + cos * ny
         c, s = cos[..., None], sin[..., None]
         return c * nx - s * ny, s * nx + c * ny
 
@@ -260,8 +276,17 @@ def _argmax_rows(g, tie=_TIE):
     order of preference: ties are common, e.g. a square's corner on a piece's end point
     is as far along the diagonal as along the border's normal, and the diagonal would
     lock the element in place), and its value."""
-    top = g.max(axis=1, initial=-np.inf)
-    k = np.argmax(g >= (top - tie)[:, None], axis=1)
+    # candidate by candidate on a transposed copy (a loop over the few candidates): a
+    # reduction along the short axis of a (rows, candidates) array costs several times
+    # more, and so do strided columns
+    by_candidate = np.ascontiguousarray(g.T)
+    top = np.full(len(g), -np.inf)
+    for col in by_candidate:
+        np.maximum(top, col, out=top)
+    top -= tie
+    k = np.zeros(len(g), dtype=np.int64)
+    for m in range(len(by_candidate) - 1, -1, -1):  # the first within tie wins: filled last
+        k[by_candidate[m] >= top] = m
     return k, g[np.arange(len(g)), k]
 
 
@@ -285,26 +310,38 @@ def _refine_angles(gap_at, phi, width):
     return best, np.maximum(ga, gb)
 
 
-def _best_direction(gap_of, nx, ny, curved_from=None, enough=None, g=None):
-    """Per row, the preferred candidate direction (columns of ``nx``, ``ny``, in order of
-    preference) and its gap.  For curved shapes (``curved_from``: a reference angle per
-    row) the rows whose gap is below ``enough`` also try _SAMPLES directions within ±90°
-    of it, refined by golden section, taken when clearly better.  ``gap_of(nx, ny, rows)``
-    evaluates the rows ``rows`` (a slice or indices), broadcasting over columns; ``g``:
-    the candidates' gaps where the caller has them already."""
-    if g is None:
-        g = gap_of(nx, ny, slice(None))
-    g = np.where(np.isfinite(g), g, -np.inf)  # last round's n is NaN for new rows
+def _gaps_of_rows(gap, unit, args):
+    """``gap_for(rows)``: the gap function (nx, ny) of those rows (a slice or indices),
+    broadcasting over columns; ``gap``: :func:`_pair_gap` or :func:`_seg_gap`, ``args``:
+    its per-row arguments as (rows, 1) columns, gathered once per call of gap_for (the
+    curved shapes' refinement evaluates the same rows some thirty times)."""
+
+    def gap_for(rows):
+        picked = tuple(a[rows] for a in args)
+        return lambda nx, ny: gap(unit, *picked, nx, ny)
+
+    return gap_for
+
+
+def _best_direction(gap_for, g, direction_of, curved_from=None, enough=None):
+    """Per row, the preferred candidate direction (columns of the candidates' gaps ``g``,
+    in order of preference) and its gap.  ``direction_of(k)``: the direction (x, y) of
+    each row's candidate k (built only for the one chosen, not for every candidate).
+    For curved shapes (``curved_from``: a reference angle per row) the rows whose gap is
+    below ``enough`` also try _SAMPLES directions within ±90° of it, refined by golden
+    section, taken when clearly better.  ``gap_for``: :func:`_gaps_of_rows`.  ``g`` is
+    overwritten."""
+    np.copyto(g, -np.inf, where=~np.isfinite(g))  # last round's n is NaN for new rows
     k, best = _argmax_rows(g)
-    rows = np.arange(len(k))
-    bx, by = nx[rows, k], ny[rows, k]
-    sub = np.flatnonzero(best < enough) if curved_from is not None else rows[:0]
+    bx, by = direction_of(k)
+    sub = np.flatnonzero(best < enough) if curved_from is not None else np.zeros(0, np.int64)
     if len(sub):  # rows far apart already are left out of the program: no need to refine
         off = np.linspace(-math.pi / 2, math.pi / 2, _SAMPLES)
         phis = curved_from[sub, None] + off[None, :]
-        ks, _ = _argmax_rows(gap_of(np.cos(phis), np.sin(phis), sub))
+        gap_of = gap_for(sub)
+        ks, _ = _argmax_rows(gap_of(np.cos(phis), np.sin(phis)))
         phi, gref = _refine_angles(
-            lambda p: gap_of(np.cos(p)[:, None], np.sin(p)[:, None], sub)[:, 0],
+            lambda p: gap_of(np.cos(p)[:, None], np.sin(p)[:, None])[:, 0],
             phis[np.arange(len(sub)), ks],
             off[1] - off[0],
         )
@@ -320,78 +357,104 @@ def _pair_gap(unit, dx, dy, ri, rj, ci, si, cj, sj, nx, ny):
     return nx * dx + ny * dy - ri * unit.support(nx, ny, ci, si) - rj * unit.support(-nx, -ny, cj, sj)
 
 
-def _best_pair_directions(unit, c, r, cos, sin, i, j, prev_n, enough=None, along=None):
+def _best_pair_directions(unit, c, r, cos, sin, i, j, prev_n, enough=None, along=None, offsets=None):
     """Per pair: the unit n (from i to j) to separate them along, and their gap along it
     (``along``: the gaps along the centre lines where the caller has them, NaN where the
-    centres coincide)."""
-    dx, dy = c[j, 0] - c[i, 0], c[j, 1] - c[i, 1]
-    d = np.hypot(dx, dy)
+    centres coincide; ``offsets``: c[j] − c[i] as (x, y, length) where the caller has
+    them)."""
+    if offsets is None:
+        dx, dy = c[j, 0] - c[i, 0], c[j, 1] - c[i, 1]
+        offsets = dx, dy, np.hypot(dx, dy)
+    dx, dy, d = offsets
     with np.errstate(invalid="ignore", divide="ignore"):
         clx, cly = np.where(d > 0, dx / d, 1.0), np.where(d > 0, dy / d, 0.0)
     args = tuple(v[:, None] for v in (dx, dy, r[i], r[j], cos[i], sin[i], cos[j], sin[j]))
-    gap_of = lambda nx, ny, k: _pair_gap(unit, *(a[k] for a in args), nx, ny)  # noqa: E731
-    # in order of preference: faces (walls to slide along), last round's n, centre line
-    cands_x, cands_y, gaps = [], [], []
-    if unit.kind == "polygon":
-        dx_, dy_ = dx[:, None], dy[:, None]
-        fx, fy, gi = _face_gaps(unit, dx_, dy_, *args[2:])
-        cands_x.append(fx), cands_y.append(fy), gaps.append(gi)
+    gap_for = _gaps_of_rows(_pair_gap, unit, args)
+    gap_of = gap_for(slice(None))
+    # the candidates' gaps in order of preference, written into one array: faces (walls
+    # to slide along; i's, then j's), last round's n, centre line
+    faces = len(unit.normals) if unit.kind == "polygon" else 0
+    other = np.arange(len(i))
+    if faces and unit.symmetric:
         # j's faces seen from j: the gap along −g is the gap along g from j to i.  Where j
         # is turned as i is and the shape is centrally symmetric, j's faces are i's (its
         # opposite normals), later in the order of preference and of the same gap (to
         # rounding, far below _TIE): never chosen, so not evaluated
-        other = np.arange(len(i))
-        if unit.symmetric:
-            other = np.flatnonzero((cos[i] != cos[j]) | (sin[i] != sin[j]))
-        if len(other):
-            gx, gy, gj = np.full_like(fx, np.nan), np.full_like(fy, np.nan), np.full_like(gi, -np.inf)
-            ro, co, so = args[3][other], args[6][other], args[7][other]
-            gx[other], gy[other], gj[other] = _face_gaps(
-                unit, -dx_[other], -dy_[other], ro, args[2][other], co, so, args[4][other], args[5][other]
-            )
-            cands_x.append(-gx), cands_y.append(-gy), gaps.append(gj)
+        other = np.flatnonzero((cos[i] != cos[j]) | (sin[i] != sin[j]))
+    j_faces = faces if len(other) else 0
+    g = np.empty((len(i), faces + j_faces + 2))
+    ri, rj, ci, si, cj, sj = (a[:, 0] for a in args[2:])
+    if faces:
+        _face_gaps(unit, dx, dy, ri, rj, ci, si, cj, sj, out=g[:, :faces])
+    if j_faces:
+        g[:, faces : faces + j_faces] = -np.inf
+        g[other, faces : faces + j_faces] = _face_gaps(
+            unit, -dx[other], -dy[other], rj[other], ri[other], cj[other], sj[other], ci[other], si[other]
+        )
     # last round's n: new pairs have none (NaN, never chosen)
-    known = np.flatnonzero(np.isfinite(prev_n[:, 0]))
-    g_prev = np.full((len(i), 1), np.nan)
-    g_prev[known] = gap_of(prev_n[known, 0:1], prev_n[known, 1:2], known)
+    if np.isfinite(prev_n[:, 0]).any():
+        g[:, -2] = gap_of(prev_n[:, 0:1], prev_n[:, 1:2])[:, 0]
+    else:
+        g[:, -2] = np.nan
     if along is None:
-        g_line = gap_of(clx[:, None], cly[:, None], slice(None))
+        g[:, -1] = gap_of(clx[:, None], cly[:, None])[:, 0]
     else:
-        g_line = along.copy()[:, None]
+        g[:, -1] = along
         fresh = np.flatnonzero(~(d > 0))
-        g_line[fresh] = gap_of(clx[fresh, None], cly[fresh, None], fresh)
-    cands_x += [prev_n[:, 0:1], clx[:, None]]
-    cands_y += [prev_n[:, 1:2], cly[:, None]]
+        g[fresh, -1] = gap_for(fresh)(clx[fresh, None], cly[fresh, None])[:, 0]
+
+    def direction_of(k):
+        """The direction of candidate k of each pair: a face normal of i, minus one of
+        j, last round's n or the centre line."""
+        last = k == faces + j_faces + 1
+        bx, by = np.where(last, clx, prev_n[:, 0]), np.where(last, cly, prev_n[:, 1])
+        on_face = np.flatnonzero(k < faces + j_faces)
+        if len(on_face):
+            m = k[on_face]
+            of_j = m >= faces
+            m = np.where(of_j, m - faces, m)
+            owner = np.where(of_j, j[on_face], i[on_face])
+            fx, fy = unit.face_normal(m, cos[owner], sin[owner])
+            sign = np.where(of_j, -1.0, 1.0)
+            bx[on_face], by[on_face] = sign * fx, sign * fy
+        return bx, by
+
     curved = unit.kind == "ellipse" and unit.axes[0] != unit.axes[1]  # circles: centre line
-    return _best_direction(
-        gap_of,
-        np.concatenate(cands_x, axis=1),
-        np.concatenate(cands_y, axis=1),
-        np.arctan2(cly, clx) if curved else None,
-        enough,
-        np.concatenate([*gaps, g_prev, g_line], axis=1),
-    )
+    return _best_direction(gap_for, g, direction_of, np.arctan2(cly, clx) if curved else None, enough)
 
 
-def _face_gaps(unit, dx, dy, ra, rb, ca, sa, cb, sb):
-    """Face normals n_k of polygon a (turned by its angle) and the gaps along them from a
-    to b (``dx``, ``dy``: b's centre minus a's): h_a(n_k) is a constant of the shape,
-    and for a centrally symmetric shape the opposite normal's gap needs no new support."""
-    fx, fy = unit.face_normals(ca[:, 0], sa[:, 0])
+def _face_gaps(unit, dx, dy, ra, rb, ca, sa, cb, sb, out=None):
+    """The gaps (rows, K) along the face normals n_k of polygon a (turned by its angle)
+    from a to b (``dx``, ``dy``: b's centre minus a's; one entry per row), into ``out``
+    where given: h_a(n_k) is a constant of the shape, and for a centrally symmetric
+    shape the opposite normal's gap needs no new support.  Worked face by face along
+    the rows (a row's few faces as numpy's inner loop cost several times more)."""
+    if out is None:
+        out = np.empty((len(ra), len(unit.normals)))
+    by_face = out.T
+    offsets = unit.offsets[:, None]
     if unit.symmetric:
-        h = fx.shape[1] // 2
-        nd = fx[:, :h] * dx + fy[:, :h] * dy
+        h = len(by_face) // 2
+        fx, fy = unit.face_normals(ca, sa, h, faces_first=True)
+        nd = fx * dx + fy * dy
         # = rb·h_b(±n): b turned as a is has a's offsets along a's normals (to rounding)
-        same = np.flatnonzero((ca[:, 0] == cb[:, 0]) & (sa[:, 0] == sb[:, 0]))
+        same = np.flatnonzero((ca == cb) & (sa == sb))
         hb = np.empty_like(nd)
-        hb[same] = unit.offsets[:h]
-        turned = np.flatnonzero((ca[:, 0] != cb[:, 0]) | (sa[:, 0] != sb[:, 0]))
-        hb[turned] = unit.support(fx[turned, :h], fy[turned, :h], cb[turned], sb[turned])
+        if len(same) == len(ra):  # all turned alike (no field): one broadcast
+            hb[:] = offsets[:h]
+        else:
+            hb[:, same] = offsets[:h]
+        turned = np.flatnonzero((ca != cb) | (sa != sb))
+        hb[:, turned] = unit.support(fx[:, turned], fy[:, turned], cb[turned], sb[turned])
         hb *= rb
-        g = np.concatenate([nd - hb, -nd - hb], axis=1) - ra * unit.offsets
+        np.subtract(nd, hb, out=by_face[:h])
+        np.negative(nd, out=by_face[h:])
+        by_face[h:] -= hb
+        by_face -= ra * offsets
     else:
-        g = fx * dx + fy * dy - ra * unit.offsets - rb * unit.support(-fx, -fy, cb, sb)
-    return fx, fy, g
+        fx, fy = unit.face_normals(ca, sa, faces_first=True)
+        by_face[:] = fx * dx + fy * dy - ra * offsets - rb * unit.support(-fx, -fy, cb, sb)
+    return out
 
 
 def _reach_classes(reach: np.ndarray) -> list[np.ndarray]:
@@ -404,28 +467,40 @@ def _reach_classes(reach: np.ndarray) -> list[np.ndarray]:
     return np.split(order, cuts)
 
 
-def _near_items(points, reach, item_trees, extra):
+def _point_trees(points, reach) -> list:
+    """[(indices, kd-tree of their points, their largest reach)] per class of reach
+    (:func:`_reach_classes`): built once per round, queried for the near pairs and for
+    the near pieces.  The trees are built unbalanced and with plain boxes (scipy's
+    balanced_tree, compact_nodes): faster to build and to query here, and the pairs found
+    are the same (their order is set afterwards)."""
+    return [
+        (cls, cKDTree(points[cls], balanced_tree=False, compact_nodes=False), reach[cls].max())
+        for cls in _reach_classes(reach)
+    ]
+
+
+def _near_items(point_trees, item_trees, extra):
     """(k, i): every point k and item i with |points[k] − item| <= reach[k] + the item's
-    half-length + extra (and some farther ones), ordered by k then i.  ``item_trees``:
-    [(item indices, kd-tree of their midpoints, their largest half-length)]
-    (:func:`_segment_trees`).  The points are queried class by class of reach, each
-    class's tree built once."""
+    half-length + extra (and some farther ones), ordered by k then i.  ``point_trees``:
+    the points by class of reach (:func:`_point_trees`); ``item_trees``: [(item
+    indices, kd-tree of their midpoints, their largest half-length)]
+    (:func:`_segment_trees`)."""
     ks, items = [], []
-    for cls in _reach_classes(reach):
-        tree, top = cKDTree(points[cls]), reach[cls].max()
+    for cls, tree, top in point_trees:
         for members, item_tree, half_length in item_trees:
             found = tree.sparse_distance_matrix(item_tree, top + half_length + extra, output_type="ndarray")
             ks.append(cls[found["i"]])
             items.append(members[found["j"]])
     k, i = np.concatenate(ks), np.concatenate(items)
-    order = _order_pairs(k, i, 1 + max((m.max(initial=0) for m, _, _ in item_trees), default=0))
-    return k[order], i[order]
+    return _sorted_pairs(k, i, 1 + max((m.max(initial=0) for m, _, _ in item_trees), default=0))
 
 
-def _order_pairs(a, b, nb):
-    """The order of the (unique) index pairs (a, b), b < ``nb``, by a then b: one argsort
-    of a·nb + b, the same order as np.lexsort((b, a)) in under half its time."""
-    return np.argsort(a.astype(np.int64) * nb + b)
+def _sorted_pairs(a, b, nb):
+    """The index pairs (a, b), b < ``nb``, sorted by a then b (as np.lexsort((b, a))
+    orders them): the keys a·nb + b sorted and split again, in a quarter of the time
+    of an argsort of the keys and the two gathers."""
+    key = np.sort(a.astype(np.int64) * nb + b)
+    return key // nb, key % nb
 
 
 def _segment_trees(segs: np.ndarray) -> list:
@@ -442,13 +517,12 @@ def _segment_trees(segs: np.ndarray) -> list:
     return out
 
 
-def _pairs_within(points, reach, extra):
-    """(P, 2) index pairs a < b with |points[a] − points[b]| <= reach[a] + reach[b] +
-    extra (and some farther ones), ordered by a then b: class by class of reach, so one
-    large element does not widen the query of every small one."""
-    classes = _reach_classes(reach)
-    trees = [cKDTree(points[cls]) for cls in classes]
-    tops = [reach[cls].max() for cls in classes]
+def _pairs_within(point_trees, count, extra):
+    """Index pairs (a, b), a < b, of the ``count`` points with |points[a] − points[b]| <=
+    reach[a] + reach[b] + extra (and some farther ones), ordered by a then b: class by
+    class of reach (``point_trees``: :func:`_point_trees`), so one large element does
+    not widen the query of every small one."""
+    classes, trees, tops = zip(*point_trees, strict=True)
     a_s, b_s = [], []
     for x, (cx, tx) in enumerate(zip(classes, trees, strict=True)):
         got = tx.query_pairs(2 * tops[x] + extra, output_type="ndarray")
@@ -459,35 +533,41 @@ def _pairs_within(points, reach, extra):
             a_s.append(cx[found["i"]])
             b_s.append(classes[y][found["j"]])
     a, b = np.concatenate(a_s), np.concatenate(b_s)
-    a, b = np.minimum(a, b), np.maximum(a, b)
-    order = _order_pairs(a, b, len(points))
-    return np.stack([a[order], b[order]], axis=1)
+    return _sorted_pairs(np.minimum(a, b), np.maximum(a, b), count)
 
 
-def _near_pairs(unit, c, r, cos, sin, budget, gap, prev):
-    """Pairs whose gap could close to < gap this round; their n and current gap."""
-    act = np.flatnonzero(r > 0)
+def _near_pairs(unit, c, r, cos, sin, budget, gap, prev, act, point_trees):
+    """Pairs whose gap could close to < gap this round; their n and current gap
+    (``act``: the elements with a size, ``point_trees``: their centres by class of reach
+    ρ·r + budget, :func:`_point_trees`)."""
     if len(act) < 2:
         e = np.zeros(0)
         return np.zeros(0, np.int64), np.zeros(0, np.int64), e, e, e
-    reach = unit.rho * r[act] + budget[act]
-    ij = _pairs_within(c[act], reach, gap + _SELECT)
-    i, j = act[ij[:, 0]], act[ij[:, 1]]
-    d = np.hypot(*(c[j] - c[i]).T)
+    a, b = _pairs_within(point_trees, len(act), gap + _SELECT)
+    i, j = act[a], act[b]
+    dx, dy = c[j, 0] - c[i, 0], c[j, 1] - c[i, 1]
+    d = np.hypot(dx, dy)
     enough = gap + budget[i] + budget[j] + _SELECT
     keep = d < unit.rho * (r[i] + r[j]) + enough
-    i, j, d, enough = i[keep], j[keep], d[keep], enough[keep]
+    i, j, dx, dy, d, enough = _select(keep, i, j, dx, dy, d, enough)
     # the centre line is one of the candidates and the one chosen is within _TIE of the
     # best: pairs already far enough apart along it are left out without the others
-    dx, dy = c[j, 0] - c[i, 0], c[j, 1] - c[i, 1]
     with np.errstate(invalid="ignore", divide="ignore"):
         along = _pair_gap(unit, dx, dy, r[i], r[j], cos[i], sin[i], cos[j], sin[j], dx / d, dy / d)
     keep = ~(along >= enough + _TIE)  # coincident centres (NaN) stay
-    i, j, enough = i[keep], j[keep], enough[keep]
+    i, j, enough, along, dx, dy, d = _select(keep, i, j, enough, along, dx, dy, d)
     prev_n = _lookup(prev, i * len(r) + j)
-    nx, ny, g = _best_pair_directions(unit, c, r, cos, sin, i, j, prev_n, enough, along[keep])
+    nx, ny, g = _best_pair_directions(unit, c, r, cos, sin, i, j, prev_n, enough, along, (dx, dy, d))
     keep = g < enough
-    return i[keep], j[keep], nx[keep], ny[keep], g[keep]
+    return _select(keep, i, j, nx, ny, g)
+
+
+def _select(keep, *arrays) -> tuple:
+    """The entries where ``keep`` (bool) is True of each of the 1-D ``arrays``: the
+    indices found once and taken from each, not the mask counted again per array
+    (a boolean index does that: over twice the time for ten arrays)."""
+    at = np.flatnonzero(keep)
+    return tuple(a.take(at) for a in arrays)
 
 
 def _lookup(prev, keys):
@@ -496,9 +576,10 @@ def _lookup(prev, keys):
     if prev is None or len(prev[0]) == 0:
         return out
     pk, pn = prev
-    pos = np.clip(np.searchsorted(pk, keys), 0, len(pk) - 1)
-    hit = pk[pos] == keys
-    out[hit] = pn[pos[hit]]
+    pos = np.searchsorted(pk, keys)
+    np.minimum(pos, len(pk) - 1, out=pos)
+    hit = np.flatnonzero(pk.take(pos) == keys)
+    out[hit] = pn[pos.take(hit)]
     return out
 
 
@@ -590,20 +671,18 @@ def _closest_on_segment(px, py, qx, qy, x, y):
     return px + t * ex, py + t * ey
 
 
-def _near_segments(unit, c, r, cos, sin, budget, half, segs, seg_trees, prev):
-    act = np.flatnonzero(r > 0)
+def _near_segments(unit, c, r, cos, sin, budget, half, segs, seg_trees, prev, act, point_trees):
     empty = np.zeros(0)
     if len(act) == 0 or len(segs) == 0:
         return np.zeros(0, np.int64), np.zeros(0, np.int64), empty, empty, empty
-    reach = unit.rho * r[act] + budget[act]
-    k, s = _near_items(c[act], reach, seg_trees, half + _SELECT)
+    k, s = _near_items(point_trees, seg_trees, half + _SELECT)
     e = act[k]
     px, py, qx, qy = segs[s, 0], segs[s, 1], segs[s, 2], segs[s, 3]
     x, y = c[e, 0], c[e, 1]
     kx, ky = _closest_on_segment(px, py, qx, qy, x, y)
     d = np.hypot(kx - x, ky - y)
     keep = d < unit.rho * r[e] + budget[e] + half + _SELECT
-    e, s, px, py, qx, qy, x, y, kx, ky, d = (v[keep] for v in (e, s, px, py, qx, qy, x, y, kx, ky, d))
+    e, s, px, py, qx, qy, x, y, kx, ky, d = _select(keep, e, s, px, py, qx, qy, x, y, kx, ky, d)
     prev_n = _lookup(prev, e * len(segs) + s)
     with np.errstate(invalid="ignore", divide="ignore"):
         tx, ty = np.where(d > 0, (kx - x) / d, 1.0), np.where(d > 0, (ky - y) / d, 0.0)
@@ -615,36 +694,41 @@ def _near_segments(unit, c, r, cos, sin, budget, half, segs, seg_trees, prev):
     flip = np.where(sx * (kx - x) + sy * (ky - y) < 0, -1.0, 1.0)
     # in order of preference: the piece's own normal, the element's faces, last round's
     # n, the direction of the nearest point (beside a reflex corner of the region)
-    cx_, cy_ = [(sx * flip)[:, None]], [(sy * flip)[:, None]]
+    # (the candidates' gaps written into one array, their directions built only for the
+    # one chosen)
+    nsx, nsy = sx * flip, sy * flip
     args = tuple(v[:, None] for v in (px, py, qx, qy, x, y, r[e], cos[e], sin[e]))
-    gap_of = lambda nx, ny, k: _seg_gap(unit, *(a[k] for a in args), nx, ny)  # noqa: E731
-    gaps = [gap_of(cx_[0], cy_[0], slice(None))]
-    if unit.kind == "polygon":
-        fx, fy = unit.face_normals(cos[e], sin[e])
-        cx_.append(fx)
-        cy_.append(fy)
+    gap_for = _gaps_of_rows(_seg_gap, unit, args)
+    gap_of = gap_for(slice(None))
+    faces = len(unit.normals) if unit.kind == "polygon" else 0
+    g = np.empty((len(e), faces + 3))
+    g[:, 0] = gap_of(nsx[:, None], nsy[:, None])[:, 0]
+    if faces:  # worked face by face along the rows, as in _face_gaps
+        fx, fy = unit.face_normals(cos[e], sin[e], faces_first=True)
         # along its own faces the element reaches out by the shape's offsets
-        p_, q_ = fx * args[0] + fy * args[1], fx * args[2] + fy * args[3]
-        gaps.append(np.minimum(p_, q_) - fx * args[4] - fy * args[5] - args[6] * unit.offsets)
+        p_, q_ = fx * px + fy * py, fx * qx + fy * qy
+        g[:, 1 : 1 + faces].T[:] = np.minimum(p_, q_) - fx * x - fy * y - r[e] * unit.offsets[:, None]
     # last round's n: new rows have none (NaN, never chosen)
     known = np.flatnonzero(np.isfinite(prev_n[:, 0]))
-    g_prev = np.full((len(e), 1), np.nan)
-    g_prev[known] = gap_of(prev_n[known, 0:1], prev_n[known, 1:2], known)
-    gaps += [g_prev, gap_of(tx[:, None], ty[:, None], slice(None))]
-    cx_ += [prev_n[:, 0:1], tx[:, None]]
-    cy_ += [prev_n[:, 1:2], ty[:, None]]
+    g[:, -2] = np.nan
+    g[known, -2] = gap_for(known)(prev_n[known, 0:1], prev_n[known, 1:2])[:, 0]
+    g[:, -1] = gap_of(tx[:, None], ty[:, None])[:, 0]
+
+    def direction_of(k):
+        """The direction of candidate k of each row: the piece's normal, a face normal,
+        last round's n or the nearest point's."""
+        bx = np.where(k == 0, nsx, np.where(k == faces + 2, tx, prev_n[:, 0]))
+        by = np.where(k == 0, nsy, np.where(k == faces + 2, ty, prev_n[:, 1]))
+        on_face = np.flatnonzero((k >= 1) & (k <= faces))
+        if len(on_face):
+            bx[on_face], by[on_face] = unit.face_normal(k[on_face] - 1, cos[e[on_face]], sin[e[on_face]])
+        return bx, by
+
     curved = unit.kind == "ellipse" and unit.axes[0] != unit.axes[1]  # circles: nearest point
     enough = half + budget[e] + _SELECT
-    bx, by, best = _best_direction(
-        gap_of,
-        np.concatenate(cx_, axis=1),
-        np.concatenate(cy_, axis=1),
-        np.arctan2(ty, tx) if curved else None,
-        enough,
-        np.concatenate(gaps, axis=1),
-    )
+    bx, by, best = _best_direction(gap_for, g, direction_of, np.arctan2(ty, tx) if curved else None, enough)
     keep = best < enough
-    return e[keep], s[keep], bx[keep], by[keep], best[keep]
+    return _select(keep, e, s, bx, by, best)
 
 
 # --------------------------------------------------------------------- constraints
@@ -970,31 +1054,42 @@ def _solve_lp(
 
 @functools.cache
 def _csr_matvec():
-    """scipy's CSR product kernel (a private function) where it is there and gives
-    ``m @ v`` on a small case, else None: a scipy that moves or changes it falls back to
-    the public product instead of failing."""
+    """scipy's CSR and CSC product kernels (private functions) where they are there and
+    give ``m @ v`` and ``m.T @ w`` on a small case, else None: a scipy that moves or
+    changes them falls back to the public product instead of failing."""
     import scipy.sparse as sp
 
     try:
-        from scipy.sparse._sparsetools import csr_matvec
+        from scipy.sparse._sparsetools import csc_matvec, csr_matvec
 
-        m, v, out = sp.csr_matrix(np.array([[1.0, 2.0], [0.0, 3.0]])), np.array([1.0, -1.0]), np.zeros(2)
-        csr_matvec(2, 2, m.indptr, m.indices, m.data, v, out)
+        m = sp.csr_matrix(np.array([[1.0, 2.0, 0.0], [0.0, 3.0, -4.0]]))
+        v, w, out, out_t = np.array([1.0, -1.0, 0.5]), np.array([2.0, -3.0]), np.zeros(2), np.zeros(3)
+        csr_matvec(2, 3, m.indptr, m.indices, m.data, v, out)
+        csc_matvec(3, 2, m.indptr, m.indices, m.data, w, out_t)
     except Exception:  # any failure means: use the public product
         return None
-    return csr_matvec if np.array_equal(out, m @ v) else None
+    ok = np.array_equal(out, m @ v) and np.array_equal(out_t, m.T @ w)
+    return (csr_matvec, csc_matvec) if ok else None
 
 
-def _product(m, v, out):
-    """``out`` = m @ v for a CSR matrix m, written into ``out``: scipy's own kernel (the
-    same sums in the same order), without the checks and the new array of ``m @ v``,
-    which cost a fifth of a PDHG step's product on a program of 4000 elements."""
-    kernel = _csr_matvec()
-    if kernel is None:
-        out[:] = m @ v
+def _product(m, v, out, transpose=False):
+    """``out`` = m @ v (``transpose``: m.T @ v) for a CSR matrix m, written into ``out``:
+    scipy's own kernels (the same sums in the same order), without the checks and the
+    new array of ``m @ v``, which cost a fifth of a PDHG step's product on a program of
+    4000 elements.  m.T @ v reads m's rows as the columns of m.T (CSC): it adds each row's
+    entries into ``out`` in row order, the sums of m.T.tocsr() @ v exactly, without the
+    transposed copy and faster (scattered writes into the short ``out`` instead of
+    gathered reads from the long v)."""
+    kernels = _csr_matvec()
+    if kernels is None:
+        out[:] = m.T @ v if transpose else m @ v
         return out
-    out.fill(0.0)  # the kernel adds to out
-    kernel(m.shape[0], m.shape[1], m.indptr, m.indices, m.data, v, out)
+    out.fill(0.0)  # the kernels add to out
+    rows, cols = m.shape
+    if transpose:
+        kernels[1](cols, rows, m.indptr, m.indices, m.data, v, out)
+    else:
+        kernels[0](rows, cols, m.indptr, m.indices, m.data, v, out)
     return out
 
 
@@ -1012,7 +1107,9 @@ def _solve_pdhg(rows: _Rows, act, c, r, gap, delta, lo_dr, hi_dr, weight, iterat
     import scipy.sparse as sp
 
     n = len(r)
-    col = np.full(n, -1, dtype=np.int64)
+    # int32 column numbers and row starts: scipy keeps a CSR matrix's indices in int32
+    # where they fit, and would otherwise copy them
+    col = np.full(n, -1, dtype=np.int32)
     col[act] = np.arange(len(act))
     ncol = 3 * len(act)
     npair, nseg = len(rows.i), len(rows.e)
@@ -1034,8 +1131,9 @@ def _solve_pdhg(rows: _Rows, act, c, r, gap, delta, lo_dr, hi_dr, weight, iterat
         ]
     )
     start = np.concatenate([np.arange(0, 6 * npair + 1, 6), 6 * npair + np.arange(3, 3 * nseg + 1, 3)])
+    if 6 * npair + 3 * nseg < 2**31 and ncol < 2**31:
+        start = start.astype(np.int32)
     a = sp.csr_matrix((value, index, start), shape=(npair + nseg, ncol))
-    at = a.T.tocsr()
     # the current state (x = 0) is feasible
     b = np.minimum(-np.concatenate([rows.pair_slack(c, r, gap), rows.seg_slack(c, r, 0.5 * gap)]), 0.0)
     lo, hi, cost = np.empty(ncol), np.empty(ncol), np.zeros(ncol)
@@ -1055,8 +1153,11 @@ def _solve_pdhg(rows: _Rows, act, c, r, gap, delta, lo_dr, hi_dr, weight, iterat
     # x = 0, y = 0, until a restart); the answer is the last T(z), which keeps the bounds
     x, y, no_rows = np.zeros(ncol), np.zeros(npair + nseg), np.zeros(npair + nseg)
     x0 = y0 = None  # the anchor: the start (0) until the first restart
-    xt, z, scratch, yt = np.empty(ncol), np.empty(ncol), np.empty(ncol), np.empty(npair + nseg)
-    aty = at @ y
+    # every step works in these buffers: a fresh array per step would be fresh memory
+    # from the system each time (page faults cost about as much as the arithmetic)
+    xt, z, scratch = np.empty(ncol), np.empty(ncol), np.empty(ncol)
+    yt, y_scratch = np.empty(npair + nseg), np.empty(npair + nseg)
+    aty = np.zeros(ncol)  # Aᵀy, y = 0
     inv_tau, inv_sigma = 1.0 / tau, 1.0 / sigma
     first = None  # fixed-point residual |T(z) − z| after the last restart
     k = steps = 0
@@ -1082,7 +1183,7 @@ def _solve_pdhg(rows: _Rows, act, c, r, gap, delta, lo_dr, hi_dr, weight, iterat
             np.subtract(xt, x, out=scratch)
             np.multiply(scratch, scratch, out=scratch)
             scratch *= inv_tau
-            dy = yt - y
+            dy = np.subtract(yt, y, out=y_scratch)
             np.multiply(dy, dy, out=dy)
             dy *= inv_sigma
             residual = math.sqrt(float(scratch.sum()) + float(dy.sum()))
@@ -1098,12 +1199,12 @@ def _solve_pdhg(rows: _Rows, act, c, r, gap, delta, lo_dr, hi_dr, weight, iterat
             w = (k + 1.0) / (k + 2.0)
             np.multiply(z, w, out=x)  # z = 2x̃ − x
             y *= -w
-            y += (2.0 * w) * yt
+            y += np.multiply(yt, 2.0 * w, out=y_scratch)
             if x0 is not None:
-                x += (1.0 - w) * x0
-                y += (1.0 - w) * y0
+                x += np.multiply(x0, 1.0 - w, out=scratch)
+                y += np.multiply(y0, 1.0 - w, out=y_scratch)
             k += 1
-        _product(at, y, aty)
+        _product(a, y, aty, transpose=True)
         # a fixed point of T is the program's optimum: stop when T(z) = z and x̃ meets
         # the rows (small programs; large ones use every step)
         if residual is not None and residual < _PDHG_STILL and np.max(b - a @ xt, initial=0.0) < _PDHG_STILL:
@@ -1264,8 +1365,13 @@ def compact(
         if max_sizes is not None:
             up = np.clip(max_sizes - r, 0.0, up)
         budget = math.sqrt(2) * delta + unit.rho * up
-        i, j, px, py, _ = _near_pairs(unit, c, r, cos, sin, budget, gap, prev_p)
-        e, s, sx, sy, _ = _near_segments(unit, c, r, cos, sin, budget, 0.5 * gap, segs, seg_trees, prev_s)
+        act = np.flatnonzero(r > 0)
+        # one kd-tree of the centres (per class of reach) for the pairs and the pieces
+        trees = _point_trees(c[act], unit.rho * r[act] + budget[act]) if len(act) else []
+        i, j, px, py, _ = _near_pairs(unit, c, r, cos, sin, budget, gap, prev_p, act, trees)
+        e, s, sx, sy, _ = _near_segments(
+            unit, c, r, cos, sin, budget, 0.5 * gap, segs, seg_trees, prev_s, act, trees
+        )
         seg_m = np.minimum(sx * segs[s, 0] + sy * segs[s, 1], sx * segs[s, 2] + sy * segs[s, 3])
         rows = _Rows(
             i,

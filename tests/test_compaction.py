@@ -519,15 +519,21 @@ def test_boundary_segments_of_a_whole_raster_are_its_sides():
 
 
 def test_product_is_the_sparse_product():
-    """The PDHG steps' product into a given array equals scipy's m @ v exactly."""
+    """The PDHG steps' products into a given array equal scipy's m @ v and m.T @ w
+    exactly, and m.T @ w equals the product by the transposed copy (m.T.tocsr()) that
+    the steps used before, bit for bit."""
     import scipy.sparse as sp
 
     from compact_distributions.cvt.compaction import _product
 
     m = sp.random(300, 200, density=0.03, format="csr", random_state=4)
     v = np.random.default_rng(4).normal(size=200)
+    w = np.random.default_rng(5).normal(size=300)
     out = np.full(300, np.nan)  # whatever was there is overwritten
     assert _product(m, v, out) is out and np.array_equal(out, m @ v)
+    out_t = np.full(200, np.nan)
+    assert _product(m, w, out_t, transpose=True) is out_t
+    assert np.array_equal(out_t, m.T @ w) and np.array_equal(out_t, m.T.tocsr() @ w)
 
 
 def test_product_falls_back_when_scipys_kernel_is_gone(monkeypatch):
@@ -547,6 +553,8 @@ def test_product_falls_back_when_scipys_kernel_is_gone(monkeypatch):
         v = np.random.default_rng(5).normal(size=40)
         out = np.full(50, np.nan)
         assert np.array_equal(compaction._product(m, v, out), m @ v)
+        w = np.random.default_rng(6).normal(size=50)
+        assert np.array_equal(compaction._product(m, w, np.full(40, np.nan), transpose=True), m.T @ w)
     finally:
         compaction._csr_matvec.cache_clear()
 
@@ -675,11 +683,17 @@ def test_tightest_pieces_keep_the_same_constraints():
     assert len(zero.tightest_pieces().e) == 1  # −0.0 and 0.0: one direction
 
 
-def test_order_pairs_is_lexicographic():
-    """_order_pairs orders index pairs as np.lexsort does (by the first, then the second)."""
-    from compact_distributions.cvt.compaction import _order_pairs
+def test_sorted_pairs_are_lexicographic():
+    """_sorted_pairs sorts index pairs as np.lexsort does (by the first, then the
+    second), equal pairs included."""
+    from compact_distributions.cvt.compaction import _sorted_pairs
 
     rng = np.random.default_rng(5)
     ab = np.unique(rng.integers(0, 1000, (5000, 2)), axis=0)[rng.permutation(4000)]
+    ab = np.concatenate([ab, ab[:50]])  # some twice
     a, b = ab[:, 0], ab[:, 1]
-    assert np.array_equal(_order_pairs(a, b, 1000), np.lexsort((b, a)))
+    order = np.lexsort((b, a))
+    sa, sb = _sorted_pairs(a, b, 1000)
+    assert np.array_equal(sa, a[order]) and np.array_equal(sb, b[order])
+    empty = np.zeros(0, np.int64)
+    assert all(len(v) == 0 for v in _sorted_pairs(empty, empty, 1))
