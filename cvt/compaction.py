@@ -85,27 +85,15 @@ points lower on every shape.  ``max_growth`` (off by default) caps every size at
 Δc⁺, Δc⁻), which keeps regular lattices from drifting (a lattice of circles then reaches
 its optimum π/4 exactly) but measured up to 0.4 points lower and 30-60 % slower on CVTs.
 
-Speed (4000 squares, 1024², after 20 Lloyd iterations; 2-core machine shared with other
-jobs, so CPU seconds are the steadier figure)
--------------------------------------------------------------------------------------
-One program for all elements (12 000 columns, ~16 000 rows): HiGHS dual simplex 0.7 s for
-the first round, then 5-23 s per round as more rows become tight (17 700 iterations at
-1.3 ms: the basis couples long chains of touching elements); interior point 2.5 s per
-round; PDLP 8 s at 1e-4.  The same program as one block-diagonal model (tiles, cross
-pairs as walls) fell to ~1 s per round; carrying its basis from round to round (an alien
-basis mapped by pair) cut the iterations by a quarter but the time by under 10 %, as
-every round moves all bounds.  One small model per tile: ~0.25 s CPU per round, with
-about 2 points less coverage than the untiled program at equal rounds (squares after 3
-rounds 0.956 against 0.977), which one more round makes up.  The tiles' dual simplex is
-the floor: about 3.5 iterations per element and round, whatever the tile size (16 to 128
-elements per tile: within 20 % of the time, with less coverage below 64), the HiGHS
-options (crash, pricing, edge weights, presolve, one block-diagonal model per 2-16
-tiles) or the start (each tile's basis from two rounds back, mapped by element and row,
-halves the later rounds' iterations but not their time: HiGHS repairs the alien basis).
-Tiles are independent, and HiGHS lets go of the interpreter while it solves, so one
-thread per core solves them (1.9x on two cores when the second is idle).  Defaults
-(4 rounds, growth 0.15, move 0.5, 64 elements per tile): ~1.0 s CPU, coverage 0.97;
-building a round (kd-trees, directions, rows) in numpy is ~0.05 s of each round.
+Solvers (4000 squares, 1024², after 20 Lloyd iterations)
+--------------------------------------------------------
+HiGHS on the whole program slows down round after round as more rows become tight (the
+simplex basis couples long chains of touching elements); interior point and PDLP at
+1e-4 are slower still.  One small model per tile of about 64 elements (cross pairs as
+walls) keeps HiGHS' dual simplex fast, at about 3.5 iterations per element and round
+whatever the tile size, the options or a basis carried from an earlier round, and costs
+about 2 points of coverage against the untiled program at equal rounds.  Tiles are
+independent and HiGHS lets go of the interpreter, so one thread per core solves them.
 
 PDHG on the whole untiled program does better on both counts, as the program needs no
 exact optimum: every row is checked and repaired afterwards.  On the first round of the
@@ -113,11 +101,8 @@ case above, the area gain (after the repair) of the tiles' exact optima is 0.158
 the untiled optimum 0.186; PDHG from zero reaches 0.168 / 0.179 / 0.183 after 50 / 100
 / 200 steps, leaving rows short by at most 0.2-0.4 px (repaired by shrinking, with less
 loss than the tile walls cost).  A step is two sparse products (~6 entries per pair row)
-and a few whole-array operations, so 100 steps cost about as much as building the round.
-Four rounds of 100 steps: ~0.2 s CPU against ~0.8 s for the tiles, and 1.1 % more area
-(Table 2's ours-compact rows 0.4-1.4 points more coverage); 64 000 squares at 4096²:
-~3.6-4.4 s CPU against ~12 s, half of it building the rounds.  50 steps per round give
-about the tiles' coverage (-0.3 to +0.7 % of the area, by shape) for ~20 % less time.
+and a few whole-array operations; four rounds of PDHG take about a quarter of the tiles'
+time and cover 1.1 % more area (Table 2's ours-compact rows 0.4-1.4 points more).
 Plain PDHG's best primal/dual step ratio was 4 (2 and 8 within 0.3 % of the area).
 Measured no better: starting each round from last round's duals (mapped by pair), steps
 folded into the matrices, float32 products, relaxation 1.5 (~20 % fewer steps for the
@@ -141,8 +126,8 @@ Steps stop early only when converged (T(z) = z and no row short by more than 1e-
 small programs, which then meet HiGHS' optimum).  PDHG is plain single-threaded NumPy
 and scipy.sparse: the result does not depend on ``threads``.
 
-Where this departs from the issue's sketch
-------------------------------------------
+Choices in the formulation
+--------------------------
 * (1) uses h_j(−n), not h_j(n): the two are equal for centrally symmetric elements, not
   for triangles.
 * Variables are displacements from the round's start (the program is equally well scaled
@@ -150,7 +135,7 @@ Where this departs from the issue's sketch
   absolute cap; the objective is the area Σ r_i·Δr_i.
 * The region is kept by (2) against boundary pieces with a best direction per piece.
 * The program is solved approximately as a whole by PDHG, or exactly per tile with walls
-  between tiles by HiGHS (see Speed); the exact check after each round makes either safe.
+  between tiles by HiGHS (see Solvers); the exact check after each round makes either safe.
 """
 
 from __future__ import annotations
