@@ -59,11 +59,11 @@ RUN_CHUNK = 1024  # runs per work-item of suspect_runs
 # work-groups of the walled-cell kernels, fixed: the numbers of runs change every step,
 # and PoCL builds a kernel anew for each work-group size it is left to choose
 RUN_GROUP = (1, 16)  # row_runs: segments x rows
-LIST_GROUP = 64  # the kernels over listed runs
+LIST_GROUP = 64  # the kernels over listed runs or cells
 WALL_KERNELS = (
     "row_runs",
     "suspect_runs",
-    "pieces_start",
+    "suspect_cells",
     "pieces_join",
     "pieces_measure",
     "pieces_largest",
@@ -584,39 +584,52 @@ class OpenCLBackend(Backend):
         cl.enqueue_nd_range_kernel(self._queue, kernel, size, group)
 
     def _suspect_runs(self, metric: Metric, labels_buf, w: int, h: int, n: int):
-        """List the runs of the labels in ``labels_buf`` (``row_runs``) and those of the
-        cells that may be in pieces (``suspect_runs``), with one wait: (runs found, runs
-        kept, counts buffer, all runs, kept runs, per-cell top and bottom run counts).
-        The counts buffer holds (found, kept, dropped); the pieces kernels add the last."""
+        """Count each cell's top and bottom runs in the labels in ``labels_buf`` and list
+        the runs of the cells that may be in pieces, with one wait: (runs listed, counts
+        buffer, listed runs, their index at their first pixel, their union-find parents,
+        per-cell top and bottom run counts).  ``row_runs`` lists the runs of the cells
+        that were suspect last time, ``suspect_runs`` keeps those of the cells suspect
+        now, and ``suspect_cells`` flags these for next time; where a suspect cell was
+        not listed (its runs are missing), or the runs overflowed their buffer, the
+        listing is done again.  The counts buffer holds (listed by row_runs, kept,
+        dropped, missed); pieces_dropped adds the dropped."""
         cl, queue = self._cl, self._queue
-        ends_buf, counts_buf = self._buffer("run_ends", 8 * n), self._buffer("run_counts", 12)
-        counts = np.zeros(3, dtype=np.uint32)
+        ends_buf, counts_buf = self._buffer("run_ends", 8 * n), self._buffer("run_counts", 16)
+        before = self._buffers.get("wanted_cells")
+        wanted = self._buffer("wanted_cells", n)
+        if wanted is not before:  # new: any flags give the same result; all lists every run once
+            cl.enqueue_fill_buffer(queue, wanted, np.uint8(1), 0, wanted.size)
+        run_at = self._buffer("run_at", 4 * w * h)
+        rows = (-(-w // RUN_SEGMENT), h)
+        counts = np.zeros(4, dtype=np.uint32)
         while True:
             room = self._run_room
             runs_buf, listed_buf = self._buffer("runs", 12 * room), self._buffer("suspect_runs", 12 * room)
+            parent = self._buffer("piece_parent", 4 * room)
             cl.enqueue_fill_buffer(queue, ends_buf, np.uint32(0), 0, 8 * n)
-            cl.enqueue_fill_buffer(queue, counts_buf, np.uint32(0), 0, 12)
-            rows = (-(-w // RUN_SEGMENT), h)
-            args = (labels_buf, ends_buf, counts_buf, np.uint32(room), runs_buf)
+            cl.enqueue_fill_buffer(queue, counts_buf, np.uint32(0), 0, 16)
+            args = (labels_buf, wanted, ends_buf, counts_buf, np.uint32(room), runs_buf)
             self._wall_kernel(
                 metric, "row_runs", rows, np.int32(w), np.int32(h), np.int32(RUN_SEGMENT), *args
             )
             chunks = max(1, -(-room // RUN_CHUNK))
-            args = (np.uint32(room), np.uint32(RUN_CHUNK), runs_buf, ends_buf, counts_buf, listed_buf)
-            self._wall_kernel(metric, "suspect_runs", chunks, *args)
+            args = (runs_buf, ends_buf, counts_buf, listed_buf, run_at, parent)
+            self._wall_kernel(metric, "suspect_runs", chunks, np.uint32(room), np.uint32(RUN_CHUNK), *args)
+            self._wall_kernel(metric, "suspect_cells", n, np.int32(n), ends_buf, wanted, counts_buf)
             self._read(counts, counts_buf)
-            if counts[0] <= room:
-                return int(counts[0]), int(counts[1]), counts_buf, runs_buf, listed_buf, ends_buf
-            # too many to hold: again, with room (the counts start again from zero)
-            self._run_room = int(counts[0]) * 5 // 4
+            if counts[0] > room:  # too many to hold: again, with room
+                self._run_room = int(counts[0]) * 5 // 4
+            elif counts[3] == 0:
+                return int(counts[1]), counts_buf, listed_buf, run_at, parent, ends_buf
+            # else again: every suspect cell is flagged now
 
     def _walled_moments(self, sites, angles, scales, metric: Metric, grid: Grid) -> Moments:
         """The moments of the labels with each cell cut to the piece it keeps, found on
-        the device: ``row_runs`` lists the runs and counts each cell's top and bottom
-        runs, ``suspect_runs`` keeps the runs of the cells that may be in pieces, the
+        the device: :meth:`_suspect_runs` counts each cell's top and bottom runs and
+        lists the runs of the cells that may be in pieces, the
         ``pieces_*`` kernels find their pieces and list the runs of those not kept; the
         host reads 5·N sums and those runs (never the raster) and subtracts their sums.
-        The host waits twice: for the number of kept runs, and for the results."""
+        The host waits twice: for the number of listed runs, and for the results."""
         cl = self._cl
         n = len(sites)
         w, h = grid.width, grid.height
@@ -626,13 +639,12 @@ class OpenCLBackend(Backend):
             self._wall_kernel(metric, name, m, np.uint32(m), *args)
 
         try:
-            _, m, counts_buf, _, listed_buf, _ = self._suspect_runs(metric, labels_buf, w, h, n)
+            m, counts_buf, listed_buf, run_at, parent, _ = self._suspect_runs(metric, labels_buf, w, h, n)
             if m == 0:
                 return self._read_moments(acc_buf, n)
             i, j = pixel_index(sites, w, h)
             site_at = self._upload("site_at", (i * w + j).astype(np.int32))
-            run_at = self._buffer("run_at", 4 * w * h)
-            parent, root = self._buffer("piece_parent", 4 * m), self._buffer("piece_root", 4 * m)
+            root = self._buffer("piece_root", 4 * m)
             size, first = self._buffer("piece_size", 4 * m), self._buffer("piece_first", 4 * m)
             site_piece, largest = self._buffer("site_piece", 4 * n), self._buffer("largest", 4 * n)
             last, dropped_buf = self._buffer("last_largest", 4 * n), self._buffer("dropped", 12 * m)
@@ -645,14 +657,13 @@ class OpenCLBackend(Backend):
                 (last, -1, n),
             ):
                 cl.enqueue_fill_buffer(self._queue, buf, np.int32(value), 0, 4 * count)
-            run("pieces_start", m, listed_buf, run_at, parent)
             run("pieces_join", m, np.int32(w), listed_buf, labels_buf, run_at, parent)
             run("pieces_measure", m, listed_buf, parent, root, size, first, site_at, site_piece)
             run("pieces_largest", m, listed_buf, root, size, largest)
             run("pieces_last", m, listed_buf, root, size, first, largest, last)
             run("pieces_dropped", m, listed_buf, root, first, site_piece, last, counts_buf, dropped_buf)
             # all of them in one wait: at most m runs are dropped
-            counts, dropped = np.empty(3, dtype=np.uint32), np.empty((m, 3), dtype=np.int32)
+            counts, dropped = np.empty(4, dtype=np.uint32), np.empty((m, 3), dtype=np.int32)
             cl.enqueue_copy(self._queue, counts, counts_buf, is_blocking=False)
             cl.enqueue_copy(self._queue, dropped, dropped_buf, is_blocking=False)
             whole = self._read_moments(acc_buf, n)  # in order: the copies above are done

@@ -608,9 +608,13 @@ __kernel void row_moments(const int width, const int height, const int seg,
 /* A walled step keeps one 4-connected piece of each cell (cvt.mosaic.split_cells).  A
    cell whose row runs include only one "top" run (no pixel of it has its own label
    straight above), or only one "bottom" run, is one piece: from any of its runs, steps to
-   a touching run above (below) end at that run.  row_runs lists the runs of the region
-   and counts both kinds per cell; suspect_runs keeps the runs of the cells with more
-   than one of each, and the pieces_* kernels find their pieces. */
+   a touching run above (below) end at that run.  row_runs counts both kinds per cell,
+   suspect_runs lists the runs of the cells with more than one of each, and the pieces_*
+   kernels find their pieces.  row_runs takes, per work-item, the runs of the region
+   that begin in one segment of `seg` pixels of a row (a multiple of 16; a run may reach
+   past the segment's end), reading the row 16 pixels at a time: where the label changes,
+   and where a pixel has its own label straight above and below, as bits; a run's part of
+   a chunk is a range of bits, so the work per chunk is per run, not per pixel. */
 
 /* 16 labels of a row from column j (j may be -1); columns off the row read -1 */
 inline int16 row16(__global const int *row, const int j, const int width)
@@ -634,19 +638,42 @@ inline uint lane_bits(const int16 m)
     return (uint)(c.x | c.y);
 }
 
-/* One work-item per segment of `seg` pixels of a row (a multiple of 16) takes the runs of
-   the region that begin in it (a run may reach past the segment's end): each as (first
-   pixel, length, label) at runs[3 k ..], k from the counter counts[0] (zeroed by the host;
-   one atomic per work-item reserves its place), and ends[2 l], ends[2 l + 1] count the
-   top and bottom runs of cell l (zeroed by the host).  Runs beyond `room` are counted,
-   not written (the host then asks again with more room).
+/* a run of cell l ends: one more top run unless a pixel of it had l above, one more
+   bottom run unless one had l below */
+inline void count_ends(volatile __global uint *ends, const int l, const uint up, const uint down)
+{
+    if (!up)
+        atomic_inc(ends + 2 * l);
+    if (!down)
+        atomic_inc(ends + 2 * l + 1);
+}
 
-   The row is read 16 pixels at a time: where the label changes, and where a pixel has
-   its own label straight above and below, as bits; a run's part of a chunk is a range
-   of bits, so the work per chunk is per run, not per pixel. */
+/* The runs of the wanted cells are listed, each as (first pixel, length, label) at
+   runs[3 k ..], k from a counter (zeroed by the host); runs beyond `room` are counted,
+   not written (the host then asks again with more room).  A work-item holds up to LISTED
+   runs and reserves their places with one atomic. */
+#define LISTED 16
+inline void list_runs(volatile __global uint *counter, const uint room, __global int *runs,
+                      const int got, const int held[LISTED][3])
+{
+    uint k = atomic_add(counter, (uint)got);
+    for (int q = 0; q < got && k < room; ++q, ++k) {
+        runs[3 * k] = held[q][0];
+        runs[3 * k + 1] = held[q][1];
+        runs[3 * k + 2] = held[q][2];
+    }
+}
+
+/* Per cell l its top runs at ends[2 l] and its bottom runs at ends[2 l + 1] (zeroed by
+   the host; atomics only where a run is a top or bottom one, a few per cell), and the
+   runs of the cells flagged in `wanted` listed at counts[0].  The host flags the cells
+   that were suspect in its last call (suspect_cells): a Lloyd step moves the sites
+   little, so they are those of this call but for a few, and the runs of the other
+   cells, most of them, are neither written nor read again. */
 __kernel void row_runs(const int width, const int height, const int seg,
-                       __global const int *labels, volatile __global uint *ends,
-                       volatile __global uint *counts, const uint room, __global int *runs)
+                       __global const int *labels, __global const uchar *wanted,
+                       volatile __global uint *ends, volatile __global uint *counts,
+                       const uint room, __global int *runs)
 {
     const int i = get_global_id(1);
     const int j0 = get_global_id(0) * seg;
@@ -655,34 +682,35 @@ __kernel void row_runs(const int width, const int height, const int seg,
     const int j1 = j0 + seg < width ? j0 + seg : width;
     __global const int *row = labels + (size_t)i * width;
     __global const int *above = row - width, *below = row + width; /* read only in the raster */
-    uint mine = 0; /* runs of the region that begin in the segment */
-    for (int j = j0; j < j1; j += 16) {
-        const int16 l = row16(row, j, width);
-        const uint begin = lane_bits((l >= 0) & (l != row16(row, j - 1, width)));
-        mine += popcount(j1 - j < 16 ? begin & ((1u << (j1 - j)) - 1) : begin);
+    int held[LISTED][3];
+    int got = 0;
+    int cur = -1, start = 0, keep = 0; /* the open run: its label (-1: none of ours), its
+                                          first pixel, whether it is listed */
+    uint up = 0, down = 0;             /* whether a pixel of it has its label above, below */
+#define CLOSE_RUN(UP, DOWN, END)                                                        \
+    {                                                                                   \
+        count_ends(ends, cur, UP, DOWN);                                                \
+        if (keep) {                                                                     \
+            if (got == LISTED) {                                                        \
+                list_runs(counts, room, runs, got, held);                               \
+                got = 0;                                                                \
+            }                                                                           \
+            held[got][0] = i * width + start;                                           \
+            held[got][1] = (END) - start;                                               \
+            held[got][2] = cur;                                                         \
+            ++got;                                                                      \
+        }                                                                               \
     }
-    if (mine == 0)
-        return;
-    uint k = atomic_add(counts, mine);
-    int cur = -1, start = 0; /* the open run: its label (-1: none of ours) and first pixel */
-    uint up = 0, down = 0;   /* whether a pixel of it has its label above, below */
     for (int j = j0;; j += 16) {
         if (j >= width || (j >= j1 && cur < 0)) {
-            if (cur >= 0) { /* the run reaches the row's end */
-                if (!up)
-                    atomic_inc(ends + 2 * cur);
-                if (!down)
-                    atomic_inc(ends + 2 * cur + 1);
-                if (k < room) {
-                    runs[3 * k] = i * width + start;
-                    runs[3 * k + 1] = width - start;
-                    runs[3 * k + 2] = cur;
-                }
-            }
+            if (cur >= 0) /* the run reaches the row's end */
+                CLOSE_RUN(up, down, width)
             break;
         }
         const int16 l = row16(row, j, width);
         uint change = lane_bits(l != row16(row, j - 1, width));
+        if (!change && (cur < 0 || (up && down)))
+            continue; /* nothing begins or ends here, and the open run is settled */
         const uint same_up = i > 0 ? lane_bits(row16(above, j, width) == l) : 0;
         const uint same_down = i + 1 < height ? lane_bits(row16(below, j, width) == l) : 0;
         int lab[16];
@@ -693,18 +721,10 @@ __kernel void row_runs(const int width, const int height, const int seg,
             change &= change - 1;
             if (cur >= 0) { /* the open run ends before lane t */
                 const uint part = from & ((1u << t) - 1);
-                if (!(up || (same_up & part)))
-                    atomic_inc(ends + 2 * cur);
-                if (!(down || (same_down & part)))
-                    atomic_inc(ends + 2 * cur + 1);
-                if (k < room) {
-                    runs[3 * k] = i * width + start;
-                    runs[3 * k + 1] = j + t - start;
-                    runs[3 * k + 2] = cur;
-                }
-                ++k;
+                CLOSE_RUN(up || (same_up & part), down || (same_down & part), j + t)
             }
             cur = j + t < j1 ? lab[t] : -1; /* runs that begin past the segment are not ours */
+            keep = cur >= 0 && wanted[cur];
             start = j + t;
             up = down = 0;
             from = 0xffffu & ~((1u << t) - 1);
@@ -716,15 +736,20 @@ __kernel void row_runs(const int width, const int height, const int seg,
             down = down || (same_down & from);
         }
     }
+#undef CLOSE_RUN
+    if (got)
+        list_runs(counts, room, runs, got, held);
 }
 
-/* The runs (as row_runs lists them: counts[0] of them, `room` at most) of the cells with
-   more than one top and more than one bottom run, copied to out[3 k ..], k from the
-   counter counts[1] (zeroed by the host); one work-item per `chunk` runs, one atomic
-   each.  The count is read here, not by the host: no wait between the kernels. */
+/* Of the runs row_runs listed (counts[0] of them, `room` at most), those of the cells
+   with more than one top and more than one bottom run, copied to out[3 k ..], k from the
+   counter counts[1] (zeroed by the host), each its own piece (parent[k] = k) with its
+   index at its first pixel (run_at[p], read by pieces_join); one work-item per `chunk`
+   runs, one atomic each.  The count is read here, not by the host: no wait between the
+   kernels. */
 __kernel void suspect_runs(const uint room, const uint chunk, __global const int *runs,
                            __global const uint *ends, volatile __global uint *counts,
-                           __global int *out)
+                           __global int *out, __global int *run_at, __global int *parent)
 {
     const uint total = counts[0] < room ? counts[0] : room;
     const uint r0 = get_global_id(0) * chunk;
@@ -734,7 +759,7 @@ __kernel void suspect_runs(const uint room, const uint chunk, __global const int
     uint mine = 0;
     for (uint r = r0; r < r1; ++r) {
         const int l = runs[3 * r + 2];
-        mine += ends[2 * l] > 1 && ends[2 * l + 1] > 1;
+        mine += (ends[2 * l] > 1) & (ends[2 * l + 1] > 1);
     }
     if (mine == 0)
         return;
@@ -745,9 +770,26 @@ __kernel void suspect_runs(const uint room, const uint chunk, __global const int
             out[3 * k] = runs[3 * r];
             out[3 * k + 1] = runs[3 * r + 1];
             out[3 * k + 2] = l;
+            run_at[runs[3 * r]] = (int)k;
+            parent[k] = (int)k;
             ++k;
         }
     }
+}
+
+/* Per cell: whether it is suspect now, for the next call's row_runs, and at counts[3]
+   how many suspect cells row_runs did not list (the host then lists again, now with
+   every suspect cell flagged). */
+__kernel void suspect_cells(const int n, __global const uint *ends, __global uchar *wanted,
+                            volatile __global uint *counts)
+{
+    const int l = get_global_id(0);
+    if (l >= n)
+        return;
+    const uchar now = ends[2 * l] > 1 && ends[2 * l + 1] > 1;
+    if (now && !wanted[l])
+        atomic_inc(counts + 3);
+    wanted[l] = now;
 }
 
 /* The pieces of the listed cells (the runs suspect_runs kept, `m` of them, unordered),
@@ -757,28 +799,27 @@ __kernel void suspect_runs(const uint room, const uint chunk, __global const int
    Hawick's concurrent union: a link that loses a race is retried from the new roots).
    run_at[p]: the index of the listed run that begins at pixel p (only those are read). */
 
+/* The root of run x's piece, halving the path on the way (each run passed then points
+   to its grandparent): links go from a higher index to a lower one, and runs are listed
+   about row by row, so a tall cell's runs would otherwise form chains as long as the
+   cell is tall.  A halving store replaces a link by another to the same piece (pieces
+   only merge) with a lower index, and a union that loses a link to it retries from the
+   old root: the pieces come out the same, each rooted at its smallest index. */
 inline int piece_root(volatile __global int *parent, int x)
 {
     int p = parent[x];
     while (p != x) {
-        x = p;
+        const int g = parent[p];
+        if (g == p)
+            return p;
+        parent[x] = g;
+        x = g;
         p = parent[x];
     }
     return x;
 }
 
-/* 1. each run its own piece, and its index at its first pixel */
-__kernel void pieces_start(const uint m, __global const int *runs, __global int *run_at,
-                           volatile __global int *parent)
-{
-    const uint k = get_global_id(0);
-    if (k >= m)
-        return;
-    run_at[runs[3 * k]] = (int)k;
-    parent[k] = (int)k;
-}
-
-/* 2. each run joins the runs of the row above that touch it: one per stretch of its own
+/* 1. each run joins the runs of the row above that touch it: one per stretch of its own
    label above it, found by walking left to the stretch's run start */
 __kernel void pieces_join(const uint m, const int width, __global const int *runs,
                           __global const int *labels, __global const int *run_at,
@@ -814,7 +855,7 @@ __kernel void pieces_join(const uint m, const int width, __global const int *run
     }
 }
 
-/* 3. per piece (at its root) its pixels and first pixel; per cell the piece that holds
+/* 2. per piece (at its root) its pixels and first pixel; per cell the piece that holds
    its site's pixel (site_at[l], from the host) where the site is in its cell */
 __kernel void pieces_measure(const uint m, __global const int *runs, volatile __global int *parent,
                              __global int *root, volatile __global int *size,
@@ -834,7 +875,7 @@ __kernel void pieces_measure(const uint m, __global const int *runs, volatile __
         site_piece[l] = r; /* one run holds the site's pixel: one writer */
 }
 
-/* 4. per cell the size of its largest piece */
+/* 3. per cell the size of its largest piece */
 __kernel void pieces_largest(const uint m, __global const int *runs, __global const int *root,
                              __global const int *size, volatile __global int *largest)
 {
@@ -844,7 +885,7 @@ __kernel void pieces_largest(const uint m, __global const int *runs, __global co
     atomic_max(largest + runs[3 * k + 2], size[k]);
 }
 
-/* 5. per cell, of its largest pieces the one that begins last in raster order (pieces
+/* 4. per cell, of its largest pieces the one that begins last in raster order (pieces
    begin at different pixels) */
 __kernel void pieces_last(const uint m, __global const int *runs, __global const int *root,
                           __global const int *size, __global const int *first,
@@ -858,7 +899,7 @@ __kernel void pieces_last(const uint m, __global const int *runs, __global const
         atomic_max(last + l, first[k]);
 }
 
-/* 6. the runs outside the piece their cell keeps (the site's piece, else the last of the
+/* 5. the runs outside the piece their cell keeps (the site's piece, else the last of the
    largest), listed as suspect_runs lists runs, at dropped[3 k ..] from the counter
    counts[2] (zeroed by the host) */
 __kernel void pieces_dropped(const uint m, __global const int *runs, __global const int *root,
