@@ -17,8 +17,9 @@ segment.
 
 :meth:`OpenCLBackend.walled_moments` (the walled step of a mosaic) also cuts each cell to
 the one 4-connected piece that :func:`cvt.mosaic.split_cells` keeps, on the device: the
-runs of the cells that may be in pieces are listed, joined into pieces by a union-find,
-and only the runs of the pieces not kept come back, whose sums the host subtracts.
+runs of the cells that may be in pieces are listed and joined into pieces by a
+union-find, and the sums of the pieces not kept are taken from their cells' sums: the
+host reads back 5·N sums, as for the unwalled step.
 
 Two label kernels, the same search: ``label_blocks`` (one work-item per ``STRIP`` square
 blocks of 4, 8 or 16 px side by side in a row; the default on CPUs, where PoCL vectorises
@@ -34,7 +35,6 @@ refused with the compiler's reason).  Nothing is ever asked interactively.
 
 from __future__ import annotations
 
-import dataclasses
 import math
 import os
 import warnings
@@ -45,7 +45,7 @@ import numpy as np
 
 from compact_distributions.cvt.errors import BackendUnavailable, InputError
 from compact_distributions.cvt.metrics import Metric, compile_sites
-from compact_distributions.cvt.moments import Moments, moments_from_runs
+from compact_distributions.cvt.moments import Moments
 from compact_distributions.cvt.pixels import pixel_index
 from compact_distributions.cvt.problem import Grid
 from compact_distributions.cvt.quiet import c_output_silenced
@@ -59,11 +59,10 @@ RUN_CHUNK = 1024  # runs per work-item of suspect_runs
 # work-groups of the walled-cell kernels, fixed: the numbers of runs change every step,
 # and PoCL builds a kernel anew for each work-group size it is left to choose
 RUN_GROUP = (1, 16)  # row_runs: segments x rows
-LIST_GROUP = 64  # the kernels over listed runs or cells
+LIST_GROUP = 64  # the kernels over listed runs
 WALL_KERNELS = (
     "row_runs",
     "suspect_runs",
-    "suspect_cells",
     "pieces_join",
     "pieces_measure",
     "pieces_largest",
@@ -584,52 +583,42 @@ class OpenCLBackend(Backend):
         cl.enqueue_nd_range_kernel(self._queue, kernel, size, group)
 
     def _suspect_runs(self, metric: Metric, labels_buf, w: int, h: int, n: int):
-        """Count each cell's top and bottom runs in the labels in ``labels_buf`` and list
-        the runs of the cells that may be in pieces, with one wait: (runs listed, counts
-        buffer, listed runs, their index at their first pixel, their union-find parents,
-        per-cell top and bottom run counts).  ``row_runs`` lists the runs of the cells
-        that were suspect last time, ``suspect_runs`` keeps those of the cells suspect
-        now, and ``suspect_cells`` flags these for next time; where a suspect cell was
-        not listed (its runs are missing), or the runs overflowed their buffer, the
-        listing is done again.  The counts buffer holds (listed by row_runs, kept,
-        dropped, missed); pieces_dropped adds the dropped."""
+        """List the runs of the labels in ``labels_buf`` (``row_runs``) and keep those of
+        the cells that may be in pieces (``suspect_runs``), with one wait: (runs kept,
+        counts buffer, kept runs, their index at their first pixel, their union-find
+        parents, per-cell top and bottom run counts).  The counts buffer holds (found,
+        kept)."""
         cl, queue = self._cl, self._queue
-        ends_buf, counts_buf = self._buffer("run_ends", 8 * n), self._buffer("run_counts", 16)
-        before = self._buffers.get("wanted_cells")
-        wanted = self._buffer("wanted_cells", n)
-        if wanted is not before:  # new: any flags give the same result; all lists every run once
-            cl.enqueue_fill_buffer(queue, wanted, np.uint8(1), 0, wanted.size)
+        ends_buf, counts_buf = self._buffer("run_ends", 8 * n), self._buffer("run_counts", 8)
         run_at = self._buffer("run_at", 4 * w * h)
-        rows = (-(-w // RUN_SEGMENT), h)
-        counts = np.zeros(4, dtype=np.uint32)
+        counts = np.zeros(2, dtype=np.uint32)
         while True:
             room = self._run_room
             runs_buf, listed_buf = self._buffer("runs", 12 * room), self._buffer("suspect_runs", 12 * room)
             parent = self._buffer("piece_parent", 4 * room)
             cl.enqueue_fill_buffer(queue, ends_buf, np.uint32(0), 0, 8 * n)
-            cl.enqueue_fill_buffer(queue, counts_buf, np.uint32(0), 0, 16)
-            args = (labels_buf, wanted, ends_buf, counts_buf, np.uint32(room), runs_buf)
+            cl.enqueue_fill_buffer(queue, counts_buf, np.uint32(0), 0, 8)
+            rows = (-(-w // RUN_SEGMENT), h)
+            args = (labels_buf, ends_buf, counts_buf, np.uint32(room), runs_buf)
             self._wall_kernel(
                 metric, "row_runs", rows, np.int32(w), np.int32(h), np.int32(RUN_SEGMENT), *args
             )
             chunks = max(1, -(-room // RUN_CHUNK))
             args = (runs_buf, ends_buf, counts_buf, listed_buf, run_at, parent)
             self._wall_kernel(metric, "suspect_runs", chunks, np.uint32(room), np.uint32(RUN_CHUNK), *args)
-            self._wall_kernel(metric, "suspect_cells", n, np.int32(n), ends_buf, wanted, counts_buf)
             self._read(counts, counts_buf)
-            if counts[0] > room:  # too many to hold: again, with room
-                self._run_room = int(counts[0]) * 5 // 4
-            elif counts[3] == 0:
+            if counts[0] <= room:
                 return int(counts[1]), counts_buf, listed_buf, run_at, parent, ends_buf
-            # else again: every suspect cell is flagged now
+            # too many to hold: again, with room (the counts start again from zero)
+            self._run_room = int(counts[0]) * 5 // 4
 
     def _walled_moments(self, sites, angles, scales, metric: Metric, grid: Grid) -> Moments:
         """The moments of the labels with each cell cut to the piece it keeps, found on
-        the device: :meth:`_suspect_runs` counts each cell's top and bottom runs and
-        lists the runs of the cells that may be in pieces, the
-        ``pieces_*`` kernels find their pieces and list the runs of those not kept; the
-        host reads 5·N sums and those runs (never the raster) and subtracts their sums.
-        The host waits twice: for the number of listed runs, and for the results."""
+        the device: ``row_runs`` lists the runs and counts each cell's top and bottom
+        runs, ``suspect_runs`` keeps the runs of the cells that may be in pieces, the
+        ``pieces_*`` kernels find their pieces and take the sums of the runs of those not
+        kept from their cells' sums; the host reads 5·N sums (never the raster).  The
+        host waits twice: for the number of kept runs, and for the sums."""
         cl = self._cl
         n = len(sites)
         w, h = grid.width, grid.height
@@ -647,7 +636,7 @@ class OpenCLBackend(Backend):
             root = self._buffer("piece_root", 4 * m)
             size, first = self._buffer("piece_size", 4 * m), self._buffer("piece_first", 4 * m)
             site_piece, largest = self._buffer("site_piece", 4 * n), self._buffer("largest", 4 * n)
-            last, dropped_buf = self._buffer("last_largest", 4 * n), self._buffer("dropped", 12 * m)
+            last = self._buffer("last_largest", 4 * n)
             # the slots the pieces kernels fill, per piece and per listed cell, start empty
             for buf, value, count in (
                 (size, 0, m),
@@ -661,20 +650,23 @@ class OpenCLBackend(Backend):
             run("pieces_measure", m, listed_buf, parent, root, size, first, site_at, site_piece)
             run("pieces_largest", m, listed_buf, root, size, largest)
             run("pieces_last", m, listed_buf, root, size, first, largest, last)
-            run("pieces_dropped", m, listed_buf, root, first, site_piece, last, counts_buf, dropped_buf)
-            # all of them in one wait: at most m runs are dropped
-            counts, dropped = np.empty(4, dtype=np.uint32), np.empty((m, 3), dtype=np.int32)
-            cl.enqueue_copy(self._queue, counts, counts_buf, is_blocking=False)
-            cl.enqueue_copy(self._queue, dropped, dropped_buf, is_blocking=False)
-            whole = self._read_moments(acc_buf, n)  # in order: the copies above are done
+            run(
+                "pieces_dropped",
+                m,
+                listed_buf,
+                root,
+                first,
+                site_piece,
+                last,
+                np.int32(w),
+                np.int32(n),
+                acc_buf,
+            )
+            return self._read_moments(acc_buf, n)
         except cl.Error as exc:
             raise BackendUnavailable(
                 f"opencl: walled-cell kernels failed on {self.device()}: {exc}"
             ) from None
-        dropped = dropped[: counts[2]]
-        start = dropped[:, 0].astype(np.int64)
-        gone = moments_from_runs(start, start + dropped[:, 1], dropped[:, 2], w, n)
-        return Moments(*(getattr(whole, f.name) - getattr(gone, f.name) for f in dataclasses.fields(Moments)))
 
     # --------------------------------------------------------------------- fit
     def fit_search(self, cells):

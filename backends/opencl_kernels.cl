@@ -95,16 +95,19 @@ inline ulong sum_squares(const long m)
     return u * (u + 1) * (2 * u + 1) / 6;
 }
 
+/* The sums of the run of pixels a..b of a row, times `sign`: 1 adds them, (ulong)-1 takes
+   them away (the sums are kept modulo 2^64, the split counters too, so any order of
+   additions and subtractions ends at the same sums). */
 inline void flush_run(volatile __global acc_t *acc, const int n, const int site,
-                      const int a, const int b, const int row)
+                      const int a, const int b, const int row, const ulong sign)
 {
     const ulong len = (ulong)(b - a + 1);
     const ulong r = (ulong)row;
-    add_sum(acc, 0, n, site, len);
-    add_sum(acc, 1, n, site, (ulong)(a + b) * len / 2);
-    add_sum(acc, 2, n, site, r * len);
-    add_sum(acc, 3, n, site, sum_squares(b) - sum_squares((long)a - 1));
-    add_sum(acc, 4, n, site, r * r * len);
+    add_sum(acc, 0, n, site, sign * len);
+    add_sum(acc, 1, n, site, sign * ((ulong)(a + b) * len / 2));
+    add_sum(acc, 2, n, site, sign * (r * len));
+    add_sum(acc, 3, n, site, sign * (sum_squares(b) - sum_squares((long)a - 1)));
+    add_sum(acc, 4, n, site, sign * (r * r * len));
 }
 
 /* The arguments of both label kernels, in the order the host sets them. */
@@ -594,13 +597,13 @@ __kernel void row_moments(const int width, const int height, const int seg,
         const int l = row[j];
         if (l != cur) {
             if (cur >= 0)
-                flush_run(acc, n, cur, start, j - 1, i);
+                flush_run(acc, n, cur, start, j - 1, i, 1);
             cur = l;
             start = j;
         }
     }
     if (cur >= 0)
-        flush_run(acc, n, cur, start, j1 - 1, i);
+        flush_run(acc, n, cur, start, j1 - 1, i, 1);
 }
 
 /* ------------------------------------------------------------------ walled cells */
@@ -608,13 +611,9 @@ __kernel void row_moments(const int width, const int height, const int seg,
 /* A walled step keeps one 4-connected piece of each cell (cvt.mosaic.split_cells).  A
    cell whose row runs include only one "top" run (no pixel of it has its own label
    straight above), or only one "bottom" run, is one piece: from any of its runs, steps to
-   a touching run above (below) end at that run.  row_runs counts both kinds per cell,
-   suspect_runs lists the runs of the cells with more than one of each, and the pieces_*
-   kernels find their pieces.  row_runs takes, per work-item, the runs of the region
-   that begin in one segment of `seg` pixels of a row (a multiple of 16; a run may reach
-   past the segment's end), reading the row 16 pixels at a time: where the label changes,
-   and where a pixel has its own label straight above and below, as bits; a run's part of
-   a chunk is a range of bits, so the work per chunk is per run, not per pixel. */
+   a touching run above (below) end at that run.  row_runs lists the runs of the region
+   and counts both kinds per cell; suspect_runs keeps the runs of the cells with more
+   than one of each, and the pieces_* kernels find their pieces. */
 
 /* 16 labels of a row from column j (j may be -1); columns off the row read -1 */
 inline int16 row16(__global const int *row, const int j, const int width)
@@ -638,42 +637,19 @@ inline uint lane_bits(const int16 m)
     return (uint)(c.x | c.y);
 }
 
-/* a run of cell l ends: one more top run unless a pixel of it had l above, one more
-   bottom run unless one had l below */
-inline void count_ends(volatile __global uint *ends, const int l, const uint up, const uint down)
-{
-    if (!up)
-        atomic_inc(ends + 2 * l);
-    if (!down)
-        atomic_inc(ends + 2 * l + 1);
-}
+/* One work-item per segment of `seg` pixels of a row (a multiple of 16) takes the runs of
+   the region that begin in it (a run may reach past the segment's end): each as (first
+   pixel, length, label) at runs[3 k ..], k from the counter counts[0] (zeroed by the host;
+   one atomic per work-item reserves its place), and ends[2 l], ends[2 l + 1] count the
+   top and bottom runs of cell l (zeroed by the host).  Runs beyond `room` are counted,
+   not written (the host then asks again with more room).
 
-/* The runs of the wanted cells are listed, each as (first pixel, length, label) at
-   runs[3 k ..], k from a counter (zeroed by the host); runs beyond `room` are counted,
-   not written (the host then asks again with more room).  A work-item holds up to LISTED
-   runs and reserves their places with one atomic. */
-#define LISTED 16
-inline void list_runs(volatile __global uint *counter, const uint room, __global int *runs,
-                      const int got, const int held[LISTED][3])
-{
-    uint k = atomic_add(counter, (uint)got);
-    for (int q = 0; q < got && k < room; ++q, ++k) {
-        runs[3 * k] = held[q][0];
-        runs[3 * k + 1] = held[q][1];
-        runs[3 * k + 2] = held[q][2];
-    }
-}
-
-/* Per cell l its top runs at ends[2 l] and its bottom runs at ends[2 l + 1] (zeroed by
-   the host; atomics only where a run is a top or bottom one, a few per cell), and the
-   runs of the cells flagged in `wanted` listed at counts[0].  The host flags the cells
-   that were suspect in its last call (suspect_cells): a Lloyd step moves the sites
-   little, so they are those of this call but for a few, and the runs of the other
-   cells, most of them, are neither written nor read again. */
+   The row is read 16 pixels at a time: where the label changes, and where a pixel has
+   its own label straight above and below, as bits; a run's part of a chunk is a range
+   of bits, so the work per chunk is per run, not per pixel. */
 __kernel void row_runs(const int width, const int height, const int seg,
-                       __global const int *labels, __global const uchar *wanted,
-                       volatile __global uint *ends, volatile __global uint *counts,
-                       const uint room, __global int *runs)
+                       __global const int *labels, volatile __global uint *ends,
+                       volatile __global uint *counts, const uint room, __global int *runs)
 {
     const int i = get_global_id(1);
     const int j0 = get_global_id(0) * seg;
@@ -682,35 +658,34 @@ __kernel void row_runs(const int width, const int height, const int seg,
     const int j1 = j0 + seg < width ? j0 + seg : width;
     __global const int *row = labels + (size_t)i * width;
     __global const int *above = row - width, *below = row + width; /* read only in the raster */
-    int held[LISTED][3];
-    int got = 0;
-    int cur = -1, start = 0, keep = 0; /* the open run: its label (-1: none of ours), its
-                                          first pixel, whether it is listed */
-    uint up = 0, down = 0;             /* whether a pixel of it has its label above, below */
-#define CLOSE_RUN(UP, DOWN, END)                                                        \
-    {                                                                                   \
-        count_ends(ends, cur, UP, DOWN);                                                \
-        if (keep) {                                                                     \
-            if (got == LISTED) {                                                        \
-                list_runs(counts, room, runs, got, held);                               \
-                got = 0;                                                                \
-            }                                                                           \
-            held[got][0] = i * width + start;                                           \
-            held[got][1] = (END) - start;                                               \
-            held[got][2] = cur;                                                         \
-            ++got;                                                                      \
-        }                                                                               \
+    uint mine = 0; /* runs of the region that begin in the segment */
+    for (int j = j0; j < j1; j += 16) {
+        const int16 l = row16(row, j, width);
+        const uint begin = lane_bits((l >= 0) & (l != row16(row, j - 1, width)));
+        mine += popcount(j1 - j < 16 ? begin & ((1u << (j1 - j)) - 1) : begin);
     }
+    if (mine == 0)
+        return;
+    uint k = atomic_add(counts, mine);
+    int cur = -1, start = 0; /* the open run: its label (-1: none of ours) and first pixel */
+    uint up = 0, down = 0;   /* whether a pixel of it has its label above, below */
     for (int j = j0;; j += 16) {
         if (j >= width || (j >= j1 && cur < 0)) {
-            if (cur >= 0) /* the run reaches the row's end */
-                CLOSE_RUN(up, down, width)
+            if (cur >= 0) { /* the run reaches the row's end */
+                if (!up)
+                    atomic_inc(ends + 2 * cur);
+                if (!down)
+                    atomic_inc(ends + 2 * cur + 1);
+                if (k < room) {
+                    runs[3 * k] = i * width + start;
+                    runs[3 * k + 1] = width - start;
+                    runs[3 * k + 2] = cur;
+                }
+            }
             break;
         }
         const int16 l = row16(row, j, width);
         uint change = lane_bits(l != row16(row, j - 1, width));
-        if (!change && (cur < 0 || (up && down)))
-            continue; /* nothing begins or ends here, and the open run is settled */
         const uint same_up = i > 0 ? lane_bits(row16(above, j, width) == l) : 0;
         const uint same_down = i + 1 < height ? lane_bits(row16(below, j, width) == l) : 0;
         int lab[16];
@@ -721,10 +696,18 @@ __kernel void row_runs(const int width, const int height, const int seg,
             change &= change - 1;
             if (cur >= 0) { /* the open run ends before lane t */
                 const uint part = from & ((1u << t) - 1);
-                CLOSE_RUN(up || (same_up & part), down || (same_down & part), j + t)
+                if (!(up || (same_up & part)))
+                    atomic_inc(ends + 2 * cur);
+                if (!(down || (same_down & part)))
+                    atomic_inc(ends + 2 * cur + 1);
+                if (k < room) {
+                    runs[3 * k] = i * width + start;
+                    runs[3 * k + 1] = j + t - start;
+                    runs[3 * k + 2] = cur;
+                }
+                ++k;
             }
             cur = j + t < j1 ? lab[t] : -1; /* runs that begin past the segment are not ours */
-            keep = cur >= 0 && wanted[cur];
             start = j + t;
             up = down = 0;
             from = 0xffffu & ~((1u << t) - 1);
@@ -736,9 +719,6 @@ __kernel void row_runs(const int width, const int height, const int seg,
             down = down || (same_down & from);
         }
     }
-#undef CLOSE_RUN
-    if (got)
-        list_runs(counts, room, runs, got, held);
 }
 
 /* Of the runs row_runs listed (counts[0] of them, `room` at most), those of the cells
@@ -775,21 +755,6 @@ __kernel void suspect_runs(const uint room, const uint chunk, __global const int
             ++k;
         }
     }
-}
-
-/* Per cell: whether it is suspect now, for the next call's row_runs, and at counts[3]
-   how many suspect cells row_runs did not list (the host then lists again, now with
-   every suspect cell flagged). */
-__kernel void suspect_cells(const int n, __global const uint *ends, __global uchar *wanted,
-                            volatile __global uint *counts)
-{
-    const int l = get_global_id(0);
-    if (l >= n)
-        return;
-    const uchar now = ends[2 * l] > 1 && ends[2 * l + 1] > 1;
-    if (now && !wanted[l])
-        atomic_inc(counts + 3);
-    wanted[l] = now;
 }
 
 /* The pieces of the listed cells (the runs suspect_runs kept, `m` of them, unordered),
@@ -900,12 +865,12 @@ __kernel void pieces_last(const uint m, __global const int *runs, __global const
 }
 
 /* 5. the runs outside the piece their cell keeps (the site's piece, else the last of the
-   largest), listed as suspect_runs lists runs, at dropped[3 k ..] from the counter
-   counts[2] (zeroed by the host) */
+   largest): their sums are taken from their cell's (acc, as the label kernels left it),
+   so the host reads the cut cells' sums and nothing else */
 __kernel void pieces_dropped(const uint m, __global const int *runs, __global const int *root,
                              __global const int *first, __global const int *site_piece,
-                             __global const int *last, volatile __global uint *counts,
-                             __global int *dropped)
+                             __global const int *last, const int width, const int n,
+                             volatile __global acc_t *acc)
 {
     const uint k = get_global_id(0);
     if (k >= m)
@@ -915,8 +880,6 @@ __kernel void pieces_dropped(const uint m, __global const int *runs, __global co
     const int keep = own >= 0 ? first[own] : last[l];
     if (first[root[k]] == keep)
         return;
-    const uint d = atomic_inc(counts + 2);
-    dropped[3 * d] = runs[3 * k];
-    dropped[3 * d + 1] = runs[3 * k + 1];
-    dropped[3 * d + 2] = l;
+    const int p = runs[3 * k], i = p / width, j = p - i * width;
+    flush_run(acc, n, l, j, j + runs[3 * k + 1] - 1, i, (ulong)0 - 1);
 }

@@ -147,12 +147,12 @@ def runs_of(labels):
 @needs_opencl
 @pytest.mark.parametrize("width", [700, 512, 37])
 def test_device_runs_and_their_top_and_bottom_counts_are_numpy_s(width):
-    """run_ends and suspect_runs read rows 16 labels at a time in 256-px segments: runs
-    of 1 to 600 px (within a chunk, across chunks and segments, to the row's end),
-    outside pixels, widths a multiple of 16 or not.  The per-cell top and bottom counts
-    are those counted pixel by pixel, and suspect_runs lists NumPy's runs of the cells
-    with more than one of each (all but a block), each its own piece, its index at its
-    first pixel."""
+    """row_runs reads rows 16 labels at a time in 256-px segments: runs of 1 to 600 px
+    (within a chunk, across chunks and segments, to the row's end), outside pixels,
+    widths a multiple of 16 or not.  It finds as many runs as NumPy, its per-cell top and
+    bottom counts are those counted pixel by pixel, and suspect_runs keeps NumPy's runs
+    of the cells with more than one of each (all but a block), each its own piece, its
+    index at its first pixel."""
     rng = np.random.default_rng(width)
     h, n = 40, 7
     rows = []
@@ -165,14 +165,22 @@ def test_device_runs_and_their_top_and_bottom_counts_are_numpy_s(width):
     labels[5:15, 3:30] = n - 1  # one block: one top and one bottom run
     with OpenCLBackend() as ocl:
         buf = ocl._upload("labels_under_test", labels)
-        kept, _, listed_buf, run_at_buf, parent_buf, ends_buf = ocl._suspect_runs(
+        kept, counts_buf, listed_buf, run_at_buf, parent_buf, ends_buf = ocl._suspect_runs(
             make_metric("l2"), buf, width, h, n
         )
         listed, parent = np.empty((kept, 3), dtype=np.int32), np.empty(kept, dtype=np.int32)
         ends, run_at = np.empty((n, 2), dtype=np.uint32), np.empty(h * width, dtype=np.int32)
-        for out, src in ((listed, listed_buf), (parent, parent_buf), (ends, ends_buf), (run_at, run_at_buf)):
+        counts = np.empty(2, dtype=np.uint32)
+        for out, src in (
+            (listed, listed_buf),
+            (parent, parent_buf),
+            (ends, ends_buf),
+            (run_at, run_at_buf),
+            (counts, counts_buf),
+        ):
             ocl._read(out, src)
     want = runs_of(labels)
+    assert counts[0] == len(want) and counts[1] == kept
     np.testing.assert_array_equal(ends, [run_ends(labels, c) for c in range(n)])
     suspect = [c for c in range(n) if min(run_ends(labels, c)) > 1]
     assert n - 1 not in suspect and len(suspect) >= 3
@@ -208,27 +216,6 @@ def test_more_runs_than_the_buffer_holds_are_asked_for_again():
         assert ocl._run_room > 8
         want = split_moments(ocl.label(sites, **args), sites)
     np.testing.assert_array_equal(as_array(got), as_array(want))
-
-
-@needs_opencl
-@pytest.mark.parametrize("flags", [0, 1], ids=["none", "all"])
-def test_stale_suspect_flags_give_the_same_moments(flags):
-    """row_runs lists the runs of the cells flagged suspect by the last call: flags that
-    miss suspect cells (none flagged: the device lists again) or flag every cell give
-    the host's moments, and leave the cells suspect now flagged."""
-    sites, args = walled_case("linf", seed=4)
-    n = len(sites)
-    with OpenCLBackend() as ocl:
-        labels = ocl.label(sites, **args)
-        want = as_array(split_moments(labels, sites))
-        np.testing.assert_array_equal(as_array(ocl.walled_moments(sites, **args)), want)
-        ocl._upload("wanted_cells", np.full(n, flags, dtype=np.uint8))
-        np.testing.assert_array_equal(as_array(ocl.walled_moments(sites, **args)), want)
-        wanted = np.empty(n, dtype=np.uint8)
-        ocl._read(wanted, ocl._buffers["wanted_cells"])
-    suspect = [min(run_ends(labels, c)) > 1 for c in range(n)]
-    np.testing.assert_array_equal(wanted, suspect)
-    assert sum(suspect) >= 10
 
 
 @needs_opencl
