@@ -622,31 +622,30 @@ class OpenCLBackend(Backend):
         cl = self._cl
         n = len(sites)
         w, h = grid.width, grid.height
+        # each site's pixel, for pieces_measure: sent now, without a wait (the array lives
+        # until the sums are read), so that nothing is left to send once the runs are kept
+        i, j = pixel_index(sites, w, h)
+        site_pixel = (i * w + j).astype(np.int32)
+        site_at = self._buffer("site_at", site_pixel.nbytes)
+        cl.enqueue_copy(self._queue, site_at, site_pixel, is_blocking=False)
         acc_buf, labels_buf = self._enqueue_moments(sites, angles, scales, metric, grid)
 
         def run(name, m, *args):
             self._wall_kernel(metric, name, m, np.uint32(m), *args)
 
         try:
+            site_piece, largest = self._buffer("site_piece", 4 * n), self._buffer("largest", 4 * n)
+            last = self._buffer("last_largest", 4 * n)
+            # the per-cell slots the pieces kernels fill start empty (pieces_join empties
+            # the per-piece ones): enqueued now, so that only kernels follow the wait below
+            for buf, value in ((site_piece, -1), (largest, 0), (last, -1)):
+                cl.enqueue_fill_buffer(self._queue, buf, np.int32(value), 0, 4 * n)
             m, counts_buf, listed_buf, run_at, parent, _ = self._suspect_runs(metric, labels_buf, w, h, n)
             if m == 0:
                 return self._read_moments(acc_buf, n)
-            i, j = pixel_index(sites, w, h)
-            site_at = self._upload("site_at", (i * w + j).astype(np.int32))
             root = self._buffer("piece_root", 4 * m)
             size, first = self._buffer("piece_size", 4 * m), self._buffer("piece_first", 4 * m)
-            site_piece, largest = self._buffer("site_piece", 4 * n), self._buffer("largest", 4 * n)
-            last = self._buffer("last_largest", 4 * n)
-            # the slots the pieces kernels fill, per piece and per listed cell, start empty
-            for buf, value, count in (
-                (size, 0, m),
-                (first, np.iinfo(np.int32).max, m),
-                (site_piece, -1, n),
-                (largest, 0, n),
-                (last, -1, n),
-            ):
-                cl.enqueue_fill_buffer(self._queue, buf, np.int32(value), 0, 4 * count)
-            run("pieces_join", m, np.int32(w), listed_buf, labels_buf, run_at, parent)
+            run("pieces_join", m, np.int32(w), listed_buf, labels_buf, run_at, parent, size, first)
             run("pieces_measure", m, listed_buf, parent, root, size, first, site_at, site_piece)
             run("pieces_largest", m, listed_buf, root, size, largest)
             run("pieces_last", m, listed_buf, root, size, first, largest, last)

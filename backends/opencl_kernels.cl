@@ -785,14 +785,18 @@ inline int piece_root(volatile __global int *parent, int x)
 }
 
 /* 1. each run joins the runs of the row above that touch it: one per stretch of its own
-   label above it, found by walking left to the stretch's run start */
+   label above it, found by walking left to the stretch's run start; and empties its
+   slots of pieces_measure's sums (size, first) */
 __kernel void pieces_join(const uint m, const int width, __global const int *runs,
                           __global const int *labels, __global const int *run_at,
-                          volatile __global int *parent)
+                          volatile __global int *parent, __global int *size,
+                          __global int *first)
 {
     const uint k = get_global_id(0);
     if (k >= m)
         return;
+    size[k] = 0;
+    first[k] = 0x7fffffff;
     const int p = runs[3 * k], len = runs[3 * k + 1], l = runs[3 * k + 2];
     const int i = p / width, j = p - i * width;
     if (i == 0)
