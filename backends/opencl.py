@@ -61,7 +61,10 @@ RUN_CHUNK = 1024  # runs per work-item of suspect_runs
 RUN_GROUP = (1, 16)  # row_runs: segments x rows
 LIST_GROUP = 64  # the kernels over listed runs
 WALL_KERNELS = (
+    "prefix_sums",
+    "run_counts",
     "row_runs",
+    "suspect_count",
     "suspect_runs",
     "pieces_join",
     "pieces_measure",
@@ -583,33 +586,38 @@ class OpenCLBackend(Backend):
         cl.enqueue_nd_range_kernel(self._queue, kernel, size, group)
 
     def _suspect_runs(self, metric: Metric, labels_buf, w: int, h: int, n: int):
-        """List the runs of the labels in ``labels_buf`` (``row_runs``) and keep those of
-        the cells that may be in pieces (``suspect_runs``), with one wait: (runs kept,
-        counts buffer, kept runs, their index at their first pixel, their union-find
-        parents, per-cell top and bottom run counts).  The counts buffer holds (found,
-        kept)."""
+        """List the runs of the labels in ``labels_buf`` in raster order (``run_counts``,
+        ``prefix_sums``, ``row_runs``) and keep, in that order, those of the cells that
+        may be in pieces (``suspect_count``, ``prefix_sums``, ``suspect_runs``), with one
+        wait: (runs kept, counts buffer, kept runs, their union-find parents, per-cell top
+        and bottom run counts).  The counts buffer holds (found, kept)."""
         cl, queue = self._cl, self._queue
         ends_buf, counts_buf = self._buffer("run_ends", 8 * n), self._buffer("run_counts", 8)
-        run_at = self._buffer("run_at", 4 * w * h)
+        segments = -(-w // RUN_SEGMENT)
+        rows = (segments, h)
+        scan = (np.int32(w), np.int32(h), np.int32(RUN_SEGMENT), labels_buf)
+        places = self._buffer("run_places", 4 * segments * h)
+        self._wall_kernel(metric, "run_counts", rows, *scan, places)
+        self._wall_kernel(metric, "prefix_sums", 1, np.uint32(segments * h), places, counts_buf, np.int32(0))
         counts = np.zeros(2, dtype=np.uint32)
         while True:
             room = self._run_room
             runs_buf, listed_buf = self._buffer("runs", 12 * room), self._buffer("suspect_runs", 12 * room)
             parent = self._buffer("piece_parent", 4 * room)
-            cl.enqueue_fill_buffer(queue, ends_buf, np.uint32(0), 0, 8 * n)
-            cl.enqueue_fill_buffer(queue, counts_buf, np.uint32(0), 0, 8)
-            rows = (-(-w // RUN_SEGMENT), h)
-            args = (labels_buf, ends_buf, counts_buf, np.uint32(room), runs_buf)
-            self._wall_kernel(
-                metric, "row_runs", rows, np.int32(w), np.int32(h), np.int32(RUN_SEGMENT), *args
-            )
             chunks = max(1, -(-room // RUN_CHUNK))
-            args = (runs_buf, ends_buf, counts_buf, listed_buf, run_at, parent)
-            self._wall_kernel(metric, "suspect_runs", chunks, np.uint32(room), np.uint32(RUN_CHUNK), *args)
+            chunk_places = self._buffer("chunk_places", 4 * (-(-chunks // LIST_GROUP) * LIST_GROUP))
+            cl.enqueue_fill_buffer(queue, ends_buf, np.uint32(0), 0, 8 * n)
+            self._wall_kernel(metric, "row_runs", rows, *scan, ends_buf, places, np.uint32(room), runs_buf)
+            args = (np.uint32(room), np.uint32(RUN_CHUNK), runs_buf, ends_buf, counts_buf)
+            self._wall_kernel(metric, "suspect_count", chunks, *args, chunk_places)
+            self._wall_kernel(
+                metric, "prefix_sums", 1, np.uint32(chunks), chunk_places, counts_buf, np.int32(1)
+            )
+            self._wall_kernel(metric, "suspect_runs", chunks, *args, chunk_places, listed_buf, parent)
             self._read(counts, counts_buf)
             if counts[0] <= room:
-                return int(counts[1]), counts_buf, listed_buf, run_at, parent, ends_buf
-            # too many to hold: again, with room (the counts start again from zero)
+                return int(counts[1]), counts_buf, listed_buf, parent, ends_buf
+            # too many to hold: again, with room
             self._run_room = int(counts[0]) * 5 // 4
 
     def _walled_moments(self, sites, angles, scales, metric: Metric, grid: Grid) -> Moments:
@@ -640,12 +648,12 @@ class OpenCLBackend(Backend):
             # the per-piece ones): enqueued now, so that only kernels follow the wait below
             for buf, value in ((site_piece, -1), (largest, 0), (last, -1)):
                 cl.enqueue_fill_buffer(self._queue, buf, np.int32(value), 0, 4 * n)
-            m, counts_buf, listed_buf, run_at, parent, _ = self._suspect_runs(metric, labels_buf, w, h, n)
+            m, counts_buf, listed_buf, parent, _ = self._suspect_runs(metric, labels_buf, w, h, n)
             if m == 0:
                 return self._read_moments(acc_buf, n)
             root = self._buffer("piece_root", 4 * m)
             size, first = self._buffer("piece_size", 4 * m), self._buffer("piece_first", 4 * m)
-            run("pieces_join", m, np.int32(w), listed_buf, labels_buf, run_at, parent, size, first)
+            run("pieces_join", m, np.int32(w), listed_buf, parent, size, first)
             run("pieces_measure", m, listed_buf, parent, root, size, first, site_at, site_piece)
             run("pieces_largest", m, listed_buf, root, size, largest)
             run("pieces_last", m, listed_buf, root, size, first, largest, last)

@@ -637,19 +637,56 @@ inline uint lane_bits(const int16 m)
     return (uint)(c.x | c.y);
 }
 
+/* An exclusive prefix sum of values[0 .. count), in place, and their total at
+   totals[slot]: one work-item (the values summed are a few per row of the raster). */
+__kernel void prefix_sums(const uint count, __global uint *values, __global uint *totals,
+                          const int slot)
+{
+    if (get_global_id(0) != 0)
+        return;
+    uint s = 0;
+    for (uint q = 0; q < count; ++q) {
+        const uint v = values[q];
+        values[q] = s;
+        s += v;
+    }
+    totals[slot] = s;
+}
+
+/* The runs of the region that begin in segment s (of `seg` pixels, a multiple of 16) of
+   row i, at places[i * segments + s]: prefix_sums makes these the places of the
+   segments' first runs, so that row_runs lists the runs in raster order. */
+__kernel void run_counts(const int width, const int height, const int seg,
+                         __global const int *labels, __global uint *places)
+{
+    const int i = get_global_id(1);
+    const int j0 = get_global_id(0) * seg;
+    if (i >= height || j0 >= width)
+        return;
+    const int j1 = j0 + seg < width ? j0 + seg : width;
+    __global const int *row = labels + (size_t)i * width;
+    uint mine = 0;
+    for (int j = j0; j < j1; j += 16) {
+        const int16 l = row16(row, j, width);
+        const uint begin = lane_bits((l >= 0) & (l != row16(row, j - 1, width)));
+        mine += popcount(j1 - j < 16 ? begin & ((1u << (j1 - j)) - 1) : begin);
+    }
+    places[i * get_global_size(0) + get_global_id(0)] = mine;
+}
+
 /* One work-item per segment of `seg` pixels of a row (a multiple of 16) takes the runs of
    the region that begin in it (a run may reach past the segment's end): each as (first
-   pixel, length, label) at runs[3 k ..], k from the counter counts[0] (zeroed by the host;
-   one atomic per work-item reserves its place), and ends[2 l], ends[2 l + 1] count the
-   top and bottom runs of cell l (zeroed by the host).  Runs beyond `room` are counted,
-   not written (the host then asks again with more room).
+   pixel, length, label) at runs[3 k ..], k from its segment's place (run_counts and
+   prefix_sums: the runs in raster order), and ends[2 l], ends[2 l + 1] count the top
+   and bottom runs of cell l (zeroed by the host).  Runs beyond `room` are not written
+   (the host then asks again with more room).
 
    The row is read 16 pixels at a time: where the label changes, and where a pixel has
    its own label straight above and below, as bits; a run's part of a chunk is a range
    of bits, so the work per chunk is per run, not per pixel. */
 __kernel void row_runs(const int width, const int height, const int seg,
                        __global const int *labels, volatile __global uint *ends,
-                       volatile __global uint *counts, const uint room, __global int *runs)
+                       __global const uint *places, const uint room, __global int *runs)
 {
     const int i = get_global_id(1);
     const int j0 = get_global_id(0) * seg;
@@ -658,15 +695,7 @@ __kernel void row_runs(const int width, const int height, const int seg,
     const int j1 = j0 + seg < width ? j0 + seg : width;
     __global const int *row = labels + (size_t)i * width;
     __global const int *above = row - width, *below = row + width; /* read only in the raster */
-    uint mine = 0; /* runs of the region that begin in the segment */
-    for (int j = j0; j < j1; j += 16) {
-        const int16 l = row16(row, j, width);
-        const uint begin = lane_bits((l >= 0) & (l != row16(row, j - 1, width)));
-        mine += popcount(j1 - j < 16 ? begin & ((1u << (j1 - j)) - 1) : begin);
-    }
-    if (mine == 0)
-        return;
-    uint k = atomic_add(counts, mine);
+    uint k = places[i * get_global_size(0) + get_global_id(0)];
     int cur = -1, start = 0; /* the open run: its label (-1: none of ours) and first pixel */
     uint up = 0, down = 0;   /* whether a pixel of it has its label above, below */
     for (int j = j0;; j += 16) {
@@ -722,47 +751,61 @@ __kernel void row_runs(const int width, const int height, const int seg,
 }
 
 /* Of the runs row_runs listed (counts[0] of them, `room` at most), those of the cells
-   with more than one top and more than one bottom run, copied to out[3 k ..], k from the
-   counter counts[1] (zeroed by the host), each its own piece (parent[k] = k) with its
-   index at its first pixel (run_at[p], read by pieces_join); one work-item per `chunk`
-   runs, one atomic each.  The count is read here, not by the host: no wait between the
-   kernels. */
+   with more than one top and more than one bottom run: one work-item per `chunk` runs.
+   suspect_count counts them at places[c] for chunk c; prefix_sums makes these places
+   (their total at counts[1]); suspect_runs copies them there, to out[3 k ..], so that
+   they stay in raster order, each its own piece (parent[k] = k). */
+inline int is_suspect(__global const uint *ends, const int l)
+{
+    return (ends[2 * l] > 1) & (ends[2 * l + 1] > 1);
+}
+
+__kernel void suspect_count(const uint room, const uint chunk, __global const int *runs,
+                            __global const uint *ends, __global const uint *counts,
+                            __global uint *places)
+{
+    const uint total = counts[0] < room ? counts[0] : room;
+    const uint c = get_global_id(0), r0 = c * chunk;
+    if (r0 >= total) {
+        places[c] = 0;
+        return;
+    }
+    const uint r1 = r0 + chunk < total ? r0 + chunk : total;
+    uint mine = 0;
+    for (uint r = r0; r < r1; ++r)
+        mine += is_suspect(ends, runs[3 * r + 2]);
+    places[c] = mine;
+}
+
 __kernel void suspect_runs(const uint room, const uint chunk, __global const int *runs,
-                           __global const uint *ends, volatile __global uint *counts,
-                           __global int *out, __global int *run_at, __global int *parent)
+                           __global const uint *ends, __global const uint *counts,
+                           __global const uint *places, __global int *out,
+                           __global int *parent)
 {
     const uint total = counts[0] < room ? counts[0] : room;
     const uint r0 = get_global_id(0) * chunk;
     if (r0 >= total)
         return;
     const uint r1 = r0 + chunk < total ? r0 + chunk : total;
-    uint mine = 0;
+    uint k = places[get_global_id(0)];
     for (uint r = r0; r < r1; ++r) {
         const int l = runs[3 * r + 2];
-        mine += (ends[2 * l] > 1) & (ends[2 * l + 1] > 1);
-    }
-    if (mine == 0)
-        return;
-    uint k = atomic_add(counts + 1, mine);
-    for (uint r = r0; r < r1; ++r) {
-        const int l = runs[3 * r + 2];
-        if (ends[2 * l] > 1 && ends[2 * l + 1] > 1) {
+        if (is_suspect(ends, l)) {
             out[3 * k] = runs[3 * r];
             out[3 * k + 1] = runs[3 * r + 1];
             out[3 * k + 2] = l;
-            run_at[runs[3 * r]] = (int)k;
             parent[k] = (int)k;
             ++k;
         }
     }
 }
 
-/* The pieces of the listed cells (the runs suspect_runs kept, `m` of them, unordered),
-   and the runs of the pieces their cells do not keep.  Runs are joined where they touch
-   (same cell, adjacent rows, overlapping columns) by a union-find over run indices whose
-   roots are the smallest index of their piece, linked with atomic_min (Playne and
-   Hawick's concurrent union: a link that loses a race is retried from the new roots).
-   run_at[p]: the index of the listed run that begins at pixel p (only those are read). */
+/* The pieces of the listed cells (the runs suspect_runs kept, `m` of them, in raster
+   order), and the runs of the pieces their cells do not keep.  Runs are joined where
+   they touch (same cell, adjacent rows, overlapping columns) by a union-find over run
+   indices whose roots are the smallest index of their piece, linked with atomic_min
+   (Playne and Hawick's concurrent union: a link that loses a race is retried from the
+   new roots). */
 
 /* The root of run x's piece, halving the path on the way (each run passed then points
    to its grandparent): links go from a higher index to a lower one, and runs are listed
@@ -784,11 +827,11 @@ inline int piece_root(volatile __global int *parent, int x)
     return x;
 }
 
-/* 1. each run joins the runs of the row above that touch it: one per stretch of its own
-   label above it, found by walking left to the stretch's run start; and empties its
-   slots of pieces_measure's sums (size, first) */
+/* 1. each run joins the runs of its cell in the row above that touch it: the listed runs
+   are in raster order, so those are the runs from the last one that begins at or
+   before the pixel above the run's first (a binary search) to the last one that begins
+   above it; and it empties its slots of pieces_measure's sums (size, first) */
 __kernel void pieces_join(const uint m, const int width, __global const int *runs,
-                          __global const int *labels, __global const int *run_at,
                           volatile __global int *parent, __global int *size,
                           __global int *first)
 {
@@ -798,28 +841,32 @@ __kernel void pieces_join(const uint m, const int width, __global const int *run
     size[k] = 0;
     first[k] = 0x7fffffff;
     const int p = runs[3 * k], len = runs[3 * k + 1], l = runs[3 * k + 2];
-    const int i = p / width, j = p - i * width;
-    if (i == 0)
-        return;
-    __global const int *above = labels + (size_t)(i - 1) * width;
-    for (int x = j; x < j + len; ++x) {
-        if (above[x] != l || (x > j && above[x - 1] == l))
-            continue;
-        int s = x;
-        while (s > 0 && above[s - 1] == l)
-            --s;
-        int a = (int)k, b = run_at[(i - 1) * width + s];
+    if (p < width)
+        return; /* the top row */
+    const int q = p - width; /* the pixel above the run's first */
+    int lo = 0, hi = (int)k; /* the first run that begins past q, in [lo, hi] */
+    while (lo < hi) {
+        const int mid = (lo + hi) / 2;
+        if (runs[3 * mid] <= q)
+            lo = mid + 1;
+        else
+            hi = mid;
+    }
+    for (int r = lo > 0 ? lo - 1 : 0; r < (int)k && runs[3 * r] < q + len; ++r) {
+        if (runs[3 * r + 2] != l || runs[3 * r] + runs[3 * r + 1] <= q)
+            continue; /* another cell's, or one that ends before (on an earlier row) */
+        int a = (int)k, b = r;
         for (;;) {
             a = piece_root(parent, a);
             b = piece_root(parent, b);
             if (a == b)
                 break;
-            const int hi = a > b ? a : b, lo = a > b ? b : a;
-            const int old = atomic_min(parent + hi, lo);
-            if (old == hi)
+            const int hi_ = a > b ? a : b, lo_ = a > b ? b : a;
+            const int old = atomic_min(parent + hi_, lo_);
+            if (old == hi_)
                 break;
-            a = old; /* hi was linked meanwhile: join its new root */
-            b = lo;
+            a = old; /* hi_ was linked meanwhile: join its new root */
+            b = lo_;
         }
     }
 }
