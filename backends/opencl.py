@@ -62,7 +62,6 @@ RUN_GROUP = (1, 16)  # row_runs: segments x rows
 LIST_GROUP = 64  # the kernels over listed runs
 WALL_KERNELS = (
     "prefix_sums",
-    "run_counts",
     "row_runs",
     "suspect_count",
     "suspect_runs",
@@ -586,8 +585,8 @@ class OpenCLBackend(Backend):
         cl.enqueue_nd_range_kernel(self._queue, kernel, size, group)
 
     def _suspect_runs(self, metric: Metric, labels_buf, w: int, h: int, n: int):
-        """List the runs of the labels in ``labels_buf`` in raster order (``run_counts``,
-        ``prefix_sums``, ``row_runs``) and keep, in that order, those of the cells that
+        """List the runs of the labels in ``labels_buf`` in raster order (``row_runs``
+        counting, ``prefix_sums``, ``row_runs`` listing) and keep, in that order, those of the cells that
         may be in pieces (``suspect_count``, ``prefix_sums``, ``suspect_runs``), with one
         wait: (runs kept, counts buffer, kept runs, their union-find parents, per-cell top
         and bottom run counts).  The counts buffer holds (found, kept)."""
@@ -597,7 +596,10 @@ class OpenCLBackend(Backend):
         rows = (segments, h)
         scan = (np.int32(w), np.int32(h), np.int32(RUN_SEGMENT), labels_buf)
         places = self._buffer("run_places", 4 * segments * h)
-        self._wall_kernel(metric, "run_counts", rows, *scan, places)
+        # the counting pass reads neither ends nor runs: any buffers do
+        self._wall_kernel(
+            metric, "row_runs", rows, *scan, np.int32(1), places, ends_buf, np.uint32(0), places
+        )
         self._wall_kernel(metric, "prefix_sums", 1, np.uint32(segments * h), places, counts_buf, np.int32(0))
         counts = np.zeros(2, dtype=np.uint32)
         while True:
@@ -607,7 +609,8 @@ class OpenCLBackend(Backend):
             chunks = max(1, -(-room // RUN_CHUNK))
             chunk_places = self._buffer("chunk_places", 4 * (-(-chunks // LIST_GROUP) * LIST_GROUP))
             cl.enqueue_fill_buffer(queue, ends_buf, np.uint32(0), 0, 8 * n)
-            self._wall_kernel(metric, "row_runs", rows, *scan, ends_buf, places, np.uint32(room), runs_buf)
+            listing = (np.int32(0), places, ends_buf, np.uint32(room), runs_buf)
+            self._wall_kernel(metric, "row_runs", rows, *scan, *listing)
             args = (np.uint32(room), np.uint32(RUN_CHUNK), runs_buf, ends_buf, counts_buf)
             self._wall_kernel(metric, "suspect_count", chunks, *args, chunk_places)
             self._wall_kernel(

@@ -653,31 +653,12 @@ __kernel void prefix_sums(const uint count, __global uint *values, __global uint
     totals[slot] = s;
 }
 
-/* The runs of the region that begin in segment s (of `seg` pixels, a multiple of 16) of
-   row i, at places[i * segments + s]: prefix_sums makes these the places of the
-   segments' first runs, so that row_runs lists the runs in raster order. */
-__kernel void run_counts(const int width, const int height, const int seg,
-                         __global const int *labels, __global uint *places)
-{
-    const int i = get_global_id(1);
-    const int j0 = get_global_id(0) * seg;
-    if (i >= height || j0 >= width)
-        return;
-    const int j1 = j0 + seg < width ? j0 + seg : width;
-    __global const int *row = labels + (size_t)i * width;
-    uint mine = 0;
-    for (int j = j0; j < j1; j += 16) {
-        const int16 l = row16(row, j, width);
-        const uint begin = lane_bits((l >= 0) & (l != row16(row, j - 1, width)));
-        mine += popcount(j1 - j < 16 ? begin & ((1u << (j1 - j)) - 1) : begin);
-    }
-    places[i * get_global_size(0) + get_global_id(0)] = mine;
-}
-
 /* One work-item per segment of `seg` pixels of a row (a multiple of 16) takes the runs of
-   the region that begin in it (a run may reach past the segment's end): each as (first
-   pixel, length, label) at runs[3 k ..], k from its segment's place (run_counts and
-   prefix_sums: the runs in raster order), and ends[2 l], ends[2 l + 1] count the top
+   the region that begin in it (a run may reach past the segment's end).  With `count`
+   set it only counts them, at places[i * segments + s] for segment s of row i;
+   prefix_sums makes these the places of the segments' first runs.  Then (`count` 0) it
+   lists each as (first pixel, length, label) at runs[3 k ..], k from its segment's
+   place (so the runs are in raster order), and ends[2 l], ends[2 l + 1] count the top
    and bottom runs of cell l (zeroed by the host).  Runs beyond `room` are not written
    (the host then asks again with more room).
 
@@ -685,8 +666,8 @@ __kernel void run_counts(const int width, const int height, const int seg,
    its own label straight above and below, as bits; a run's part of a chunk is a range
    of bits, so the work per chunk is per run, not per pixel. */
 __kernel void row_runs(const int width, const int height, const int seg,
-                       __global const int *labels, volatile __global uint *ends,
-                       __global const uint *places, const uint room, __global int *runs)
+                       __global const int *labels, const int count, __global uint *places,
+                       volatile __global uint *ends, const uint room, __global int *runs)
 {
     const int i = get_global_id(1);
     const int j0 = get_global_id(0) * seg;
@@ -694,8 +675,19 @@ __kernel void row_runs(const int width, const int height, const int seg,
         return;
     const int j1 = j0 + seg < width ? j0 + seg : width;
     __global const int *row = labels + (size_t)i * width;
+    __global uint *place = places + i * get_global_size(0) + get_global_id(0);
+    if (count) {
+        uint mine = 0;
+        for (int j = j0; j < j1; j += 16) {
+            const int16 l = row16(row, j, width);
+            const uint begin = lane_bits((l >= 0) & (l != row16(row, j - 1, width)));
+            mine += popcount(j1 - j < 16 ? begin & ((1u << (j1 - j)) - 1) : begin);
+        }
+        *place = mine;
+        return;
+    }
     __global const int *above = row - width, *below = row + width; /* read only in the raster */
-    uint k = places[i * get_global_size(0) + get_global_id(0)];
+    uint k = *place;
     int cur = -1, start = 0; /* the open run: its label (-1: none of ours) and first pixel */
     uint up = 0, down = 0;   /* whether a pixel of it has its label above, below */
     for (int j = j0;; j += 16) {
