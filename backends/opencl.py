@@ -63,6 +63,7 @@ LIST_GROUP = 64  # the kernels over listed runs
 WALL_KERNELS = (
     "prefix_sums",
     "row_runs",
+    "suspect_cells",
     "suspect_count",
     "suspect_runs",
     "pieces_join",
@@ -587,11 +588,13 @@ class OpenCLBackend(Backend):
     def _suspect_runs(self, metric: Metric, labels_buf, w: int, h: int, n: int):
         """List the runs of the labels in ``labels_buf`` in raster order (``row_runs``
         counting, ``prefix_sums``, ``row_runs`` listing) and keep, in that order, those of the cells that
-        may be in pieces (``suspect_count``, ``prefix_sums``, ``suspect_runs``), with one
+        may be in pieces (``suspect_cells``, ``suspect_count``, ``prefix_sums``,
+        ``suspect_runs``), with one
         wait: (runs kept, counts buffer, kept runs, their union-find parents, per-cell top
         and bottom run counts).  The counts buffer holds (found, kept)."""
         cl, queue = self._cl, self._queue
         ends_buf, counts_buf = self._buffer("run_ends", 8 * n), self._buffer("run_counts", 8)
+        suspect = self._buffer("suspect_cells", n)
         segments = -(-w // RUN_SEGMENT)
         rows = (segments, h)
         scan = (np.int32(w), np.int32(h), np.int32(RUN_SEGMENT), labels_buf)
@@ -611,7 +614,8 @@ class OpenCLBackend(Backend):
             cl.enqueue_fill_buffer(queue, ends_buf, np.uint32(0), 0, 8 * n)
             listing = (np.int32(0), places, ends_buf, np.uint32(room), runs_buf)
             self._wall_kernel(metric, "row_runs", rows, *scan, *listing)
-            args = (np.uint32(room), np.uint32(RUN_CHUNK), runs_buf, ends_buf, counts_buf)
+            self._wall_kernel(metric, "suspect_cells", n, np.int32(n), ends_buf, suspect)
+            args = (np.uint32(room), np.uint32(RUN_CHUNK), runs_buf, suspect, counts_buf)
             self._wall_kernel(metric, "suspect_count", chunks, *args, chunk_places)
             self._wall_kernel(
                 metric, "prefix_sums", 1, np.uint32(chunks), chunk_places, counts_buf, np.int32(1)

@@ -743,17 +743,21 @@ __kernel void row_runs(const int width, const int height, const int seg,
 }
 
 /* Of the runs row_runs listed (counts[0] of them, `room` at most), those of the cells
-   with more than one top and more than one bottom run: one work-item per `chunk` runs.
-   suspect_count counts them at places[c] for chunk c; prefix_sums makes these places
-   (their total at counts[1]); suspect_runs copies them there, to out[3 k ..], so that
-   they stay in raster order, each its own piece (parent[k] = k). */
-inline int is_suspect(__global const uint *ends, const int l)
+   with more than one top and more than one bottom run: suspect_cells flags these cells
+   (a byte each: the runs' lookups stay in the first-level cache, where the run counts
+   would not); with one work-item per `chunk` runs, suspect_count counts their runs at
+   places[c] for chunk c; prefix_sums makes these places (their total at counts[1]);
+   suspect_runs copies them there, to out[3 k ..], so that they stay in raster order,
+   each its own piece (parent[k] = k). */
+__kernel void suspect_cells(const int n, __global const uint *ends, __global uchar *suspect)
 {
-    return (ends[2 * l] > 1) & (ends[2 * l + 1] > 1);
+    const int l = get_global_id(0);
+    if (l < n)
+        suspect[l] = (ends[2 * l] > 1) & (ends[2 * l + 1] > 1);
 }
 
 __kernel void suspect_count(const uint room, const uint chunk, __global const int *runs,
-                            __global const uint *ends, __global const uint *counts,
+                            __global const uchar *suspect, __global const uint *counts,
                             __global uint *places)
 {
     const uint total = counts[0] < room ? counts[0] : room;
@@ -765,12 +769,12 @@ __kernel void suspect_count(const uint room, const uint chunk, __global const in
     const uint r1 = r0 + chunk < total ? r0 + chunk : total;
     uint mine = 0;
     for (uint r = r0; r < r1; ++r)
-        mine += is_suspect(ends, runs[3 * r + 2]);
+        mine += suspect[runs[3 * r + 2]];
     places[c] = mine;
 }
 
 __kernel void suspect_runs(const uint room, const uint chunk, __global const int *runs,
-                           __global const uint *ends, __global const uint *counts,
+                           __global const uchar *suspect, __global const uint *counts,
                            __global const uint *places, __global int *out,
                            __global int *parent)
 {
@@ -782,7 +786,7 @@ __kernel void suspect_runs(const uint room, const uint chunk, __global const int
     uint k = places[get_global_id(0)];
     for (uint r = r0; r < r1; ++r) {
         const int l = runs[3 * r + 2];
-        if (is_suspect(ends, l)) {
+        if (suspect[l]) {
             out[3 * k] = runs[3 * r];
             out[3 * k + 1] = runs[3 * r + 1];
             out[3 * k + 2] = l;
