@@ -652,30 +652,19 @@ class OpenCLBackend(Backend):
             site_piece, largest = self._buffer("site_piece", 4 * n), self._buffer("largest", 4 * n)
             last = self._buffer("last_largest", 4 * n)
             # the per-cell slots the pieces kernels fill start empty (pieces_join empties
-            # the per-piece ones): enqueued now, so that only kernels follow the wait below
+            # the per-piece sizes): enqueued now, so that only kernels follow the wait below
             for buf, value in ((site_piece, -1), (largest, 0), (last, -1)):
                 cl.enqueue_fill_buffer(self._queue, buf, np.int32(value), 0, 4 * n)
             m, counts_buf, listed_buf, parent, _ = self._suspect_runs(metric, labels_buf, w, h, n)
             if m == 0:
                 return self._read_moments(acc_buf, n)
-            root = self._buffer("piece_root", 4 * m)
-            size, first = self._buffer("piece_size", 4 * m), self._buffer("piece_first", 4 * m)
-            run("pieces_join", m, np.int32(w), listed_buf, parent, size, first)
-            run("pieces_measure", m, listed_buf, parent, root, size, first, site_at, site_piece)
+            root, size = self._buffer("piece_root", 4 * m), self._buffer("piece_size", 4 * m)
+            run("pieces_join", m, np.int32(w), listed_buf, parent, size)
+            run("pieces_measure", m, listed_buf, parent, root, size, site_at, site_piece)
             run("pieces_largest", m, listed_buf, root, size, largest)
-            run("pieces_last", m, listed_buf, root, size, first, largest, last)
-            run(
-                "pieces_dropped",
-                m,
-                listed_buf,
-                root,
-                first,
-                site_piece,
-                last,
-                np.int32(w),
-                np.int32(n),
-                acc_buf,
-            )
+            run("pieces_last", m, listed_buf, root, size, largest, last)
+            args = (np.int32(w), np.int32(n), acc_buf)
+            run("pieces_dropped", m, listed_buf, root, site_piece, last, *args)
             return self._read_moments(acc_buf, n)
         except cl.Error as exc:
             raise BackendUnavailable(

@@ -826,16 +826,14 @@ inline int piece_root(volatile __global int *parent, int x)
 /* 1. each run joins the runs of its cell in the row above that touch it: the listed runs
    are in raster order, so those are the runs from the last one that begins at or
    before the pixel above the run's first (a binary search) to the last one that begins
-   above it; and it empties its slots of pieces_measure's sums (size, first) */
+   above it; and it empties its slot of pieces_measure's sizes */
 __kernel void pieces_join(const uint m, const int width, __global const int *runs,
-                          volatile __global int *parent, __global int *size,
-                          __global int *first)
+                          volatile __global int *parent, __global int *size)
 {
     const uint k = get_global_id(0);
     if (k >= m)
         return;
     size[k] = 0;
-    first[k] = 0x7fffffff;
     const int p = runs[3 * k], len = runs[3 * k + 1], l = runs[3 * k + 2];
     if (p < width)
         return; /* the top row */
@@ -867,12 +865,12 @@ __kernel void pieces_join(const uint m, const int width, __global const int *run
     }
 }
 
-/* 2. per piece (at its root) its pixels and first pixel; per cell the piece that holds
-   its site's pixel (site_at[l], from the host) where the site is in its cell */
+/* 2. per piece (at its root) its pixels; per cell the piece that holds its site's pixel
+   (site_at[l], from the host) where the site is in its cell.  A piece's root, its
+   smallest index, is its first run in raster order: its first pixel needs no sum. */
 __kernel void pieces_measure(const uint m, __global const int *runs, volatile __global int *parent,
                              __global int *root, volatile __global int *size,
-                             volatile __global int *first, __global const int *site_at,
-                             __global int *site_piece)
+                             __global const int *site_at, __global int *site_piece)
 {
     const uint k = get_global_id(0);
     if (k >= m)
@@ -881,7 +879,6 @@ __kernel void pieces_measure(const uint m, __global const int *runs, volatile __
     const int r = piece_root(parent, (int)k);
     root[k] = r;
     atomic_add(size + r, len);
-    atomic_min(first + r, p);
     const int s = site_at[l];
     if (p <= s && s < p + len)
         site_piece[l] = r; /* one run holds the site's pixel: one writer */
@@ -897,35 +894,33 @@ __kernel void pieces_largest(const uint m, __global const int *runs, __global co
     atomic_max(largest + runs[3 * k + 2], size[k]);
 }
 
-/* 4. per cell, of its largest pieces the one that begins last in raster order (pieces
-   begin at different pixels) */
+/* 4. per cell, of its largest pieces the one that begins last in raster order: the one
+   with the largest root */
 __kernel void pieces_last(const uint m, __global const int *runs, __global const int *root,
-                          __global const int *size, __global const int *first,
-                          __global const int *largest, volatile __global int *last)
+                          __global const int *size, __global const int *largest,
+                          volatile __global int *last)
 {
     const uint k = get_global_id(0);
     if (k >= m || root[k] != (int)k)
         return;
     const int l = runs[3 * k + 2];
     if (size[k] == largest[l])
-        atomic_max(last + l, first[k]);
+        atomic_max(last + l, (int)k);
 }
 
 /* 5. the runs outside the piece their cell keeps (the site's piece, else the last of the
    largest): their sums are taken from their cell's (acc, as the label kernels left it),
    so the host reads the cut cells' sums and nothing else */
 __kernel void pieces_dropped(const uint m, __global const int *runs, __global const int *root,
-                             __global const int *first, __global const int *site_piece,
-                             __global const int *last, const int width, const int n,
-                             volatile __global acc_t *acc)
+                             __global const int *site_piece, __global const int *last,
+                             const int width, const int n, volatile __global acc_t *acc)
 {
     const uint k = get_global_id(0);
     if (k >= m)
         return;
     const int l = runs[3 * k + 2];
     const int own = site_piece[l];
-    const int keep = own >= 0 ? first[own] : last[l];
-    if (first[root[k]] == keep)
+    if (root[k] == (own >= 0 ? own : last[l]))
         return;
     const int p = runs[3 * k], i = p / width, j = p - i * width;
     flush_run(acc, n, l, j, j + runs[3 * k + 1] - 1, i, (ulong)0 - 1);
