@@ -675,7 +675,9 @@ __kernel void row_runs(const int width, const int height, const int seg,
         return;
     const int j1 = j0 + seg < width ? j0 + seg : width;
     __global const int *row = labels + (size_t)i * width;
-    __global uint *place = places + i * get_global_size(0) + get_global_id(0);
+    /* segments per row counted from the raster, not the global size (padded to the
+       work-group) */
+    __global uint *place = places + i * ((width + seg - 1) / seg) + get_global_id(0);
     if (count) {
         uint mine = 0;
         for (int j = j0; j < j1; j += 16) {

@@ -74,6 +74,7 @@ def test_bad_sites_are_an_input_error():
 # ------------------------------------------------------------------------- OpenCL
 
 try:
+    from compact_distributions.backends import opencl as opencl_module
     from compact_distributions.backends.opencl import OpenCLBackend
 
     OpenCLBackend.probe()
@@ -145,14 +146,17 @@ def runs_of(labels):
 
 
 @needs_opencl
+@pytest.mark.parametrize("group", [None, (2, 8)], ids=["group", "padded"])
 @pytest.mark.parametrize("width", [700, 512, 37])
-def test_device_runs_and_their_top_and_bottom_counts_are_numpy_s(width):
+def test_device_runs_and_their_top_and_bottom_counts_are_numpy_s(width, group, monkeypatch):
     """row_runs reads rows 16 labels at a time in 256-px segments: runs of 1 to 600 px
     (within a chunk, across chunks and segments, to the row's end), outside pixels,
     widths a multiple of 16 or not.  It finds as many runs as NumPy, its per-cell top and
     bottom counts are those counted pixel by pixel, and suspect_runs keeps NumPy's runs
     of the cells with more than one of each (all but a block), in raster order, each its
-    own piece."""
+    own piece; also where the work-groups pad the segments of a row."""
+    if group is not None:
+        monkeypatch.setattr(opencl_module, "RUN_GROUP", group)
     rng = np.random.default_rng(width)
     h, n = 40, 7
     rows = []
