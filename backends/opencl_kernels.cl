@@ -827,7 +827,7 @@ inline int piece_root(volatile __global int *parent, int x)
 
 /* 1. each run joins the runs of its cell in the row above that touch it: the listed runs
    are in raster order, so those are the runs from the last one that begins at or
-   before the pixel above the run's first (a binary search) to the last one that begins
+   before the pixel above the run's first (a search) to the last one that begins
    above it; and it empties its slot of pieces_measure's sizes */
 __kernel void pieces_join(const uint m, const int width, __global const int *runs,
                           volatile __global int *parent, __global int *size)
@@ -840,7 +840,17 @@ __kernel void pieces_join(const uint m, const int width, __global const int *run
     if (p < width)
         return; /* the top row */
     const int q = p - width; /* the pixel above the run's first */
-    int lo = 0, hi = (int)k; /* the first run that begins past q, in [lo, hi] */
+    /* the first run that begins past q, in [lo, hi]: found by steps back from k that
+       double (the runs of the row above are near, and so are their cache lines), then
+       halving */
+    int lo = 0, hi = (int)k;
+    for (int step = 1; hi - step >= 0; step *= 2) {
+        if (runs[3 * (hi - step)] <= q) {
+            lo = hi - step + 1;
+            break;
+        }
+        hi -= step;
+    }
     while (lo < hi) {
         const int mid = (lo + hi) / 2;
         if (runs[3 * mid] <= q)
