@@ -17,8 +17,9 @@ segment.
 
 :meth:`OpenCLBackend.walled_moments` (the walled step of a mosaic) also cuts each cell to
 the one 4-connected piece that :func:`cvt.mosaic.split_cells` keeps, on the device: the
-runs of the cells that may be in pieces are listed, joined into pieces by a union-find,
-and only the runs of the pieces not kept come back, whose sums the host subtracts.
+runs of the cells that may be in pieces are listed and joined into pieces by a
+union-find, and the sums of the pieces not kept are taken from their cells' sums: the
+host reads back 5·N sums, as for the unwalled step.
 
 Two label kernels, the same search: ``label_blocks`` (one work-item per ``STRIP`` square
 blocks of 4, 8 or 16 px side by side in a row; the default on CPUs, where PoCL vectorises
@@ -34,7 +35,6 @@ refused with the compiler's reason).  Nothing is ever asked interactively.
 
 from __future__ import annotations
 
-import dataclasses
 import math
 import os
 import warnings
@@ -45,7 +45,7 @@ import numpy as np
 
 from compact_distributions.cvt.errors import BackendUnavailable, InputError
 from compact_distributions.cvt.metrics import Metric, compile_sites
-from compact_distributions.cvt.moments import Moments, moments_from_runs
+from compact_distributions.cvt.moments import Moments
 from compact_distributions.cvt.pixels import pixel_index
 from compact_distributions.cvt.problem import Grid
 from compact_distributions.cvt.quiet import c_output_silenced
@@ -61,9 +61,11 @@ RUN_CHUNK = 1024  # runs per work-item of suspect_runs
 RUN_GROUP = (1, 16)  # row_runs: segments x rows
 LIST_GROUP = 64  # the kernels over listed runs
 WALL_KERNELS = (
+    "prefix_sums",
     "row_runs",
+    "suspect_cells",
+    "suspect_count",
     "suspect_runs",
-    "pieces_start",
     "pieces_join",
     "pieces_measure",
     "pieces_largest",
@@ -584,86 +586,90 @@ class OpenCLBackend(Backend):
         cl.enqueue_nd_range_kernel(self._queue, kernel, size, group)
 
     def _suspect_runs(self, metric: Metric, labels_buf, w: int, h: int, n: int):
-        """List the runs of the labels in ``labels_buf`` (``row_runs``) and those of the
-        cells that may be in pieces (``suspect_runs``), with one wait: (runs found, runs
-        kept, counts buffer, all runs, kept runs, per-cell top and bottom run counts).
-        The counts buffer holds (found, kept, dropped); the pieces kernels add the last."""
+        """List the runs of the labels in ``labels_buf`` in raster order (``row_runs``
+        counting, ``prefix_sums``, ``row_runs`` listing) and keep, in that order, those of the cells that
+        may be in pieces (``suspect_cells``, ``suspect_count``, ``prefix_sums``,
+        ``suspect_runs``), with one
+        wait: (runs kept, counts buffer, kept runs, their union-find parents, per-cell top
+        and bottom run counts).  The counts buffer holds (found, kept)."""
         cl, queue = self._cl, self._queue
-        ends_buf, counts_buf = self._buffer("run_ends", 8 * n), self._buffer("run_counts", 12)
-        counts = np.zeros(3, dtype=np.uint32)
+        ends_buf, counts_buf = self._buffer("run_ends", 8 * n), self._buffer("run_counts", 8)
+        suspect = self._buffer("suspect_cells", n)
+        segments = -(-w // RUN_SEGMENT)
+        rows = (segments, h)
+        scan = (np.int32(w), np.int32(h), np.int32(RUN_SEGMENT), labels_buf)
+        places = self._buffer("run_places", 4 * segments * h)
+        # the counting pass reads neither ends nor runs: any buffers do
+        self._wall_kernel(
+            metric, "row_runs", rows, *scan, np.int32(1), places, ends_buf, np.uint32(0), places
+        )
+        self._wall_kernel(metric, "prefix_sums", 1, np.uint32(segments * h), places, counts_buf, np.int32(0))
+        counts = np.zeros(2, dtype=np.uint32)
         while True:
             room = self._run_room
             runs_buf, listed_buf = self._buffer("runs", 12 * room), self._buffer("suspect_runs", 12 * room)
-            cl.enqueue_fill_buffer(queue, ends_buf, np.uint32(0), 0, 8 * n)
-            cl.enqueue_fill_buffer(queue, counts_buf, np.uint32(0), 0, 12)
-            rows = (-(-w // RUN_SEGMENT), h)
-            args = (labels_buf, ends_buf, counts_buf, np.uint32(room), runs_buf)
-            self._wall_kernel(
-                metric, "row_runs", rows, np.int32(w), np.int32(h), np.int32(RUN_SEGMENT), *args
-            )
+            parent = self._buffer("piece_parent", 4 * room)
             chunks = max(1, -(-room // RUN_CHUNK))
-            args = (np.uint32(room), np.uint32(RUN_CHUNK), runs_buf, ends_buf, counts_buf, listed_buf)
-            self._wall_kernel(metric, "suspect_runs", chunks, *args)
+            chunk_places = self._buffer("chunk_places", 4 * (-(-chunks // LIST_GROUP) * LIST_GROUP))
+            cl.enqueue_fill_buffer(queue, ends_buf, np.uint32(0), 0, 8 * n)
+            listing = (np.int32(0), places, ends_buf, np.uint32(room), runs_buf)
+            self._wall_kernel(metric, "row_runs", rows, *scan, *listing)
+            self._wall_kernel(metric, "suspect_cells", n, np.int32(n), ends_buf, suspect)
+            args = (np.uint32(room), np.uint32(RUN_CHUNK), runs_buf, suspect, counts_buf)
+            self._wall_kernel(metric, "suspect_count", chunks, *args, chunk_places)
+            self._wall_kernel(
+                metric, "prefix_sums", 1, np.uint32(chunks), chunk_places, counts_buf, np.int32(1)
+            )
+            self._wall_kernel(metric, "suspect_runs", chunks, *args, chunk_places, listed_buf, parent)
             self._read(counts, counts_buf)
             if counts[0] <= room:
-                return int(counts[0]), int(counts[1]), counts_buf, runs_buf, listed_buf, ends_buf
-            # too many to hold: again, with room (the counts start again from zero)
+                return int(counts[1]), counts_buf, listed_buf, parent, ends_buf
+            # too many to hold: again, with room
             self._run_room = int(counts[0]) * 5 // 4
 
     def _walled_moments(self, sites, angles, scales, metric: Metric, grid: Grid) -> Moments:
         """The moments of the labels with each cell cut to the piece it keeps, found on
         the device: ``row_runs`` lists the runs and counts each cell's top and bottom
         runs, ``suspect_runs`` keeps the runs of the cells that may be in pieces, the
-        ``pieces_*`` kernels find their pieces and list the runs of those not kept; the
-        host reads 5·N sums and those runs (never the raster) and subtracts their sums.
-        The host waits twice: for the number of kept runs, and for the results."""
+        ``pieces_*`` kernels find their pieces and take the sums of the runs of those not
+        kept from their cells' sums; the host reads 5·N sums (never the raster).  The
+        host waits twice: for the number of kept runs, and for the sums."""
         cl = self._cl
         n = len(sites)
         w, h = grid.width, grid.height
+        # each site's pixel, for pieces_measure: sent now, without a wait (the array lives
+        # until the sums are read), so that nothing is left to send once the runs are kept
+        i, j = pixel_index(sites, w, h)
+        site_pixel = (i * w + j).astype(np.int32)
+        site_at = self._buffer("site_at", site_pixel.nbytes)
+        cl.enqueue_copy(self._queue, site_at, site_pixel, is_blocking=False)
         acc_buf, labels_buf = self._enqueue_moments(sites, angles, scales, metric, grid)
 
         def run(name, m, *args):
             self._wall_kernel(metric, name, m, np.uint32(m), *args)
 
         try:
-            _, m, counts_buf, _, listed_buf, _ = self._suspect_runs(metric, labels_buf, w, h, n)
+            site_piece, largest = self._buffer("site_piece", 4 * n), self._buffer("largest", 4 * n)
+            last = self._buffer("last_largest", 4 * n)
+            # the per-cell slots the pieces kernels fill start empty (pieces_join empties
+            # the per-piece sizes): enqueued now, so that only kernels follow the wait below
+            for buf, value in ((site_piece, -1), (largest, 0), (last, -1)):
+                cl.enqueue_fill_buffer(self._queue, buf, np.int32(value), 0, 4 * n)
+            m, counts_buf, listed_buf, parent, _ = self._suspect_runs(metric, labels_buf, w, h, n)
             if m == 0:
                 return self._read_moments(acc_buf, n)
-            i, j = pixel_index(sites, w, h)
-            site_at = self._upload("site_at", (i * w + j).astype(np.int32))
-            run_at = self._buffer("run_at", 4 * w * h)
-            parent, root = self._buffer("piece_parent", 4 * m), self._buffer("piece_root", 4 * m)
-            size, first = self._buffer("piece_size", 4 * m), self._buffer("piece_first", 4 * m)
-            site_piece, largest = self._buffer("site_piece", 4 * n), self._buffer("largest", 4 * n)
-            last, dropped_buf = self._buffer("last_largest", 4 * n), self._buffer("dropped", 12 * m)
-            # the slots the pieces kernels fill, per piece and per listed cell, start empty
-            for buf, value, count in (
-                (size, 0, m),
-                (first, np.iinfo(np.int32).max, m),
-                (site_piece, -1, n),
-                (largest, 0, n),
-                (last, -1, n),
-            ):
-                cl.enqueue_fill_buffer(self._queue, buf, np.int32(value), 0, 4 * count)
-            run("pieces_start", m, listed_buf, run_at, parent)
-            run("pieces_join", m, np.int32(w), listed_buf, labels_buf, run_at, parent)
-            run("pieces_measure", m, listed_buf, parent, root, size, first, site_at, site_piece)
+            root, size = self._buffer("piece_root", 4 * m), self._buffer("piece_size", 4 * m)
+            run("pieces_join", m, np.int32(w), listed_buf, parent, size)
+            run("pieces_measure", m, listed_buf, parent, root, size, site_at, site_piece)
             run("pieces_largest", m, listed_buf, root, size, largest)
-            run("pieces_last", m, listed_buf, root, size, first, largest, last)
-            run("pieces_dropped", m, listed_buf, root, first, site_piece, last, counts_buf, dropped_buf)
-            # all of them in one wait: at most m runs are dropped
-            counts, dropped = np.empty(3, dtype=np.uint32), np.empty((m, 3), dtype=np.int32)
-            cl.enqueue_copy(self._queue, counts, counts_buf, is_blocking=False)
-            cl.enqueue_copy(self._queue, dropped, dropped_buf, is_blocking=False)
-            whole = self._read_moments(acc_buf, n)  # in order: the copies above are done
+            run("pieces_last", m, listed_buf, root, size, largest, last)
+            args = (np.int32(w), np.int32(n), acc_buf)
+            run("pieces_dropped", m, listed_buf, root, site_piece, last, *args)
+            return self._read_moments(acc_buf, n)
         except cl.Error as exc:
             raise BackendUnavailable(
                 f"opencl: walled-cell kernels failed on {self.device()}: {exc}"
             ) from None
-        dropped = dropped[: counts[2]]
-        start = dropped[:, 0].astype(np.int64)
-        gone = moments_from_runs(start, start + dropped[:, 1], dropped[:, 2], w, n)
-        return Moments(*(getattr(whole, f.name) - getattr(gone, f.name) for f in dataclasses.fields(Moments)))
 
     # --------------------------------------------------------------------- fit
     def fit_search(self, cells):

@@ -95,16 +95,19 @@ inline ulong sum_squares(const long m)
     return u * (u + 1) * (2 * u + 1) / 6;
 }
 
+/* The sums of the run of pixels a..b of a row, times `sign`: 1 adds them, (ulong)-1 takes
+   them away (the sums are kept modulo 2^64, the split counters too, so any order of
+   additions and subtractions ends at the same sums). */
 inline void flush_run(volatile __global acc_t *acc, const int n, const int site,
-                      const int a, const int b, const int row)
+                      const int a, const int b, const int row, const ulong sign)
 {
     const ulong len = (ulong)(b - a + 1);
     const ulong r = (ulong)row;
-    add_sum(acc, 0, n, site, len);
-    add_sum(acc, 1, n, site, (ulong)(a + b) * len / 2);
-    add_sum(acc, 2, n, site, r * len);
-    add_sum(acc, 3, n, site, sum_squares(b) - sum_squares((long)a - 1));
-    add_sum(acc, 4, n, site, r * r * len);
+    add_sum(acc, 0, n, site, sign * len);
+    add_sum(acc, 1, n, site, sign * ((ulong)(a + b) * len / 2));
+    add_sum(acc, 2, n, site, sign * (r * len));
+    add_sum(acc, 3, n, site, sign * (sum_squares(b) - sum_squares((long)a - 1)));
+    add_sum(acc, 4, n, site, sign * (r * r * len));
 }
 
 /* The arguments of both label kernels, in the order the host sets them. */
@@ -594,13 +597,13 @@ __kernel void row_moments(const int width, const int height, const int seg,
         const int l = row[j];
         if (l != cur) {
             if (cur >= 0)
-                flush_run(acc, n, cur, start, j - 1, i);
+                flush_run(acc, n, cur, start, j - 1, i, 1);
             cur = l;
             start = j;
         }
     }
     if (cur >= 0)
-        flush_run(acc, n, cur, start, j1 - 1, i);
+        flush_run(acc, n, cur, start, j1 - 1, i, 1);
 }
 
 /* ------------------------------------------------------------------ walled cells */
@@ -634,19 +637,37 @@ inline uint lane_bits(const int16 m)
     return (uint)(c.x | c.y);
 }
 
+/* An exclusive prefix sum of values[0 .. count), in place, and their total at
+   totals[slot]: one work-item (the values summed are a few per row of the raster). */
+__kernel void prefix_sums(const uint count, __global uint *values, __global uint *totals,
+                          const int slot)
+{
+    if (get_global_id(0) != 0)
+        return;
+    uint s = 0;
+    for (uint q = 0; q < count; ++q) {
+        const uint v = values[q];
+        values[q] = s;
+        s += v;
+    }
+    totals[slot] = s;
+}
+
 /* One work-item per segment of `seg` pixels of a row (a multiple of 16) takes the runs of
-   the region that begin in it (a run may reach past the segment's end): each as (first
-   pixel, length, label) at runs[3 k ..], k from the counter counts[0] (zeroed by the host;
-   one atomic per work-item reserves its place), and ends[2 l], ends[2 l + 1] count the
-   top and bottom runs of cell l (zeroed by the host).  Runs beyond `room` are counted,
-   not written (the host then asks again with more room).
+   the region that begin in it (a run may reach past the segment's end).  With `count`
+   set it only counts them, at places[i * segments + s] for segment s of row i;
+   prefix_sums makes these the places of the segments' first runs.  Then (`count` 0) it
+   lists each as (first pixel, length, label) at runs[3 k ..], k from its segment's
+   place (so the runs are in raster order), and ends[2 l], ends[2 l + 1] count the top
+   and bottom runs of cell l (zeroed by the host).  Runs beyond `room` are not written
+   (the host then asks again with more room).
 
    The row is read 16 pixels at a time: where the label changes, and where a pixel has
    its own label straight above and below, as bits; a run's part of a chunk is a range
    of bits, so the work per chunk is per run, not per pixel. */
 __kernel void row_runs(const int width, const int height, const int seg,
-                       __global const int *labels, volatile __global uint *ends,
-                       volatile __global uint *counts, const uint room, __global int *runs)
+                       __global const int *labels, const int count, __global uint *places,
+                       volatile __global uint *ends, const uint room, __global int *runs)
 {
     const int i = get_global_id(1);
     const int j0 = get_global_id(0) * seg;
@@ -654,16 +675,21 @@ __kernel void row_runs(const int width, const int height, const int seg,
         return;
     const int j1 = j0 + seg < width ? j0 + seg : width;
     __global const int *row = labels + (size_t)i * width;
-    __global const int *above = row - width, *below = row + width; /* read only in the raster */
-    uint mine = 0; /* runs of the region that begin in the segment */
-    for (int j = j0; j < j1; j += 16) {
-        const int16 l = row16(row, j, width);
-        const uint begin = lane_bits((l >= 0) & (l != row16(row, j - 1, width)));
-        mine += popcount(j1 - j < 16 ? begin & ((1u << (j1 - j)) - 1) : begin);
-    }
-    if (mine == 0)
+    /* segments per row counted from the raster, not the global size (padded to the
+       work-group) */
+    __global uint *place = places + i * ((width + seg - 1) / seg) + get_global_id(0);
+    if (count) {
+        uint mine = 0;
+        for (int j = j0; j < j1; j += 16) {
+            const int16 l = row16(row, j, width);
+            const uint begin = lane_bits((l >= 0) & (l != row16(row, j - 1, width)));
+            mine += popcount(j1 - j < 16 ? begin & ((1u << (j1 - j)) - 1) : begin);
+        }
+        *place = mine;
         return;
-    uint k = atomic_add(counts, mine);
+    }
+    __global const int *above = row - width, *below = row + width; /* read only in the raster */
+    uint k = *place;
     int cur = -1, start = 0; /* the open run: its label (-1: none of ours) and first pixel */
     uint up = 0, down = 0;   /* whether a pixel of it has its label above, below */
     for (int j = j0;; j += 16) {
@@ -718,108 +744,145 @@ __kernel void row_runs(const int width, const int height, const int seg,
     }
 }
 
-/* The runs (as row_runs lists them: counts[0] of them, `room` at most) of the cells with
-   more than one top and more than one bottom run, copied to out[3 k ..], k from the
-   counter counts[1] (zeroed by the host); one work-item per `chunk` runs, one atomic
-   each.  The count is read here, not by the host: no wait between the kernels. */
+/* Of the runs row_runs listed (counts[0] of them, `room` at most), those of the cells
+   with more than one top and more than one bottom run: suspect_cells flags these cells
+   (a byte each: the runs' lookups stay in the first-level cache, where the run counts
+   would not); with one work-item per `chunk` runs, suspect_count counts their runs at
+   places[c] for chunk c; prefix_sums makes these places (their total at counts[1]);
+   suspect_runs copies them there, to out[3 k ..], so that they stay in raster order,
+   each its own piece (parent[k] = k). */
+__kernel void suspect_cells(const int n, __global const uint *ends, __global uchar *suspect)
+{
+    const int l = get_global_id(0);
+    if (l < n)
+        suspect[l] = (ends[2 * l] > 1) & (ends[2 * l + 1] > 1);
+}
+
+__kernel void suspect_count(const uint room, const uint chunk, __global const int *runs,
+                            __global const uchar *suspect, __global const uint *counts,
+                            __global uint *places)
+{
+    const uint total = counts[0] < room ? counts[0] : room;
+    const uint c = get_global_id(0), r0 = c * chunk;
+    if (r0 >= total) {
+        places[c] = 0;
+        return;
+    }
+    const uint r1 = r0 + chunk < total ? r0 + chunk : total;
+    uint mine = 0;
+    for (uint r = r0; r < r1; ++r)
+        mine += suspect[runs[3 * r + 2]];
+    places[c] = mine;
+}
+
 __kernel void suspect_runs(const uint room, const uint chunk, __global const int *runs,
-                           __global const uint *ends, volatile __global uint *counts,
-                           __global int *out)
+                           __global const uchar *suspect, __global const uint *counts,
+                           __global const uint *places, __global int *out,
+                           __global int *parent)
 {
     const uint total = counts[0] < room ? counts[0] : room;
     const uint r0 = get_global_id(0) * chunk;
     if (r0 >= total)
         return;
     const uint r1 = r0 + chunk < total ? r0 + chunk : total;
-    uint mine = 0;
+    uint k = places[get_global_id(0)];
     for (uint r = r0; r < r1; ++r) {
         const int l = runs[3 * r + 2];
-        mine += ends[2 * l] > 1 && ends[2 * l + 1] > 1;
-    }
-    if (mine == 0)
-        return;
-    uint k = atomic_add(counts + 1, mine);
-    for (uint r = r0; r < r1; ++r) {
-        const int l = runs[3 * r + 2];
-        if (ends[2 * l] > 1 && ends[2 * l + 1] > 1) {
+        if (suspect[l]) {
             out[3 * k] = runs[3 * r];
             out[3 * k + 1] = runs[3 * r + 1];
             out[3 * k + 2] = l;
+            parent[k] = (int)k;
             ++k;
         }
     }
 }
 
-/* The pieces of the listed cells (the runs suspect_runs kept, `m` of them, unordered),
-   and the runs of the pieces their cells do not keep.  Runs are joined where they touch
-   (same cell, adjacent rows, overlapping columns) by a union-find over run indices whose
-   roots are the smallest index of their piece, linked with atomic_min (Playne and
-   Hawick's concurrent union: a link that loses a race is retried from the new roots).
-   run_at[p]: the index of the listed run that begins at pixel p (only those are read). */
+/* The pieces of the listed cells (the runs suspect_runs kept, `m` of them, in raster
+   order), and the runs of the pieces their cells do not keep.  Runs are joined where
+   they touch (same cell, adjacent rows, overlapping columns) by a union-find over run
+   indices whose roots are the smallest index of their piece, linked with atomic_min
+   (Playne and Hawick's concurrent union: a link that loses a race is retried from the
+   new roots). */
 
+/* The root of run x's piece, halving the path on the way (each run passed then points
+   to its grandparent): links go from a higher index to a lower one, and runs are listed
+   about row by row, so a tall cell's runs would otherwise form chains as long as the
+   cell is tall.  A halving store replaces a link by another to the same piece (pieces
+   only merge) with a lower index, and a union that loses a link to it retries from the
+   old root: the pieces come out the same, each rooted at its smallest index. */
 inline int piece_root(volatile __global int *parent, int x)
 {
     int p = parent[x];
     while (p != x) {
-        x = p;
+        const int g = parent[p];
+        if (g == p)
+            return p;
+        parent[x] = g;
+        x = g;
         p = parent[x];
     }
     return x;
 }
 
-/* 1. each run its own piece, and its index at its first pixel */
-__kernel void pieces_start(const uint m, __global const int *runs, __global int *run_at,
-                           volatile __global int *parent)
-{
-    const uint k = get_global_id(0);
-    if (k >= m)
-        return;
-    run_at[runs[3 * k]] = (int)k;
-    parent[k] = (int)k;
-}
-
-/* 2. each run joins the runs of the row above that touch it: one per stretch of its own
-   label above it, found by walking left to the stretch's run start */
+/* 1. each run joins the runs of its cell in the row above that touch it: the listed runs
+   are in raster order, so those are the runs from the last one that begins at or
+   before the pixel above the run's first (a search) to the last one that begins
+   above it; and it empties its slot of pieces_measure's sizes */
 __kernel void pieces_join(const uint m, const int width, __global const int *runs,
-                          __global const int *labels, __global const int *run_at,
-                          volatile __global int *parent)
+                          volatile __global int *parent, __global int *size)
 {
     const uint k = get_global_id(0);
     if (k >= m)
         return;
+    size[k] = 0;
     const int p = runs[3 * k], len = runs[3 * k + 1], l = runs[3 * k + 2];
-    const int i = p / width, j = p - i * width;
-    if (i == 0)
-        return;
-    __global const int *above = labels + (size_t)(i - 1) * width;
-    for (int x = j; x < j + len; ++x) {
-        if (above[x] != l || (x > j && above[x - 1] == l))
-            continue;
-        int s = x;
-        while (s > 0 && above[s - 1] == l)
-            --s;
-        int a = (int)k, b = run_at[(i - 1) * width + s];
+    if (p < width)
+        return; /* the top row */
+    const int q = p - width; /* the pixel above the run's first */
+    /* the first run that begins past q, in [lo, hi]: found by steps back from k that
+       double (the runs of the row above are near, and so are their cache lines), then
+       halving */
+    int lo = 0, hi = (int)k;
+    for (int step = 1; hi - step >= 0; step *= 2) {
+        if (runs[3 * (hi - step)] <= q) {
+            lo = hi - step + 1;
+            break;
+        }
+        hi -= step;
+    }
+    while (lo < hi) {
+        const int mid = (lo + hi) / 2;
+        if (runs[3 * mid] <= q)
+            lo = mid + 1;
+        else
+            hi = mid;
+    }
+    for (int r = lo > 0 ? lo - 1 : 0; r < (int)k && runs[3 * r] < q + len; ++r) {
+        if (runs[3 * r + 2] != l || runs[3 * r] + runs[3 * r + 1] <= q)
+            continue; /* another cell's, or one that ends before (on an earlier row) */
+        int a = (int)k, b = r;
         for (;;) {
             a = piece_root(parent, a);
             b = piece_root(parent, b);
             if (a == b)
                 break;
-            const int hi = a > b ? a : b, lo = a > b ? b : a;
-            const int old = atomic_min(parent + hi, lo);
-            if (old == hi)
+            const int hi_ = a > b ? a : b, lo_ = a > b ? b : a;
+            const int old = atomic_min(parent + hi_, lo_);
+            if (old == hi_)
                 break;
-            a = old; /* hi was linked meanwhile: join its new root */
-            b = lo;
+            a = old; /* hi_ was linked meanwhile: join its new root */
+            b = lo_;
         }
     }
 }
 
-/* 3. per piece (at its root) its pixels and first pixel; per cell the piece that holds
-   its site's pixel (site_at[l], from the host) where the site is in its cell */
+/* 2. per piece (at its root) its pixels; per cell the piece that holds its site's pixel
+   (site_at[l], from the host) where the site is in its cell.  A piece's root, its
+   smallest index, is its first run in raster order: its first pixel needs no sum. */
 __kernel void pieces_measure(const uint m, __global const int *runs, volatile __global int *parent,
                              __global int *root, volatile __global int *size,
-                             volatile __global int *first, __global const int *site_at,
-                             __global int *site_piece)
+                             __global const int *site_at, __global int *site_piece)
 {
     const uint k = get_global_id(0);
     if (k >= m)
@@ -828,13 +891,12 @@ __kernel void pieces_measure(const uint m, __global const int *runs, volatile __
     const int r = piece_root(parent, (int)k);
     root[k] = r;
     atomic_add(size + r, len);
-    atomic_min(first + r, p);
     const int s = site_at[l];
     if (p <= s && s < p + len)
         site_piece[l] = r; /* one run holds the site's pixel: one writer */
 }
 
-/* 4. per cell the size of its largest piece */
+/* 3. per cell the size of its largest piece */
 __kernel void pieces_largest(const uint m, __global const int *runs, __global const int *root,
                              __global const int *size, volatile __global int *largest)
 {
@@ -844,38 +906,34 @@ __kernel void pieces_largest(const uint m, __global const int *runs, __global co
     atomic_max(largest + runs[3 * k + 2], size[k]);
 }
 
-/* 5. per cell, of its largest pieces the one that begins last in raster order (pieces
-   begin at different pixels) */
+/* 4. per cell, of its largest pieces the one that begins last in raster order: the one
+   with the largest root */
 __kernel void pieces_last(const uint m, __global const int *runs, __global const int *root,
-                          __global const int *size, __global const int *first,
-                          __global const int *largest, volatile __global int *last)
+                          __global const int *size, __global const int *largest,
+                          volatile __global int *last)
 {
     const uint k = get_global_id(0);
     if (k >= m || root[k] != (int)k)
         return;
     const int l = runs[3 * k + 2];
     if (size[k] == largest[l])
-        atomic_max(last + l, first[k]);
+        atomic_max(last + l, (int)k);
 }
 
-/* 6. the runs outside the piece their cell keeps (the site's piece, else the last of the
-   largest), listed as suspect_runs lists runs, at dropped[3 k ..] from the counter
-   counts[2] (zeroed by the host) */
+/* 5. the runs outside the piece their cell keeps (the site's piece, else the last of the
+   largest): their sums are taken from their cell's (acc, as the label kernels left it),
+   so the host reads the cut cells' sums and nothing else */
 __kernel void pieces_dropped(const uint m, __global const int *runs, __global const int *root,
-                             __global const int *first, __global const int *site_piece,
-                             __global const int *last, volatile __global uint *counts,
-                             __global int *dropped)
+                             __global const int *site_piece, __global const int *last,
+                             const int width, const int n, volatile __global acc_t *acc)
 {
     const uint k = get_global_id(0);
     if (k >= m)
         return;
     const int l = runs[3 * k + 2];
     const int own = site_piece[l];
-    const int keep = own >= 0 ? first[own] : last[l];
-    if (first[root[k]] == keep)
+    if (root[k] == (own >= 0 ? own : last[l]))
         return;
-    const uint d = atomic_inc(counts + 2);
-    dropped[3 * d] = runs[3 * k];
-    dropped[3 * d + 1] = runs[3 * k + 1];
-    dropped[3 * d + 2] = l;
+    const int p = runs[3 * k], i = p / width, j = p - i * width;
+    flush_run(acc, n, l, j, j + runs[3 * k + 1] - 1, i, (ulong)0 - 1);
 }

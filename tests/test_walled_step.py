@@ -74,6 +74,7 @@ def test_bad_sites_are_an_input_error():
 # ------------------------------------------------------------------------- OpenCL
 
 try:
+    from compact_distributions.backends import opencl as opencl_module
     from compact_distributions.backends.opencl import OpenCLBackend
 
     OpenCLBackend.probe()
@@ -145,13 +146,17 @@ def runs_of(labels):
 
 
 @needs_opencl
+@pytest.mark.parametrize("group", [None, (2, 8)], ids=["group", "padded"])
 @pytest.mark.parametrize("width", [700, 512, 37])
-def test_device_runs_and_their_top_and_bottom_counts_are_numpy_s(width):
+def test_device_runs_and_their_top_and_bottom_counts_are_numpy_s(width, group, monkeypatch):
     """row_runs reads rows 16 labels at a time in 256-px segments: runs of 1 to 600 px
     (within a chunk, across chunks and segments, to the row's end), outside pixels,
-    widths a multiple of 16 or not.  Its runs are NumPy's, its per-cell top and bottom
-    counts those counted pixel by pixel, and suspect_runs keeps the runs of the cells
-    with more than one of each (all but a block)."""
+    widths a multiple of 16 or not.  It finds as many runs as NumPy, its per-cell top and
+    bottom counts are those counted pixel by pixel, and suspect_runs keeps NumPy's runs
+    of the cells with more than one of each (all but a block), in raster order, each its
+    own piece; also where the work-groups pad the segments of a row."""
+    if group is not None:
+        monkeypatch.setattr(opencl_module, "RUN_GROUP", group)
     rng = np.random.default_rng(width)
     h, n = 40, 7
     rows = []
@@ -164,20 +169,20 @@ def test_device_runs_and_their_top_and_bottom_counts_are_numpy_s(width):
     labels[5:15, 3:30] = n - 1  # one block: one top and one bottom run
     with OpenCLBackend() as ocl:
         buf = ocl._upload("labels_under_test", labels)
-        found, kept, _, runs_buf, listed_buf, ends_buf = ocl._suspect_runs(
+        kept, counts_buf, listed_buf, parent_buf, ends_buf = ocl._suspect_runs(
             make_metric("l2"), buf, width, h, n
         )
-        runs, listed = np.empty((found, 3), dtype=np.int32), np.empty((kept, 3), dtype=np.int32)
-        ends = np.empty((n, 2), dtype=np.uint32)
-        for out, src in ((runs, runs_buf), (listed, listed_buf), (ends, ends_buf)):
+        listed, parent = np.empty((kept, 3), dtype=np.int32), np.empty(kept, dtype=np.int32)
+        ends, counts = np.empty((n, 2), dtype=np.uint32), np.empty(2, dtype=np.uint32)
+        for out, src in ((listed, listed_buf), (parent, parent_buf), (ends, ends_buf), (counts, counts_buf)):
             ocl._read(out, src)
     want = runs_of(labels)
-    assert len(runs) == len(want) and set(map(tuple, runs.tolist())) == want
+    assert counts[0] == len(want) and counts[1] == kept
     np.testing.assert_array_equal(ends, [run_ends(labels, c) for c in range(n)])
     suspect = [c for c in range(n) if min(run_ends(labels, c)) > 1]
     assert n - 1 not in suspect and len(suspect) >= 3
-    assert set(map(tuple, listed.tolist())) == {r for r in want if r[2] in suspect}
-    assert len(listed) == kept
+    assert listed.tolist() == sorted([list(r) for r in want if r[2] in suspect])
+    np.testing.assert_array_equal(parent, np.arange(kept))
 
 
 @needs_opencl
