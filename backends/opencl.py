@@ -55,13 +55,14 @@ from .base import Backend
 KERNEL_FILE = Path(__file__).with_name("opencl_kernels.cl")
 SEGMENT = 64  # pixels of a row per work-item of the moments kernel
 RUN_SEGMENT = 256  # pixels of a row per work-item of row_runs
-RUN_CHUNK = 1024  # runs per work-item of suspect_runs
+RUN_CHUNK = 128  # runs per work-item of suspect_runs
 # work-groups of the walled-cell kernels, fixed: the numbers of runs change every step,
 # and PoCL builds a kernel anew for each work-group size it is left to choose
 RUN_GROUP = (1, 16)  # row_runs: segments x rows
 LIST_GROUP = 64  # the kernels over listed runs
 WALL_KERNELS = (
     "prefix_sums",
+    "row_places",
     "row_runs",
     "suspect_cells",
     "suspect_count",
@@ -422,9 +423,11 @@ class OpenCLBackend(Backend):
         reach = metric.circumradius * float(scales.max()) * (1 + REACH_MARGIN)
         return records, k, reach
 
-    def _run_labels(self, sites, angles, scales, metric: Metric, grid: Grid, acc_buf=None):
+    def _run_labels(self, sites, angles, scales, metric: Metric, grid: Grid, acc_buf=None, run_starts=None):
         """Enqueue the label kernel; the labels stay in the device buffer 'labels'.  With
-        ``acc_buf`` (zeroed, block kernel only) the kernel also adds the moments to it."""
+        ``acc_buf`` (zeroed, block kernel only) the kernel also adds the moments to it;
+        with ``run_starts`` (block kernel only) it counts the run starts per strip and
+        row there, for the walled step's ``row_runs``."""
         n = len(sites)
         if self._queue is None:
             raise RuntimeError("opencl: this backend was closed; create a new one")
@@ -504,6 +507,8 @@ class OpenCLBackend(Backend):
             np.int32(seed and self.seed),
             self._buffer("moments", 4) if acc_buf is None else acc_buf,
             np.int32(acc_buf is not None),
+            self._buffer("run_places", 4) if run_starts is None else run_starts,
+            np.int32(run_starts is not None),
         )
         local = self.local_size
         if self.block > 0:  # one work-item per STRIP blocks of a row
@@ -537,14 +542,15 @@ class OpenCLBackend(Backend):
         acc_buf, _ = self._enqueue_moments(sites, angles, scales, metric, grid)
         return self._read_moments(acc_buf, len(sites))
 
-    def _enqueue_moments(self, sites, angles, scales, metric: Metric, grid: Grid):
-        """Enqueue the labels and their sums: (sums buffer, labels buffer)."""
+    def _enqueue_moments(self, sites, angles, scales, metric: Metric, grid: Grid, run_starts=None):
+        """Enqueue the labels and their sums: (sums buffer, labels buffer); ``run_starts``
+        as in :meth:`_run_labels`."""
         cl = self._cl
         n = len(sites)
         acc_buf = self._buffer("moments", ACC_BYTES * n)
         cl.enqueue_fill_buffer(self._queue, acc_buf, np.uint32(0), 0, ACC_BYTES * n)
         if self.block > 0:  # the block kernel sums its own labels
-            labels_buf, _ = self._run_labels(sites, angles, scales, metric, grid, acc_buf)
+            labels_buf, _ = self._run_labels(sites, angles, scales, metric, grid, acc_buf, run_starts)
         else:
             labels_buf, _ = self._run_labels(sites, angles, scales, metric, grid)
             _, moments_kernel = self._kernels(metric, _facet_count(metric))
@@ -585,37 +591,59 @@ class OpenCLBackend(Backend):
             group, size = (LIST_GROUP,), (-(-items // LIST_GROUP) * LIST_GROUP,)
         cl.enqueue_nd_range_kernel(self._queue, kernel, size, group)
 
-    def _suspect_runs(self, metric: Metric, labels_buf, w: int, h: int, n: int):
-        """List the runs of the labels in ``labels_buf`` in raster order (``row_runs``
-        counting, ``prefix_sums``, ``row_runs`` listing) and keep, in that order, those of the cells that
-        may be in pieces (``suspect_cells``, ``suspect_count``, ``prefix_sums``,
-        ``suspect_runs``), with one
-        wait: (runs kept, counts buffer, kept runs, their union-find parents, per-cell top
-        and bottom run counts).  The counts buffer holds (found, kept)."""
+    def _run_units(self, w: int, h: int):
+        """Where the walled step's run starts are counted: (pixels per unit of a row, the
+        buffer of counts per unit and row, whether the label kernel counts them)."""
+        counted = self.block > 0
+        unit = self.block * STRIP if counted else RUN_SEGMENT
+        return unit, self._buffer("run_places", 4 * -(-w // unit) * h), counted
+
+    def _suspect_runs(self, metric: Metric, labels_buf, w: int, h: int, n: int, units):
+        """List the runs of the labels in ``labels_buf`` in raster order (counted by the
+        label kernel or ``row_runs``' counting pass, as ``units`` from :meth:`_run_units`
+        says; placed by ``row_places`` and ``prefix_sums``; listed by ``row_runs``) and
+        keep, in that order, those of the cells that may be in pieces (``suspect_cells``,
+        ``suspect_count``, ``prefix_sums``, ``suspect_runs``), with one wait: (runs kept,
+        counts buffer, kept runs, their union-find parents, per-cell top and bottom run
+        counts).  The counts buffer holds (found, kept)."""
         cl, queue = self._cl, self._queue
         ends_buf, counts_buf = self._buffer("run_ends", 8 * n), self._buffer("run_counts", 8)
         suspect = self._buffer("suspect_cells", n)
-        segments = -(-w // RUN_SEGMENT)
-        rows = (segments, h)
+        unit, places, counted = units
+        rows = (-(-w // RUN_SEGMENT), h)
         scan = (np.int32(w), np.int32(h), np.int32(RUN_SEGMENT), labels_buf)
-        places = self._buffer("run_places", 4 * segments * h)
-        # the counting pass reads neither ends nor runs: any buffers do
+        row_base = self._buffer("run_row_base", 4 * h)
+        if not counted:  # the counting pass reads neither ends nor runs: any buffers do
+            args = (np.int32(1), places, np.int32(unit), row_base, places, np.uint32(0), places, places)
+            self._wall_kernel(metric, "row_runs", rows, *scan, *args)
         self._wall_kernel(
-            metric, "row_runs", rows, *scan, np.int32(1), places, ends_buf, np.uint32(0), places
+            metric, "row_places", h, np.int32(w), np.int32(h), np.int32(unit), labels_buf, places, row_base
         )
-        self._wall_kernel(metric, "prefix_sums", 1, np.uint32(segments * h), places, counts_buf, np.int32(0))
+        self._wall_kernel(metric, "prefix_sums", 1, np.uint32(h), row_base, counts_buf, np.int32(0))
         counts = np.zeros(2, dtype=np.uint32)
         while True:
             room = self._run_room
-            runs_buf, listed_buf = self._buffer("runs", 12 * room), self._buffer("suspect_runs", 12 * room)
+            # the runs found as (first pixel, length) and their labels apart: suspect_count
+            # reads the labels alone
+            runs_buf, labels_of = self._buffer("runs", 8 * room), self._buffer("run_labels", 4 * room)
+            listed_buf = self._buffer("suspect_runs", 12 * room)
             parent = self._buffer("piece_parent", 4 * room)
             chunks = max(1, -(-room // RUN_CHUNK))
             chunk_places = self._buffer("chunk_places", 4 * (-(-chunks // LIST_GROUP) * LIST_GROUP))
             cl.enqueue_fill_buffer(queue, ends_buf, np.uint32(0), 0, 8 * n)
-            listing = (np.int32(0), places, ends_buf, np.uint32(room), runs_buf)
+            listing = (
+                np.int32(0),
+                places,
+                np.int32(unit),
+                row_base,
+                ends_buf,
+                np.uint32(room),
+                runs_buf,
+                labels_of,
+            )
             self._wall_kernel(metric, "row_runs", rows, *scan, *listing)
             self._wall_kernel(metric, "suspect_cells", n, np.int32(n), ends_buf, suspect)
-            args = (np.uint32(room), np.uint32(RUN_CHUNK), runs_buf, suspect, counts_buf)
+            args = (np.uint32(room), np.uint32(RUN_CHUNK), runs_buf, labels_of, suspect, counts_buf)
             self._wall_kernel(metric, "suspect_count", chunks, *args, chunk_places)
             self._wall_kernel(
                 metric, "prefix_sums", 1, np.uint32(chunks), chunk_places, counts_buf, np.int32(1)
@@ -643,7 +671,10 @@ class OpenCLBackend(Backend):
         site_pixel = (i * w + j).astype(np.int32)
         site_at = self._buffer("site_at", site_pixel.nbytes)
         cl.enqueue_copy(self._queue, site_at, site_pixel, is_blocking=False)
-        acc_buf, labels_buf = self._enqueue_moments(sites, angles, scales, metric, grid)
+        units = self._run_units(w, h)
+        acc_buf, labels_buf = self._enqueue_moments(
+            sites, angles, scales, metric, grid, units[1] if units[2] else None
+        )
 
         def run(name, m, *args):
             self._wall_kernel(metric, name, m, np.uint32(m), *args)
@@ -655,7 +686,7 @@ class OpenCLBackend(Backend):
             # the per-piece sizes): enqueued now, so that only kernels follow the wait below
             for buf, value in ((site_piece, -1), (largest, 0), (last, -1)):
                 cl.enqueue_fill_buffer(self._queue, buf, np.int32(value), 0, 4 * n)
-            m, counts_buf, listed_buf, parent, _ = self._suspect_runs(metric, labels_buf, w, h, n)
+            m, counts_buf, listed_buf, parent, _ = self._suspect_runs(metric, labels_buf, w, h, n, units)
             if m == 0:
                 return self._read_moments(acc_buf, n)
             root, size = self._buffer("piece_root", 4 * m), self._buffer("piece_size", 4 * m)

@@ -118,7 +118,8 @@ inline void flush_run(volatile __global acc_t *acc, const int n, const int site,
         __global const float4 *site_pos,                                                \
         __global const int *site_index, __global const uchar *mask, const int use_mask, \
         __global int *labels, __global const int *site_rank, const int n, const int seed, \
-        volatile __global acc_t *acc, const int sums
+        volatile __global acc_t *acc, const int sums, __global uint *run_starts,        \
+        const int count_starts
 
 /* One work-item per pixel: the nearest site, searched over a uniform grid of cells ring
    by ring (Chebyshev rings of cells around the pixel's cell).
@@ -246,6 +247,16 @@ typedef CAT(uint, BW) rowu;
 typedef CAT(float, BW) rowf;
 #define load_row CAT(vload, BW)
 __constant int LANES[16] = {0, 1, 2, 3, 4, 5, 6, 7, 8, 9, 10, 11, 12, 13, 14, 15};
+/* shuffle2(row, other, SHIFT_UP): other's lane 0, then row's lanes 0 .. BW - 2 */
+__constant uint SHIFT_UP[16] = {BW, 0, 1, 2, 3, 4, 5, 6, 7, 8, 9, 10, 11, 12, 13, 14};
+#if BW == 16
+#define LAST_LANE f
+#else
+#define LAST_LANE SUB1(BW)
+#endif
+#define SUB1(b) CAT(SUB1_, b)
+#define SUB1_4 3
+#define SUB1_8 7
 
 /* the largest, the sum and the smallest of a row's lanes, by halving */
 inline float hmaxf(rowf v)
@@ -556,6 +567,14 @@ __kernel void label_blocks(LABEL_KERNEL_ARGS)
     }
     sums_table table;
     table.used = 0;
+    /* with count_starts, per row of the strip the runs of the region that begin in it,
+       its first pixel left out (its left neighbour is another work-item's): the walled
+       step's row_places adds it, so row_runs needs no counting pass */
+    const rowi lanes = load_row(0, LANES);
+    rowi begins[BH];
+    int last[BH]; /* per row, the label of the pixel left of the block */
+    for (int yy = 0; yy < BH; ++yy)
+        begins[yy] = (rowi)(0);
     for (int g = 0; g < STRIP; ++g) {
         if (!on[g])
             continue;
@@ -563,6 +582,11 @@ __kernel void label_blocks(LABEL_KERNEL_ARGS)
         const int xn = x0 + BW < width ? BW : width - x0;
         for (int yy = 0; yy < yn; ++yy) {
             const rowi row = load_row(0, live[g][yy]) != 0 ? load_row(0, best_idx[g][yy]) : (rowi)(-1);
+            if (count_starts) { /* each lane's left neighbour: the row moved one lane up */
+                const rowi left = shuffle2(row, (rowi)(last[yy]), load_row(0, SHIFT_UP));
+                begins[yy] += (row >= 0) & (row != left) & (lanes >= (g == 0));
+                last[yy] = row.CAT(s, LAST_LANE);
+            }
             if (xn == BW)
                 CAT(vstore, BW)(row, 0, labels + (y0 + yy) * width + x0);
             else
@@ -574,6 +598,11 @@ __kernel void label_blocks(LABEL_KERNEL_ARGS)
     }
     if (sums)
         flush_table(acc, n, &table);
+    if (count_starts) {
+        const int strips = (width + STRIP * BW - 1) / (STRIP * BW);
+        for (int yy = 0; yy < yn; ++yy)
+            run_starts[(y0 + yy) * strips + get_global_id(0)] = (uint)(-hsum(begins[yy]));
+    }
 }
 
 /* Per-site integer sums (count, Σj, Σi, Σj², Σi²) of the label raster.  One work-item
@@ -653,21 +682,50 @@ __kernel void prefix_sums(const uint count, __global uint *values, __global uint
     totals[slot] = s;
 }
 
-/* One work-item per segment of `seg` pixels of a row (a multiple of 16) takes the runs of
-   the region that begin in it (a run may reach past the segment's end).  With `count`
-   set it only counts them, at places[i * segments + s] for segment s of row i;
-   prefix_sums makes these the places of the segments' first runs.  Then (`count` 0) it
-   lists each as (first pixel, length, label) at runs[3 k ..], k from its segment's
-   place (so the runs are in raster order), and ends[2 l], ends[2 l + 1] count the top
-   and bottom runs of cell l (zeroed by the host).  Runs beyond `room` are not written
-   (the host then asks again with more room).
+/* Per row (a work-item each) the places of its units' first runs (unit: `unit` pixels
+   of the row) within the row, from the counts of the runs that begin in each unit,
+   which label_blocks (per strip) or row_runs' counting pass (per segment) left at
+   places[i * units + u], less the unit's first pixel (there the left neighbour is
+   another work-item's): added here, then an exclusive prefix sum along the row, the
+   row's total at totals[i] (prefix_sums makes these the rows' places). */
+__kernel void row_places(const int width, const int height, const int unit,
+                         __global const int *labels, __global uint *places, __global uint *totals)
+{
+    const int i = get_global_id(0);
+    if (i >= height)
+        return;
+    const int units = (width + unit - 1) / unit;
+    __global const int *row = labels + (size_t)i * width;
+    __global uint *place = places + (size_t)i * units;
+    uint s = 0;
+    for (int u = 0; u < units; ++u) {
+        const int j = u * unit;
+        const uint c = place[u] + (row[j] >= 0 && (j == 0 || row[j - 1] != row[j]));
+        place[u] = s;
+        s += c;
+    }
+    totals[i] = s;
+}
+
+/* One work-item per segment of `seg` pixels of a row (a multiple of 16 and of `unit`)
+   takes the runs of the region that begin in it (a run may reach past the segment's
+   end).  With `count` set it only counts them, its first pixel left out, at
+   places[i * segments + s] for segment s of row i (then `unit` is `seg`); row_places
+   and prefix_sums make row_base[i] + places[i * units + u] the place of the first run
+   of unit u of row i.  Then (`count` 0) it lists each as (first pixel, length, label)
+   at runs[3 k ..], k from its segment's place (so the runs are in raster order), and
+   ends[2 l], ends[2 l + 1] count the top and bottom runs of cell l (zeroed by the
+   host).  Runs beyond `room` are not written (the host then asks again with more
+   room).
 
    The row is read 16 pixels at a time: where the label changes, and where a pixel has
    its own label straight above and below, as bits; a run's part of a chunk is a range
    of bits, so the work per chunk is per run, not per pixel. */
 __kernel void row_runs(const int width, const int height, const int seg,
                        __global const int *labels, const int count, __global uint *places,
-                       volatile __global uint *ends, const uint room, __global int *runs)
+                       const int unit, __global const uint *row_base,
+                       volatile __global uint *ends, const uint room, __global int2 *runs,
+                       __global int *run_label)
 {
     const int i = get_global_id(1);
     const int j0 = get_global_id(0) * seg;
@@ -675,21 +733,23 @@ __kernel void row_runs(const int width, const int height, const int seg,
         return;
     const int j1 = j0 + seg < width ? j0 + seg : width;
     __global const int *row = labels + (size_t)i * width;
-    /* segments per row counted from the raster, not the global size (padded to the
+    /* units per row counted from the raster, not the global size (padded to the
        work-group) */
-    __global uint *place = places + i * ((width + seg - 1) / seg) + get_global_id(0);
+    const int units = (width + unit - 1) / unit;
+    __global uint *place = places + (size_t)i * units + get_global_id(0) * (seg / unit);
     if (count) {
         uint mine = 0;
         for (int j = j0; j < j1; j += 16) {
             const int16 l = row16(row, j, width);
-            const uint begin = lane_bits((l >= 0) & (l != row16(row, j - 1, width)));
+            uint begin = lane_bits((l >= 0) & (l != row16(row, j - 1, width)));
+            begin &= j == j0 ? ~1u : ~0u; /* the first pixel: row_places */
             mine += popcount(j1 - j < 16 ? begin & ((1u << (j1 - j)) - 1) : begin);
         }
         *place = mine;
         return;
     }
     __global const int *above = row - width, *below = row + width; /* read only in the raster */
-    uint k = *place;
+    uint k = row_base[i] + *place;
     int cur = -1, start = 0; /* the open run: its label (-1: none of ours) and first pixel */
     uint up = 0, down = 0;   /* whether a pixel of it has its label above, below */
     for (int j = j0;; j += 16) {
@@ -700,9 +760,8 @@ __kernel void row_runs(const int width, const int height, const int seg,
                 if (!down)
                     atomic_inc(ends + 2 * cur + 1);
                 if (k < room) {
-                    runs[3 * k] = i * width + start;
-                    runs[3 * k + 1] = width - start;
-                    runs[3 * k + 2] = cur;
+                    runs[k] = (int2)(i * width + start, width - start);
+                    run_label[k] = cur;
                 }
             }
             break;
@@ -724,9 +783,8 @@ __kernel void row_runs(const int width, const int height, const int seg,
                 if (!(down || (same_down & part)))
                     atomic_inc(ends + 2 * cur + 1);
                 if (k < room) {
-                    runs[3 * k] = i * width + start;
-                    runs[3 * k + 1] = j + t - start;
-                    runs[3 * k + 2] = cur;
+                    runs[k] = (int2)(i * width + start, j + t - start);
+                    run_label[k] = cur;
                 }
                 ++k;
             }
@@ -758,8 +816,8 @@ __kernel void suspect_cells(const int n, __global const uint *ends, __global uch
         suspect[l] = (ends[2 * l] > 1) & (ends[2 * l + 1] > 1);
 }
 
-__kernel void suspect_count(const uint room, const uint chunk, __global const int *runs,
-                            __global const uchar *suspect, __global const uint *counts,
+__kernel void suspect_count(const uint room, const uint chunk, __global const int2 *runs,
+                            __global const int *run_label, __global const uchar *suspect, __global const uint *counts,
                             __global uint *places)
 {
     const uint total = counts[0] < room ? counts[0] : room;
@@ -771,12 +829,12 @@ __kernel void suspect_count(const uint room, const uint chunk, __global const in
     const uint r1 = r0 + chunk < total ? r0 + chunk : total;
     uint mine = 0;
     for (uint r = r0; r < r1; ++r)
-        mine += suspect[runs[3 * r + 2]];
+        mine += suspect[run_label[r]];
     places[c] = mine;
 }
 
-__kernel void suspect_runs(const uint room, const uint chunk, __global const int *runs,
-                           __global const uchar *suspect, __global const uint *counts,
+__kernel void suspect_runs(const uint room, const uint chunk, __global const int2 *runs,
+                           __global const int *run_label, __global const uchar *suspect, __global const uint *counts,
                            __global const uint *places, __global int *out,
                            __global int *parent)
 {
@@ -787,10 +845,11 @@ __kernel void suspect_runs(const uint room, const uint chunk, __global const int
     const uint r1 = r0 + chunk < total ? r0 + chunk : total;
     uint k = places[get_global_id(0)];
     for (uint r = r0; r < r1; ++r) {
-        const int l = runs[3 * r + 2];
+        const int l = run_label[r];
         if (suspect[l]) {
-            out[3 * k] = runs[3 * r];
-            out[3 * k + 1] = runs[3 * r + 1];
+            const int2 run = runs[r];
+            out[3 * k] = run.x;
+            out[3 * k + 1] = run.y;
             out[3 * k + 2] = l;
             parent[k] = (int)k;
             ++k;

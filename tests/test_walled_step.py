@@ -169,8 +169,11 @@ def test_device_runs_and_their_top_and_bottom_counts_are_numpy_s(width, group, m
     labels[5:15, 3:30] = n - 1  # one block: one top and one bottom run
     with OpenCLBackend() as ocl:
         buf = ocl._upload("labels_under_test", labels)
+        # labels not from the label kernel: row_runs counts the run starts
+        seg = opencl_module.RUN_SEGMENT
+        units = (seg, ocl._buffer("run_places", 4 * -(-width // seg) * h), False)
         kept, counts_buf, listed_buf, parent_buf, ends_buf = ocl._suspect_runs(
-            make_metric("l2"), buf, width, h, n
+            make_metric("l2"), buf, width, h, n, units
         )
         listed, parent = np.empty((kept, 3), dtype=np.int32), np.empty(kept, dtype=np.int32)
         ends, counts = np.empty((n, 2), dtype=np.uint32), np.empty(2, dtype=np.uint32)
