@@ -626,7 +626,8 @@ class OpenCLBackend(Backend):
             # the runs found as (first pixel, length) and their labels apart: suspect_count
             # reads the labels alone
             runs_buf, labels_of = self._buffer("runs", 8 * room), self._buffer("run_labels", 4 * room)
-            listed_buf = self._buffer("suspect_runs", 12 * room)
+            # so are the runs kept: the pieces kernels read them a run per work-item
+            listed = (self._buffer("suspect_runs", 8 * room), self._buffer("suspect_labels", 4 * room))
             parent = self._buffer("piece_parent", 4 * room)
             chunks = max(1, -(-room // RUN_CHUNK))
             chunk_places = self._buffer("chunk_places", 4 * (-(-chunks // LIST_GROUP) * LIST_GROUP))
@@ -648,10 +649,10 @@ class OpenCLBackend(Backend):
             self._wall_kernel(
                 metric, "prefix_sums", 1, np.uint32(chunks), chunk_places, counts_buf, np.int32(1)
             )
-            self._wall_kernel(metric, "suspect_runs", chunks, *args, chunk_places, listed_buf, parent)
+            self._wall_kernel(metric, "suspect_runs", chunks, *args, chunk_places, *listed, parent)
             self._read(counts, counts_buf)
             if counts[0] <= room:
-                return int(counts[1]), counts_buf, listed_buf, parent, ends_buf
+                return int(counts[1]), counts_buf, listed, parent, ends_buf
             # too many to hold: again, with room
             self._run_room = int(counts[0]) * 5 // 4
 
@@ -686,16 +687,16 @@ class OpenCLBackend(Backend):
             # the per-piece sizes): enqueued now, so that only kernels follow the wait below
             for buf, value in ((site_piece, -1), (largest, 0), (last, -1)):
                 cl.enqueue_fill_buffer(self._queue, buf, np.int32(value), 0, 4 * n)
-            m, counts_buf, listed_buf, parent, _ = self._suspect_runs(metric, labels_buf, w, h, n, units)
+            m, counts_buf, listed, parent, _ = self._suspect_runs(metric, labels_buf, w, h, n, units)
             if m == 0:
                 return self._read_moments(acc_buf, n)
             root, size = self._buffer("piece_root", 4 * m), self._buffer("piece_size", 4 * m)
-            run("pieces_join", m, np.int32(w), listed_buf, parent, size)
-            run("pieces_measure", m, listed_buf, parent, root, size, site_at, site_piece)
-            run("pieces_largest", m, listed_buf, root, size, largest)
-            run("pieces_last", m, listed_buf, root, size, largest, last)
+            run("pieces_join", m, np.int32(w), *listed, parent, size)
+            run("pieces_measure", m, *listed, parent, root, size, site_at, site_piece)
+            run("pieces_largest", m, listed[1], root, size, largest)
+            run("pieces_last", m, listed[1], root, size, largest, last)
             args = (np.int32(w), np.int32(n), acc_buf)
-            run("pieces_dropped", m, listed_buf, root, site_piece, last, *args)
+            run("pieces_dropped", m, *listed, root, site_piece, last, *args)
             return self._read_moments(acc_buf, n)
         except cl.Error as exc:
             raise BackendUnavailable(

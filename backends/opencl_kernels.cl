@@ -712,8 +712,9 @@ __kernel void row_places(const int width, const int height, const int unit,
    end).  With `count` set it only counts them, its first pixel left out, at
    places[i * segments + s] for segment s of row i (then `unit` is `seg`); row_places
    and prefix_sums make row_base[i] + places[i * units + u] the place of the first run
-   of unit u of row i.  Then (`count` 0) it lists each as (first pixel, length, label)
-   at runs[3 k ..], k from its segment's place (so the runs are in raster order), and
+   of unit u of row i.  Then (`count` 0) it lists each as (first pixel, length) at
+   runs[k] and its label at run_label[k] (apart: suspect_count reads the labels alone),
+   k from its segment's place (so the runs are in raster order), and
    ends[2 l], ends[2 l + 1] count the top and bottom runs of cell l (zeroed by the
    host).  Runs beyond `room` are not written (the host then asks again with more
    room).
@@ -807,8 +808,9 @@ __kernel void row_runs(const int width, const int height, const int seg,
    (a byte each: the runs' lookups stay in the first-level cache, where the run counts
    would not); with one work-item per `chunk` runs, suspect_count counts their runs at
    places[c] for chunk c; prefix_sums makes these places (their total at counts[1]);
-   suspect_runs copies them there, to out[3 k ..], so that they stay in raster order,
-   each its own piece (parent[k] = k). */
+   suspect_runs copies them there, to out[k] and out_label[k], so that they stay in
+   raster order, each its own piece (parent[k] = k).  The labels stay apart from the
+   (first pixel, length) pairs: the kernels over runs read whole vectors of them. */
 __kernel void suspect_cells(const int n, __global const uint *ends, __global uchar *suspect)
 {
     const int l = get_global_id(0);
@@ -835,8 +837,8 @@ __kernel void suspect_count(const uint room, const uint chunk, __global const in
 
 __kernel void suspect_runs(const uint room, const uint chunk, __global const int2 *runs,
                            __global const int *run_label, __global const uchar *suspect, __global const uint *counts,
-                           __global const uint *places, __global int *out,
-                           __global int *parent)
+                           __global const uint *places, __global int2 *out,
+                           __global int *out_label, __global int *parent)
 {
     const uint total = counts[0] < room ? counts[0] : room;
     const uint r0 = get_global_id(0) * chunk;
@@ -847,10 +849,8 @@ __kernel void suspect_runs(const uint room, const uint chunk, __global const int
     for (uint r = r0; r < r1; ++r) {
         const int l = run_label[r];
         if (suspect[l]) {
-            const int2 run = runs[r];
-            out[3 * k] = run.x;
-            out[3 * k + 1] = run.y;
-            out[3 * k + 2] = l;
+            out[k] = runs[r];
+            out_label[k] = l;
             parent[k] = (int)k;
             ++k;
         }
@@ -888,14 +888,16 @@ inline int piece_root(volatile __global int *parent, int x)
    are in raster order, so those are the runs from the last one that begins at or
    before the pixel above the run's first (a search) to the last one that begins
    above it; and it empties its slot of pieces_measure's sizes */
-__kernel void pieces_join(const uint m, const int width, __global const int *runs,
+__kernel void pieces_join(const uint m, const int width, __global const int2 *runs,
+                          __global const int *run_label,
                           volatile __global int *parent, __global int *size)
 {
     const uint k = get_global_id(0);
     if (k >= m)
         return;
     size[k] = 0;
-    const int p = runs[3 * k], len = runs[3 * k + 1], l = runs[3 * k + 2];
+    const int2 run = runs[k];
+    const int p = run.x, len = run.y, l = run_label[k];
     if (p < width)
         return; /* the top row */
     const int q = p - width; /* the pixel above the run's first */
@@ -904,7 +906,7 @@ __kernel void pieces_join(const uint m, const int width, __global const int *run
        halving */
     int lo = 0, hi = (int)k;
     for (int step = 1; hi - step >= 0; step *= 2) {
-        if (runs[3 * (hi - step)] <= q) {
+        if (runs[hi - step].x <= q) {
             lo = hi - step + 1;
             break;
         }
@@ -912,13 +914,13 @@ __kernel void pieces_join(const uint m, const int width, __global const int *run
     }
     while (lo < hi) {
         const int mid = (lo + hi) / 2;
-        if (runs[3 * mid] <= q)
+        if (runs[mid].x <= q)
             lo = mid + 1;
         else
             hi = mid;
     }
-    for (int r = lo > 0 ? lo - 1 : 0; r < (int)k && runs[3 * r] < q + len; ++r) {
-        if (runs[3 * r + 2] != l || runs[3 * r] + runs[3 * r + 1] <= q)
+    for (int r = lo > 0 ? lo - 1 : 0; r < (int)k && runs[r].x < q + len; ++r) {
+        if (run_label[r] != l || runs[r].x + runs[r].y <= q)
             continue; /* another cell's, or one that ends before (on an earlier row) */
         int a = (int)k, b = r;
         for (;;) {
@@ -939,14 +941,16 @@ __kernel void pieces_join(const uint m, const int width, __global const int *run
 /* 2. per piece (at its root) its pixels; per cell the piece that holds its site's pixel
    (site_at[l], from the host) where the site is in its cell.  A piece's root, its
    smallest index, is its first run in raster order: its first pixel needs no sum. */
-__kernel void pieces_measure(const uint m, __global const int *runs, volatile __global int *parent,
+__kernel void pieces_measure(const uint m, __global const int2 *runs, __global const int *run_label,
+                             volatile __global int *parent,
                              __global int *root, volatile __global int *size,
                              __global const int *site_at, __global int *site_piece)
 {
     const uint k = get_global_id(0);
     if (k >= m)
         return;
-    const int p = runs[3 * k], len = runs[3 * k + 1], l = runs[3 * k + 2];
+    const int2 run = runs[k];
+    const int p = run.x, len = run.y, l = run_label[k];
     const int r = piece_root(parent, (int)k);
     root[k] = r;
     atomic_add(size + r, len);
@@ -956,25 +960,25 @@ __kernel void pieces_measure(const uint m, __global const int *runs, volatile __
 }
 
 /* 3. per cell the size of its largest piece */
-__kernel void pieces_largest(const uint m, __global const int *runs, __global const int *root,
+__kernel void pieces_largest(const uint m, __global const int *run_label, __global const int *root,
                              __global const int *size, volatile __global int *largest)
 {
     const uint k = get_global_id(0);
     if (k >= m || root[k] != (int)k)
         return;
-    atomic_max(largest + runs[3 * k + 2], size[k]);
+    atomic_max(largest + run_label[k], size[k]);
 }
 
 /* 4. per cell, of its largest pieces the one that begins last in raster order: the one
    with the largest root */
-__kernel void pieces_last(const uint m, __global const int *runs, __global const int *root,
+__kernel void pieces_last(const uint m, __global const int *run_label, __global const int *root,
                           __global const int *size, __global const int *largest,
                           volatile __global int *last)
 {
     const uint k = get_global_id(0);
     if (k >= m || root[k] != (int)k)
         return;
-    const int l = runs[3 * k + 2];
+    const int l = run_label[k];
     if (size[k] == largest[l])
         atomic_max(last + l, (int)k);
 }
@@ -982,17 +986,19 @@ __kernel void pieces_last(const uint m, __global const int *runs, __global const
 /* 5. the runs outside the piece their cell keeps (the site's piece, else the last of the
    largest): their sums are taken from their cell's (acc, as the label kernels left it),
    so the host reads the cut cells' sums and nothing else */
-__kernel void pieces_dropped(const uint m, __global const int *runs, __global const int *root,
+__kernel void pieces_dropped(const uint m, __global const int2 *runs, __global const int *run_label,
+                             __global const int *root,
                              __global const int *site_piece, __global const int *last,
                              const int width, const int n, volatile __global acc_t *acc)
 {
     const uint k = get_global_id(0);
     if (k >= m)
         return;
-    const int l = runs[3 * k + 2];
+    const int l = run_label[k];
     const int own = site_piece[l];
     if (root[k] == (own >= 0 ? own : last[l]))
         return;
-    const int p = runs[3 * k], i = p / width, j = p - i * width;
-    flush_run(acc, n, l, j, j + runs[3 * k + 1] - 1, i, (ulong)0 - 1);
+    const int2 run = runs[k];
+    const int i = run.x / width, j = run.x - i * width;
+    flush_run(acc, n, l, j, j + run.y - 1, i, (ulong)0 - 1);
 }

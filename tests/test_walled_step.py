@@ -172,13 +172,21 @@ def test_device_runs_and_their_top_and_bottom_counts_are_numpy_s(width, group, m
         # labels not from the label kernel: row_runs counts the run starts
         seg = opencl_module.RUN_SEGMENT
         units = (seg, ocl._buffer("run_places", 4 * -(-width // seg) * h), False)
-        kept, counts_buf, listed_buf, parent_buf, ends_buf = ocl._suspect_runs(
+        kept, counts_buf, (pos_buf, label_buf), parent_buf, ends_buf = ocl._suspect_runs(
             make_metric("l2"), buf, width, h, n, units
         )
         listed, parent = np.empty((kept, 3), dtype=np.int32), np.empty(kept, dtype=np.int32)
+        pos, label = np.empty((kept, 2), dtype=np.int32), np.empty(kept, dtype=np.int32)
         ends, counts = np.empty((n, 2), dtype=np.uint32), np.empty(2, dtype=np.uint32)
-        for out, src in ((listed, listed_buf), (parent, parent_buf), (ends, ends_buf), (counts, counts_buf)):
+        for out, src in (
+            (pos, pos_buf),
+            (label, label_buf),
+            (parent, parent_buf),
+            (ends, ends_buf),
+            (counts, counts_buf),
+        ):
             ocl._read(out, src)
+        listed[:, :2], listed[:, 2] = pos, label
     want = runs_of(labels)
     assert counts[0] == len(want) and counts[1] == kept
     np.testing.assert_array_equal(ends, [run_ends(labels, c) for c in range(n)])
