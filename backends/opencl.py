@@ -67,6 +67,7 @@ WALL_KERNELS = (
     "suspect_cells",
     "suspect_count",
     "suspect_runs",
+    "pieces_rows",
     "pieces_join",
     "pieces_measure",
     "pieces_largest",
@@ -691,7 +692,9 @@ class OpenCLBackend(Backend):
             if m == 0:
                 return self._read_moments(acc_buf, n)
             root, size = self._buffer("piece_root", 4 * m), self._buffer("piece_size", 4 * m)
-            run("pieces_join", m, np.int32(w), *listed, parent, size)
+            row_start = self._buffer("piece_row_start", 4 * (h + 1))
+            run("pieces_rows", m, np.int32(w), np.int32(h), listed[0], row_start, size)
+            self._wall_kernel(metric, "pieces_join", h, np.int32(w), np.int32(h), *listed, row_start, parent)
             run("pieces_measure", m, *listed, parent, root, size, site_at, site_piece)
             run("pieces_largest", m, listed[1], root, size, largest)
             run("pieces_last", m, listed[1], root, size, largest, last)

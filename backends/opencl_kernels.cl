@@ -884,61 +884,64 @@ inline int piece_root(volatile __global int *parent, int x)
     return x;
 }
 
-/* 1. each run joins the runs of its cell in the row above that touch it: the listed runs
-   are in raster order, so those are the runs from the last one that begins at or
-   before the pixel above the run's first (a search) to the last one that begins
-   above it; and it empties its slot of pieces_measure's sizes */
-__kernel void pieces_join(const uint m, const int width, __global const int2 *runs,
-                          __global const int *run_label,
-                          volatile __global int *parent, __global int *size)
+/* 1. where each row's runs begin in the list (row_start[i]: the first run on row i or
+   below, row_start[height] = m), and each run empties its slot of pieces_measure's
+   sizes */
+__kernel void pieces_rows(const uint m, const int width, const int height,
+                          __global const int2 *runs, __global int *row_start, __global int *size)
 {
     const uint k = get_global_id(0);
     if (k >= m)
         return;
     size[k] = 0;
-    const int2 run = runs[k];
-    const int p = run.x, len = run.y, l = run_label[k];
-    if (p < width)
-        return; /* the top row */
-    const int q = p - width; /* the pixel above the run's first */
-    /* the first run that begins past q, in [lo, hi]: found by steps back from k that
-       double (the runs of the row above are near, and so are their cache lines), then
-       halving */
-    int lo = 0, hi = (int)k;
-    for (int step = 1; hi - step >= 0; step *= 2) {
-        if (runs[hi - step].x <= q) {
-            lo = hi - step + 1;
-            break;
-        }
-        hi -= step;
-    }
-    while (lo < hi) {
-        const int mid = (lo + hi) / 2;
-        if (runs[mid].x <= q)
-            lo = mid + 1;
-        else
-            hi = mid;
-    }
-    for (int r = lo > 0 ? lo - 1 : 0; r < (int)k && runs[r].x < q + len; ++r) {
-        if (run_label[r] != l || runs[r].x + runs[r].y <= q)
-            continue; /* another cell's, or one that ends before (on an earlier row) */
-        int a = (int)k, b = r;
-        for (;;) {
-            a = piece_root(parent, a);
-            b = piece_root(parent, b);
-            if (a == b)
-                break;
-            const int hi_ = a > b ? a : b, lo_ = a > b ? b : a;
-            const int old = atomic_min(parent + hi_, lo_);
-            if (old == hi_)
-                break;
-            a = old; /* hi_ was linked meanwhile: join its new root */
-            b = lo_;
+    const int i = runs[k].x / width;
+    const int before = k > 0 ? runs[k - 1].x / width : -1; /* the previous run's row */
+    for (int r = before + 1; r <= i; ++r)
+        row_start[r] = (int)k;
+    if (k == m - 1)
+        for (int r = i + 1; r <= height; ++r)
+            row_start[r] = (int)m;
+}
+
+/* 2. each row (a work-item) joins each of its runs to the runs of its cell in the row
+   above that touch it, walking both rows' runs in order at once (both are in raster
+   order in the list) */
+__kernel void pieces_join(const int width, const int height, __global const int2 *runs,
+                          __global const int *run_label, __global const int *row_start,
+                          volatile __global int *parent)
+{
+    const int i = get_global_id(0);
+    if (i < 1 || i >= height)
+        return;
+    int r = row_start[i - 1]; /* the first run above that may touch the current one */
+    const int above_end = row_start[i], end = row_start[i + 1];
+    for (int k = above_end; k < end; ++k) {
+        const int2 run = runs[k];
+        const int q = run.x - width; /* the pixel above the run's first */
+        const int l = run_label[k];
+        while (r < above_end && runs[r].x + runs[r].y <= q)
+            ++r; /* ends before the run begins: before the next ones too */
+        for (int t = r; t < above_end && runs[t].x < q + run.y; ++t) {
+            if (run_label[t] != l)
+                continue;
+            int a = k, b = t;
+            for (;;) {
+                a = piece_root(parent, a);
+                b = piece_root(parent, b);
+                if (a == b)
+                    break;
+                const int hi_ = a > b ? a : b, lo_ = a > b ? b : a;
+                const int old = atomic_min(parent + hi_, lo_);
+                if (old == hi_)
+                    break;
+                a = old; /* hi_ was linked meanwhile: join its new root */
+                b = lo_;
+            }
         }
     }
 }
 
-/* 2. per piece (at its root) its pixels; per cell the piece that holds its site's pixel
+/* 3. per piece (at its root) its pixels; per cell the piece that holds its site's pixel
    (site_at[l], from the host) where the site is in its cell.  A piece's root, its
    smallest index, is its first run in raster order: its first pixel needs no sum. */
 __kernel void pieces_measure(const uint m, __global const int2 *runs, __global const int *run_label,
@@ -959,7 +962,7 @@ __kernel void pieces_measure(const uint m, __global const int2 *runs, __global c
         site_piece[l] = r; /* one run holds the site's pixel: one writer */
 }
 
-/* 3. per cell the size of its largest piece */
+/* 4. per cell the size of its largest piece */
 __kernel void pieces_largest(const uint m, __global const int *run_label, __global const int *root,
                              __global const int *size, volatile __global int *largest)
 {
@@ -969,7 +972,7 @@ __kernel void pieces_largest(const uint m, __global const int *run_label, __glob
     atomic_max(largest + run_label[k], size[k]);
 }
 
-/* 4. per cell, of its largest pieces the one that begins last in raster order: the one
+/* 5. per cell, of its largest pieces the one that begins last in raster order: the one
    with the largest root */
 __kernel void pieces_last(const uint m, __global const int *run_label, __global const int *root,
                           __global const int *size, __global const int *largest,
@@ -983,7 +986,7 @@ __kernel void pieces_last(const uint m, __global const int *run_label, __global 
         atomic_max(last + l, (int)k);
 }
 
-/* 5. the runs outside the piece their cell keeps (the site's piece, else the last of the
+/* 6. the runs outside the piece their cell keeps (the site's piece, else the last of the
    largest): their sums are taken from their cell's (acc, as the label kernels left it),
    so the host reads the cut cells' sums and nothing else */
 __kernel void pieces_dropped(const uint m, __global const int2 *runs, __global const int *run_label,

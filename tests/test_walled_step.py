@@ -238,3 +238,50 @@ def test_a_walled_mosaic_has_the_same_sites_on_either_path(monkeypatch):
         host = make_mosaic(SAMPLES_DIR / "scene.jpg", ocl, **run)
     assert fast.problem.grid.mask is not None and not fast.problem.grid.mask.all()
     np.testing.assert_array_equal(fast.sites, host.sites)
+
+
+@needs_opencl
+@pytest.mark.parametrize("block", [4, 8, 16])
+def test_the_block_kernel_counts_each_strip_rows_run_starts(block):
+    """With run_starts the label kernel leaves, per strip of STRIP blocks and row, the
+    runs of the region that begin in it, its first pixel left out (row_places adds it):
+    NumPy's count from the labels, on a raster whose width and height are not multiples
+    of the strip or the block, with walls."""
+    sites, args = walled_case("linf", seed=4, w=203, h=61, n=120)
+    with OpenCLBackend(block=block) as ocl:
+        unit, places, counted = ocl._run_units(203, 61)
+        assert counted and unit == block * opencl_module.STRIP
+        acc = ocl._buffer("moments", opencl_module.ACC_BYTES * len(sites))
+        labels_buf, _ = ocl._run_labels(sites, **args, acc_buf=acc, run_starts=places)
+        labels = np.empty((61, 203), dtype=np.int32)
+        ocl._read(labels, labels_buf)
+        strips = -(-203 // unit)
+        got = np.empty((61, strips), dtype=np.uint32)
+        ocl._read(got, places)
+    left = np.concatenate([np.full((61, 1), -2), labels[:, :-1]], axis=1)
+    begins = (labels >= 0) & (labels != left)
+    begins[:, ::unit] = False
+    want = np.add.reduceat(begins, np.arange(0, 203, unit), axis=1)
+    assert want.sum() > 500 and (labels < 0).any()
+    np.testing.assert_array_equal(got, want)
+
+
+@needs_opencl
+def test_pieces_join_walks_rows_without_kept_runs_and_tall_cells():
+    """pieces_join works a row each: rows without any run of a cell that may be in
+    pieces (wall rows across the whole raster), cells taller than a work-group of rows,
+    a raster whose height is not a multiple of it.  The moments are the host split's."""
+    w, h = 90, 150
+    mask = np.ones((h, w), dtype=bool)
+    mask[70, :] = False  # a wall row: no runs on it
+    mask[20:130, 45] = False  # a wall that ends inside cells: U-shaped cells around its ends
+    mask[40, 10:80] = False
+    sites = np.array([[20.0, 30.0], [70.0, 30.0], [45.0, 20.0], [45.0, 120.0], [20.0, 100.0], [45.0, 70.0]])
+    l2 = make_metric("l2")
+    grid = Grid(w, h, mask)
+    with OpenCLBackend() as ocl:
+        labels = ocl.label(sites, metric=l2, grid=grid)
+        got = ocl.walled_moments(sites, metric=l2, grid=grid)
+    cut = split_cells(labels, sites)
+    assert not np.array_equal(cut, labels) and (labels[70] < 0).all()
+    np.testing.assert_array_equal(as_array(got), hand_moments(cut, len(sites)))
