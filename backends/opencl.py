@@ -67,7 +67,6 @@ WALL_KERNELS = (
     "suspect_cells",
     "suspect_count",
     "suspect_runs",
-    "pieces_rows",
     "pieces_join",
     "pieces_measure",
     "pieces_largest",
@@ -630,6 +629,9 @@ class OpenCLBackend(Backend):
             # so are the runs kept: the pieces kernels read them a run per work-item
             listed = (self._buffer("suspect_runs", 8 * room), self._buffer("suspect_labels", 4 * room))
             parent = self._buffer("piece_parent", 4 * room)
+            # per kept run its piece's size (pieces_measure), per row its first kept run
+            size, row_start = self._buffer("piece_size", 4 * room), self._buffer("piece_row_start", 4 * h)
+            cl.enqueue_fill_buffer(queue, row_start, np.int32(2**31 - 1), 0, 4 * h)
             chunks = max(1, -(-room // RUN_CHUNK))
             chunk_places = self._buffer("chunk_places", 4 * (-(-chunks // LIST_GROUP) * LIST_GROUP))
             cl.enqueue_fill_buffer(queue, ends_buf, np.uint32(0), 0, 8 * n)
@@ -650,10 +652,21 @@ class OpenCLBackend(Backend):
             self._wall_kernel(
                 metric, "prefix_sums", 1, np.uint32(chunks), chunk_places, counts_buf, np.int32(1)
             )
-            self._wall_kernel(metric, "suspect_runs", chunks, *args, chunk_places, *listed, parent)
+            self._wall_kernel(
+                metric,
+                "suspect_runs",
+                chunks,
+                *args,
+                chunk_places,
+                *listed,
+                parent,
+                np.int32(w),
+                row_start,
+                size,
+            )
             self._read(counts, counts_buf)
             if counts[0] <= room:
-                return int(counts[1]), counts_buf, listed, parent, ends_buf
+                return int(counts[1]), counts_buf, listed, parent, ends_buf, (row_start, size)
             # too many to hold: again, with room
             self._run_room = int(counts[0]) * 5 // 4
 
@@ -684,17 +697,18 @@ class OpenCLBackend(Backend):
         try:
             site_piece, largest = self._buffer("site_piece", 4 * n), self._buffer("largest", 4 * n)
             last = self._buffer("last_largest", 4 * n)
-            # the per-cell slots the pieces kernels fill start empty (pieces_join empties
+            # the per-cell slots the pieces kernels fill start empty (suspect_runs empties
             # the per-piece sizes): enqueued now, so that only kernels follow the wait below
             for buf, value in ((site_piece, -1), (largest, 0), (last, -1)):
                 cl.enqueue_fill_buffer(self._queue, buf, np.int32(value), 0, 4 * n)
-            m, counts_buf, listed, parent, _ = self._suspect_runs(metric, labels_buf, w, h, n, units)
+            m, counts_buf, listed, parent, _, (row_start, size) = self._suspect_runs(
+                metric, labels_buf, w, h, n, units
+            )
             if m == 0:
                 return self._read_moments(acc_buf, n)
-            root, size = self._buffer("piece_root", 4 * m), self._buffer("piece_size", 4 * m)
-            row_start = self._buffer("piece_row_start", 4 * (h + 1))
-            run("pieces_rows", m, np.int32(w), np.int32(h), listed[0], row_start, size)
-            self._wall_kernel(metric, "pieces_join", h, np.int32(w), np.int32(h), *listed, row_start, parent)
+            root = self._buffer("piece_root", 4 * m)
+            args = (np.uint32(m), np.int32(w), np.int32(h), *listed, row_start, parent)
+            self._wall_kernel(metric, "pieces_join", h, *args)
             run("pieces_measure", m, *listed, parent, root, size, site_at, site_piece)
             run("pieces_largest", m, listed[1], root, size, largest)
             run("pieces_last", m, listed[1], root, size, largest, last)

@@ -809,8 +809,10 @@ __kernel void row_runs(const int width, const int height, const int seg,
    would not); with one work-item per `chunk` runs, suspect_count counts their runs at
    places[c] for chunk c; prefix_sums makes these places (their total at counts[1]);
    suspect_runs copies them there, to out[k] and out_label[k], so that they stay in
-   raster order, each its own piece (parent[k] = k).  The labels stay apart from the
-   (first pixel, length) pairs: the kernels over runs read whole vectors of them. */
+   raster order, each its own piece (parent[k] = k, its size 0), and leaves the first
+   kept run of each row at row_start (filled with INT_MAX by the host) for pieces_join.
+   The labels stay apart from the (first pixel, length) pairs: the kernels over runs
+   read whole vectors of them. */
 __kernel void suspect_cells(const int n, __global const uint *ends, __global uchar *suspect)
 {
     const int l = get_global_id(0);
@@ -838,7 +840,8 @@ __kernel void suspect_count(const uint room, const uint chunk, __global const in
 __kernel void suspect_runs(const uint room, const uint chunk, __global const int2 *runs,
                            __global const int *run_label, __global const uchar *suspect, __global const uint *counts,
                            __global const uint *places, __global int2 *out,
-                           __global int *out_label, __global int *parent)
+                           __global int *out_label, __global int *parent, const int width,
+                           volatile __global int *row_start, __global int *size)
 {
     const uint total = counts[0] < room ? counts[0] : room;
     const uint r0 = get_global_id(0) * chunk;
@@ -846,12 +849,19 @@ __kernel void suspect_runs(const uint room, const uint chunk, __global const int
         return;
     const uint r1 = r0 + chunk < total ? r0 + chunk : total;
     uint k = places[get_global_id(0)];
+    int row = -1; /* the row of the last run kept here */
     for (uint r = r0; r < r1; ++r) {
         const int l = run_label[r];
         if (suspect[l]) {
-            out[k] = runs[r];
+            const int2 run = runs[r];
+            out[k] = run;
             out_label[k] = l;
             parent[k] = (int)k;
+            size[k] = 0;
+            if (run.x >= (row + 1) * width) { /* the first kept here on its row */
+                row = run.x / width;
+                atomic_min(row_start + row, (int)k);
+            }
             ++k;
         }
     }
@@ -884,38 +894,20 @@ inline int piece_root(volatile __global int *parent, int x)
     return x;
 }
 
-/* 1. where each row's runs begin in the list (row_start[i]: the first run on row i or
-   below, row_start[height] = m), and each run empties its slot of pieces_measure's
-   sizes */
-__kernel void pieces_rows(const uint m, const int width, const int height,
-                          __global const int2 *runs, __global int *row_start, __global int *size)
-{
-    const uint k = get_global_id(0);
-    if (k >= m)
-        return;
-    size[k] = 0;
-    const int i = runs[k].x / width;
-    const int before = k > 0 ? runs[k - 1].x / width : -1; /* the previous run's row */
-    for (int r = before + 1; r <= i; ++r)
-        row_start[r] = (int)k;
-    if (k == m - 1)
-        for (int r = i + 1; r <= height; ++r)
-            row_start[r] = (int)m;
-}
-
-/* 2. each row (a work-item) joins each of its runs to the runs of its cell in the row
+/* 1. each row (a work-item) joins each of its runs to the runs of its cell in the row
    above that touch it, walking both rows' runs in order at once (both are in raster
-   order in the list) */
-__kernel void pieces_join(const int width, const int height, __global const int2 *runs,
-                          __global const int *run_label, __global const int *row_start,
-                          volatile __global int *parent)
+   order in the list; suspect_runs left each row's first at row_start, INT_MAX on a row
+   without any) */
+__kernel void pieces_join(const uint m, const int width, const int height,
+                          __global const int2 *runs, __global const int *run_label,
+                          __global const int *row_start, volatile __global int *parent)
 {
     const int i = get_global_id(0);
-    if (i < 1 || i >= height)
+    if (i < 1 || i >= height || row_start[i] == INT_MAX || row_start[i - 1] == INT_MAX)
         return;
     int r = row_start[i - 1]; /* the first run above that may touch the current one */
-    const int above_end = row_start[i], end = row_start[i + 1];
-    for (int k = above_end; k < end; ++k) {
+    const int above_end = row_start[i], next_row = (i + 1) * width;
+    for (int k = above_end; k < (int)m && runs[k].x < next_row; ++k) {
         const int2 run = runs[k];
         const int q = run.x - width; /* the pixel above the run's first */
         const int l = run_label[k];
@@ -941,7 +933,7 @@ __kernel void pieces_join(const int width, const int height, __global const int2
     }
 }
 
-/* 3. per piece (at its root) its pixels; per cell the piece that holds its site's pixel
+/* 2. per piece (at its root) its pixels; per cell the piece that holds its site's pixel
    (site_at[l], from the host) where the site is in its cell.  A piece's root, its
    smallest index, is its first run in raster order: its first pixel needs no sum. */
 __kernel void pieces_measure(const uint m, __global const int2 *runs, __global const int *run_label,
@@ -962,7 +954,7 @@ __kernel void pieces_measure(const uint m, __global const int2 *runs, __global c
         site_piece[l] = r; /* one run holds the site's pixel: one writer */
 }
 
-/* 4. per cell the size of its largest piece */
+/* 3. per cell the size of its largest piece */
 __kernel void pieces_largest(const uint m, __global const int *run_label, __global const int *root,
                              __global const int *size, volatile __global int *largest)
 {
@@ -972,7 +964,7 @@ __kernel void pieces_largest(const uint m, __global const int *run_label, __glob
     atomic_max(largest + run_label[k], size[k]);
 }
 
-/* 5. per cell, of its largest pieces the one that begins last in raster order: the one
+/* 4. per cell, of its largest pieces the one that begins last in raster order: the one
    with the largest root */
 __kernel void pieces_last(const uint m, __global const int *run_label, __global const int *root,
                           __global const int *size, __global const int *largest,
@@ -986,7 +978,7 @@ __kernel void pieces_last(const uint m, __global const int *run_label, __global 
         atomic_max(last + l, (int)k);
 }
 
-/* 6. the runs outside the piece their cell keeps (the site's piece, else the last of the
+/* 5. the runs outside the piece their cell keeps (the site's piece, else the last of the
    largest): their sums are taken from their cell's (acc, as the label kernels left it),
    so the host reads the cut cells' sums and nothing else */
 __kernel void pieces_dropped(const uint m, __global const int2 *runs, __global const int *run_label,

@@ -172,7 +172,7 @@ def test_device_runs_and_their_top_and_bottom_counts_are_numpy_s(width, group, m
         # labels not from the label kernel: row_runs counts the run starts
         seg = opencl_module.RUN_SEGMENT
         units = (seg, ocl._buffer("run_places", 4 * -(-width // seg) * h), False)
-        kept, counts_buf, (pos_buf, label_buf), parent_buf, ends_buf = ocl._suspect_runs(
+        kept, counts_buf, (pos_buf, label_buf), parent_buf, ends_buf, _ = ocl._suspect_runs(
             make_metric("l2"), buf, width, h, n, units
         )
         listed, parent = np.empty((kept, 3), dtype=np.int32), np.empty(kept, dtype=np.int32)
