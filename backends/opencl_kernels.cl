@@ -573,11 +573,17 @@ __kernel void label_blocks(LABEL_KERNEL_ARGS)
     const rowi lanes = load_row(0, LANES);
     rowi begins[BH];
     int last[BH]; /* per row, the label of the pixel left of the block */
-    for (int yy = 0; yy < BH; ++yy)
+    for (int yy = 0; yy < BH; ++yy) {
         begins[yy] = (rowi)(0);
+        last[yy] = -1;
+    }
     for (int g = 0; g < STRIP; ++g) {
-        if (!on[g])
+        if (!on[g]) {
+            if (xs0 + g * BW < width) /* a block with no pixel of the region */
+                for (int yy = 0; yy < BH; ++yy)
+                    last[yy] = -1;
             continue;
+        }
         const int x0 = xs0 + g * BW;
         const int xn = x0 + BW < width ? BW : width - x0;
         for (int yy = 0; yy < yn; ++yy) {
