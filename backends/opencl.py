@@ -69,6 +69,7 @@ WALL_KERNELS = (
     "suspect_runs",
     "pieces_join",
     "pieces_measure",
+    "pieces_size",
     "pieces_largest",
     "pieces_last",
     "pieces_dropped",
@@ -629,7 +630,7 @@ class OpenCLBackend(Backend):
             # so are the runs kept: the pieces kernels read them a run per work-item
             listed = (self._buffer("suspect_runs", 8 * room), self._buffer("suspect_labels", 4 * room))
             parent = self._buffer("piece_parent", 4 * room)
-            # per kept run its piece's size (pieces_measure), per row its first kept run
+            # per kept run its piece's size (pieces_size), per row its first kept run
             size, row_start = self._buffer("piece_size", 4 * room), self._buffer("piece_row_start", 4 * h)
             cl.enqueue_fill_buffer(queue, row_start, np.int32(2**31 - 1), 0, 4 * h)
             chunks = max(1, -(-room // RUN_CHUNK))
@@ -709,9 +710,10 @@ class OpenCLBackend(Backend):
             root = self._buffer("piece_root", 4 * m)
             args = (np.uint32(m), np.int32(w), np.int32(h), *listed, row_start, parent)
             self._wall_kernel(metric, "pieces_join", h, *args)
-            run("pieces_measure", m, *listed, parent, root, size, site_at, site_piece)
-            run("pieces_largest", m, listed[1], root, size, largest)
-            run("pieces_last", m, listed[1], root, size, largest, last)
+            run("pieces_measure", m, *listed, parent, root, site_at, site_piece)
+            run("pieces_size", m, *listed, root, site_piece, size)
+            run("pieces_largest", m, listed[1], root, site_piece, size, largest)
+            run("pieces_last", m, listed[1], root, site_piece, size, largest, last)
             args = (np.int32(w), np.int32(n), acc_buf)
             run("pieces_dropped", m, *listed, root, site_piece, last, *args)
             return self._read_moments(acc_buf, n)

@@ -939,52 +939,66 @@ __kernel void pieces_join(const uint m, const int width, const int height,
     }
 }
 
-/* 2. per piece (at its root) its pixels; per cell the piece that holds its site's pixel
+/* 2. per run its piece (root); per cell the piece that holds its site's pixel
    (site_at[l], from the host) where the site is in its cell.  A piece's root, its
    smallest index, is its first run in raster order: its first pixel needs no sum. */
 __kernel void pieces_measure(const uint m, __global const int2 *runs, __global const int *run_label,
-                             volatile __global int *parent,
-                             __global int *root, volatile __global int *size,
+                             volatile __global int *parent, __global int *root,
                              __global const int *site_at, __global int *site_piece)
 {
     const uint k = get_global_id(0);
     if (k >= m)
         return;
     const int2 run = runs[k];
-    const int p = run.x, len = run.y, l = run_label[k];
+    const int l = run_label[k];
     const int r = piece_root(parent, (int)k);
     root[k] = r;
-    atomic_add(size + r, len);
     const int s = site_at[l];
-    if (p <= s && s < p + len)
+    if (run.x <= s && s < run.x + run.y)
         site_piece[l] = r; /* one run holds the site's pixel: one writer */
 }
 
-/* 3. per cell the size of its largest piece */
-__kernel void pieces_largest(const uint m, __global const int *run_label, __global const int *root,
-                             __global const int *size, volatile __global int *largest)
+/* 3. per piece (at its root) its pixels, only in the cells whose site is not in them
+   (on a wall, or off the raster): the others keep the site's piece whatever the sizes,
+   so most runs need no atomic here */
+__kernel void pieces_size(const uint m, __global const int2 *runs, __global const int *run_label,
+                          __global const int *root, __global const int *site_piece,
+                          volatile __global int *size)
 {
     const uint k = get_global_id(0);
-    if (k >= m || root[k] != (int)k)
+    if (k >= m || site_piece[run_label[k]] >= 0)
         return;
-    atomic_max(largest + run_label[k], size[k]);
+    atomic_add(size + root[k], runs[k].y);
 }
 
-/* 4. per cell, of its largest pieces the one that begins last in raster order: the one
-   with the largest root */
-__kernel void pieces_last(const uint m, __global const int *run_label, __global const int *root,
-                          __global const int *size, __global const int *largest,
-                          volatile __global int *last)
+/* 4. per such cell the size of its largest piece */
+__kernel void pieces_largest(const uint m, __global const int *run_label, __global const int *root,
+                             __global const int *site_piece, __global const int *size,
+                             volatile __global int *largest)
 {
     const uint k = get_global_id(0);
     if (k >= m || root[k] != (int)k)
         return;
     const int l = run_label[k];
-    if (size[k] == largest[l])
+    if (site_piece[l] < 0)
+        atomic_max(largest + l, size[k]);
+}
+
+/* 5. per such cell, of its largest pieces the one that begins last in raster order: the
+   one with the largest root */
+__kernel void pieces_last(const uint m, __global const int *run_label, __global const int *root,
+                          __global const int *site_piece, __global const int *size,
+                          __global const int *largest, volatile __global int *last)
+{
+    const uint k = get_global_id(0);
+    if (k >= m || root[k] != (int)k)
+        return;
+    const int l = run_label[k];
+    if (site_piece[l] < 0 && size[k] == largest[l])
         atomic_max(last + l, (int)k);
 }
 
-/* 5. the runs outside the piece their cell keeps (the site's piece, else the last of the
+/* 6. the runs outside the piece their cell keeps (the site's piece, else the last of the
    largest): their sums are taken from their cell's (acc, as the label kernels left it),
    so the host reads the cut cells' sums and nothing else */
 __kernel void pieces_dropped(const uint m, __global const int2 *runs, __global const int *run_label,
