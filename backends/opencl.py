@@ -301,6 +301,7 @@ class OpenCLBackend(Backend):
         self._fit_kernels: dict[tuple, object] = {}  # _fit_key -> fit kernel
         self._fits_on_device = "cl_khr_fp64" in self._device.extensions
         self._run_room = 1 << 16  # runs the suspect_runs buffer holds; grows as needed
+        self._kept_room = 0  # kept runs the pieces kernels run over (0: as many as held)
 
     # ------------------------------------------------------------------ device
     @classmethod
@@ -604,9 +605,11 @@ class OpenCLBackend(Backend):
         label kernel or ``row_runs``' counting pass, as ``units`` from :meth:`_run_units`
         says; placed by ``row_places`` and ``prefix_sums``; listed by ``row_runs``) and
         keep, in that order, those of the cells that may be in pieces (``suspect_cells``,
-        ``suspect_count``, ``prefix_sums``, ``suspect_runs``), with one wait: (runs kept,
-        counts buffer, kept runs, their union-find parents, per-cell top and bottom run
-        counts).  The counts buffer holds (found, kept)."""
+        ``suspect_count``, ``prefix_sums``, ``suspect_runs``), without a wait: (counts
+        buffer, kept runs, their union-find parents, per-cell top and bottom run counts,
+        (first kept run per row, piece sizes), the runs the buffers hold).  The counts
+        buffer holds (found, kept): where more were found than the buffers hold, the
+        lists are cut short and the caller asks again with more room."""
         cl, queue = self._cl, self._queue
         ends_buf, counts_buf = self._buffer("run_ends", 8 * n), self._buffer("run_counts", 8)
         suspect = self._buffer("suspect_cells", n)
@@ -621,68 +624,96 @@ class OpenCLBackend(Backend):
             metric, "row_places", h, np.int32(w), np.int32(h), np.int32(unit), labels_buf, places, row_base
         )
         self._wall_kernel(metric, "prefix_sums", 1, np.uint32(h), row_base, counts_buf, np.int32(0))
-        counts = np.zeros(2, dtype=np.uint32)
-        while True:
-            room = self._run_room
-            # the runs found as (first pixel, length) and their labels apart: suspect_count
-            # reads the labels alone
-            runs_buf, labels_of = self._buffer("runs", 8 * room), self._buffer("run_labels", 4 * room)
-            # so are the runs kept: the pieces kernels read them a run per work-item
-            listed = (self._buffer("suspect_runs", 8 * room), self._buffer("suspect_labels", 4 * room))
-            parent = self._buffer("piece_parent", 4 * room)
-            # per kept run its piece's size (pieces_size), per row its first kept run
-            size, row_start = self._buffer("piece_size", 4 * room), self._buffer("piece_row_start", 4 * h)
-            cl.enqueue_fill_buffer(queue, row_start, np.int32(2**31 - 1), 0, 4 * h)
-            chunks = max(1, -(-room // RUN_CHUNK))
-            chunk_places = self._buffer("chunk_places", 4 * (-(-chunks // LIST_GROUP) * LIST_GROUP))
-            cl.enqueue_fill_buffer(queue, ends_buf, np.uint32(0), 0, 8 * n)
-            listing = (
-                np.int32(0),
-                places,
-                np.int32(unit),
-                row_base,
-                ends_buf,
-                np.uint32(room),
-                runs_buf,
-                labels_of,
-            )
-            self._wall_kernel(metric, "row_runs", rows, *scan, *listing)
-            self._wall_kernel(metric, "suspect_cells", n, np.int32(n), ends_buf, suspect)
-            args = (np.uint32(room), np.uint32(RUN_CHUNK), runs_buf, labels_of, suspect, counts_buf)
-            self._wall_kernel(metric, "suspect_count", chunks, *args, chunk_places)
-            self._wall_kernel(
-                metric, "prefix_sums", 1, np.uint32(chunks), chunk_places, counts_buf, np.int32(1)
-            )
-            self._wall_kernel(
-                metric,
-                "suspect_runs",
-                chunks,
-                *args,
-                chunk_places,
-                *listed,
-                parent,
-                np.int32(w),
-                row_start,
-                size,
-            )
-            self._read(counts, counts_buf)
-            if counts[0] <= room:
-                return int(counts[1]), counts_buf, listed, parent, ends_buf, (row_start, size)
-            # too many to hold: again, with room
-            self._run_room = int(counts[0]) * 5 // 4
+        room = self._run_room
+        # the runs found as (first pixel, length) and their labels apart: suspect_count
+        # reads the labels alone
+        runs_buf, labels_of = self._buffer("runs", 8 * room), self._buffer("run_labels", 4 * room)
+        # so are the runs kept: the pieces kernels read them a run per work-item
+        listed = (self._buffer("suspect_runs", 8 * room), self._buffer("suspect_labels", 4 * room))
+        parent = self._buffer("piece_parent", 4 * room)
+        # per kept run its piece's size (pieces_size), per row its first kept run
+        size, row_start = self._buffer("piece_size", 4 * room), self._buffer("piece_row_start", 4 * h)
+        cl.enqueue_fill_buffer(queue, row_start, np.int32(2**31 - 1), 0, 4 * h)
+        chunks = max(1, -(-room // RUN_CHUNK))
+        chunk_places = self._buffer("chunk_places", 4 * (-(-chunks // LIST_GROUP) * LIST_GROUP))
+        cl.enqueue_fill_buffer(queue, ends_buf, np.uint32(0), 0, 8 * n)
+        listing = (
+            np.int32(0),
+            places,
+            np.int32(unit),
+            row_base,
+            ends_buf,
+            np.uint32(room),
+            runs_buf,
+            labels_of,
+        )
+        self._wall_kernel(metric, "row_runs", rows, *scan, *listing)
+        self._wall_kernel(metric, "suspect_cells", n, np.int32(n), ends_buf, suspect)
+        args = (np.uint32(room), np.uint32(RUN_CHUNK), runs_buf, labels_of, suspect, counts_buf)
+        self._wall_kernel(metric, "suspect_count", chunks, *args, chunk_places)
+        self._wall_kernel(metric, "prefix_sums", 1, np.uint32(chunks), chunk_places, counts_buf, np.int32(1))
+        self._wall_kernel(
+            metric,
+            "suspect_runs",
+            chunks,
+            *args,
+            chunk_places,
+            *listed,
+            parent,
+            np.int32(w),
+            row_start,
+            size,
+        )
+        return counts_buf, listed, parent, ends_buf, (row_start, size), room
+
+    def _enqueue_pieces(self, metric: Metric, n: int, w: int, h: int, acc_buf, labels_buf, site_at, units):
+        """Enqueue the walled-cell kernels over the labels and sums the label kernel left,
+        with no wait before the sums are read: the pieces kernels run over as many runs
+        as the last call kept (and half as many again), and read how many were kept on the
+        device.  Returns (moments, counts (found, kept), the runs the buffers hold, the
+        runs the pieces kernels ran over): the moments hold only where found <= held and
+        kept <= ran over."""
+        cl = self._cl
+        site_piece, largest = self._buffer("site_piece", 4 * n), self._buffer("largest", 4 * n)
+        last = self._buffer("last_largest", 4 * n)
+        # the per-cell slots the pieces kernels fill start empty (suspect_runs empties
+        # the per-piece sizes)
+        for buf, value in ((site_piece, -1), (largest, 0), (last, -1)):
+            cl.enqueue_fill_buffer(self._queue, buf, np.int32(value), 0, 4 * n)
+        counts_buf, listed, parent, _, (row_start, size), room = self._suspect_runs(
+            metric, labels_buf, w, h, n, units
+        )
+        bound = min(room, self._kept_room or room)
+        root = self._buffer("piece_root", 4 * room)
+
+        def run(name, *args):
+            self._wall_kernel(metric, name, bound, counts_buf, *args)
+
+        self._wall_kernel(
+            metric, "pieces_join", h, counts_buf, np.int32(w), np.int32(h), *listed, row_start, parent
+        )
+        run("pieces_measure", *listed, parent, root, site_at, site_piece)
+        run("pieces_size", *listed, root, site_piece, size)
+        run("pieces_largest", listed[1], root, site_piece, size, largest)
+        run("pieces_last", listed[1], root, site_piece, size, largest, last)
+        run("pieces_dropped", *listed, root, site_piece, last, np.int32(w), np.int32(n), acc_buf)
+        counts = np.empty(2, dtype=np.uint32)
+        cl.enqueue_copy(self._queue, counts, counts_buf, is_blocking=False)  # before the sums: in order
+        return self._read_moments(acc_buf, n), counts, room, bound
 
     def _walled_moments(self, sites, angles, scales, metric: Metric, grid: Grid) -> Moments:
         """The moments of the labels with each cell cut to the piece it keeps, found on
         the device: ``row_runs`` lists the runs and counts each cell's top and bottom
         runs, ``suspect_runs`` keeps the runs of the cells that may be in pieces, the
         ``pieces_*`` kernels find their pieces and take the sums of the runs of those not
-        kept from their cells' sums; the host reads 5·N sums (never the raster).  The
-        host waits twice: for the number of kept runs, and for the sums."""
+        kept from their cells' sums; the host reads 5·N sums (never the raster) and the
+        runs' counts, and waits once, for these.  Where the runs outnumber the buffers, or
+        the kept runs the pieces kernels ran over, it labels again with room for them."""
         cl = self._cl
         n = len(sites)
         w, h = grid.width, grid.height
         # each site's pixel, for pieces_measure: sent now, without a wait (the array lives
-        # until the sums are read), so that nothing is left to send once the runs are kept
+        # until the sums are read)
         i, j = pixel_index(sites, w, h)
         site_pixel = (i * w + j).astype(np.int32)
         site_at = self._buffer("site_at", site_pixel.nbytes)
@@ -692,31 +723,21 @@ class OpenCLBackend(Backend):
             sites, angles, scales, metric, grid, units[1] if units[2] else None
         )
 
-        def run(name, m, *args):
-            self._wall_kernel(metric, name, m, np.uint32(m), *args)
-
         try:
-            site_piece, largest = self._buffer("site_piece", 4 * n), self._buffer("largest", 4 * n)
-            last = self._buffer("last_largest", 4 * n)
-            # the per-cell slots the pieces kernels fill start empty (suspect_runs empties
-            # the per-piece sizes): enqueued now, so that only kernels follow the wait below
-            for buf, value in ((site_piece, -1), (largest, 0), (last, -1)):
-                cl.enqueue_fill_buffer(self._queue, buf, np.int32(value), 0, 4 * n)
-            m, counts_buf, listed, parent, _, (row_start, size) = self._suspect_runs(
-                metric, labels_buf, w, h, n, units
-            )
-            if m == 0:
-                return self._read_moments(acc_buf, n)
-            root = self._buffer("piece_root", 4 * m)
-            args = (np.uint32(m), np.int32(w), np.int32(h), *listed, row_start, parent)
-            self._wall_kernel(metric, "pieces_join", h, *args)
-            run("pieces_measure", m, *listed, parent, root, site_at, site_piece)
-            run("pieces_size", m, *listed, root, site_piece, size)
-            run("pieces_largest", m, listed[1], root, site_piece, size, largest)
-            run("pieces_last", m, listed[1], root, site_piece, size, largest, last)
-            args = (np.int32(w), np.int32(n), acc_buf)
-            run("pieces_dropped", m, *listed, root, site_piece, last, *args)
-            return self._read_moments(acc_buf, n)
+            while True:
+                mom, counts, room, bound = self._enqueue_pieces(
+                    metric, n, w, h, acc_buf, labels_buf, site_at, units
+                )
+                # the next call's kept runs are about as many (Lloyd steps move the sites
+                # less and less): the pieces kernels run over half as many again
+                self._kept_room = int(counts[1]) * 3 // 2 + LIST_GROUP
+                if counts[0] <= room and counts[1] <= bound:
+                    return mom
+                if counts[0] > room:  # too many to hold (and kept of a list cut short)
+                    self._run_room, self._kept_room = int(counts[0]) * 5 // 4, 0
+                acc_buf, labels_buf = self._enqueue_moments(
+                    sites, angles, scales, metric, grid, units[1] if units[2] else None
+                )
         except cl.Error as exc:
             raise BackendUnavailable(
                 f"opencl: walled-cell kernels failed on {self.device()}: {exc}"

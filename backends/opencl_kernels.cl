@@ -904,10 +904,11 @@ inline int piece_root(volatile __global int *parent, int x)
    above that touch it, walking both rows' runs in order at once (both are in raster
    order in the list; suspect_runs left each row's first at row_start, INT_MAX on a row
    without any) */
-__kernel void pieces_join(const uint m, const int width, const int height,
+__kernel void pieces_join(__global const uint *counts, const int width, const int height,
                           __global const int2 *runs, __global const int *run_label,
                           __global const int *row_start, volatile __global int *parent)
 {
+    const uint m = counts[1]; /* the runs kept (the host sized the kernel without waiting for it) */
     const int i = get_global_id(0);
     if (i < 1 || i >= height || row_start[i] == INT_MAX || row_start[i - 1] == INT_MAX)
         return;
@@ -942,10 +943,11 @@ __kernel void pieces_join(const uint m, const int width, const int height,
 /* 2. per run its piece (root); per cell the piece that holds its site's pixel
    (site_at[l], from the host) where the site is in its cell.  A piece's root, its
    smallest index, is its first run in raster order: its first pixel needs no sum. */
-__kernel void pieces_measure(const uint m, __global const int2 *runs, __global const int *run_label,
+__kernel void pieces_measure(__global const uint *counts, __global const int2 *runs, __global const int *run_label,
                              volatile __global int *parent, __global int *root,
                              __global const int *site_at, __global int *site_piece)
 {
+    const uint m = counts[1]; /* the runs kept (the host sized the kernel without waiting for it) */
     const uint k = get_global_id(0);
     if (k >= m)
         return;
@@ -961,10 +963,11 @@ __kernel void pieces_measure(const uint m, __global const int2 *runs, __global c
 /* 3. per piece (at its root) its pixels, only in the cells whose site is not in them
    (on a wall, or off the raster): the others keep the site's piece whatever the sizes,
    so most runs need no atomic here */
-__kernel void pieces_size(const uint m, __global const int2 *runs, __global const int *run_label,
+__kernel void pieces_size(__global const uint *counts, __global const int2 *runs, __global const int *run_label,
                           __global const int *root, __global const int *site_piece,
                           volatile __global int *size)
 {
+    const uint m = counts[1]; /* the runs kept (the host sized the kernel without waiting for it) */
     const uint k = get_global_id(0);
     if (k >= m || site_piece[run_label[k]] >= 0)
         return;
@@ -972,10 +975,11 @@ __kernel void pieces_size(const uint m, __global const int2 *runs, __global cons
 }
 
 /* 4. per such cell the size of its largest piece */
-__kernel void pieces_largest(const uint m, __global const int *run_label, __global const int *root,
+__kernel void pieces_largest(__global const uint *counts, __global const int *run_label, __global const int *root,
                              __global const int *site_piece, __global const int *size,
                              volatile __global int *largest)
 {
+    const uint m = counts[1]; /* the runs kept (the host sized the kernel without waiting for it) */
     const uint k = get_global_id(0);
     if (k >= m || root[k] != (int)k)
         return;
@@ -986,10 +990,11 @@ __kernel void pieces_largest(const uint m, __global const int *run_label, __glob
 
 /* 5. per such cell, of its largest pieces the one that begins last in raster order: the
    one with the largest root */
-__kernel void pieces_last(const uint m, __global const int *run_label, __global const int *root,
+__kernel void pieces_last(__global const uint *counts, __global const int *run_label, __global const int *root,
                           __global const int *site_piece, __global const int *size,
                           __global const int *largest, volatile __global int *last)
 {
+    const uint m = counts[1]; /* the runs kept (the host sized the kernel without waiting for it) */
     const uint k = get_global_id(0);
     if (k >= m || root[k] != (int)k)
         return;
@@ -1001,11 +1006,12 @@ __kernel void pieces_last(const uint m, __global const int *run_label, __global 
 /* 6. the runs outside the piece their cell keeps (the site's piece, else the last of the
    largest): their sums are taken from their cell's (acc, as the label kernels left it),
    so the host reads the cut cells' sums and nothing else */
-__kernel void pieces_dropped(const uint m, __global const int2 *runs, __global const int *run_label,
+__kernel void pieces_dropped(__global const uint *counts, __global const int2 *runs, __global const int *run_label,
                              __global const int *root,
                              __global const int *site_piece, __global const int *last,
                              const int width, const int n, volatile __global acc_t *acc)
 {
+    const uint m = counts[1]; /* the runs kept (the host sized the kernel without waiting for it) */
     const uint k = get_global_id(0);
     if (k >= m)
         return;

@@ -172,19 +172,16 @@ def test_device_runs_and_their_top_and_bottom_counts_are_numpy_s(width, group, m
         # labels not from the label kernel: row_runs counts the run starts
         seg = opencl_module.RUN_SEGMENT
         units = (seg, ocl._buffer("run_places", 4 * -(-width // seg) * h), False)
-        kept, counts_buf, (pos_buf, label_buf), parent_buf, ends_buf, _ = ocl._suspect_runs(
+        counts_buf, (pos_buf, label_buf), parent_buf, ends_buf, _, _ = ocl._suspect_runs(
             make_metric("l2"), buf, width, h, n, units
         )
+        counts = np.empty(2, dtype=np.uint32)
+        ocl._read(counts, counts_buf)
+        kept = int(counts[1])
         listed, parent = np.empty((kept, 3), dtype=np.int32), np.empty(kept, dtype=np.int32)
         pos, label = np.empty((kept, 2), dtype=np.int32), np.empty(kept, dtype=np.int32)
-        ends, counts = np.empty((n, 2), dtype=np.uint32), np.empty(2, dtype=np.uint32)
-        for out, src in (
-            (pos, pos_buf),
-            (label, label_buf),
-            (parent, parent_buf),
-            (ends, ends_buf),
-            (counts, counts_buf),
-        ):
+        ends = np.empty((n, 2), dtype=np.uint32)
+        for out, src in ((pos, pos_buf), (label, label_buf), (parent, parent_buf), (ends, ends_buf)):
             ocl._read(out, src)
         listed[:, :2], listed[:, 2] = pos, label
     want = runs_of(labels)
@@ -220,8 +217,13 @@ def test_more_runs_than_the_buffer_holds_are_asked_for_again():
         ocl._run_room = 8
         got = WalledBackend(ocl).moments(sites, **args)
         assert ocl._run_room > 8
+        # the pieces kernels ran over fewer kept runs than there are: asked for again
+        ocl._kept_room = 8
+        again = WalledBackend(ocl).moments(sites, **args)
+        assert ocl._kept_room > 8
         want = split_moments(ocl.label(sites, **args), sites)
     np.testing.assert_array_equal(as_array(got), as_array(want))
+    np.testing.assert_array_equal(as_array(again), as_array(want))
 
 
 @needs_opencl
