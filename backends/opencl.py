@@ -55,19 +55,21 @@ from .base import Backend
 KERNEL_FILE = Path(__file__).with_name("opencl_kernels.cl")
 SEGMENT = 64  # pixels of a row per work-item of the moments kernel
 RUN_SEGMENT = 256  # pixels of a row per work-item of row_runs
-RUN_CHUNK = 1024  # runs per work-item of suspect_runs
+RUN_CHUNK = 128  # runs per work-item of suspect_runs
 # work-groups of the walled-cell kernels, fixed: the numbers of runs change every step,
 # and PoCL builds a kernel anew for each work-group size it is left to choose
 RUN_GROUP = (1, 16)  # row_runs: segments x rows
 LIST_GROUP = 64  # the kernels over listed runs
 WALL_KERNELS = (
     "prefix_sums",
+    "row_places",
     "row_runs",
     "suspect_cells",
     "suspect_count",
     "suspect_runs",
     "pieces_join",
     "pieces_measure",
+    "pieces_size",
     "pieces_largest",
     "pieces_last",
     "pieces_dropped",
@@ -299,6 +301,7 @@ class OpenCLBackend(Backend):
         self._fit_kernels: dict[tuple, object] = {}  # _fit_key -> fit kernel
         self._fits_on_device = "cl_khr_fp64" in self._device.extensions
         self._run_room = 1 << 16  # runs the suspect_runs buffer holds; grows as needed
+        self._kept_room = 0  # kept runs the pieces kernels run over (0: as many as held)
 
     # ------------------------------------------------------------------ device
     @classmethod
@@ -422,9 +425,11 @@ class OpenCLBackend(Backend):
         reach = metric.circumradius * float(scales.max()) * (1 + REACH_MARGIN)
         return records, k, reach
 
-    def _run_labels(self, sites, angles, scales, metric: Metric, grid: Grid, acc_buf=None):
+    def _run_labels(self, sites, angles, scales, metric: Metric, grid: Grid, acc_buf=None, run_starts=None):
         """Enqueue the label kernel; the labels stay in the device buffer 'labels'.  With
-        ``acc_buf`` (zeroed, block kernel only) the kernel also adds the moments to it."""
+        ``acc_buf`` (zeroed, block kernel only) the kernel also adds the moments to it;
+        with ``run_starts`` (block kernel only) it counts the run starts per strip and
+        row there, for the walled step's ``row_runs``."""
         n = len(sites)
         if self._queue is None:
             raise RuntimeError("opencl: this backend was closed; create a new one")
@@ -504,6 +509,8 @@ class OpenCLBackend(Backend):
             np.int32(seed and self.seed),
             self._buffer("moments", 4) if acc_buf is None else acc_buf,
             np.int32(acc_buf is not None),
+            self._buffer("run_places", 4) if run_starts is None else run_starts,
+            np.int32(run_starts is not None),
         )
         local = self.local_size
         if self.block > 0:  # one work-item per STRIP blocks of a row
@@ -537,14 +544,15 @@ class OpenCLBackend(Backend):
         acc_buf, _ = self._enqueue_moments(sites, angles, scales, metric, grid)
         return self._read_moments(acc_buf, len(sites))
 
-    def _enqueue_moments(self, sites, angles, scales, metric: Metric, grid: Grid):
-        """Enqueue the labels and their sums: (sums buffer, labels buffer)."""
+    def _enqueue_moments(self, sites, angles, scales, metric: Metric, grid: Grid, run_starts=None):
+        """Enqueue the labels and their sums: (sums buffer, labels buffer); ``run_starts``
+        as in :meth:`_run_labels`."""
         cl = self._cl
         n = len(sites)
         acc_buf = self._buffer("moments", ACC_BYTES * n)
         cl.enqueue_fill_buffer(self._queue, acc_buf, np.uint32(0), 0, ACC_BYTES * n)
         if self.block > 0:  # the block kernel sums its own labels
-            labels_buf, _ = self._run_labels(sites, angles, scales, metric, grid, acc_buf)
+            labels_buf, _ = self._run_labels(sites, angles, scales, metric, grid, acc_buf, run_starts)
         else:
             labels_buf, _ = self._run_labels(sites, angles, scales, metric, grid)
             _, moments_kernel = self._kernels(metric, _facet_count(metric))
@@ -585,87 +593,151 @@ class OpenCLBackend(Backend):
             group, size = (LIST_GROUP,), (-(-items // LIST_GROUP) * LIST_GROUP,)
         cl.enqueue_nd_range_kernel(self._queue, kernel, size, group)
 
-    def _suspect_runs(self, metric: Metric, labels_buf, w: int, h: int, n: int):
-        """List the runs of the labels in ``labels_buf`` in raster order (``row_runs``
-        counting, ``prefix_sums``, ``row_runs`` listing) and keep, in that order, those of the cells that
-        may be in pieces (``suspect_cells``, ``suspect_count``, ``prefix_sums``,
-        ``suspect_runs``), with one
-        wait: (runs kept, counts buffer, kept runs, their union-find parents, per-cell top
-        and bottom run counts).  The counts buffer holds (found, kept)."""
+    def _run_units(self, w: int, h: int):
+        """Where the walled step's run starts are counted: (pixels per unit of a row, the
+        buffer of counts per unit and row, whether the label kernel counts them)."""
+        counted = self.block > 0
+        unit = self.block * STRIP if counted else RUN_SEGMENT
+        return unit, self._buffer("run_places", 4 * -(-w // unit) * h), counted
+
+    def _suspect_runs(self, metric: Metric, labels_buf, w: int, h: int, n: int, units):
+        """List the runs of the labels in ``labels_buf`` in raster order (counted by the
+        label kernel or ``row_runs``' counting pass, as ``units`` from :meth:`_run_units`
+        says; placed by ``row_places`` and ``prefix_sums``; listed by ``row_runs``) and
+        keep, in that order, those of the cells that may be in pieces (``suspect_cells``,
+        ``suspect_count``, ``prefix_sums``, ``suspect_runs``), without a wait: (counts
+        buffer, kept runs, their union-find parents, per-cell top and bottom run counts,
+        (first kept run per row, piece sizes), the runs the buffers hold).  The counts
+        buffer holds (found, kept): where more were found than the buffers hold, the
+        lists are cut short and the caller asks again with more room."""
         cl, queue = self._cl, self._queue
         ends_buf, counts_buf = self._buffer("run_ends", 8 * n), self._buffer("run_counts", 8)
         suspect = self._buffer("suspect_cells", n)
-        segments = -(-w // RUN_SEGMENT)
-        rows = (segments, h)
+        unit, places, counted = units
+        rows = (-(-w // RUN_SEGMENT), h)
         scan = (np.int32(w), np.int32(h), np.int32(RUN_SEGMENT), labels_buf)
-        places = self._buffer("run_places", 4 * segments * h)
-        # the counting pass reads neither ends nor runs: any buffers do
+        row_base = self._buffer("run_row_base", 4 * h)
+        if not counted:  # the counting pass reads neither ends nor runs: any buffers do
+            args = (np.int32(1), places, np.int32(unit), row_base, places, np.uint32(0), places, places)
+            self._wall_kernel(metric, "row_runs", rows, *scan, *args)
         self._wall_kernel(
-            metric, "row_runs", rows, *scan, np.int32(1), places, ends_buf, np.uint32(0), places
+            metric, "row_places", h, np.int32(w), np.int32(h), np.int32(unit), labels_buf, places, row_base
         )
-        self._wall_kernel(metric, "prefix_sums", 1, np.uint32(segments * h), places, counts_buf, np.int32(0))
-        counts = np.zeros(2, dtype=np.uint32)
-        while True:
-            room = self._run_room
-            runs_buf, listed_buf = self._buffer("runs", 12 * room), self._buffer("suspect_runs", 12 * room)
-            parent = self._buffer("piece_parent", 4 * room)
-            chunks = max(1, -(-room // RUN_CHUNK))
-            chunk_places = self._buffer("chunk_places", 4 * (-(-chunks // LIST_GROUP) * LIST_GROUP))
-            cl.enqueue_fill_buffer(queue, ends_buf, np.uint32(0), 0, 8 * n)
-            listing = (np.int32(0), places, ends_buf, np.uint32(room), runs_buf)
-            self._wall_kernel(metric, "row_runs", rows, *scan, *listing)
-            self._wall_kernel(metric, "suspect_cells", n, np.int32(n), ends_buf, suspect)
-            args = (np.uint32(room), np.uint32(RUN_CHUNK), runs_buf, suspect, counts_buf)
-            self._wall_kernel(metric, "suspect_count", chunks, *args, chunk_places)
-            self._wall_kernel(
-                metric, "prefix_sums", 1, np.uint32(chunks), chunk_places, counts_buf, np.int32(1)
-            )
-            self._wall_kernel(metric, "suspect_runs", chunks, *args, chunk_places, listed_buf, parent)
-            self._read(counts, counts_buf)
-            if counts[0] <= room:
-                return int(counts[1]), counts_buf, listed_buf, parent, ends_buf
-            # too many to hold: again, with room
-            self._run_room = int(counts[0]) * 5 // 4
+        self._wall_kernel(metric, "prefix_sums", 1, np.uint32(h), row_base, counts_buf, np.int32(0))
+        room = self._run_room
+        # the runs found as (first pixel, length) and their labels apart: suspect_count
+        # reads the labels alone
+        runs_buf, labels_of = self._buffer("runs", 8 * room), self._buffer("run_labels", 4 * room)
+        # so are the runs kept: the pieces kernels read them a run per work-item
+        listed = (self._buffer("suspect_runs", 8 * room), self._buffer("suspect_labels", 4 * room))
+        parent = self._buffer("piece_parent", 4 * room)
+        # per kept run its piece's size (pieces_size), per row its first kept run
+        size, row_start = self._buffer("piece_size", 4 * room), self._buffer("piece_row_start", 4 * h)
+        cl.enqueue_fill_buffer(queue, row_start, np.int32(2**31 - 1), 0, 4 * h)
+        chunks = max(1, -(-room // RUN_CHUNK))
+        chunk_places = self._buffer("chunk_places", 4 * (-(-chunks // LIST_GROUP) * LIST_GROUP))
+        cl.enqueue_fill_buffer(queue, ends_buf, np.uint32(0), 0, 8 * n)
+        listing = (
+            np.int32(0),
+            places,
+            np.int32(unit),
+            row_base,
+            ends_buf,
+            np.uint32(room),
+            runs_buf,
+            labels_of,
+        )
+        self._wall_kernel(metric, "row_runs", rows, *scan, *listing)
+        self._wall_kernel(metric, "suspect_cells", n, np.int32(n), ends_buf, suspect)
+        args = (np.uint32(room), np.uint32(RUN_CHUNK), runs_buf, labels_of, suspect, counts_buf)
+        self._wall_kernel(metric, "suspect_count", chunks, *args, chunk_places)
+        self._wall_kernel(metric, "prefix_sums", 1, np.uint32(chunks), chunk_places, counts_buf, np.int32(1))
+        self._wall_kernel(
+            metric,
+            "suspect_runs",
+            chunks,
+            *args,
+            chunk_places,
+            *listed,
+            parent,
+            np.int32(w),
+            row_start,
+            size,
+        )
+        return counts_buf, listed, parent, ends_buf, (row_start, size), room
+
+    def _enqueue_pieces(self, metric: Metric, n: int, w: int, h: int, acc_buf, labels_buf, site_at, units):
+        """Enqueue the walled-cell kernels over the labels and sums the label kernel left,
+        with no wait before the sums are read: the pieces kernels run over as many runs
+        as the last call kept (and half as many again), and read how many were kept on the
+        device.  Returns (moments, counts (found, kept), the runs the buffers hold, the
+        runs the pieces kernels ran over): the moments hold only where found <= held and
+        kept <= ran over."""
+        cl = self._cl
+        site_piece, largest = self._buffer("site_piece", 4 * n), self._buffer("largest", 4 * n)
+        last = self._buffer("last_largest", 4 * n)
+        # the per-cell slots the pieces kernels fill start empty (suspect_runs empties
+        # the per-piece sizes)
+        for buf, value in ((site_piece, -1), (largest, 0), (last, -1)):
+            cl.enqueue_fill_buffer(self._queue, buf, np.int32(value), 0, 4 * n)
+        counts_buf, listed, parent, _, (row_start, size), room = self._suspect_runs(
+            metric, labels_buf, w, h, n, units
+        )
+        bound = min(room, self._kept_room or room)
+        root = self._buffer("piece_root", 4 * room)
+
+        def run(name, *args):
+            self._wall_kernel(metric, name, bound, counts_buf, *args)
+
+        self._wall_kernel(
+            metric, "pieces_join", h, counts_buf, np.int32(w), np.int32(h), *listed, row_start, parent
+        )
+        run("pieces_measure", *listed, parent, root, site_at, site_piece)
+        run("pieces_size", *listed, root, site_piece, size)
+        run("pieces_largest", listed[1], root, site_piece, size, largest)
+        run("pieces_last", listed[1], root, site_piece, size, largest, last)
+        run("pieces_dropped", *listed, root, site_piece, last, np.int32(w), np.int32(n), acc_buf)
+        counts = np.empty(2, dtype=np.uint32)
+        cl.enqueue_copy(self._queue, counts, counts_buf, is_blocking=False)  # before the sums: in order
+        return self._read_moments(acc_buf, n), counts, room, bound
 
     def _walled_moments(self, sites, angles, scales, metric: Metric, grid: Grid) -> Moments:
         """The moments of the labels with each cell cut to the piece it keeps, found on
         the device: ``row_runs`` lists the runs and counts each cell's top and bottom
         runs, ``suspect_runs`` keeps the runs of the cells that may be in pieces, the
         ``pieces_*`` kernels find their pieces and take the sums of the runs of those not
-        kept from their cells' sums; the host reads 5·N sums (never the raster).  The
-        host waits twice: for the number of kept runs, and for the sums."""
+        kept from their cells' sums; the host reads 5·N sums (never the raster) and the
+        runs' counts, and waits once, for these.  Where the runs outnumber the buffers, or
+        the kept runs the pieces kernels ran over, it labels again with room for them."""
         cl = self._cl
         n = len(sites)
         w, h = grid.width, grid.height
         # each site's pixel, for pieces_measure: sent now, without a wait (the array lives
-        # until the sums are read), so that nothing is left to send once the runs are kept
+        # until the sums are read)
         i, j = pixel_index(sites, w, h)
         site_pixel = (i * w + j).astype(np.int32)
         site_at = self._buffer("site_at", site_pixel.nbytes)
         cl.enqueue_copy(self._queue, site_at, site_pixel, is_blocking=False)
-        acc_buf, labels_buf = self._enqueue_moments(sites, angles, scales, metric, grid)
-
-        def run(name, m, *args):
-            self._wall_kernel(metric, name, m, np.uint32(m), *args)
+        units = self._run_units(w, h)
+        acc_buf, labels_buf = self._enqueue_moments(
+            sites, angles, scales, metric, grid, units[1] if units[2] else None
+        )
 
         try:
-            site_piece, largest = self._buffer("site_piece", 4 * n), self._buffer("largest", 4 * n)
-            last = self._buffer("last_largest", 4 * n)
-            # the per-cell slots the pieces kernels fill start empty (pieces_join empties
-            # the per-piece sizes): enqueued now, so that only kernels follow the wait below
-            for buf, value in ((site_piece, -1), (largest, 0), (last, -1)):
-                cl.enqueue_fill_buffer(self._queue, buf, np.int32(value), 0, 4 * n)
-            m, counts_buf, listed_buf, parent, _ = self._suspect_runs(metric, labels_buf, w, h, n)
-            if m == 0:
-                return self._read_moments(acc_buf, n)
-            root, size = self._buffer("piece_root", 4 * m), self._buffer("piece_size", 4 * m)
-            run("pieces_join", m, np.int32(w), listed_buf, parent, size)
-            run("pieces_measure", m, listed_buf, parent, root, size, site_at, site_piece)
-            run("pieces_largest", m, listed_buf, root, size, largest)
-            run("pieces_last", m, listed_buf, root, size, largest, last)
-            args = (np.int32(w), np.int32(n), acc_buf)
-            run("pieces_dropped", m, listed_buf, root, site_piece, last, *args)
-            return self._read_moments(acc_buf, n)
+            while True:
+                mom, counts, room, bound = self._enqueue_pieces(
+                    metric, n, w, h, acc_buf, labels_buf, site_at, units
+                )
+                # the next call's kept runs are about as many (Lloyd steps move the sites
+                # less and less): the pieces kernels run over half as many again
+                self._kept_room = int(counts[1]) * 3 // 2 + LIST_GROUP
+                if counts[0] <= room and counts[1] <= bound:
+                    return mom
+                if counts[0] > room:  # too many to hold (and kept of a list cut short)
+                    self._run_room, self._kept_room = int(counts[0]) * 5 // 4, 0
+                acc_buf, labels_buf = self._enqueue_moments(
+                    sites, angles, scales, metric, grid, units[1] if units[2] else None
+                )
         except cl.Error as exc:
             raise BackendUnavailable(
                 f"opencl: walled-cell kernels failed on {self.device()}: {exc}"

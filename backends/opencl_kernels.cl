@@ -118,7 +118,8 @@ inline void flush_run(volatile __global acc_t *acc, const int n, const int site,
         __global const float4 *site_pos,                                                \
         __global const int *site_index, __global const uchar *mask, const int use_mask, \
         __global int *labels, __global const int *site_rank, const int n, const int seed, \
-        volatile __global acc_t *acc, const int sums
+        volatile __global acc_t *acc, const int sums, __global uint *run_starts,        \
+        const int count_starts
 
 /* One work-item per pixel: the nearest site, searched over a uniform grid of cells ring
    by ring (Chebyshev rings of cells around the pixel's cell).
@@ -246,6 +247,16 @@ typedef CAT(uint, BW) rowu;
 typedef CAT(float, BW) rowf;
 #define load_row CAT(vload, BW)
 __constant int LANES[16] = {0, 1, 2, 3, 4, 5, 6, 7, 8, 9, 10, 11, 12, 13, 14, 15};
+/* shuffle2(row, other, SHIFT_UP): other's lane 0, then row's lanes 0 .. BW - 2 */
+__constant uint SHIFT_UP[16] = {BW, 0, 1, 2, 3, 4, 5, 6, 7, 8, 9, 10, 11, 12, 13, 14};
+#if BW == 16
+#define LAST_LANE f
+#else
+#define LAST_LANE SUB1(BW)
+#endif
+#define SUB1(b) CAT(SUB1_, b)
+#define SUB1_4 3
+#define SUB1_8 7
 
 /* the largest, the sum and the smallest of a row's lanes, by halving */
 inline float hmaxf(rowf v)
@@ -556,13 +567,32 @@ __kernel void label_blocks(LABEL_KERNEL_ARGS)
     }
     sums_table table;
     table.used = 0;
+    /* with count_starts, per row of the strip the runs of the region that begin in it,
+       its first pixel left out (its left neighbour is another work-item's): the walled
+       step's row_places adds it, so row_runs needs no counting pass */
+    const rowi lanes = load_row(0, LANES);
+    rowi begins[BH];
+    int last[BH]; /* per row, the label of the pixel left of the block */
+    for (int yy = 0; yy < BH; ++yy) {
+        begins[yy] = (rowi)(0);
+        last[yy] = -1;
+    }
     for (int g = 0; g < STRIP; ++g) {
-        if (!on[g])
+        if (!on[g]) {
+            if (xs0 + g * BW < width) /* a block with no pixel of the region */
+                for (int yy = 0; yy < BH; ++yy)
+                    last[yy] = -1;
             continue;
+        }
         const int x0 = xs0 + g * BW;
         const int xn = x0 + BW < width ? BW : width - x0;
         for (int yy = 0; yy < yn; ++yy) {
             const rowi row = load_row(0, live[g][yy]) != 0 ? load_row(0, best_idx[g][yy]) : (rowi)(-1);
+            if (count_starts) { /* each lane's left neighbour: the row moved one lane up */
+                const rowi left = shuffle2(row, (rowi)(last[yy]), load_row(0, SHIFT_UP));
+                begins[yy] += (row >= 0) & (row != left) & (lanes >= (g == 0));
+                last[yy] = row.CAT(s, LAST_LANE);
+            }
             if (xn == BW)
                 CAT(vstore, BW)(row, 0, labels + (y0 + yy) * width + x0);
             else
@@ -574,6 +604,11 @@ __kernel void label_blocks(LABEL_KERNEL_ARGS)
     }
     if (sums)
         flush_table(acc, n, &table);
+    if (count_starts) {
+        const int strips = (width + STRIP * BW - 1) / (STRIP * BW);
+        for (int yy = 0; yy < yn; ++yy)
+            run_starts[(y0 + yy) * strips + get_global_id(0)] = (uint)(-hsum(begins[yy]));
+    }
 }
 
 /* Per-site integer sums (count, Σj, Σi, Σj², Σi²) of the label raster.  One work-item
@@ -653,21 +688,51 @@ __kernel void prefix_sums(const uint count, __global uint *values, __global uint
     totals[slot] = s;
 }
 
-/* One work-item per segment of `seg` pixels of a row (a multiple of 16) takes the runs of
-   the region that begin in it (a run may reach past the segment's end).  With `count`
-   set it only counts them, at places[i * segments + s] for segment s of row i;
-   prefix_sums makes these the places of the segments' first runs.  Then (`count` 0) it
-   lists each as (first pixel, length, label) at runs[3 k ..], k from its segment's
-   place (so the runs are in raster order), and ends[2 l], ends[2 l + 1] count the top
-   and bottom runs of cell l (zeroed by the host).  Runs beyond `room` are not written
-   (the host then asks again with more room).
+/* Per row (a work-item each) the places of its units' first runs (unit: `unit` pixels
+   of the row) within the row, from the counts of the runs that begin in each unit,
+   which label_blocks (per strip) or row_runs' counting pass (per segment) left at
+   places[i * units + u], less the unit's first pixel (there the left neighbour is
+   another work-item's): added here, then an exclusive prefix sum along the row, the
+   row's total at totals[i] (prefix_sums makes these the rows' places). */
+__kernel void row_places(const int width, const int height, const int unit,
+                         __global const int *labels, __global uint *places, __global uint *totals)
+{
+    const int i = get_global_id(0);
+    if (i >= height)
+        return;
+    const int units = (width + unit - 1) / unit;
+    __global const int *row = labels + (size_t)i * width;
+    __global uint *place = places + (size_t)i * units;
+    uint s = 0;
+    for (int u = 0; u < units; ++u) {
+        const int j = u * unit;
+        const uint c = place[u] + (row[j] >= 0 && (j == 0 || row[j - 1] != row[j]));
+        place[u] = s;
+        s += c;
+    }
+    totals[i] = s;
+}
+
+/* One work-item per segment of `seg` pixels of a row (a multiple of 16 and of `unit`)
+   takes the runs of the region that begin in it (a run may reach past the segment's
+   end).  With `count` set it only counts them, its first pixel left out, at
+   places[i * segments + s] for segment s of row i (then `unit` is `seg`); row_places
+   and prefix_sums make row_base[i] + places[i * units + u] the place of the first run
+   of unit u of row i.  Then (`count` 0) it lists each as (first pixel, length) at
+   runs[k] and its label at run_label[k] (apart: suspect_count reads the labels alone),
+   k from its segment's place (so the runs are in raster order), and
+   ends[2 l], ends[2 l + 1] count the top and bottom runs of cell l (zeroed by the
+   host).  Runs beyond `room` are not written (the host then asks again with more
+   room).
 
    The row is read 16 pixels at a time: where the label changes, and where a pixel has
    its own label straight above and below, as bits; a run's part of a chunk is a range
    of bits, so the work per chunk is per run, not per pixel. */
 __kernel void row_runs(const int width, const int height, const int seg,
                        __global const int *labels, const int count, __global uint *places,
-                       volatile __global uint *ends, const uint room, __global int *runs)
+                       const int unit, __global const uint *row_base,
+                       volatile __global uint *ends, const uint room, __global int2 *runs,
+                       __global int *run_label)
 {
     const int i = get_global_id(1);
     const int j0 = get_global_id(0) * seg;
@@ -675,21 +740,23 @@ __kernel void row_runs(const int width, const int height, const int seg,
         return;
     const int j1 = j0 + seg < width ? j0 + seg : width;
     __global const int *row = labels + (size_t)i * width;
-    /* segments per row counted from the raster, not the global size (padded to the
+    /* units per row counted from the raster, not the global size (padded to the
        work-group) */
-    __global uint *place = places + i * ((width + seg - 1) / seg) + get_global_id(0);
+    const int units = (width + unit - 1) / unit;
+    __global uint *place = places + (size_t)i * units + get_global_id(0) * (seg / unit);
     if (count) {
         uint mine = 0;
         for (int j = j0; j < j1; j += 16) {
             const int16 l = row16(row, j, width);
-            const uint begin = lane_bits((l >= 0) & (l != row16(row, j - 1, width)));
+            uint begin = lane_bits((l >= 0) & (l != row16(row, j - 1, width)));
+            begin &= j == j0 ? ~1u : ~0u; /* the first pixel: row_places */
             mine += popcount(j1 - j < 16 ? begin & ((1u << (j1 - j)) - 1) : begin);
         }
         *place = mine;
         return;
     }
     __global const int *above = row - width, *below = row + width; /* read only in the raster */
-    uint k = *place;
+    uint k = row_base[i] + *place;
     int cur = -1, start = 0; /* the open run: its label (-1: none of ours) and first pixel */
     uint up = 0, down = 0;   /* whether a pixel of it has its label above, below */
     for (int j = j0;; j += 16) {
@@ -700,9 +767,8 @@ __kernel void row_runs(const int width, const int height, const int seg,
                 if (!down)
                     atomic_inc(ends + 2 * cur + 1);
                 if (k < room) {
-                    runs[3 * k] = i * width + start;
-                    runs[3 * k + 1] = width - start;
-                    runs[3 * k + 2] = cur;
+                    runs[k] = (int2)(i * width + start, width - start);
+                    run_label[k] = cur;
                 }
             }
             break;
@@ -724,9 +790,8 @@ __kernel void row_runs(const int width, const int height, const int seg,
                 if (!(down || (same_down & part)))
                     atomic_inc(ends + 2 * cur + 1);
                 if (k < room) {
-                    runs[3 * k] = i * width + start;
-                    runs[3 * k + 1] = j + t - start;
-                    runs[3 * k + 2] = cur;
+                    runs[k] = (int2)(i * width + start, j + t - start);
+                    run_label[k] = cur;
                 }
                 ++k;
             }
@@ -749,8 +814,11 @@ __kernel void row_runs(const int width, const int height, const int seg,
    (a byte each: the runs' lookups stay in the first-level cache, where the run counts
    would not); with one work-item per `chunk` runs, suspect_count counts their runs at
    places[c] for chunk c; prefix_sums makes these places (their total at counts[1]);
-   suspect_runs copies them there, to out[3 k ..], so that they stay in raster order,
-   each its own piece (parent[k] = k). */
+   suspect_runs copies them there, to out[k] and out_label[k], so that they stay in
+   raster order, each its own piece (parent[k] = k, its size 0), and leaves the first
+   kept run of each row at row_start (filled with INT_MAX by the host) for pieces_join.
+   The labels stay apart from the (first pixel, length) pairs: the kernels over runs
+   read whole vectors of them. */
 __kernel void suspect_cells(const int n, __global const uint *ends, __global uchar *suspect)
 {
     const int l = get_global_id(0);
@@ -758,8 +826,8 @@ __kernel void suspect_cells(const int n, __global const uint *ends, __global uch
         suspect[l] = (ends[2 * l] > 1) & (ends[2 * l + 1] > 1);
 }
 
-__kernel void suspect_count(const uint room, const uint chunk, __global const int *runs,
-                            __global const uchar *suspect, __global const uint *counts,
+__kernel void suspect_count(const uint room, const uint chunk, __global const int2 *runs,
+                            __global const int *run_label, __global const uchar *suspect, __global const uint *counts,
                             __global uint *places)
 {
     const uint total = counts[0] < room ? counts[0] : room;
@@ -771,14 +839,15 @@ __kernel void suspect_count(const uint room, const uint chunk, __global const in
     const uint r1 = r0 + chunk < total ? r0 + chunk : total;
     uint mine = 0;
     for (uint r = r0; r < r1; ++r)
-        mine += suspect[runs[3 * r + 2]];
+        mine += suspect[run_label[r]];
     places[c] = mine;
 }
 
-__kernel void suspect_runs(const uint room, const uint chunk, __global const int *runs,
-                           __global const uchar *suspect, __global const uint *counts,
-                           __global const uint *places, __global int *out,
-                           __global int *parent)
+__kernel void suspect_runs(const uint room, const uint chunk, __global const int2 *runs,
+                           __global const int *run_label, __global const uchar *suspect, __global const uint *counts,
+                           __global const uint *places, __global int2 *out,
+                           __global int *out_label, __global int *parent, const int width,
+                           volatile __global int *row_start, __global int *size)
 {
     const uint total = counts[0] < room ? counts[0] : room;
     const uint r0 = get_global_id(0) * chunk;
@@ -786,13 +855,19 @@ __kernel void suspect_runs(const uint room, const uint chunk, __global const int
         return;
     const uint r1 = r0 + chunk < total ? r0 + chunk : total;
     uint k = places[get_global_id(0)];
+    int row = -1; /* the row of the last run kept here */
     for (uint r = r0; r < r1; ++r) {
-        const int l = runs[3 * r + 2];
+        const int l = run_label[r];
         if (suspect[l]) {
-            out[3 * k] = runs[3 * r];
-            out[3 * k + 1] = runs[3 * r + 1];
-            out[3 * k + 2] = l;
+            const int2 run = runs[r];
+            out[k] = run;
+            out_label[k] = l;
             parent[k] = (int)k;
+            size[k] = 0;
+            if (run.x >= (row + 1) * width) { /* the first kept here on its row */
+                row = run.x / width;
+                atomic_min(row_start + row, (int)k);
+            }
             ++k;
         }
     }
@@ -825,115 +900,126 @@ inline int piece_root(volatile __global int *parent, int x)
     return x;
 }
 
-/* 1. each run joins the runs of its cell in the row above that touch it: the listed runs
-   are in raster order, so those are the runs from the last one that begins at or
-   before the pixel above the run's first (a search) to the last one that begins
-   above it; and it empties its slot of pieces_measure's sizes */
-__kernel void pieces_join(const uint m, const int width, __global const int *runs,
-                          volatile __global int *parent, __global int *size)
+/* 1. each row (a work-item) joins each of its runs to the runs of its cell in the row
+   above that touch it, walking both rows' runs in order at once (both are in raster
+   order in the list; suspect_runs left each row's first at row_start, INT_MAX on a row
+   without any) */
+__kernel void pieces_join(__global const uint *counts, const int width, const int height,
+                          __global const int2 *runs, __global const int *run_label,
+                          __global const int *row_start, volatile __global int *parent)
 {
-    const uint k = get_global_id(0);
-    if (k >= m)
+    const uint m = counts[1]; /* the runs kept (the host sized the kernel without waiting for it) */
+    const int i = get_global_id(0);
+    if (i < 1 || i >= height || row_start[i] == INT_MAX || row_start[i - 1] == INT_MAX)
         return;
-    size[k] = 0;
-    const int p = runs[3 * k], len = runs[3 * k + 1], l = runs[3 * k + 2];
-    if (p < width)
-        return; /* the top row */
-    const int q = p - width; /* the pixel above the run's first */
-    /* the first run that begins past q, in [lo, hi]: found by steps back from k that
-       double (the runs of the row above are near, and so are their cache lines), then
-       halving */
-    int lo = 0, hi = (int)k;
-    for (int step = 1; hi - step >= 0; step *= 2) {
-        if (runs[3 * (hi - step)] <= q) {
-            lo = hi - step + 1;
-            break;
-        }
-        hi -= step;
-    }
-    while (lo < hi) {
-        const int mid = (lo + hi) / 2;
-        if (runs[3 * mid] <= q)
-            lo = mid + 1;
-        else
-            hi = mid;
-    }
-    for (int r = lo > 0 ? lo - 1 : 0; r < (int)k && runs[3 * r] < q + len; ++r) {
-        if (runs[3 * r + 2] != l || runs[3 * r] + runs[3 * r + 1] <= q)
-            continue; /* another cell's, or one that ends before (on an earlier row) */
-        int a = (int)k, b = r;
-        for (;;) {
-            a = piece_root(parent, a);
-            b = piece_root(parent, b);
-            if (a == b)
-                break;
-            const int hi_ = a > b ? a : b, lo_ = a > b ? b : a;
-            const int old = atomic_min(parent + hi_, lo_);
-            if (old == hi_)
-                break;
-            a = old; /* hi_ was linked meanwhile: join its new root */
-            b = lo_;
+    int r = row_start[i - 1]; /* the first run above that may touch the current one */
+    const int above_end = row_start[i], next_row = (i + 1) * width;
+    for (int k = above_end; k < (int)m && runs[k].x < next_row; ++k) {
+        const int2 run = runs[k];
+        const int q = run.x - width; /* the pixel above the run's first */
+        const int l = run_label[k];
+        while (r < above_end && runs[r].x + runs[r].y <= q)
+            ++r; /* ends before the run begins: before the next ones too */
+        for (int t = r; t < above_end && runs[t].x < q + run.y; ++t) {
+            if (run_label[t] != l)
+                continue;
+            int a = k, b = t;
+            for (;;) {
+                a = piece_root(parent, a);
+                b = piece_root(parent, b);
+                if (a == b)
+                    break;
+                const int hi_ = a > b ? a : b, lo_ = a > b ? b : a;
+                const int old = atomic_min(parent + hi_, lo_);
+                if (old == hi_)
+                    break;
+                a = old; /* hi_ was linked meanwhile: join its new root */
+                b = lo_;
+            }
         }
     }
 }
 
-/* 2. per piece (at its root) its pixels; per cell the piece that holds its site's pixel
+/* 2. per run its piece (root); per cell the piece that holds its site's pixel
    (site_at[l], from the host) where the site is in its cell.  A piece's root, its
    smallest index, is its first run in raster order: its first pixel needs no sum. */
-__kernel void pieces_measure(const uint m, __global const int *runs, volatile __global int *parent,
-                             __global int *root, volatile __global int *size,
+__kernel void pieces_measure(__global const uint *counts, __global const int2 *runs, __global const int *run_label,
+                             volatile __global int *parent, __global int *root,
                              __global const int *site_at, __global int *site_piece)
 {
+    const uint m = counts[1]; /* the runs kept (the host sized the kernel without waiting for it) */
     const uint k = get_global_id(0);
     if (k >= m)
         return;
-    const int p = runs[3 * k], len = runs[3 * k + 1], l = runs[3 * k + 2];
+    const int2 run = runs[k];
+    const int l = run_label[k];
     const int r = piece_root(parent, (int)k);
     root[k] = r;
-    atomic_add(size + r, len);
     const int s = site_at[l];
-    if (p <= s && s < p + len)
+    if (run.x <= s && s < run.x + run.y)
         site_piece[l] = r; /* one run holds the site's pixel: one writer */
 }
 
-/* 3. per cell the size of its largest piece */
-__kernel void pieces_largest(const uint m, __global const int *runs, __global const int *root,
-                             __global const int *size, volatile __global int *largest)
+/* 3. per piece (at its root) its pixels, only in the cells whose site is not in them
+   (on a wall, or off the raster): the others keep the site's piece whatever the sizes,
+   so most runs need no atomic here */
+__kernel void pieces_size(__global const uint *counts, __global const int2 *runs, __global const int *run_label,
+                          __global const int *root, __global const int *site_piece,
+                          volatile __global int *size)
 {
+    const uint m = counts[1]; /* the runs kept (the host sized the kernel without waiting for it) */
     const uint k = get_global_id(0);
-    if (k >= m || root[k] != (int)k)
+    if (k >= m || site_piece[run_label[k]] >= 0)
         return;
-    atomic_max(largest + runs[3 * k + 2], size[k]);
+    atomic_add(size + root[k], runs[k].y);
 }
 
-/* 4. per cell, of its largest pieces the one that begins last in raster order: the one
-   with the largest root */
-__kernel void pieces_last(const uint m, __global const int *runs, __global const int *root,
-                          __global const int *size, __global const int *largest,
-                          volatile __global int *last)
+/* 4. per such cell the size of its largest piece */
+__kernel void pieces_largest(__global const uint *counts, __global const int *run_label, __global const int *root,
+                             __global const int *site_piece, __global const int *size,
+                             volatile __global int *largest)
 {
+    const uint m = counts[1]; /* the runs kept (the host sized the kernel without waiting for it) */
     const uint k = get_global_id(0);
     if (k >= m || root[k] != (int)k)
         return;
-    const int l = runs[3 * k + 2];
-    if (size[k] == largest[l])
+    const int l = run_label[k];
+    if (site_piece[l] < 0)
+        atomic_max(largest + l, size[k]);
+}
+
+/* 5. per such cell, of its largest pieces the one that begins last in raster order: the
+   one with the largest root */
+__kernel void pieces_last(__global const uint *counts, __global const int *run_label, __global const int *root,
+                          __global const int *site_piece, __global const int *size,
+                          __global const int *largest, volatile __global int *last)
+{
+    const uint m = counts[1]; /* the runs kept (the host sized the kernel without waiting for it) */
+    const uint k = get_global_id(0);
+    if (k >= m || root[k] != (int)k)
+        return;
+    const int l = run_label[k];
+    if (site_piece[l] < 0 && size[k] == largest[l])
         atomic_max(last + l, (int)k);
 }
 
-/* 5. the runs outside the piece their cell keeps (the site's piece, else the last of the
+/* 6. the runs outside the piece their cell keeps (the site's piece, else the last of the
    largest): their sums are taken from their cell's (acc, as the label kernels left it),
    so the host reads the cut cells' sums and nothing else */
-__kernel void pieces_dropped(const uint m, __global const int *runs, __global const int *root,
+__kernel void pieces_dropped(__global const uint *counts, __global const int2 *runs, __global const int *run_label,
+                             __global const int *root,
                              __global const int *site_piece, __global const int *last,
                              const int width, const int n, volatile __global acc_t *acc)
 {
+    const uint m = counts[1]; /* the runs kept (the host sized the kernel without waiting for it) */
     const uint k = get_global_id(0);
     if (k >= m)
         return;
-    const int l = runs[3 * k + 2];
+    const int l = run_label[k];
     const int own = site_piece[l];
     if (root[k] == (own >= 0 ? own : last[l]))
         return;
-    const int p = runs[3 * k], i = p / width, j = p - i * width;
-    flush_run(acc, n, l, j, j + runs[3 * k + 1] - 1, i, (ulong)0 - 1);
+    const int2 run = runs[k];
+    const int i = run.x / width, j = run.x - i * width;
+    flush_run(acc, n, l, j, j + run.y - 1, i, (ulong)0 - 1);
 }

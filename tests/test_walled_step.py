@@ -169,13 +169,21 @@ def test_device_runs_and_their_top_and_bottom_counts_are_numpy_s(width, group, m
     labels[5:15, 3:30] = n - 1  # one block: one top and one bottom run
     with OpenCLBackend() as ocl:
         buf = ocl._upload("labels_under_test", labels)
-        kept, counts_buf, listed_buf, parent_buf, ends_buf = ocl._suspect_runs(
-            make_metric("l2"), buf, width, h, n
+        # labels not from the label kernel: row_runs counts the run starts
+        seg = opencl_module.RUN_SEGMENT
+        units = (seg, ocl._buffer("run_places", 4 * -(-width // seg) * h), False)
+        counts_buf, (pos_buf, label_buf), parent_buf, ends_buf, _, _ = ocl._suspect_runs(
+            make_metric("l2"), buf, width, h, n, units
         )
+        counts = np.empty(2, dtype=np.uint32)
+        ocl._read(counts, counts_buf)
+        kept = int(counts[1])
         listed, parent = np.empty((kept, 3), dtype=np.int32), np.empty(kept, dtype=np.int32)
-        ends, counts = np.empty((n, 2), dtype=np.uint32), np.empty(2, dtype=np.uint32)
-        for out, src in ((listed, listed_buf), (parent, parent_buf), (ends, ends_buf), (counts, counts_buf)):
+        pos, label = np.empty((kept, 2), dtype=np.int32), np.empty(kept, dtype=np.int32)
+        ends = np.empty((n, 2), dtype=np.uint32)
+        for out, src in ((pos, pos_buf), (label, label_buf), (parent, parent_buf), (ends, ends_buf)):
             ocl._read(out, src)
+        listed[:, :2], listed[:, 2] = pos, label
     want = runs_of(labels)
     assert counts[0] == len(want) and counts[1] == kept
     np.testing.assert_array_equal(ends, [run_ends(labels, c) for c in range(n)])
@@ -209,8 +217,13 @@ def test_more_runs_than_the_buffer_holds_are_asked_for_again():
         ocl._run_room = 8
         got = WalledBackend(ocl).moments(sites, **args)
         assert ocl._run_room > 8
+        # the pieces kernels ran over fewer kept runs than there are: asked for again
+        ocl._kept_room = 8
+        again = WalledBackend(ocl).moments(sites, **args)
+        assert ocl._kept_room > 8
         want = split_moments(ocl.label(sites, **args), sites)
     np.testing.assert_array_equal(as_array(got), as_array(want))
+    np.testing.assert_array_equal(as_array(again), as_array(want))
 
 
 @needs_opencl
@@ -227,3 +240,60 @@ def test_a_walled_mosaic_has_the_same_sites_on_either_path(monkeypatch):
         host = make_mosaic(SAMPLES_DIR / "scene.jpg", ocl, **run)
     assert fast.problem.grid.mask is not None and not fast.problem.grid.mask.all()
     np.testing.assert_array_equal(fast.sites, host.sites)
+
+
+@needs_opencl
+@pytest.mark.parametrize("block", [4, 8, 16])
+@pytest.mark.parametrize("n", [120, 24])
+def test_the_block_kernel_counts_each_strip_rows_run_starts(block, n):
+    """With run_starts the label kernel leaves, per strip of STRIP blocks and row, the
+    runs of the region that begin in it, its first pixel left out (row_places adds it):
+    NumPy's count from the labels, on a raster whose width and height are not multiples
+    of the strip or the block, with walls, and a wall band of whole blocks inside a strip
+    with the same cell on both sides (the block after it begins no run)."""
+    sites, args = walled_case("linf", seed=4, w=203, h=61, n=n)
+    mask = args["grid"].mask.copy()
+    band = (5 * block, 7 * block)  # the strip's second and third blocks
+    mask[:, band[0] : band[1]] = False
+    args["grid"] = Grid(203, 61, mask)
+    sites[21], args["scales"][21] = (6.0 * block, 30.0), 4.0  # a large cell over the band
+    with OpenCLBackend(block=block) as ocl:
+        unit, places, counted = ocl._run_units(203, 61)
+        assert counted and unit == block * opencl_module.STRIP
+        acc = ocl._buffer("moments", opencl_module.ACC_BYTES * len(sites))
+        labels_buf, _ = ocl._run_labels(sites, **args, acc_buf=acc, run_starts=places)
+        labels = np.empty((61, 203), dtype=np.int32)
+        ocl._read(labels, labels_buf)
+        strips = -(-203 // unit)
+        got = np.empty((61, strips), dtype=np.uint32)
+        ocl._read(got, places)
+    left = np.concatenate([np.full((61, 1), -2), labels[:, :-1]], axis=1)
+    begins = (labels >= 0) & (labels != left)
+    begins[:, ::unit] = False
+    want = np.add.reduceat(begins, np.arange(0, 203, unit), axis=1)
+    assert want.sum() > 150 and (labels < 0).any()
+    if n == 24:
+        left, right = labels[:, band[0] - 1], labels[:, band[1]]
+        assert ((left >= 0) & (left == right)).any()
+    np.testing.assert_array_equal(got, want)
+
+
+@needs_opencl
+def test_pieces_join_walks_rows_without_kept_runs_and_tall_cells():
+    """pieces_join works a row each: rows without any run of a cell that may be in
+    pieces (wall rows across the whole raster), cells taller than a work-group of rows,
+    a raster whose height is not a multiple of it.  The moments are the host split's."""
+    w, h = 90, 150
+    mask = np.ones((h, w), dtype=bool)
+    mask[70, :] = False  # a wall row: no runs on it
+    mask[20:130, 45] = False  # a wall that ends inside cells: U-shaped cells around its ends
+    mask[40, 10:80] = False
+    sites = np.array([[20.0, 30.0], [70.0, 30.0], [45.0, 20.0], [45.0, 120.0], [20.0, 100.0], [45.0, 70.0]])
+    l2 = make_metric("l2")
+    grid = Grid(w, h, mask)
+    with OpenCLBackend() as ocl:
+        labels = ocl.label(sites, metric=l2, grid=grid)
+        got = ocl.walled_moments(sites, metric=l2, grid=grid)
+    cut = split_cells(labels, sites)
+    assert not np.array_equal(cut, labels) and (labels[70] < 0).all()
+    np.testing.assert_array_equal(as_array(got), hand_moments(cut, len(sites)))
