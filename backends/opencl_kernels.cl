@@ -900,6 +900,14 @@ inline int piece_root(volatile __global int *parent, int x)
     return x;
 }
 
+/* The pieces kernels run over as many work-items as the host expected kept runs, without
+   waiting for their count: k is this work-item's kept run, and those past the count
+   (counts[1]) stop here. */
+#define KEPT_RUN_OR_RETURN(k)        \
+    const uint k = get_global_id(0); \
+    if (k >= counts[1])              \
+        return
+
 /* 1. each row (a work-item) joins each of its runs to the runs of its cell in the row
    above that touch it, walking both rows' runs in order at once (both are in raster
    order in the list; suspect_runs left each row's first at row_start, INT_MAX on a row
@@ -947,10 +955,7 @@ __kernel void pieces_measure(__global const uint *counts, __global const int2 *r
                              volatile __global int *parent, __global int *root,
                              __global const int *site_at, __global int *site_piece)
 {
-    const uint m = counts[1]; /* the runs kept (the host sized the kernel without waiting for it) */
-    const uint k = get_global_id(0);
-    if (k >= m)
-        return;
+    KEPT_RUN_OR_RETURN(k);
     const int2 run = runs[k];
     const int l = run_label[k];
     const int r = piece_root(parent, (int)k);
@@ -967,9 +972,8 @@ __kernel void pieces_size(__global const uint *counts, __global const int2 *runs
                           __global const int *root, __global const int *site_piece,
                           volatile __global int *size)
 {
-    const uint m = counts[1]; /* the runs kept (the host sized the kernel without waiting for it) */
-    const uint k = get_global_id(0);
-    if (k >= m || site_piece[run_label[k]] >= 0)
+    KEPT_RUN_OR_RETURN(k);
+    if (site_piece[run_label[k]] >= 0)
         return;
     atomic_add(size + root[k], runs[k].y);
 }
@@ -979,9 +983,8 @@ __kernel void pieces_largest(__global const uint *counts, __global const int *ru
                              __global const int *site_piece, __global const int *size,
                              volatile __global int *largest)
 {
-    const uint m = counts[1]; /* the runs kept (the host sized the kernel without waiting for it) */
-    const uint k = get_global_id(0);
-    if (k >= m || root[k] != (int)k)
+    KEPT_RUN_OR_RETURN(k);
+    if (root[k] != (int)k)
         return;
     const int l = run_label[k];
     if (site_piece[l] < 0)
@@ -994,9 +997,8 @@ __kernel void pieces_last(__global const uint *counts, __global const int *run_l
                           __global const int *site_piece, __global const int *size,
                           __global const int *largest, volatile __global int *last)
 {
-    const uint m = counts[1]; /* the runs kept (the host sized the kernel without waiting for it) */
-    const uint k = get_global_id(0);
-    if (k >= m || root[k] != (int)k)
+    KEPT_RUN_OR_RETURN(k);
+    if (root[k] != (int)k)
         return;
     const int l = run_label[k];
     if (site_piece[l] < 0 && size[k] == largest[l])
@@ -1011,10 +1013,7 @@ __kernel void pieces_dropped(__global const uint *counts, __global const int2 *r
                              __global const int *site_piece, __global const int *last,
                              const int width, const int n, volatile __global acc_t *acc)
 {
-    const uint m = counts[1]; /* the runs kept (the host sized the kernel without waiting for it) */
-    const uint k = get_global_id(0);
-    if (k >= m)
-        return;
+    KEPT_RUN_OR_RETURN(k);
     const int l = run_label[k];
     const int own = site_piece[l];
     if (root[k] == (own >= 0 ? own : last[l]))
