@@ -54,18 +54,12 @@ from .base import Backend
 
 KERNEL_FILE = Path(__file__).with_name("opencl_kernels.cl")
 SEGMENT = 64  # pixels of a row per work-item of the moments kernel
-RUN_SEGMENT = 256  # pixels of a row per work-item of row_runs
-RUN_CHUNK = 128  # runs per work-item of suspect_runs
-# work-groups of the walled-cell kernels, fixed: the numbers of runs change every step,
-# and PoCL builds a kernel anew for each work-group size it is left to choose
-RUN_GROUP = (1, 16)  # row_runs: segments x rows
-LIST_GROUP = 64  # the kernels over listed runs
+# work-group of the walled-cell kernels (a row or a cell per work-item), fixed: PoCL
+# builds a kernel anew for each work-group size it is left to choose
+WALL_GROUP = 16
 WALL_KERNELS = (
-    "prefix_sums",
-    "row_places",
     "row_runs",
     "suspect_cells",
-    "suspect_count",
     "suspect_runs",
     "pieces_join",
     "pieces_measure",
@@ -300,8 +294,7 @@ class OpenCLBackend(Backend):
         self._wall_kernels: dict[int, dict] = {}  # program -> walled-cell kernels by name
         self._fit_kernels: dict[tuple, object] = {}  # _fit_key -> fit kernel
         self._fits_on_device = "cl_khr_fp64" in self._device.extensions
-        self._run_room = 1 << 16  # runs the suspect_runs buffer holds; grows as needed
-        self._kept_room = 0  # kept runs the pieces kernels run over (0: as many as held)
+        self._row_room = 0  # slots for each row's runs the walled step needed so far
 
     # ------------------------------------------------------------------ device
     @classmethod
@@ -425,11 +418,9 @@ class OpenCLBackend(Backend):
         reach = metric.circumradius * float(scales.max()) * (1 + REACH_MARGIN)
         return records, k, reach
 
-    def _run_labels(self, sites, angles, scales, metric: Metric, grid: Grid, acc_buf=None, run_starts=None):
+    def _run_labels(self, sites, angles, scales, metric: Metric, grid: Grid, acc_buf=None):
         """Enqueue the label kernel; the labels stay in the device buffer 'labels'.  With
-        ``acc_buf`` (zeroed, block kernel only) the kernel also adds the moments to it;
-        with ``run_starts`` (block kernel only) it counts the run starts per strip and
-        row there, for the walled step's ``row_runs``."""
+        ``acc_buf`` (zeroed, block kernel only) the kernel also adds the moments to it."""
         n = len(sites)
         if self._queue is None:
             raise RuntimeError("opencl: this backend was closed; create a new one")
@@ -509,8 +500,6 @@ class OpenCLBackend(Backend):
             np.int32(seed and self.seed),
             self._buffer("moments", 4) if acc_buf is None else acc_buf,
             np.int32(acc_buf is not None),
-            self._buffer("run_places", 4) if run_starts is None else run_starts,
-            np.int32(run_starts is not None),
         )
         local = self.local_size
         if self.block > 0:  # one work-item per STRIP blocks of a row
@@ -544,15 +533,14 @@ class OpenCLBackend(Backend):
         acc_buf, _ = self._enqueue_moments(sites, angles, scales, metric, grid)
         return self._read_moments(acc_buf, len(sites))
 
-    def _enqueue_moments(self, sites, angles, scales, metric: Metric, grid: Grid, run_starts=None):
-        """Enqueue the labels and their sums: (sums buffer, labels buffer); ``run_starts``
-        as in :meth:`_run_labels`."""
+    def _enqueue_moments(self, sites, angles, scales, metric: Metric, grid: Grid):
+        """Enqueue the labels and their sums: (sums buffer, labels buffer)."""
         cl = self._cl
         n = len(sites)
         acc_buf = self._buffer("moments", ACC_BYTES * n)
         cl.enqueue_fill_buffer(self._queue, acc_buf, np.uint32(0), 0, ACC_BYTES * n)
         if self.block > 0:  # the block kernel sums its own labels
-            labels_buf, _ = self._run_labels(sites, angles, scales, metric, grid, acc_buf, run_starts)
+            labels_buf, _ = self._run_labels(sites, angles, scales, metric, grid, acc_buf)
         else:
             labels_buf, _ = self._run_labels(sites, angles, scales, metric, grid)
             _, moments_kernel = self._kernels(metric, _facet_count(metric))
@@ -577,102 +565,58 @@ class OpenCLBackend(Backend):
         return Moments(*(np.ascontiguousarray(row) for row in sums))
 
     # ------------------------------------------------------------ walled cells
-    def _wall_kernel(self, metric: Metric, name: str, items, *args) -> None:
-        """Enqueue walled-cell kernel ``name`` over ``items`` (a (segments, rows) pair, or
-        a number of listed runs), padded to a multiple of its fixed work-group: the
-        kernels skip the rest."""
+    def _wall_kernel(self, metric: Metric, name: str, items: int, *args) -> None:
+        """Enqueue walled-cell kernel ``name`` over ``items`` work-items (rows, or cells),
+        padded to a multiple of its fixed work-group: the kernels skip the rest."""
         cl = self._cl
         program = self._kernels(metric, _facet_count(metric))[0].program
         if program.int_ptr not in self._wall_kernels:
             self._wall_kernels[program.int_ptr] = {n: cl.Kernel(program, n) for n in WALL_KERNELS}
         kernel = self._wall_kernels[program.int_ptr][name]
         kernel.set_args(*args)
-        if isinstance(items, tuple):
-            group, size = RUN_GROUP, tuple(-(-v // g) * g for v, g in zip(items, RUN_GROUP, strict=True))
-        else:
-            group, size = (LIST_GROUP,), (-(-items // LIST_GROUP) * LIST_GROUP,)
-        cl.enqueue_nd_range_kernel(self._queue, kernel, size, group)
+        size = -(-items // WALL_GROUP) * WALL_GROUP
+        cl.enqueue_nd_range_kernel(self._queue, kernel, (size,), (WALL_GROUP,))
 
-    def _run_units(self, w: int, h: int):
-        """Where the walled step's run starts are counted: (pixels per unit of a row, the
-        buffer of counts per unit and row, whether the label kernel counts them)."""
-        counted = self.block > 0
-        unit = self.block * STRIP if counted else RUN_SEGMENT
-        return unit, self._buffer("run_places", 4 * -(-w // unit) * h), counted
+    def _row_slots(self, w: int, n: int, area: int) -> int:
+        """Slots for the runs of each row of a ``w``-pixel-wide raster: as many as a row
+        needed in the last calls, at least twice the cells a row crosses (one per
+        sqrt(area / n) pixels) and some, at most a pixel each."""
+        crossed = w / math.sqrt(max(area, 1) / max(n, 1))
+        return min(w, max(self._row_room, 2 * math.ceil(crossed) + 32))
 
-    def _suspect_runs(self, metric: Metric, labels_buf, w: int, h: int, n: int, units):
-        """List the runs of the labels in ``labels_buf`` in raster order (counted by the
-        label kernel or ``row_runs``' counting pass, as ``units`` from :meth:`_run_units`
-        says; placed by ``row_places`` and ``prefix_sums``; listed by ``row_runs``) and
-        keep, in that order, those of the cells that may be in pieces (``suspect_cells``,
-        ``suspect_count``, ``prefix_sums``, ``suspect_runs``), without a wait: (counts
-        buffer, kept runs, their union-find parents, per-cell top and bottom run counts,
-        (first kept run per row, piece sizes), the runs the buffers hold).  The counts
-        buffer holds (found, kept): where more were found than the buffers hold, the
-        lists are cut short and the caller asks again with more room."""
+    def _suspect_runs(self, metric: Metric, labels_buf, w: int, h: int, n: int, cap: int):
+        """List the runs of the labels in ``labels_buf``, each row's in its ``cap`` slots
+        (``row_runs``), and move to the front of its slots those of the cells that may be
+        in pieces (``suspect_cells``, ``suspect_runs``), without a wait: (counts buffer,
+        per row its kept runs, (the runs, their labels), their union-find parents, per
+        cell its top and bottom run counts, per run its piece's size).  The counts buffer
+        holds the most runs of any row: where more than ``cap``, the lists are cut short
+        and the caller asks again with more slots."""
         cl, queue = self._cl, self._queue
-        ends_buf, counts_buf = self._buffer("run_ends", 8 * n), self._buffer("run_counts", 8)
+        slots = h * cap
+        ends, counts = self._buffer("run_ends", 8 * n), self._buffer("run_counts", 4)
+        cl.enqueue_fill_buffer(queue, ends, np.uint32(0), 0, 8 * n)
+        cl.enqueue_fill_buffer(queue, counts, np.uint32(0), 0, 4)
+        # the runs as (first pixel, length) and their labels apart: suspect_runs reads
+        # the labels alone, the pieces kernels whole vectors of either
+        runs, labels_of = self._buffer("runs", 8 * slots), self._buffer("run_labels", 4 * slots)
+        found, kept = self._buffer("row_count", 4 * h), self._buffer("row_kept", 4 * h)
+        parent, size = self._buffer("piece_parent", 4 * slots), self._buffer("piece_size", 4 * slots)
         suspect = self._buffer("suspect_cells", n)
-        unit, places, counted = units
-        rows = (-(-w // RUN_SEGMENT), h)
-        scan = (np.int32(w), np.int32(h), np.int32(RUN_SEGMENT), labels_buf)
-        row_base = self._buffer("run_row_base", 4 * h)
-        if not counted:  # the counting pass reads neither ends nor runs: any buffers do
-            args = (np.int32(1), places, np.int32(unit), row_base, places, np.uint32(0), places, places)
-            self._wall_kernel(metric, "row_runs", rows, *scan, *args)
+        listing = (ends, runs, labels_of, found, counts)
         self._wall_kernel(
-            metric, "row_places", h, np.int32(w), np.int32(h), np.int32(unit), labels_buf, places, row_base
+            metric, "row_runs", h, np.int32(w), np.int32(h), labels_buf, np.uint32(cap), *listing
         )
-        self._wall_kernel(metric, "prefix_sums", 1, np.uint32(h), row_base, counts_buf, np.int32(0))
-        room = self._run_room
-        # the runs found as (first pixel, length) and their labels apart: suspect_count
-        # reads the labels alone
-        runs_buf, labels_of = self._buffer("runs", 8 * room), self._buffer("run_labels", 4 * room)
-        # so are the runs kept: the pieces kernels read them a run per work-item
-        listed = (self._buffer("suspect_runs", 8 * room), self._buffer("suspect_labels", 4 * room))
-        parent = self._buffer("piece_parent", 4 * room)
-        # per kept run its piece's size (pieces_size), per row its first kept run
-        size, row_start = self._buffer("piece_size", 4 * room), self._buffer("piece_row_start", 4 * h)
-        cl.enqueue_fill_buffer(queue, row_start, np.int32(2**31 - 1), 0, 4 * h)
-        chunks = max(1, -(-room // RUN_CHUNK))
-        chunk_places = self._buffer("chunk_places", 4 * (-(-chunks // LIST_GROUP) * LIST_GROUP))
-        cl.enqueue_fill_buffer(queue, ends_buf, np.uint32(0), 0, 8 * n)
-        listing = (
-            np.int32(0),
-            places,
-            np.int32(unit),
-            row_base,
-            ends_buf,
-            np.uint32(room),
-            runs_buf,
-            labels_of,
-        )
-        self._wall_kernel(metric, "row_runs", rows, *scan, *listing)
-        self._wall_kernel(metric, "suspect_cells", n, np.int32(n), ends_buf, suspect)
-        args = (np.uint32(room), np.uint32(RUN_CHUNK), runs_buf, labels_of, suspect, counts_buf)
-        self._wall_kernel(metric, "suspect_count", chunks, *args, chunk_places)
-        self._wall_kernel(metric, "prefix_sums", 1, np.uint32(chunks), chunk_places, counts_buf, np.int32(1))
-        self._wall_kernel(
-            metric,
-            "suspect_runs",
-            chunks,
-            *args,
-            chunk_places,
-            *listed,
-            parent,
-            np.int32(w),
-            row_start,
-            size,
-        )
-        return counts_buf, listed, parent, ends_buf, (row_start, size), room
+        self._wall_kernel(metric, "suspect_cells", n, np.int32(n), ends, suspect)
+        keeping = (found, suspect, runs, labels_of, kept, parent, size)
+        self._wall_kernel(metric, "suspect_runs", h, np.int32(h), np.uint32(cap), *keeping)
+        return counts, kept, (runs, labels_of), parent, ends, size
 
-    def _enqueue_pieces(self, metric: Metric, n: int, w: int, h: int, acc_buf, labels_buf, site_at, units):
+    def _enqueue_pieces(self, metric: Metric, n: int, w: int, h: int, acc_buf, labels_buf, site_at, cap: int):
         """Enqueue the walled-cell kernels over the labels and sums the label kernel left,
-        with no wait before the sums are read: the pieces kernels run over as many runs
-        as the last call kept (and half as many again), and read how many were kept on the
-        device.  Returns (moments, counts (found, kept), the runs the buffers hold, the
-        runs the pieces kernels ran over): the moments hold only where found <= held and
-        kept <= ran over."""
+        each row's runs in ``cap`` slots, with no wait before the sums are read.  Returns
+        (moments, the most runs of any row): the moments hold only where that is at most
+        ``cap``."""
         cl = self._cl
         site_piece, largest = self._buffer("site_piece", 4 * n), self._buffer("largest", 4 * n)
         last = self._buffer("last_largest", 4 * n)
@@ -680,35 +624,30 @@ class OpenCLBackend(Backend):
         # the per-piece sizes)
         for buf, value in ((site_piece, -1), (largest, 0), (last, -1)):
             cl.enqueue_fill_buffer(self._queue, buf, np.int32(value), 0, 4 * n)
-        counts_buf, listed, parent, _, (row_start, size), room = self._suspect_runs(
-            metric, labels_buf, w, h, n, units
-        )
-        bound = min(room, self._kept_room or room)
-        root = self._buffer("piece_root", 4 * room)
+        counts, kept, listed, parent, _, size = self._suspect_runs(metric, labels_buf, w, h, n, cap)
+        root = self._buffer("piece_root", 4 * h * cap)
 
-        def run(name, *args):
-            self._wall_kernel(metric, name, bound, counts_buf, *args)
+        def run(name, *args):  # a row each, and its kept runs
+            self._wall_kernel(metric, name, h, np.int32(h), np.uint32(cap), kept, *args)
 
-        self._wall_kernel(
-            metric, "pieces_join", h, counts_buf, np.int32(w), np.int32(h), *listed, row_start, parent
-        )
+        run("pieces_join", np.int32(w), *listed, parent)
         run("pieces_measure", *listed, parent, root, site_at, site_piece)
         run("pieces_size", *listed, root, site_piece, size)
         run("pieces_largest", listed[1], root, site_piece, size, largest)
         run("pieces_last", listed[1], root, site_piece, size, largest, last)
         run("pieces_dropped", *listed, root, site_piece, last, np.int32(w), np.int32(n), acc_buf)
-        counts = np.empty(2, dtype=np.uint32)
-        cl.enqueue_copy(self._queue, counts, counts_buf, is_blocking=False)  # before the sums: in order
-        return self._read_moments(acc_buf, n), counts, room, bound
+        most = np.empty(1, dtype=np.uint32)
+        cl.enqueue_copy(self._queue, most, counts, is_blocking=False)  # before the sums: in order
+        return self._read_moments(acc_buf, n), int(most[0])
 
     def _walled_moments(self, sites, angles, scales, metric: Metric, grid: Grid) -> Moments:
         """The moments of the labels with each cell cut to the piece it keeps, found on
-        the device: ``row_runs`` lists the runs and counts each cell's top and bottom
-        runs, ``suspect_runs`` keeps the runs of the cells that may be in pieces, the
-        ``pieces_*`` kernels find their pieces and take the sums of the runs of those not
-        kept from their cells' sums; the host reads 5·N sums (never the raster) and the
-        runs' counts, and waits once, for these.  Where the runs outnumber the buffers, or
-        the kept runs the pieces kernels ran over, it labels again with room for them."""
+        the device: ``row_runs`` lists each row's runs and counts each cell's top and
+        bottom runs, ``suspect_runs`` keeps the runs of the cells that may be in pieces,
+        the ``pieces_*`` kernels find their pieces and take the sums of the runs of those
+        not kept from their cells' sums; the host reads 5·N sums (never the raster) and
+        the most runs of a row, and waits once, for these.  Where a row had more runs than
+        its slots, it labels again with more."""
         cl = self._cl
         n = len(sites)
         w, h = grid.width, grid.height
@@ -718,26 +657,16 @@ class OpenCLBackend(Backend):
         site_pixel = (i * w + j).astype(np.int32)
         site_at = self._buffer("site_at", site_pixel.nbytes)
         cl.enqueue_copy(self._queue, site_at, site_pixel, is_blocking=False)
-        units = self._run_units(w, h)
-        acc_buf, labels_buf = self._enqueue_moments(
-            sites, angles, scales, metric, grid, units[1] if units[2] else None
-        )
-
+        acc_buf, labels_buf = self._enqueue_moments(sites, angles, scales, metric, grid)
+        area = self._mask_pixels if grid.mask is not None else w * h
         try:
             while True:
-                mom, counts, room, bound = self._enqueue_pieces(
-                    metric, n, w, h, acc_buf, labels_buf, site_at, units
-                )
-                # the next call's kept runs are about as many (Lloyd steps move the sites
-                # less and less): the pieces kernels run over half as many again
-                self._kept_room = int(counts[1]) * 3 // 2 + LIST_GROUP
-                if counts[0] <= room and counts[1] <= bound:
+                cap = self._row_slots(w, n, area)
+                mom, most = self._enqueue_pieces(metric, n, w, h, acc_buf, labels_buf, site_at, cap)
+                if most <= cap:
                     return mom
-                if counts[0] > room:  # too many to hold (and kept of a list cut short)
-                    self._run_room, self._kept_room = int(counts[0]) * 5 // 4, 0
-                acc_buf, labels_buf = self._enqueue_moments(
-                    sites, angles, scales, metric, grid, units[1] if units[2] else None
-                )
+                self._row_room = most + most // 4  # a row needs at most w: the next fits
+                acc_buf, labels_buf = self._enqueue_moments(sites, angles, scales, metric, grid)
         except cl.Error as exc:
             raise BackendUnavailable(
                 f"opencl: walled-cell kernels failed on {self.device()}: {exc}"

@@ -118,8 +118,7 @@ inline void flush_run(volatile __global acc_t *acc, const int n, const int site,
         __global const float4 *site_pos,                                                \
         __global const int *site_index, __global const uchar *mask, const int use_mask, \
         __global int *labels, __global const int *site_rank, const int n, const int seed, \
-        volatile __global acc_t *acc, const int sums, __global uint *run_starts,        \
-        const int count_starts
+        volatile __global acc_t *acc, const int sums
 
 /* One work-item per pixel: the nearest site, searched over a uniform grid of cells ring
    by ring (Chebyshev rings of cells around the pixel's cell).
@@ -247,16 +246,6 @@ typedef CAT(uint, BW) rowu;
 typedef CAT(float, BW) rowf;
 #define load_row CAT(vload, BW)
 __constant int LANES[16] = {0, 1, 2, 3, 4, 5, 6, 7, 8, 9, 10, 11, 12, 13, 14, 15};
-/* shuffle2(row, other, SHIFT_UP): other's lane 0, then row's lanes 0 .. BW - 2 */
-__constant uint SHIFT_UP[16] = {BW, 0, 1, 2, 3, 4, 5, 6, 7, 8, 9, 10, 11, 12, 13, 14};
-#if BW == 16
-#define LAST_LANE f
-#else
-#define LAST_LANE SUB1(BW)
-#endif
-#define SUB1(b) CAT(SUB1_, b)
-#define SUB1_4 3
-#define SUB1_8 7
 
 /* the largest, the sum and the smallest of a row's lanes, by halving */
 inline float hmaxf(rowf v)
@@ -567,32 +556,13 @@ __kernel void label_blocks(LABEL_KERNEL_ARGS)
     }
     sums_table table;
     table.used = 0;
-    /* with count_starts, per row of the strip the runs of the region that begin in it,
-       its first pixel left out (its left neighbour is another work-item's): the walled
-       step's row_places adds it, so row_runs needs no counting pass */
-    const rowi lanes = load_row(0, LANES);
-    rowi begins[BH];
-    int last[BH]; /* per row, the label of the pixel left of the block */
-    for (int yy = 0; yy < BH; ++yy) {
-        begins[yy] = (rowi)(0);
-        last[yy] = -1;
-    }
     for (int g = 0; g < STRIP; ++g) {
-        if (!on[g]) {
-            if (xs0 + g * BW < width) /* a block with no pixel of the region */
-                for (int yy = 0; yy < BH; ++yy)
-                    last[yy] = -1;
+        if (!on[g])
             continue;
-        }
         const int x0 = xs0 + g * BW;
         const int xn = x0 + BW < width ? BW : width - x0;
         for (int yy = 0; yy < yn; ++yy) {
             const rowi row = load_row(0, live[g][yy]) != 0 ? load_row(0, best_idx[g][yy]) : (rowi)(-1);
-            if (count_starts) { /* each lane's left neighbour: the row moved one lane up */
-                const rowi left = shuffle2(row, (rowi)(last[yy]), load_row(0, SHIFT_UP));
-                begins[yy] += (row >= 0) & (row != left) & (lanes >= (g == 0));
-                last[yy] = row.CAT(s, LAST_LANE);
-            }
             if (xn == BW)
                 CAT(vstore, BW)(row, 0, labels + (y0 + yy) * width + x0);
             else
@@ -604,11 +574,6 @@ __kernel void label_blocks(LABEL_KERNEL_ARGS)
     }
     if (sums)
         flush_table(acc, n, &table);
-    if (count_starts) {
-        const int strips = (width + STRIP * BW - 1) / (STRIP * BW);
-        for (int yy = 0; yy < yn; ++yy)
-            run_starts[(y0 + yy) * strips + get_global_id(0)] = (uint)(-hsum(begins[yy]));
-    }
 }
 
 /* Per-site integer sums (count, Σj, Σi, Σj², Σi²) of the label raster.  One work-item
@@ -648,7 +613,12 @@ __kernel void row_moments(const int width, const int height, const int seg,
    straight above), or only one "bottom" run, is one piece: from any of its runs, steps to
    a touching run above (below) end at that run.  row_runs lists the runs of the region
    and counts both kinds per cell; suspect_runs keeps the runs of the cells with more
-   than one of each, and the pieces_* kernels find their pieces. */
+   than one of each, and the pieces_* kernels find their pieces.
+
+   Each row of the raster has `cap` slots for its runs, row i's from slot i * cap on, in
+   raster order: a kernel needs no other row's count to know where a row's runs are, and
+   slots order runs as the raster does.  Every kernel here but suspect_cells takes a row
+   (a work-item each) and walks its runs. */
 
 /* 16 labels of a row from column j (j may be -1); columns off the row read -1 */
 inline int16 row16(__global const int *row, const int j, const int width)
@@ -672,109 +642,51 @@ inline uint lane_bits(const int16 m)
     return (uint)(c.x | c.y);
 }
 
-/* An exclusive prefix sum of values[0 .. count), in place, and their total at
-   totals[slot]: one work-item (the values summed are a few per row of the raster). */
-__kernel void prefix_sums(const uint count, __global uint *values, __global uint *totals,
-                          const int slot)
+/* row_runs' end of run number k of its row (label `cell`, from pixel `first`, `length`
+   pixels, `up` (`down`) where a pixel of it has its label straight above (below)): a top
+   (bottom) run of its cell where none has, and listed where the row has room */
+inline void end_run(volatile __global uint *ends, __global int2 *slots, __global int *slot_label,
+                    const uint k, const uint cap, const int cell, const int first, const int length,
+                    const uint up, const uint down)
 {
-    if (get_global_id(0) != 0)
-        return;
-    uint s = 0;
-    for (uint q = 0; q < count; ++q) {
-        const uint v = values[q];
-        values[q] = s;
-        s += v;
+    if (!up)
+        atomic_inc(ends + 2 * cell);
+    if (!down)
+        atomic_inc(ends + 2 * cell + 1);
+    if (k < cap) {
+        slots[k] = (int2)(first, length);
+        slot_label[k] = cell;
     }
-    totals[slot] = s;
 }
 
-/* Per row (a work-item each) the places of its units' first runs (unit: `unit` pixels
-   of the row) within the row, from the counts of the runs that begin in each unit,
-   which label_blocks (per strip) or row_runs' counting pass (per segment) left at
-   places[i * units + u], less the unit's first pixel (there the left neighbour is
-   another work-item's): added here, then an exclusive prefix sum along the row, the
-   row's total at totals[i] (prefix_sums makes these the rows' places). */
-__kernel void row_places(const int width, const int height, const int unit,
-                         __global const int *labels, __global uint *places, __global uint *totals)
-{
-    const int i = get_global_id(0);
-    if (i >= height)
-        return;
-    const int units = (width + unit - 1) / unit;
-    __global const int *row = labels + (size_t)i * width;
-    __global uint *place = places + (size_t)i * units;
-    uint s = 0;
-    for (int u = 0; u < units; ++u) {
-        const int j = u * unit;
-        const uint c = place[u] + (row[j] >= 0 && (j == 0 || row[j - 1] != row[j]));
-        place[u] = s;
-        s += c;
-    }
-    totals[i] = s;
-}
-
-/* One work-item per segment of `seg` pixels of a row (a multiple of 16 and of `unit`)
-   takes the runs of the region that begin in it (a run may reach past the segment's
-   end).  With `count` set it only counts them, its first pixel left out, at
-   places[i * segments + s] for segment s of row i (then `unit` is `seg`); row_places
-   and prefix_sums make row_base[i] + places[i * units + u] the place of the first run
-   of unit u of row i.  Then (`count` 0) it lists each as (first pixel, length) at
-   runs[k] and its label at run_label[k] (apart: suspect_count reads the labels alone),
-   k from its segment's place (so the runs are in raster order), and
-   ends[2 l], ends[2 l + 1] count the top and bottom runs of cell l (zeroed by the
-   host).  Runs beyond `room` are not written (the host then asks again with more
-   room).
+/* Row i's runs of the region, each as (first pixel, length) at runs[i * cap + k] and
+   its label at run_label[i * cap + k] (apart: suspect_runs reads the labels first), k
+   from 0 in raster order; their number at row_count[i], and the most of any row at
+   counts[0] (zeroed by the host: where it exceeds cap, the runs past cap are not listed
+   and the host asks again with more room); ends[2 l], ends[2 l + 1] count the top and
+   bottom runs of cell l (zeroed by the host).
 
    The row is read 16 pixels at a time: where the label changes, and where a pixel has
    its own label straight above and below, as bits; a run's part of a chunk is a range
    of bits, so the work per chunk is per run, not per pixel. */
-__kernel void row_runs(const int width, const int height, const int seg,
-                       __global const int *labels, const int count, __global uint *places,
-                       const int unit, __global const uint *row_base,
-                       volatile __global uint *ends, const uint room, __global int2 *runs,
-                       __global int *run_label)
+__kernel void row_runs(const int width, const int height, __global const int *labels,
+                       const uint cap, volatile __global uint *ends, __global int2 *runs,
+                       __global int *run_label, __global uint *row_count,
+                       volatile __global uint *counts)
 {
-    const int i = get_global_id(1);
-    const int j0 = get_global_id(0) * seg;
-    if (i >= height || j0 >= width)
+    const int i = get_global_id(0);
+    if (i >= height)
         return;
-    const int j1 = j0 + seg < width ? j0 + seg : width;
     __global const int *row = labels + (size_t)i * width;
-    /* units per row counted from the raster, not the global size (padded to the
-       work-group) */
-    const int units = (width + unit - 1) / unit;
-    __global uint *place = places + (size_t)i * units + get_global_id(0) * (seg / unit);
-    if (count) {
-        uint mine = 0;
-        for (int j = j0; j < j1; j += 16) {
-            const int16 l = row16(row, j, width);
-            uint begin = lane_bits((l >= 0) & (l != row16(row, j - 1, width)));
-            begin &= j == j0 ? ~1u : ~0u; /* the first pixel: row_places */
-            mine += popcount(j1 - j < 16 ? begin & ((1u << (j1 - j)) - 1) : begin);
-        }
-        *place = mine;
-        return;
-    }
     __global const int *above = row - width, *below = row + width; /* read only in the raster */
-    uint k = row_base[i] + *place;
+    __global int2 *slots = runs + (size_t)i * cap;
+    __global int *slot_label = run_label + (size_t)i * cap;
+    uint k = 0;
     int cur = -1, start = 0; /* the open run: its label (-1: none of ours) and first pixel */
     uint up = 0, down = 0;   /* whether a pixel of it has its label above, below */
-    for (int j = j0;; j += 16) {
-        if (j >= width || (j >= j1 && cur < 0)) {
-            if (cur >= 0) { /* the run reaches the row's end */
-                if (!up)
-                    atomic_inc(ends + 2 * cur);
-                if (!down)
-                    atomic_inc(ends + 2 * cur + 1);
-                if (k < room) {
-                    runs[k] = (int2)(i * width + start, width - start);
-                    run_label[k] = cur;
-                }
-            }
-            break;
-        }
+    for (int j = 0; j < width; j += 16) {
         const int16 l = row16(row, j, width);
-        uint change = lane_bits(l != row16(row, j - 1, width));
+        uint change = lane_bits(l != row16(row, j - 1, width)); /* lanes past the row read -1 */
         const uint same_up = i > 0 ? lane_bits(row16(above, j, width) == l) : 0;
         const uint same_down = i + 1 < height ? lane_bits(row16(below, j, width) == l) : 0;
         int lab[16];
@@ -785,40 +697,31 @@ __kernel void row_runs(const int width, const int height, const int seg,
             change &= change - 1;
             if (cur >= 0) { /* the open run ends before lane t */
                 const uint part = from & ((1u << t) - 1);
-                if (!(up || (same_up & part)))
-                    atomic_inc(ends + 2 * cur);
-                if (!(down || (same_down & part)))
-                    atomic_inc(ends + 2 * cur + 1);
-                if (k < room) {
-                    runs[k] = (int2)(i * width + start, j + t - start);
-                    run_label[k] = cur;
-                }
-                ++k;
+                end_run(ends, slots, slot_label, k++, cap, cur, i * width + start, j + t - start,
+                        up || (same_up & part), down || (same_down & part));
             }
-            cur = j + t < j1 ? lab[t] : -1; /* runs that begin past the segment are not ours */
+            cur = lab[t];
             start = j + t;
             up = down = 0;
             from = 0xffffu & ~((1u << t) - 1);
-            if (cur < 0 && j + t >= j1)
-                break;
         }
         if (cur >= 0) {
             up = up || (same_up & from);
             down = down || (same_down & from);
         }
     }
+    if (cur >= 0) /* the run reaches the row's end (a width that is a multiple of 16) */
+        end_run(ends, slots, slot_label, k++, cap, cur, i * width + start, width - start, up, down);
+    row_count[i] = k;
+    atomic_max(counts, k);
 }
 
-/* Of the runs row_runs listed (counts[0] of them, `room` at most), those of the cells
-   with more than one top and more than one bottom run: suspect_cells flags these cells
-   (a byte each: the runs' lookups stay in the first-level cache, where the run counts
-   would not); with one work-item per `chunk` runs, suspect_count counts their runs at
-   places[c] for chunk c; prefix_sums makes these places (their total at counts[1]);
-   suspect_runs copies them there, to out[k] and out_label[k], so that they stay in
-   raster order, each its own piece (parent[k] = k, its size 0), and leaves the first
-   kept run of each row at row_start (filled with INT_MAX by the host) for pieces_join.
-   The labels stay apart from the (first pixel, length) pairs: the kernels over runs
-   read whole vectors of them. */
+/* Of the runs row_runs listed, those of the cells with more than one top and more than
+   one bottom run: suspect_cells flags these cells (a byte each: the runs' lookups stay
+   in the first-level cache, where the run counts would not); suspect_runs moves each
+   row's to the front of its slots, in raster order, each its own piece (parent[k] = k,
+   its size 0), and leaves their number at row_kept[i].  The labels stay apart from the
+   (first pixel, length) pairs: the kernels over runs read whole vectors of them. */
 __kernel void suspect_cells(const int n, __global const uint *ends, __global uchar *suspect)
 {
     const int l = get_global_id(0);
@@ -826,66 +729,40 @@ __kernel void suspect_cells(const int n, __global const uint *ends, __global uch
         suspect[l] = (ends[2 * l] > 1) & (ends[2 * l + 1] > 1);
 }
 
-__kernel void suspect_count(const uint room, const uint chunk, __global const int2 *runs,
-                            __global const int *run_label, __global const uchar *suspect, __global const uint *counts,
-                            __global uint *places)
+__kernel void suspect_runs(const int height, const uint cap, __global const uint *row_count,
+                           __global const uchar *suspect, __global int2 *runs,
+                           __global int *run_label, __global uint *row_kept,
+                           __global int *parent, __global int *size)
 {
-    const uint total = counts[0] < room ? counts[0] : room;
-    const uint c = get_global_id(0), r0 = c * chunk;
-    if (r0 >= total) {
-        places[c] = 0;
+    const int i = get_global_id(0);
+    if (i >= height)
         return;
-    }
-    const uint r1 = r0 + chunk < total ? r0 + chunk : total;
-    uint mine = 0;
-    for (uint r = r0; r < r1; ++r)
-        mine += suspect[run_label[r]];
-    places[c] = mine;
-}
-
-__kernel void suspect_runs(const uint room, const uint chunk, __global const int2 *runs,
-                           __global const int *run_label, __global const uchar *suspect, __global const uint *counts,
-                           __global const uint *places, __global int2 *out,
-                           __global int *out_label, __global int *parent, const int width,
-                           volatile __global int *row_start, __global int *size)
-{
-    const uint total = counts[0] < room ? counts[0] : room;
-    const uint r0 = get_global_id(0) * chunk;
-    if (r0 >= total)
-        return;
-    const uint r1 = r0 + chunk < total ? r0 + chunk : total;
-    uint k = places[get_global_id(0)];
-    int row = -1; /* the row of the last run kept here */
-    for (uint r = r0; r < r1; ++r) {
+    const uint first = (uint)i * cap, found = row_count[i] < cap ? row_count[i] : cap;
+    uint k = first;
+    for (uint r = first; r < first + found; ++r) {
         const int l = run_label[r];
-        if (suspect[l]) {
-            const int2 run = runs[r];
-            out[k] = run;
-            out_label[k] = l;
-            parent[k] = (int)k;
-            size[k] = 0;
-            if (run.x >= (row + 1) * width) { /* the first kept here on its row */
-                row = run.x / width;
-                atomic_min(row_start + row, (int)k);
-            }
-            ++k;
-        }
+        const int keep = suspect[l]; /* k <= r: a slot is read before it is written */
+        runs[k] = runs[r];
+        run_label[k] = l;
+        parent[k] = (int)k;
+        size[k] = 0;
+        k += keep;
     }
+    row_kept[i] = k - first;
 }
 
-/* The pieces of the listed cells (the runs suspect_runs kept, `m` of them, in raster
-   order), and the runs of the pieces their cells do not keep.  Runs are joined where
-   they touch (same cell, adjacent rows, overlapping columns) by a union-find over run
-   indices whose roots are the smallest index of their piece, linked with atomic_min
-   (Playne and Hawick's concurrent union: a link that loses a race is retried from the
-   new roots). */
+/* The pieces of the listed cells (the runs suspect_runs kept), and the runs of the
+   pieces their cells do not keep.  Runs are joined where they touch (same cell, adjacent
+   rows, overlapping columns) by a union-find over their slots whose roots are the
+   smallest slot of their piece, linked with atomic_min (Playne and Hawick's concurrent
+   union: a link that loses a race is retried from the new roots). */
 
 /* The root of run x's piece, halving the path on the way (each run passed then points
-   to its grandparent): links go from a higher index to a lower one, and runs are listed
-   about row by row, so a tall cell's runs would otherwise form chains as long as the
-   cell is tall.  A halving store replaces a link by another to the same piece (pieces
-   only merge) with a lower index, and a union that loses a link to it retries from the
-   old root: the pieces come out the same, each rooted at its smallest index. */
+   to its grandparent): links go from a higher slot to a lower one, so a tall cell's runs
+   would otherwise form chains as long as the cell is tall.  A halving store replaces a
+   link by another to the same piece (pieces only merge) with a lower slot, and a union
+   that loses a link to it retries from the old root: the pieces come out the same, each
+   rooted at its smallest slot. */
 inline int piece_root(volatile __global int *parent, int x)
 {
     int p = parent[x];
@@ -900,29 +777,28 @@ inline int piece_root(volatile __global int *parent, int x)
     return x;
 }
 
-/* The pieces kernels run over as many work-items as the host expected kept runs, without
-   waiting for their count: k is this work-item's kept run, and those past the count
-   (counts[1]) stop here. */
-#define KEPT_RUN_OR_RETURN(k)        \
-    const uint k = get_global_id(0); \
-    if (k >= counts[1])              \
-        return
+/* The pieces kernels take a row each (the first `height`, with `cap` slots a row) and
+   walk its kept runs: k is a kept run's slot. */
+#define PIECES_KERNEL_ARGS const int height, const uint cap, __global const uint *row_kept
+#define FOR_KEPT_RUNS(k)                                                  \
+    const int row_ = get_global_id(0);                                    \
+    if (row_ >= height)                                                   \
+        return;                                                           \
+    const uint first_ = (uint)row_ * cap, end_ = first_ + row_kept[row_]; \
+    for (uint k = first_; k < end_; ++k)
 
-/* 1. each row (a work-item) joins each of its runs to the runs of its cell in the row
-   above that touch it, walking both rows' runs in order at once (both are in raster
-   order in the list; suspect_runs left each row's first at row_start, INT_MAX on a row
-   without any) */
-__kernel void pieces_join(__global const uint *counts, const int width, const int height,
-                          __global const int2 *runs, __global const int *run_label,
-                          __global const int *row_start, volatile __global int *parent)
+/* 1. each row joins each of its runs to the runs of its cell in the row above that touch
+   it, walking both rows' runs in order at once */
+__kernel void pieces_join(PIECES_KERNEL_ARGS, const int width, __global const int2 *runs,
+                          __global const int *run_label, volatile __global int *parent)
 {
-    const uint m = counts[1]; /* the runs kept (the host sized the kernel without waiting for it) */
     const int i = get_global_id(0);
-    if (i < 1 || i >= height || row_start[i] == INT_MAX || row_start[i - 1] == INT_MAX)
+    if (i < 1 || i >= height)
         return;
-    int r = row_start[i - 1]; /* the first run above that may touch the current one */
-    const int above_end = row_start[i], next_row = (i + 1) * width;
-    for (int k = above_end; k < (int)m && runs[k].x < next_row; ++k) {
+    int r = (i - 1) * (int)cap; /* the first run above that may touch the current one */
+    const int above_end = r + (int)row_kept[i - 1];
+    const int end = i * (int)cap + (int)row_kept[i];
+    for (int k = i * (int)cap; k < end && r < above_end; ++k) {
         const int2 run = runs[k];
         const int q = run.x - width; /* the pixel above the run's first */
         const int l = run_label[k];
@@ -950,75 +826,80 @@ __kernel void pieces_join(__global const uint *counts, const int width, const in
 
 /* 2. per run its piece (root); per cell the piece that holds its site's pixel
    (site_at[l], from the host) where the site is in its cell.  A piece's root, its
-   smallest index, is its first run in raster order: its first pixel needs no sum. */
-__kernel void pieces_measure(__global const uint *counts, __global const int2 *runs, __global const int *run_label,
+   smallest slot, is its first run in raster order: its first pixel needs no sum. */
+__kernel void pieces_measure(PIECES_KERNEL_ARGS, __global const int2 *runs, __global const int *run_label,
                              volatile __global int *parent, __global int *root,
                              __global const int *site_at, __global int *site_piece)
 {
-    KEPT_RUN_OR_RETURN(k);
-    const int2 run = runs[k];
-    const int l = run_label[k];
-    const int r = piece_root(parent, (int)k);
-    root[k] = r;
-    const int s = site_at[l];
-    if (run.x <= s && s < run.x + run.y)
-        site_piece[l] = r; /* one run holds the site's pixel: one writer */
+    FOR_KEPT_RUNS(k)
+    {
+        const int2 run = runs[k];
+        const int l = run_label[k];
+        const int r = piece_root(parent, (int)k);
+        root[k] = r;
+        const int s = site_at[l];
+        if (run.x <= s && s < run.x + run.y)
+            site_piece[l] = r; /* one run holds the site's pixel: one writer */
+    }
 }
 
 /* 3. per piece (at its root) its pixels, only in the cells whose site is not in them
    (on a wall, or off the raster): the others keep the site's piece whatever the sizes,
    so most runs need no atomic here */
-__kernel void pieces_size(__global const uint *counts, __global const int2 *runs, __global const int *run_label,
+__kernel void pieces_size(PIECES_KERNEL_ARGS, __global const int2 *runs, __global const int *run_label,
                           __global const int *root, __global const int *site_piece,
                           volatile __global int *size)
 {
-    KEPT_RUN_OR_RETURN(k);
-    if (site_piece[run_label[k]] >= 0)
-        return;
-    atomic_add(size + root[k], runs[k].y);
+    FOR_KEPT_RUNS(k)
+    {
+        if (site_piece[run_label[k]] < 0)
+            atomic_add(size + root[k], runs[k].y);
+    }
 }
 
 /* 4. per such cell the size of its largest piece */
-__kernel void pieces_largest(__global const uint *counts, __global const int *run_label, __global const int *root,
+__kernel void pieces_largest(PIECES_KERNEL_ARGS, __global const int *run_label, __global const int *root,
                              __global const int *site_piece, __global const int *size,
                              volatile __global int *largest)
 {
-    KEPT_RUN_OR_RETURN(k);
-    if (root[k] != (int)k)
-        return;
-    const int l = run_label[k];
-    if (site_piece[l] < 0)
-        atomic_max(largest + l, size[k]);
+    FOR_KEPT_RUNS(k)
+    {
+        const int l = run_label[k];
+        if (root[k] == (int)k && site_piece[l] < 0)
+            atomic_max(largest + l, size[k]);
+    }
 }
 
 /* 5. per such cell, of its largest pieces the one that begins last in raster order: the
    one with the largest root */
-__kernel void pieces_last(__global const uint *counts, __global const int *run_label, __global const int *root,
+__kernel void pieces_last(PIECES_KERNEL_ARGS, __global const int *run_label, __global const int *root,
                           __global const int *site_piece, __global const int *size,
                           __global const int *largest, volatile __global int *last)
 {
-    KEPT_RUN_OR_RETURN(k);
-    if (root[k] != (int)k)
-        return;
-    const int l = run_label[k];
-    if (site_piece[l] < 0 && size[k] == largest[l])
-        atomic_max(last + l, (int)k);
+    FOR_KEPT_RUNS(k)
+    {
+        const int l = run_label[k];
+        if (root[k] == (int)k && site_piece[l] < 0 && size[k] == largest[l])
+            atomic_max(last + l, (int)k);
+    }
 }
 
 /* 6. the runs outside the piece their cell keeps (the site's piece, else the last of the
    largest): their sums are taken from their cell's (acc, as the label kernels left it),
    so the host reads the cut cells' sums and nothing else */
-__kernel void pieces_dropped(__global const uint *counts, __global const int2 *runs, __global const int *run_label,
-                             __global const int *root,
-                             __global const int *site_piece, __global const int *last,
-                             const int width, const int n, volatile __global acc_t *acc)
+__kernel void pieces_dropped(PIECES_KERNEL_ARGS, __global const int2 *runs, __global const int *run_label,
+                             __global const int *root, __global const int *site_piece,
+                             __global const int *last, const int width, const int n,
+                             volatile __global acc_t *acc)
 {
-    KEPT_RUN_OR_RETURN(k);
-    const int l = run_label[k];
-    const int own = site_piece[l];
-    if (root[k] == (own >= 0 ? own : last[l]))
-        return;
-    const int2 run = runs[k];
-    const int i = run.x / width, j = run.x - i * width;
-    flush_run(acc, n, l, j, j + run.y - 1, i, (ulong)0 - 1);
+    FOR_KEPT_RUNS(k)
+    {
+        const int l = run_label[k];
+        const int own = site_piece[l];
+        if (root[k] == (own >= 0 ? own : last[l]))
+            continue;
+        const int2 run = runs[k];
+        const int i = run.x / width, j = run.x - i * width;
+        flush_run(acc, n, l, j, j + run.y - 1, i, (ulong)0 - 1);
+    }
 }

@@ -146,17 +146,19 @@ def runs_of(labels):
 
 
 @needs_opencl
-@pytest.mark.parametrize("group", [None, (2, 8)], ids=["group", "padded"])
+@pytest.mark.parametrize("cap", [None, 5], ids=["room", "cut short"])
+@pytest.mark.parametrize("group", [None, 7], ids=["group", "padded"])
 @pytest.mark.parametrize("width", [700, 512, 37])
-def test_device_runs_and_their_top_and_bottom_counts_are_numpy_s(width, group, monkeypatch):
-    """row_runs reads rows 16 labels at a time in 256-px segments: runs of 1 to 600 px
-    (within a chunk, across chunks and segments, to the row's end), outside pixels,
-    widths a multiple of 16 or not.  It finds as many runs as NumPy, its per-cell top and
-    bottom counts are those counted pixel by pixel, and suspect_runs keeps NumPy's runs
-    of the cells with more than one of each (all but a block), in raster order, each its
-    own piece; also where the work-groups pad the segments of a row."""
+def test_device_runs_and_their_top_and_bottom_counts_are_numpy_s(width, group, cap, monkeypatch):
+    """row_runs reads a row 16 labels at a time: runs of 1 to 600 px (within a chunk,
+    across chunks, to the row's end), outside pixels, widths a multiple of 16 or not.  It
+    reports the most runs of any row, its per-cell top and bottom counts are those counted
+    pixel by pixel, and suspect_runs leaves at the front of each row's slots NumPy's runs
+    of that row of the cells with more than one of each (all but a block), in raster
+    order, each its own piece; also where the work-groups pad the rows, and where a row
+    has more runs than slots (those past them are not listed)."""
     if group is not None:
-        monkeypatch.setattr(opencl_module, "RUN_GROUP", group)
+        monkeypatch.setattr(opencl_module, "WALL_GROUP", group)
     rng = np.random.default_rng(width)
     h, n = 40, 7
     rows = []
@@ -167,30 +169,31 @@ def test_device_runs_and_their_top_and_bottom_counts_are_numpy_s(width, group, m
         rows.append(row[:width])
     labels = np.array(rows, dtype=np.int32)
     labels[5:15, 3:30] = n - 1  # one block: one top and one bottom run
+    want = sorted(runs_of(labels))
+    per_row = [[r for r in want if r[0] // width == i] for i in range(h)]
+    most = max(len(r) for r in per_row)
+    cap = most if cap is None else cap
+    assert most > 5 and min(len(r) for r in per_row) < 5  # rows cut short and rows not
     with OpenCLBackend() as ocl:
         buf = ocl._upload("labels_under_test", labels)
-        # labels not from the label kernel: row_runs counts the run starts
-        seg = opencl_module.RUN_SEGMENT
-        units = (seg, ocl._buffer("run_places", 4 * -(-width // seg) * h), False)
-        counts_buf, (pos_buf, label_buf), parent_buf, ends_buf, _, _ = ocl._suspect_runs(
-            make_metric("l2"), buf, width, h, n, units
+        counts_buf, kept_buf, (pos_buf, label_buf), parent_buf, ends_buf, _ = ocl._suspect_runs(
+            make_metric("l2"), buf, width, h, n, cap
         )
-        counts = np.empty(2, dtype=np.uint32)
-        ocl._read(counts, counts_buf)
-        kept = int(counts[1])
-        listed, parent = np.empty((kept, 3), dtype=np.int32), np.empty(kept, dtype=np.int32)
-        pos, label = np.empty((kept, 2), dtype=np.int32), np.empty(kept, dtype=np.int32)
-        ends = np.empty((n, 2), dtype=np.uint32)
-        for out, src in ((pos, pos_buf), (label, label_buf), (parent, parent_buf), (ends, ends_buf)):
+        counts, kept = np.empty(1, dtype=np.uint32), np.empty(h, dtype=np.uint32)
+        pos, label = np.empty((h, cap, 2), dtype=np.int32), np.empty((h, cap), dtype=np.int32)
+        parent, ends = np.empty((h, cap), dtype=np.int32), np.empty((n, 2), dtype=np.uint32)
+        for out, src in ((counts, counts_buf), (kept, kept_buf), (pos, pos_buf), (label, label_buf)):
             ocl._read(out, src)
-        listed[:, :2], listed[:, 2] = pos, label
-    want = runs_of(labels)
-    assert counts[0] == len(want) and counts[1] == kept
+        for out, src in ((parent, parent_buf), (ends, ends_buf)):
+            ocl._read(out, src)
+    assert counts[0] == most
     np.testing.assert_array_equal(ends, [run_ends(labels, c) for c in range(n)])
     suspect = [c for c in range(n) if min(run_ends(labels, c)) > 1]
     assert n - 1 not in suspect and len(suspect) >= 3
-    assert listed.tolist() == sorted([list(r) for r in want if r[2] in suspect])
-    np.testing.assert_array_equal(parent, np.arange(kept))
+    for i in range(h):
+        listed = [(int(p), int(q), int(c)) for (p, q), c in zip(pos[i], label[i], strict=True)][: kept[i]]
+        assert listed == [r for r in per_row[i][:cap] if r[2] in suspect], i
+        np.testing.assert_array_equal(parent[i, : kept[i]], i * cap + np.arange(kept[i]))
 
 
 @needs_opencl
@@ -211,19 +214,18 @@ def test_a_cell_that_may_be_in_pieces_and_is_not_keeps_all_its_pixels():
 
 
 @needs_opencl
-def test_more_runs_than_the_buffer_holds_are_asked_for_again():
+def test_rows_with_more_runs_than_slots_are_asked_for_again(monkeypatch):
+    """Eight slots a row to begin with (not the backend's guess): the rows have more
+    runs, so the step labels again with as many slots as the most a row had, and more."""
+    monkeypatch.setattr(OpenCLBackend, "_row_slots", lambda self, w, n, area: min(w, max(self._row_room, 8)))
     sites, args = walled_case("l2", seed=2)
     with OpenCLBackend() as ocl:
-        ocl._run_room = 8
         got = WalledBackend(ocl).moments(sites, **args)
-        assert ocl._run_room > 8
-        # the pieces kernels ran over fewer kept runs than there are: asked for again
-        ocl._kept_room = 8
-        again = WalledBackend(ocl).moments(sites, **args)
-        assert ocl._kept_room > 8
-        want = split_moments(ocl.label(sites, **args), sites)
+        labels = ocl.label(sites, **args)
+        most = max(len({p for p, _, _ in runs_of(labels[i : i + 1])}) for i in range(labels.shape[0]))
+        assert most > 8 and ocl._row_room == most + most // 4
+    want = split_moments(labels, sites)
     np.testing.assert_array_equal(as_array(got), as_array(want))
-    np.testing.assert_array_equal(as_array(again), as_array(want))
 
 
 @needs_opencl
@@ -240,42 +242,6 @@ def test_a_walled_mosaic_has_the_same_sites_on_either_path(monkeypatch):
         host = make_mosaic(SAMPLES_DIR / "scene.jpg", ocl, **run)
     assert fast.problem.grid.mask is not None and not fast.problem.grid.mask.all()
     np.testing.assert_array_equal(fast.sites, host.sites)
-
-
-@needs_opencl
-@pytest.mark.parametrize("block", [4, 8, 16])
-@pytest.mark.parametrize("n", [120, 24])
-def test_the_block_kernel_counts_each_strip_rows_run_starts(block, n):
-    """With run_starts the label kernel leaves, per strip of STRIP blocks and row, the
-    runs of the region that begin in it, its first pixel left out (row_places adds it):
-    NumPy's count from the labels, on a raster whose width and height are not multiples
-    of the strip or the block, with walls, and a wall band of whole blocks inside a strip
-    with the same cell on both sides (the block after it begins no run)."""
-    sites, args = walled_case("linf", seed=4, w=203, h=61, n=n)
-    mask = args["grid"].mask.copy()
-    band = (5 * block, 7 * block)  # the strip's second and third blocks
-    mask[:, band[0] : band[1]] = False
-    args["grid"] = Grid(203, 61, mask)
-    sites[21], args["scales"][21] = (6.0 * block, 30.0), 4.0  # a large cell over the band
-    with OpenCLBackend(block=block) as ocl:
-        unit, places, counted = ocl._run_units(203, 61)
-        assert counted and unit == block * opencl_module.STRIP
-        acc = ocl._buffer("moments", opencl_module.ACC_BYTES * len(sites))
-        labels_buf, _ = ocl._run_labels(sites, **args, acc_buf=acc, run_starts=places)
-        labels = np.empty((61, 203), dtype=np.int32)
-        ocl._read(labels, labels_buf)
-        strips = -(-203 // unit)
-        got = np.empty((61, strips), dtype=np.uint32)
-        ocl._read(got, places)
-    left = np.concatenate([np.full((61, 1), -2), labels[:, :-1]], axis=1)
-    begins = (labels >= 0) & (labels != left)
-    begins[:, ::unit] = False
-    want = np.add.reduceat(begins, np.arange(0, 203, unit), axis=1)
-    assert want.sum() > 150 and (labels < 0).any()
-    if n == 24:
-        left, right = labels[:, band[0] - 1], labels[:, band[1]]
-        assert ((left >= 0) & (left == right)).any()
-    np.testing.assert_array_equal(got, want)
 
 
 @needs_opencl
