@@ -82,6 +82,14 @@ def _facet_count(metric: Metric) -> int:
     return 0 if metric.kind == "ellipse" else np.asarray(metric.normals).shape[0]
 
 
+def _near(last, raster: tuple, sites: np.ndarray, reach: float) -> bool:
+    """Whether ``last`` ((raster, sites) of the last labels) is of ``raster`` and of as
+    many sites, none of which has moved more than ``reach`` pixels in x or y."""
+    if last is None or last[0] != raster or last[1].shape != sites.shape:
+        return False
+    return bool(np.abs(sites - last[1]).max(initial=0.0) <= reach)
+
+
 def _fit_key(ellipse: bool, k: int) -> tuple:
     """The key of the program that holds the fit kernel for a ball kind and facet count
     (an ellipse's fit uses no K)."""
@@ -289,8 +297,8 @@ class OpenCLBackend(Backend):
         self._mask_source = None  # the mask array last uploaded (grids are immutable)
         self._mask_pixels = 0
         self.seed = bool(seed)
-        self._labels_buf = None  # the buffer the last labels went to, and their (w, h)
-        self._labels_raster = None
+        self._labels_buf = None  # the buffer the last labels went to, their (w, h) and sites
+        self._labelled = None
         self._wall_kernels: dict[int, dict] = {}  # program -> walled-cell kernels by name
         self._fit_kernels: dict[tuple, object] = {}  # _fit_key -> fit kernel
         self._fits_on_device = "cl_khr_fp64" in self._device.extensions
@@ -316,7 +324,7 @@ class OpenCLBackend(Backend):
         self._wall_kernels.clear()
         self._fit_kernels.clear()
         self._mask_source = None
-        self._labels_buf = self._labels_raster = None
+        self._labels_buf = self._labelled = None
         self._queue = self._context = None
 
     # ---------------------------------------------------------------- programs
@@ -472,12 +480,13 @@ class OpenCLBackend(Backend):
             reach_buf = self._upload("cell_reach", cell_reach)
             pos_buf, rank_buf = self._buffer("site_pos", 16), self._buffer("site_rank", 4)
         mask_buf = self._buffer("mask", 4)
-        # the last call's labels seed the block search when they are of this raster
-        # (seeds only speed the search: any index below n gives the same labels)
-        seed = self._labels_raster == (w, h)
+        # the last call's labels seed the block search when they are of this raster and
+        # of about these sites (a Lloyd step's, or the same): seeds only speed the
+        # search, as any index below n gives the same labels, but those of another
+        # problem's sites (a sweep's next run, a second mosaic) would slow it many times
         labels_buf = self._buffer("labels", 4 * w * h)
-        seed = seed and labels_buf is self._labels_buf
-        self._labels_buf, self._labels_raster = labels_buf, (w, h)
+        seed = labels_buf is self._labels_buf and _near(self._labelled, (w, h), sites, cell)
+        self._labels_buf, self._labelled = labels_buf, ((w, h), sites.copy())
         slack = 1e-3 + 4 * max(w, h) * 2.0**-24  # px: float32 rounding of far cell edges
         label_kernel.set_args(
             np.int32(w),

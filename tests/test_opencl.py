@@ -478,6 +478,22 @@ def test_seeded_search_gives_the_unseeded_labels_over_lloyd_iterations(reference
     assert_labels_match(got, reference.label(a.sites, **args), a.sites, a.angles, a.scales, problem.metric)
 
 
+def test_only_labels_of_about_the_same_sites_seed_the_search():
+    """The last labels seed the block search only where they are of this raster and of as
+    many sites, none moved more than the reach (a grid cell) since: a sweep's next
+    problem on the same raster, or another picture's mosaic, searches without them (their
+    seeds would make every block's first bound far too wide)."""
+    from compact_distributions.backends.opencl import _near
+
+    sites = np.random.default_rng(1).random((50, 2)) * 100
+    last = ((100, 80), sites.copy())
+    assert _near(last, (100, 80), sites + 2.9, 3.0) and _near(last, (100, 80), sites, 0.0)
+    assert not _near(last, (100, 80), sites + [0.0, -3.1], 3.0)
+    assert not _near(last, (100, 81), sites, 3.0)
+    assert not _near(last, (100, 80), sites[:-1], 3.0)
+    assert not _near(None, (100, 80), sites, 3.0)
+
+
 def test_speed_ratio_medians_and_rounds(monkeypatch, capsys):
     """The one-run ratio tool: medians over every timed step of every round, one ratio
     per round (times given, not measured), and its command line on a small problem."""
