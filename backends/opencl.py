@@ -82,6 +82,19 @@ def _facet_count(metric: Metric) -> int:
     return 0 if metric.kind == "ellipse" else np.asarray(metric.normals).shape[0]
 
 
+def block_mask_words(mask: np.ndarray, block: int) -> np.ndarray:
+    """``mask`` (H, W) bool as label_blocks reads it: a bit per pixel, one 16-bit word
+    per row of each ``block`` x ``block`` block, the blocks in raster order and a block's
+    words top to bottom; bit x of a word is the pixel x columns from the block's left
+    edge, and pixels off the raster are 0."""
+    h, w = mask.shape
+    rows, cols = -(-h // block), -(-w // block)
+    padded = np.zeros((rows * block, cols * block), dtype=np.uint16)
+    padded[:h, :w] = mask
+    blocks = padded.reshape(rows, block, cols, block).transpose(0, 2, 1, 3)
+    return np.ascontiguousarray(blocks @ (np.uint16(1) << np.arange(block, dtype=np.uint16)))
+
+
 def _near(last, raster: tuple, sites: np.ndarray, reach: float) -> bool:
     """Whether ``last`` ((raster, sites) of the last labels) is of ``raster`` and of as
     many sites, none of which has moved more than ``reach`` pixels in x or y."""
@@ -438,7 +451,8 @@ class OpenCLBackend(Backend):
 
         use_mask = grid.mask is not None
         if use_mask and self._mask_source is not grid.mask:
-            self._upload("mask", grid.mask.view(np.uint8))
+            packed = block_mask_words(grid.mask, self.block) if self.block > 0 else grid.mask.view(np.uint8)
+            self._upload("mask", packed)
             self._mask_source, self._mask_pixels = grid.mask, int(grid.mask.sum())
         area = self._mask_pixels if use_mask else w * h
 

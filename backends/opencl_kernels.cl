@@ -110,7 +110,9 @@ inline void flush_run(volatile __global acc_t *acc, const int n, const int site,
     add_sum(acc, 4, n, site, sign * (r * r * len));
 }
 
-/* The arguments of both label kernels, in the order the host sets them. */
+/* The arguments of both label kernels, in the order the host sets them.  The region's
+   mask: a byte per pixel for label_pixels, a bit per pixel in words per block for
+   label_blocks (start_block says how). */
 #define LABEL_KERNEL_ARGS                                                               \
     const int width, const int height, const int ncx, const int ncy, const float cell,  \
         const float reach, const float slack, __global const int *cell_start,           \
@@ -400,7 +402,7 @@ inline void block_sums(volatile __global acc_t *acc, const int n, sums_table *t,
 inline int start_block(const int width, const int height, const int ncx, const int ncy,
                        const float cell, __global const int *cell_start,
                        __global const float *records, __global const int *site_index,
-                       __global const uchar *mask, const int use_mask, __global int *labels,
+                       __global const ushort *mask_words, const int use_mask, __global int *labels,
                        __global const int *site_rank, const int n, const int seed, const int x0,
                        const int y0, float best[BH][BW], int best_idx[BH][BW], int live[BH][BW],
                        int seeds[4])
@@ -408,18 +410,18 @@ inline int start_block(const int width, const int height, const int ncx, const i
     const int xn = x0 + BW < width ? BW : width - x0; /* pixels of the block inside */
     const int yn = y0 + BH < height ? BH : height - y0;
 
-    /* which pixels count: inside the raster and the region (1, else 0) */
+    /* which pixels count: inside the raster and the region (1, else 0); the region's
+       mask comes a bit per pixel, BH 16-bit words per block, side by side (bit x of word
+       yy: pixel (x0 + x, y0 + yy), 0 off the raster): a strip's blocks read one or two
+       cache lines of it, not a line for each of their rows */
     const rowi lanes = load_row(0, LANES);
+    const rowi bit = (rowi)(1) << lanes;
+    __global const ushort *words = mask_words + ((y0 / BH) * ((width + BW - 1) / BW) + x0 / BW) * BH;
     rowi any = 0;
     for (int yy = 0; yy < BH; ++yy) {
         rowi in = (lanes < xn) & (rowi)(yy < yn ? -1 : 0); /* -1 where live */
-        if (use_mask && yy < yn) {
-            if (xn == BW)
-                in &= CAT(convert_int, BW)(CAT(vload, BW)(0, mask + (y0 + yy) * width + x0)) != 0;
-            else
-                for (int xx = 0; xx < xn; ++xx)
-                    in = mask[(y0 + yy) * width + x0 + xx] != 0 ? in : in & (lanes != xx);
-        }
+        if (use_mask)
+            in &= ((rowi)(words[yy]) & bit) != 0;
         CAT(vstore, BW)(-in, 0, live[yy]);
         any |= in;
     }
@@ -515,7 +517,7 @@ __kernel void label_blocks(LABEL_KERNEL_ARGS)
     for (int g = 0; g < STRIP; ++g) {
         const int x0 = xs0 + g * BW;
         on[g] = x0 < width && start_block(width, height, ncx, ncy, cell, cell_start, records,
-                                          site_index, mask, use_mask, labels, site_rank, n,
+                                          site_index, (__global const ushort *)mask, use_mask, labels, site_rank, n,
                                           seed, x0, y0, best[g], best_idx[g], live[g], seeds[g]);
         if (!on[g])
             continue;

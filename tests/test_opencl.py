@@ -478,6 +478,24 @@ def test_seeded_search_gives_the_unseeded_labels_over_lloyd_iterations(reference
     assert_labels_match(got, reference.label(a.sites, **args), a.sites, a.angles, a.scales, problem.metric)
 
 
+@pytest.mark.parametrize("block", [4, 8, 16])
+def test_the_block_kernel_s_mask_words_hold_each_pixel_in_its_block_s_bit(block):
+    """A region's mask as label_blocks reads it, checked pixel by pixel: bit x of word yy
+    of block (by, bx) is pixel (by * block + yy, bx * block + x), on a raster whose sides
+    are not multiples of the block (the pixels past them are 0)."""
+    from compact_distributions.backends.opencl import block_mask_words
+
+    h, w = 29, 45
+    mask = np.random.default_rng(block).random((h, w)) < 0.7
+    words = block_mask_words(mask, block).ravel()
+    cols = -(-w // block)
+    assert words.dtype == np.uint16 and words.size == -(-h // block) * cols * block
+    for i in range(-(-h // block) * block):
+        for j in range(cols * block):
+            bit = (int(words[((i // block) * cols + j // block) * block + i % block]) >> (j % block)) & 1
+            assert bit == (i < h and j < w and mask[i, j]), (i, j)
+
+
 def test_only_labels_of_about_the_same_sites_seed_the_search():
     """The last labels seed the block search only where they are of this raster and of as
     many sites, none moved more than the reach (a grid cell) since: a sweep's next
