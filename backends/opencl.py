@@ -62,11 +62,9 @@ WALL_KERNELS = (
     "suspect_cells",
     "suspect_runs",
     "pieces_join",
-    "pieces_measure",
-    "pieces_size",
-    "pieces_largest",
-    "pieces_last",
+    "pieces_site",
     "pieces_dropped",
+    "pieces_homeless",
 )
 ACC_BYTES = 64  # per site: five 64-bit sums in one cache line (the kernel file says why)
 STRIP = 4  # blocks side by side per work-item of label_blocks: they share their sums
@@ -589,8 +587,9 @@ class OpenCLBackend(Backend):
 
     # ------------------------------------------------------------ walled cells
     def _wall_kernel(self, metric: Metric, name: str, items: int, *args) -> None:
-        """Enqueue walled-cell kernel ``name`` over ``items`` work-items (rows, or cells),
-        padded to a multiple of its fixed work-group: the kernels skip the rest."""
+        """Enqueue walled-cell kernel ``name`` over ``items`` work-items (rows, cells, or
+        1 for one work-group), padded to a multiple of its fixed work-group: the kernels
+        skip the rest."""
         cl = self._cl
         program = self._kernels(metric, _facet_count(metric))[0].program
         if program.int_ptr not in self._wall_kernels:
@@ -612,55 +611,66 @@ class OpenCLBackend(Backend):
         (``row_runs``), and move to the front of its slots those of the cells that may be
         in pieces (``suspect_cells``, ``suspect_runs``), without a wait: (counts buffer,
         per row its kept runs, (the runs, their labels), their union-find parents, per
-        cell its top and bottom run counts, per run its piece's size).  The counts buffer
-        holds the most runs of any row: where more than ``cap``, the lists are cut short
-        and the caller asks again with more slots."""
+        cell its top and bottom run counts, per cell whether it may be in pieces).  The
+        counts buffer holds the most runs of any row (where more than ``cap``, the lists
+        are cut short and the caller asks again with more slots), then room for the
+        number of runs that ``pieces_dropped`` leaves to ``pieces_homeless``."""
         cl, queue = self._cl, self._queue
         slots = h * cap
-        ends, counts = self._buffer("run_ends", 8 * n), self._buffer("run_counts", 4)
+        ends, counts = self._buffer("run_ends", 8 * n), self._buffer("run_counts", 8)
         cl.enqueue_fill_buffer(queue, ends, np.uint32(0), 0, 8 * n)
-        cl.enqueue_fill_buffer(queue, counts, np.uint32(0), 0, 4)
+        cl.enqueue_fill_buffer(queue, counts, np.uint32(0), 0, 8)
         # the runs as (first pixel, length) and their labels apart: suspect_runs reads
         # the labels alone, the pieces kernels whole vectors of either
         runs, labels_of = self._buffer("runs", 8 * slots), self._buffer("run_labels", 4 * slots)
         found, kept = self._buffer("row_count", 4 * h), self._buffer("row_kept", 4 * h)
-        parent, size = self._buffer("piece_parent", 4 * slots), self._buffer("piece_size", 4 * slots)
+        parent = self._buffer("piece_parent", 4 * slots)
         suspect = self._buffer("suspect_cells", n)
         listing = (ends, runs, labels_of, found, counts)
         self._wall_kernel(
             metric, "row_runs", h, np.int32(w), np.int32(h), labels_buf, np.uint32(cap), *listing
         )
         self._wall_kernel(metric, "suspect_cells", n, np.int32(n), ends, suspect)
-        keeping = (found, suspect, runs, labels_of, kept, parent, size)
+        keeping = (found, suspect, runs, labels_of, kept, parent)
         self._wall_kernel(metric, "suspect_runs", h, np.int32(h), np.uint32(cap), *keeping)
-        return counts, kept, (runs, labels_of), parent, ends, size
+        return counts, kept, (runs, labels_of), parent, ends, suspect
 
     def _enqueue_pieces(self, metric: Metric, n: int, w: int, h: int, acc_buf, labels_buf, site_at, cap: int):
         """Enqueue the walled-cell kernels over the labels and sums the label kernel left,
         each row's runs in ``cap`` slots, with no wait before the sums are read.  Returns
         (moments, the most runs of any row): the moments hold only where that is at most
         ``cap``."""
-        cl = self._cl
-        site_piece, largest = self._buffer("site_piece", 4 * n), self._buffer("largest", 4 * n)
-        last = self._buffer("last_largest", 4 * n)
-        # the per-cell slots the pieces kernels fill start empty (suspect_runs empties
-        # the per-piece sizes)
-        for buf, value in ((site_piece, -1), (largest, 0), (last, -1)):
-            cl.enqueue_fill_buffer(self._queue, buf, np.int32(value), 0, 4 * n)
-        counts, kept, listed, parent, _, size = self._suspect_runs(metric, labels_buf, w, h, n, cap)
-        root = self._buffer("piece_root", 4 * h * cap)
-
-        def run(name, *args):  # a row each, and its kept runs
-            self._wall_kernel(metric, name, h, np.int32(h), np.uint32(cap), kept, *args)
-
-        run("pieces_join", np.int32(w), *listed, parent)
-        run("pieces_measure", *listed, parent, root, site_at, site_piece)
-        run("pieces_size", *listed, root, site_piece, size)
-        run("pieces_largest", listed[1], root, site_piece, size, largest)
-        run("pieces_last", listed[1], root, site_piece, size, largest, last)
-        run("pieces_dropped", *listed, root, site_piece, last, np.int32(w), np.int32(n), acc_buf)
-        most = np.empty(1, dtype=np.uint32)
-        cl.enqueue_copy(self._queue, most, counts, is_blocking=False)  # before the sums: in order
+        counts, kept, listed, parent, _, suspect = self._suspect_runs(metric, labels_buf, w, h, n, cap)
+        site_piece = self._buffer("site_piece", 4 * n)
+        # the runs of the cells whose site is not in them, each with its piece's root
+        homeless = self._buffer("homeless_runs", 8 * h * cap)
+        rows = (np.int32(h), np.uint32(cap), kept)
+        self._wall_kernel(metric, "pieces_join", h, *rows, np.int32(w), *listed, parent)
+        self._wall_kernel(
+            metric,
+            "pieces_site",
+            n,
+            np.int32(n),
+            np.int32(w),
+            np.uint32(cap),
+            kept,
+            suspect,
+            *listed,
+            parent,
+            site_at,
+            site_piece,
+        )
+        cut = (np.int32(w), np.int32(n), acc_buf)
+        self._wall_kernel(
+            metric, "pieces_dropped", h, *rows, *listed, parent, site_piece, homeless, counts, *cut
+        )
+        sizes = (
+            self._buffer(name, 4 * size)
+            for name, size in (("piece_size", h * cap), ("largest", n), ("last_largest", n))
+        )
+        self._wall_kernel(metric, "pieces_homeless", 1, *listed, parent, homeless, counts, *sizes, *cut)
+        most = np.empty(2, dtype=np.uint32)
+        self._cl.enqueue_copy(self._queue, most, counts, is_blocking=False)  # before the sums: in order
         return self._read_moments(acc_buf, n), int(most[0])
 
     def _walled_moments(self, sites, angles, scales, metric: Metric, grid: Grid) -> Moments:
@@ -668,13 +678,14 @@ class OpenCLBackend(Backend):
         the device: ``row_runs`` lists each row's runs and counts each cell's top and
         bottom runs, ``suspect_runs`` keeps the runs of the cells that may be in pieces,
         the ``pieces_*`` kernels find their pieces and take the sums of the runs of those
-        not kept from their cells' sums; the host reads 5·N sums (never the raster) and
+        not kept from their cells' sums (``pieces_homeless``, one work-group, those of the
+        few cells whose site is not in them); the host reads 5·N sums (never the raster) and
         the most runs of a row, and waits once, for these.  Where a row had more runs than
         its slots, it labels again with more."""
         cl = self._cl
         n = len(sites)
         w, h = grid.width, grid.height
-        # each site's pixel, for pieces_measure: sent now, without a wait (the array lives
+        # each site's pixel, for pieces_site: sent now, without a wait (the array lives
         # until the sums are read)
         i, j = pixel_index(sites, w, h)
         site_pixel = (i * w + j).astype(np.int32)

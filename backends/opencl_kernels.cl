@@ -721,9 +721,9 @@ __kernel void row_runs(const int width, const int height, __global const int *la
 /* Of the runs row_runs listed, those of the cells with more than one top and more than
    one bottom run: suspect_cells flags these cells (a byte each: the runs' lookups stay
    in the first-level cache, where the run counts would not); suspect_runs moves each
-   row's to the front of its slots, in raster order, each its own piece (parent[k] = k,
-   its size 0), and leaves their number at row_kept[i].  The labels stay apart from the
-   (first pixel, length) pairs: the kernels over runs read whole vectors of them. */
+   row's to the front of its slots, in raster order, each its own piece (parent[k] = k),
+   and leaves their number at row_kept[i].  The labels stay apart from the (first pixel,
+   length) pairs: the kernels over runs read whole vectors of them. */
 __kernel void suspect_cells(const int n, __global const uint *ends, __global uchar *suspect)
 {
     const int l = get_global_id(0);
@@ -734,7 +734,7 @@ __kernel void suspect_cells(const int n, __global const uint *ends, __global uch
 __kernel void suspect_runs(const int height, const uint cap, __global const uint *row_count,
                            __global const uchar *suspect, __global int2 *runs,
                            __global int *run_label, __global uint *row_kept,
-                           __global int *parent, __global int *size)
+                           __global int *parent)
 {
     const int i = get_global_id(0);
     if (i >= height)
@@ -747,7 +747,6 @@ __kernel void suspect_runs(const int height, const uint cap, __global const uint
         runs[k] = runs[r];
         run_label[k] = l;
         parent[k] = (int)k;
-        size[k] = 0;
         k += keep;
     }
     row_kept[i] = k - first;
@@ -826,81 +825,105 @@ __kernel void pieces_join(PIECES_KERNEL_ARGS, const int width, __global const in
     }
 }
 
-/* 2. per run its piece (root); per cell the piece that holds its site's pixel
-   (site_at[l], from the host) where the site is in its cell.  A piece's root, its
-   smallest slot, is its first run in raster order: its first pixel needs no sum. */
-__kernel void pieces_measure(PIECES_KERNEL_ARGS, __global const int2 *runs, __global const int *run_label,
-                             volatile __global int *parent, __global int *root,
-                             __global const int *site_at, __global int *site_piece)
+/* 2. per listed cell (a work-item each) the piece that holds its site's pixel
+   (site_at[l], from the host), or -1 where the site is not in its cell (on a wall, or
+   off the raster): the kept run of the pixel's row that holds it, found by bisection
+   (a row's kept runs are in raster order) */
+__kernel void pieces_site(const int n, const int width, const uint cap, __global const uint *row_kept,
+                          __global const uchar *suspect, __global const int2 *runs,
+                          __global const int *run_label, volatile __global int *parent,
+                          __global const int *site_at, __global int *site_piece)
 {
-    FOR_KEPT_RUNS(k)
-    {
-        const int2 run = runs[k];
-        const int l = run_label[k];
-        const int r = piece_root(parent, (int)k);
-        root[k] = r;
-        const int s = site_at[l];
-        if (run.x <= s && s < run.x + run.y)
-            site_piece[l] = r; /* one run holds the site's pixel: one writer */
+    const int l = get_global_id(0);
+    if (l >= n || !suspect[l])
+        return;
+    const int s = site_at[l];
+    const uint first = (uint)(s / width) * cap;
+    uint lo = first, hi = first + row_kept[s / width];
+    while (lo < hi) { /* the first run that begins after the pixel */
+        const uint mid = (lo + hi) / 2;
+        if (runs[mid].x <= s)
+            lo = mid + 1;
+        else
+            hi = mid;
     }
+    int own = -1;
+    if (lo > first && s < runs[lo - 1].x + runs[lo - 1].y && run_label[lo - 1] == l)
+        own = piece_root(parent, (int)lo - 1);
+    site_piece[l] = own;
 }
 
-/* 3. per piece (at its root) its pixels, only in the cells whose site is not in them
-   (on a wall, or off the raster): the others keep the site's piece whatever the sizes,
-   so most runs need no atomic here */
-__kernel void pieces_size(PIECES_KERNEL_ARGS, __global const int2 *runs, __global const int *run_label,
-                          __global const int *root, __global const int *site_piece,
-                          volatile __global int *size)
-{
-    FOR_KEPT_RUNS(k)
-    {
-        if (site_piece[run_label[k]] < 0)
-            atomic_add(size + root[k], runs[k].y);
-    }
-}
-
-/* 4. per such cell the size of its largest piece */
-__kernel void pieces_largest(PIECES_KERNEL_ARGS, __global const int *run_label, __global const int *root,
-                             __global const int *site_piece, __global const int *size,
-                             volatile __global int *largest)
-{
-    FOR_KEPT_RUNS(k)
-    {
-        const int l = run_label[k];
-        if (root[k] == (int)k && site_piece[l] < 0)
-            atomic_max(largest + l, size[k]);
-    }
-}
-
-/* 5. per such cell, of its largest pieces the one that begins last in raster order: the
-   one with the largest root */
-__kernel void pieces_last(PIECES_KERNEL_ARGS, __global const int *run_label, __global const int *root,
-                          __global const int *site_piece, __global const int *size,
-                          __global const int *largest, volatile __global int *last)
-{
-    FOR_KEPT_RUNS(k)
-    {
-        const int l = run_label[k];
-        if (root[k] == (int)k && site_piece[l] < 0 && size[k] == largest[l])
-            atomic_max(last + l, (int)k);
-    }
-}
-
-/* 6. the runs outside the piece their cell keeps (the site's piece, else the last of the
-   largest): their sums are taken from their cell's (acc, as the label kernels left it),
-   so the host reads the cut cells' sums and nothing else */
+/* 3. the runs outside the piece their cell keeps, where that is the site's: their sums
+   are taken from their cell's (acc, as the label kernels left it), so the host reads
+   the cut cells' sums and nothing else.  The runs of the cells whose site is not in
+   them go to a list (`homeless`, their number at counts[1], zeroed by the host), for
+   pieces_homeless. */
 __kernel void pieces_dropped(PIECES_KERNEL_ARGS, __global const int2 *runs, __global const int *run_label,
-                             __global const int *root, __global const int *site_piece,
-                             __global const int *last, const int width, const int n,
-                             volatile __global acc_t *acc)
+                             volatile __global int *parent, __global const int *site_piece,
+                             __global int2 *homeless, volatile __global uint *counts,
+                             const int width, const int n, volatile __global acc_t *acc)
 {
     FOR_KEPT_RUNS(k)
     {
         const int l = run_label[k];
         const int own = site_piece[l];
-        if (root[k] == (own >= 0 ? own : last[l]))
+        if (own < 0) {
+            homeless[atomic_inc(counts + 1)] = (int2)((int)k, 0);
+            continue;
+        }
+        if (piece_root(parent, (int)k) == own)
             continue;
         const int2 run = runs[k];
+        const int i = run.x / width, j = run.x - i * width;
+        flush_run(acc, n, l, j, j + run.y - 1, i, (ulong)0 - 1);
+    }
+}
+
+/* 4. the cells whose site is not in them keep their largest piece, of equal largest the
+   one that begins last in raster order (the one with the largest root); the runs of
+   the others are dropped as in pieces_dropped.  Such cells are few (a site on a wall,
+   or off the raster), so their runs (listed by pieces_dropped, of any rows) go to one
+   work-group, whose barriers order the steps: per run its piece, per piece its pixels,
+   per cell the largest size, of those the last piece, then the runs dropped. */
+__kernel void pieces_homeless(__global const int2 *runs, __global const int *run_label,
+                              volatile __global int *parent, __global int2 *homeless,
+                              __global const uint *counts, volatile __global int *size,
+                              volatile __global int *largest, volatile __global int *last,
+                              const int width, const int n, volatile __global acc_t *acc)
+{
+    const uint m = counts[1], step = get_local_size(0);
+    for (uint t = get_local_id(0); t < m; t += step) { /* every root is a listed run */
+        const int k = homeless[t].x;
+        size[k] = 0;
+        largest[run_label[k]] = 0;
+        last[run_label[k]] = -1;
+    }
+    barrier(CLK_GLOBAL_MEM_FENCE);
+    for (uint t = get_local_id(0); t < m; t += step) {
+        const int k = homeless[t].x, r = piece_root(parent, k);
+        homeless[t].y = r;
+        atomic_add(size + r, runs[k].y);
+    }
+    barrier(CLK_GLOBAL_MEM_FENCE);
+    for (uint t = get_local_id(0); t < m; t += step) {
+        const int2 e = homeless[t];
+        if (e.y == e.x)
+            atomic_max(largest + run_label[e.x], size[e.x]);
+    }
+    barrier(CLK_GLOBAL_MEM_FENCE);
+    for (uint t = get_local_id(0); t < m; t += step) {
+        const int2 e = homeless[t];
+        const int l = run_label[e.x];
+        if (e.y == e.x && size[e.x] == largest[l])
+            atomic_max(last + l, e.x);
+    }
+    barrier(CLK_GLOBAL_MEM_FENCE);
+    for (uint t = get_local_id(0); t < m; t += step) {
+        const int2 e = homeless[t];
+        const int l = run_label[e.x];
+        if (e.y == last[l])
+            continue;
+        const int2 run = runs[e.x];
         const int i = run.x / width, j = run.x - i * width;
         flush_run(acc, n, l, j, j + run.y - 1, i, (ulong)0 - 1);
     }
