@@ -644,6 +644,17 @@ inline uint lane_bits(const int16 m)
     return (uint)(c.x | c.y);
 }
 
+/* the lanes where 64 labels of a row from column j (j may be -1) equal those of `l`, as
+   the bits of an integer (columns off the row read -1) */
+inline ulong window_bits(__global const int *row, const int j, const int width, const int16 l0,
+                         const int16 l1, const int16 l2, const int16 l3)
+{
+    return (ulong)lane_bits(row16(row, j, width) == l0) |
+           (ulong)lane_bits(row16(row, j + 16, width) == l1) << 16 |
+           (ulong)lane_bits(row16(row, j + 32, width) == l2) << 32 |
+           (ulong)lane_bits(row16(row, j + 48, width) == l3) << 48;
+}
+
 /* row_runs' end of run number k of its row (label `cell`, from pixel `first`, `length`
    pixels, `up` (`down`) where a pixel of it has its label straight above (below)): a top
    (bottom) run of its cell where none has, and listed where the row has room */
@@ -668,9 +679,9 @@ inline void end_run(volatile __global uint *ends, __global int2 *slots, __global
    and the host asks again with more room); ends[2 l], ends[2 l + 1] count the top and
    bottom runs of cell l (zeroed by the host).
 
-   The row is read 16 pixels at a time: where the label changes, and where a pixel has
-   its own label straight above and below, as bits; a run's part of a chunk is a range
-   of bits, so the work per chunk is per run, not per pixel. */
+   The row is read in windows of 64 pixels: where the label changes, and where a pixel
+   has its own label straight above and below, as bits; a run's part of a window is a
+   range of bits, so the work per window is per run, not per pixel. */
 __kernel void row_runs(const int width, const int height, __global const int *labels,
                        const uint cap, volatile __global uint *ends, __global int2 *runs,
                        __global int *run_label, __global uint *row_count,
@@ -686,33 +697,41 @@ __kernel void row_runs(const int width, const int height, __global const int *la
     uint k = 0;
     int cur = -1, start = 0; /* the open run: its label (-1: none of ours) and first pixel */
     uint up = 0, down = 0;   /* whether a pixel of it has its label above, below */
-    for (int j = 0; j < width; j += 16) {
-        const int16 l = row16(row, j, width);
-        uint change = lane_bits(l != row16(row, j - 1, width)); /* lanes past the row read -1 */
-        const uint same_up = i > 0 ? lane_bits(row16(above, j, width) == l) : 0;
-        const uint same_down = i + 1 < height ? lane_bits(row16(below, j, width) == l) : 0;
-        int lab[16];
-        vstore16(l, 0, lab);
-        uint from = 0xffffu; /* the bits of the chunk from the open run's first lane on */
+    for (int j = 0; j < width; j += 64) {
+        const int16 l0 = row16(row, j, width), l1 = row16(row, j + 16, width);
+        const int16 l2 = row16(row, j + 32, width), l3 = row16(row, j + 48, width);
+        /* lanes past the row read -1 */
+        ulong change = ~window_bits(row, j - 1, width, l0, l1, l2, l3);
+        ulong same_up = 0, same_down = 0;
+        if (i > 0)
+            same_up = window_bits(above, j, width, l0, l1, l2, l3);
+        if (i + 1 < height)
+            same_down = window_bits(below, j, width, l0, l1, l2, l3);
+        int lab[64];
+        vstore16(l0, 0, lab);
+        vstore16(l1, 1, lab);
+        vstore16(l2, 2, lab);
+        vstore16(l3, 3, lab);
+        ulong from = ~(ulong)0; /* the bits of the window from the open run's first lane on */
         while (change) {
-            const int t = 31 - clz(change & -change);
+            const int t = 63 - clz(change & -change);
             change &= change - 1;
             if (cur >= 0) { /* the open run ends before lane t */
-                const uint part = from & ((1u << t) - 1);
+                const ulong part = from & (((ulong)1 << t) - 1);
                 end_run(ends, slots, slot_label, k++, cap, cur, i * width + start, j + t - start,
-                        up || (same_up & part), down || (same_down & part));
+                        up || (same_up & part) != 0, down || (same_down & part) != 0);
             }
             cur = lab[t];
             start = j + t;
             up = down = 0;
-            from = 0xffffu & ~((1u << t) - 1);
+            from = ~(((ulong)1 << t) - 1);
         }
         if (cur >= 0) {
-            up = up || (same_up & from);
-            down = down || (same_down & from);
+            up = up || (same_up & from) != 0;
+            down = down || (same_down & from) != 0;
         }
     }
-    if (cur >= 0) /* the run reaches the row's end (a width that is a multiple of 16) */
+    if (cur >= 0) /* the run reaches the row's end (a width that is a multiple of 64) */
         end_run(ends, slots, slot_label, k++, cap, cur, i * width + start, width - start, up, down);
     row_count[i] = k;
     atomic_max(counts, k);

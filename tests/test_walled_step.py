@@ -150,8 +150,9 @@ def runs_of(labels):
 @pytest.mark.parametrize("group", [None, 7], ids=["group", "padded"])
 @pytest.mark.parametrize("width", [700, 512, 37])
 def test_device_runs_and_their_top_and_bottom_counts_are_numpy_s(width, group, cap, monkeypatch):
-    """row_runs reads a row 16 labels at a time: runs of 1 to 600 px (within a chunk,
-    across chunks, to the row's end), outside pixels, widths a multiple of 16 or not.  It
+    """row_runs reads a row in windows of 64 labels (16 at a time): runs of 1 to 600 px
+    (within a window, across windows, to the row's end), outside pixels, widths a
+    multiple of 64 or not.  It
     reports the most runs of any row, its per-cell top and bottom counts are those counted
     pixel by pixel, and suspect_runs leaves at the front of each row's slots NumPy's runs
     of that row of the cells with more than one of each (all but a block), in raster
@@ -161,11 +162,12 @@ def test_device_runs_and_their_top_and_bottom_counts_are_numpy_s(width, group, c
         monkeypatch.setattr(opencl_module, "WALL_GROUP", group)
     rng = np.random.default_rng(width)
     h, n = 40, 7
+    lengths = [v for v in (1, 2, 5, 15, 16, 17, 40, 63, 64, 65, 300, 600) if v < width]
     rows = []
     for _ in range(h):
         row = []
         while len(row) < width:
-            row += [int(rng.integers(-1, n - 1))] * int(rng.choice([1, 2, 5, 15, 16, 17, 40, 300, 600]))
+            row += [int(rng.integers(-1, n - 1))] * int(rng.choice(lengths))
         rows.append(row[:width])
     labels = np.array(rows, dtype=np.int32)
     labels[5:15, 3:30] = n - 1  # one block: one top and one bottom run
