@@ -93,6 +93,12 @@ def block_mask_words(mask: np.ndarray, block: int) -> np.ndarray:
     return np.ascontiguousarray(blocks @ (np.uint16(1) << np.arange(block, dtype=np.uint16)))
 
 
+def _bit_words(width: int) -> int:
+    """64-bit words a row of ``width`` pixels takes as a bit per pixel (whole windows of
+    row_runs)."""
+    return -(-width // 64)
+
+
 def _near(last, raster: tuple, sites: np.ndarray, reach: float) -> bool:
     """Whether ``last`` ((raster, sites) of the last labels) is of ``raster`` and of as
     many sites, none of which has moved more than ``reach`` pixels in x or y."""
@@ -437,9 +443,11 @@ class OpenCLBackend(Backend):
         reach = metric.circumradius * float(scales.max()) * (1 + REACH_MARGIN)
         return records, k, reach
 
-    def _run_labels(self, sites, angles, scales, metric: Metric, grid: Grid, acc_buf=None):
+    def _run_labels(self, sites, angles, scales, metric: Metric, grid: Grid, acc_buf=None, below_bits=None):
         """Enqueue the label kernel; the labels stay in the device buffer 'labels'.  With
-        ``acc_buf`` (zeroed, block kernel only) the kernel also adds the moments to it."""
+        ``acc_buf`` (zeroed, block kernel only) the kernel also adds the moments to it;
+        with ``below_bits`` (block kernel of :meth:`_bits_period` rows only) it leaves
+        there the bits the walled step's ``row_runs`` reads (the kernel file says which)."""
         n = len(sites)
         if self._queue is None:
             raise RuntimeError("opencl: this backend was closed; create a new one")
@@ -521,6 +529,8 @@ class OpenCLBackend(Backend):
             np.int32(seed and self.seed),
             self._buffer("moments", 4) if acc_buf is None else acc_buf,
             np.int32(acc_buf is not None),
+            self._buffer("below_bits", 4) if below_bits is None else below_bits,
+            np.int32(0 if below_bits is None else 8 * _bit_words(w)),
         )
         local = self.local_size
         if self.block > 0:  # one work-item per STRIP blocks of a row
@@ -554,14 +564,15 @@ class OpenCLBackend(Backend):
         acc_buf, _ = self._enqueue_moments(sites, angles, scales, metric, grid)
         return self._read_moments(acc_buf, len(sites))
 
-    def _enqueue_moments(self, sites, angles, scales, metric: Metric, grid: Grid):
-        """Enqueue the labels and their sums: (sums buffer, labels buffer)."""
+    def _enqueue_moments(self, sites, angles, scales, metric: Metric, grid: Grid, below_bits=None):
+        """Enqueue the labels and their sums: (sums buffer, labels buffer); ``below_bits``
+        as for :meth:`_run_labels`."""
         cl = self._cl
         n = len(sites)
         acc_buf = self._buffer("moments", ACC_BYTES * n)
         cl.enqueue_fill_buffer(self._queue, acc_buf, np.uint32(0), 0, ACC_BYTES * n)
         if self.block > 0:  # the block kernel sums its own labels
-            labels_buf, _ = self._run_labels(sites, angles, scales, metric, grid, acc_buf)
+            labels_buf, _ = self._run_labels(sites, angles, scales, metric, grid, acc_buf, below_bits)
         else:
             labels_buf, _ = self._run_labels(sites, angles, scales, metric, grid)
             _, moments_kernel = self._kernels(metric, _facet_count(metric))
@@ -599,6 +610,12 @@ class OpenCLBackend(Backend):
         size = -(-items // WALL_GROUP) * WALL_GROUP
         cl.enqueue_nd_range_kernel(self._queue, kernel, (size,), (WALL_GROUP,))
 
+    def _bits_period(self) -> int:
+        """Rows of the blocks whose row pairs' bits the block kernel leaves for row_runs:
+        blocks 8 or 16 wide (a byte or two a block row), on a little-endian device (the
+        bytes read as 64-bit words); 0: none, row_runs reads the labels."""
+        return self.block if self.block >= 8 and self._device.endian_little else 0
+
     def _row_slots(self, w: int, n: int, area: int) -> int:
         """Slots for the runs of each row of a ``w``-pixel-wide raster: as many as a row
         needed in the last calls, at least twice the cells a row crosses (one per
@@ -606,7 +623,9 @@ class OpenCLBackend(Backend):
         crossed = w / math.sqrt(max(area, 1) / max(n, 1))
         return min(w, max(self._row_room, 2 * math.ceil(crossed) + 32))
 
-    def _suspect_runs(self, metric: Metric, labels_buf, w: int, h: int, n: int, cap: int):
+    def _suspect_runs(
+        self, metric: Metric, labels_buf, w: int, h: int, n: int, cap: int, below_bits=None, period: int = 0
+    ):
         """List the runs of the labels in ``labels_buf``, each row's in its ``cap`` slots
         (``row_runs``), and move to the front of its slots those of the cells that may be
         in pieces (``suspect_cells``, ``suspect_runs``), without a wait: (counts buffer,
@@ -614,7 +633,9 @@ class OpenCLBackend(Backend):
         cell its top and bottom run counts, per cell whether it may be in pieces).  The
         counts buffer holds the most runs of any row (where more than ``cap``, the lists
         are cut short and the caller asks again with more slots), then room for the
-        number of runs that ``pieces_dropped`` leaves to ``pieces_homeless``."""
+        number of runs that ``pieces_dropped`` leaves to ``pieces_homeless``.  Where
+        ``period`` > 0, ``below_bits`` holds the label kernel's bits of the row pairs
+        inside its blocks of ``period`` rows, which row_runs reads instead of the labels."""
         cl, queue = self._cl, self._queue
         slots = h * cap
         ends, counts = self._buffer("run_ends", 8 * n), self._buffer("run_counts", 8)
@@ -627,20 +648,22 @@ class OpenCLBackend(Backend):
         parent = self._buffer("piece_parent", 4 * slots)
         suspect = self._buffer("suspect_cells", n)
         listing = (ends, runs, labels_of, found, counts)
-        self._wall_kernel(
-            metric, "row_runs", h, np.int32(w), np.int32(h), labels_buf, np.uint32(cap), *listing
-        )
+        bits = self._buffer("below_bits", 4) if below_bits is None else below_bits
+        raster = (np.int32(w), np.int32(h), labels_buf, bits, np.int32(period))
+        self._wall_kernel(metric, "row_runs", h, *raster, np.uint32(cap), *listing)
         self._wall_kernel(metric, "suspect_cells", n, np.int32(n), ends, suspect)
         keeping = (found, suspect, runs, labels_of, kept, parent)
         self._wall_kernel(metric, "suspect_runs", h, np.int32(h), np.uint32(cap), *keeping)
         return counts, kept, (runs, labels_of), parent, ends, suspect
 
-    def _enqueue_pieces(self, metric: Metric, n: int, w: int, h: int, acc_buf, labels_buf, site_at, cap: int):
+    def _enqueue_pieces(
+        self, metric: Metric, n: int, w: int, h: int, acc_buf, labels_buf, site_at, cap: int, bits
+    ):
         """Enqueue the walled-cell kernels over the labels and sums the label kernel left,
         each row's runs in ``cap`` slots, with no wait before the sums are read.  Returns
         (moments, the most runs of any row): the moments hold only where that is at most
-        ``cap``."""
-        counts, kept, listed, parent, _, suspect = self._suspect_runs(metric, labels_buf, w, h, n, cap)
+        ``cap``.  ``bits``: (below_bits buffer, period) as for :meth:`_suspect_runs`."""
+        counts, kept, listed, parent, _, suspect = self._suspect_runs(metric, labels_buf, w, h, n, cap, *bits)
         site_piece = self._buffer("site_piece", 4 * n)
         # the runs of the cells whose site is not in them, each with its piece's root
         homeless = self._buffer("homeless_runs", 8 * h * cap)
@@ -691,16 +714,20 @@ class OpenCLBackend(Backend):
         site_pixel = (i * w + j).astype(np.int32)
         site_at = self._buffer("site_at", site_pixel.nbytes)
         cl.enqueue_copy(self._queue, site_at, site_pixel, is_blocking=False)
-        acc_buf, labels_buf = self._enqueue_moments(sites, angles, scales, metric, grid)
+        # the label kernel leaves the bits of which pixels have the label below them,
+        # where it has them at hand (inside its blocks), for row_runs
+        period = self._bits_period()
+        bits = (self._buffer("below_bits", 8 * _bit_words(w) * h), period) if period else (None, 0)
+        acc_buf, labels_buf = self._enqueue_moments(sites, angles, scales, metric, grid, bits[0])
         area = self._mask_pixels if grid.mask is not None else w * h
         try:
             while True:
                 cap = self._row_slots(w, n, area)
-                mom, most = self._enqueue_pieces(metric, n, w, h, acc_buf, labels_buf, site_at, cap)
+                mom, most = self._enqueue_pieces(metric, n, w, h, acc_buf, labels_buf, site_at, cap, bits)
                 if most <= cap:
                     return mom
                 self._row_room = most + most // 4  # a row needs at most w: the next fits
-                acc_buf, labels_buf = self._enqueue_moments(sites, angles, scales, metric, grid)
+                acc_buf, labels_buf = self._enqueue_moments(sites, angles, scales, metric, grid, bits[0])
         except cl.Error as exc:
             raise BackendUnavailable(
                 f"opencl: walled-cell kernels failed on {self.device()}: {exc}"

@@ -112,7 +112,10 @@ inline void flush_run(volatile __global acc_t *acc, const int n, const int site,
 
 /* The arguments of both label kernels, in the order the host sets them.  The region's
    mask: a byte per pixel for label_pixels, a bit per pixel in words per block for
-   label_blocks (start_block says how). */
+   label_blocks (start_block says how).  With bits_stride > 0 (label_blocks, BW 8 or 16)
+   label_blocks also leaves, for the walled step's row_runs, a bit per pixel of each row
+   whose row below is in the same block: whether the pixel has the label below it
+   (below_bits, bits_stride bytes a row, bit x % 8 of byte x / 8 for column x). */
 #define LABEL_KERNEL_ARGS                                                               \
     const int width, const int height, const int ncx, const int ncy, const float cell,  \
         const float reach, const float slack, __global const int *cell_start,           \
@@ -120,7 +123,8 @@ inline void flush_run(volatile __global acc_t *acc, const int n, const int site,
         __global const float4 *site_pos,                                                \
         __global const int *site_index, __global const uchar *mask, const int use_mask, \
         __global int *labels, __global const int *site_rank, const int n, const int seed, \
-        volatile __global acc_t *acc, const int sums
+        volatile __global acc_t *acc, const int sums, __global uchar *below_bits,       \
+        const int bits_stride
 
 /* One work-item per pixel: the nearest site, searched over a uniform grid of cells ring
    by ring (Chebyshev rings of cells around the pixel's cell).
@@ -563,8 +567,21 @@ __kernel void label_blocks(LABEL_KERNEL_ARGS)
             continue;
         const int x0 = xs0 + g * BW;
         const int xn = x0 + BW < width ? BW : width - x0;
+        rowi row_above = 0;
         for (int yy = 0; yy < yn; ++yy) {
             const rowi row = load_row(0, live[g][yy]) != 0 ? load_row(0, best_idx[g][yy]) : (rowi)(-1);
+#if BW >= 8
+            if (bits_stride > 0 && yy > 0) { /* lanes past the raster: any bits */
+                const int bits = hsum((row_above == row) & ((rowi)(1) << load_row(0, LANES)));
+                __global uchar *to = below_bits + (size_t)(y0 + yy - 1) * bits_stride + x0 / 8;
+#if BW == 16
+                *(__global ushort *)to = (ushort)bits;
+#else
+                *to = (uchar)bits;
+#endif
+            }
+            row_above = row;
+#endif
             if (xn == BW)
                 CAT(vstore, BW)(row, 0, labels + (y0 + yy) * width + x0);
             else
@@ -681,15 +698,24 @@ inline void end_run(volatile __global uint *ends, __global int2 *slots, __global
 
    The row is read in windows of 64 pixels: where the label changes, and where a pixel
    has its own label straight above and below, as bits; a run's part of a window is a
-   range of bits, so the work per window is per run, not per pixel. */
+   range of bits, so the work per window is per run, not per pixel.  The bits above and
+   below come from the label kernel where it left them (below_bits, for the rows whose
+   neighbour is in the same block of `period` rows), else from the rows' labels. */
 __kernel void row_runs(const int width, const int height, __global const int *labels,
-                       const uint cap, volatile __global uint *ends, __global int2 *runs,
+                       __global const ulong *below_bits, const int period, const uint cap,
+                       volatile __global uint *ends, __global int2 *runs,
                        __global int *run_label, __global uint *row_count,
                        volatile __global uint *counts)
 {
     const int i = get_global_id(0);
     if (i >= height)
         return;
+    /* the label kernel's bits of the row pairs inside its blocks of `period` rows (0:
+       none), a 64-bit word per window */
+    const int words = (width + 63) / 64;
+    __global const ulong *bits_up = period > 0 && i % period != 0 ? below_bits + (size_t)(i - 1) * words : 0;
+    __global const ulong *bits_down =
+        period > 0 && i % period != period - 1 ? below_bits + (size_t)i * words : 0;
     __global const int *row = labels + (size_t)i * width;
     __global const int *above = row - width, *below = row + width; /* read only in the raster */
     __global int2 *slots = runs + (size_t)i * cap;
@@ -704,9 +730,9 @@ __kernel void row_runs(const int width, const int height, __global const int *la
         ulong change = ~window_bits(row, j - 1, width, l0, l1, l2, l3);
         ulong same_up = 0, same_down = 0;
         if (i > 0)
-            same_up = window_bits(above, j, width, l0, l1, l2, l3);
+            same_up = bits_up ? bits_up[j / 64] : window_bits(above, j, width, l0, l1, l2, l3);
         if (i + 1 < height)
-            same_down = window_bits(below, j, width, l0, l1, l2, l3);
+            same_down = bits_down ? bits_down[j / 64] : window_bits(below, j, width, l0, l1, l2, l3);
         int lab[64];
         vstore16(l0, 0, lab);
         vstore16(l1, 1, lab);

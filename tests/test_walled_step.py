@@ -85,8 +85,11 @@ needs_opencl = pytest.mark.skipif(OPENCL is not None, reason=f"OpenCL backend un
 
 
 @needs_opencl
-@pytest.mark.parametrize("block", [8, 0], ids=["blocks", "pixels"])
-@pytest.mark.parametrize("split", [False, True], ids=["native", "split32"])
+@pytest.mark.parametrize(
+    "split, block",
+    [(False, 8), (True, 8), (False, 0), (True, 0), (False, 16), (False, 4)],
+    ids=["native", "split32", "pixels", "pixels-split32", "blocks16", "blocks4"],
+)
 @pytest.mark.parametrize("name", ["l2", "linf", "triangle"])
 def test_device_path_equals_the_host_split_of_the_device_labels(name, split, block):
     ocl = OpenCLBackend(split_atomics=split, block=block)
@@ -105,6 +108,27 @@ def test_device_path_equals_the_host_split_of_the_device_labels(name, split, blo
             assert not np.array_equal(cut, labels)
     finally:
         ocl.close()
+
+
+@needs_opencl
+@pytest.mark.parametrize("block", [8, 16])
+def test_the_label_kernel_leaves_which_pixels_have_the_label_below(block):
+    """The block kernel's bits for row_runs: bit x of row y is whether pixel (x, y) has
+    the label of pixel (x, y + 1), on every row whose next row is in the same block (the
+    others row_runs reads from the labels), for the pixels of the raster."""
+    sites, args = walled_case("linf", seed=4, w=203, h=77)
+    with OpenCLBackend(block=block) as ocl:
+        assert ocl._bits_period() == block
+        ocl.walled_moments(sites, **args)
+        labels = ocl.label(sites, **args)
+        words = -(-203 // 64)
+        bits = np.empty((77, words), dtype=np.uint64)
+        ocl._read(bits, ocl._buffers["below_bits"])
+    got = np.unpackbits(bits.view(np.uint8), axis=1, bitorder="little")[:, :203].astype(bool)
+    want = labels[:-1] == labels[1:]
+    inside = np.arange(76) % block != block - 1
+    assert inside.sum() >= 60 and not want[inside].all() and want[inside].any()
+    np.testing.assert_array_equal(got[:-1][inside], want[inside])
 
 
 @needs_opencl
