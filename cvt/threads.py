@@ -22,6 +22,9 @@ PARALLEL_MIN = 64
 _pool: ThreadPoolExecutor | None = None
 _pool_workers = 0
 _pool_lock = threading.Lock()
+# set in the pool's threads while they run a slice or a call: a call made from there
+# runs in that thread, as waiting on the pool from inside it could wait for ever
+_on_pool = threading.local()
 
 
 def _forget_pool() -> None:
@@ -45,6 +48,24 @@ def _shared_pool(workers: int) -> ThreadPoolExecutor:
         return _pool
 
 
+def _on_the_pool(call):
+    """``call`` wrapped to run with the pool-thread flag set."""
+
+    def run(*args):
+        _on_pool.active = True
+        try:
+            return call(*args)
+        finally:
+            _on_pool.active = False
+
+    return run
+
+
+def _nested() -> bool:
+    """Whether this thread is one of the pool's, running a slice or a call."""
+    return getattr(_on_pool, "active", False)
+
+
 def usable_cores() -> int:
     """The cores this process may run on (its CPU affinity where the OS has one)."""
     if hasattr(os, "sched_getaffinity"):
@@ -60,8 +81,8 @@ def elementwise(operation, *arrays: np.ndarray, **kwargs) -> np.ndarray:
     ----------
     operation : callable
         Takes equal-length 1-d arrays and returns one result per element; it must
-        release the GIL to gain anything (shapely's functions do), and must not call
-        ``elementwise`` itself (its slices run on the same pool).
+        release the GIL to gain anything (shapely's functions do).  Called from inside
+        a slice or a :func:`side_by_side` call, ``elementwise`` runs in that thread.
     *arrays : 1-d ndarrays of one length
         The operands.
     **kwargs
@@ -74,12 +95,12 @@ def elementwise(operation, *arrays: np.ndarray, **kwargs) -> np.ndarray:
     """
     n = len(arrays[0])
     workers = min(usable_cores(), n // PARALLEL_MIN)
-    if workers < 2:
+    if workers < 2 or _nested():
         return operation(*arrays, **kwargs)
     bounds = np.linspace(0, n, workers + 1).astype(np.int64)
     slices = [slice(a, b) for a, b in zip(bounds[:-1], bounds[1:], strict=True)]
     pool = _shared_pool(workers)
-    parts = list(pool.map(lambda s: operation(*(a[s] for a in arrays), **kwargs), slices))
+    parts = list(pool.map(_on_the_pool(lambda s: operation(*(a[s] for a in arrays), **kwargs)), slices))
     return np.concatenate(parts)
 
 
@@ -91,8 +112,9 @@ def side_by_side(*calls):
     Parameters
     ----------
     *calls : callables
-        Each takes no argument; none may depend on another's effects, nor call
-        :func:`elementwise` or ``side_by_side`` (they share the pool).
+        Each takes no argument; none may depend on another's effects.  Those on the
+        pool that call :func:`elementwise` or ``side_by_side`` run that in their own
+        thread (waiting on the pool from inside it could wait for ever).
 
     Returns
     -------
@@ -100,10 +122,10 @@ def side_by_side(*calls):
         ``[call() for call in calls]``; an exception in any call is raised here.
     """
     cores = usable_cores()
-    if len(calls) < 2 or cores < 2:
+    if len(calls) < 2 or cores < 2 or _nested():
         return [call() for call in calls]
     pool = _shared_pool(cores)
-    later = [pool.submit(call) for call in calls[1:]]
+    later = [pool.submit(_on_the_pool(call)) for call in calls[1:]]
     try:
         first = calls[0]()
     finally:

@@ -341,3 +341,47 @@ def test_side_by_side_runs_the_calls_at_once_and_returns_them_in_order(monkeypat
         threads.side_by_side(lambda: 1, broken)
     monkeypatch.setattr(threads, "usable_cores", lambda: 1)  # one core: one after the other
     assert threads.side_by_side(lambda: 3, lambda: 4) == [3, 4]
+
+
+def test_calls_nested_on_the_pool_run_in_their_own_thread(monkeypatch):
+    """An elementwise operation that calls elementwise, and a side_by_side call on the
+    pool that does, with a pool of two: waiting on the pool from inside it would wait
+    for ever (every thread waiting on slices queued behind it); the nested calls run in
+    the calling thread and give the same result as the operation alone."""
+    import threading
+
+    import shapely
+
+    from compact_distributions.cvt import threads
+
+    monkeypatch.setattr(threads, "usable_cores", lambda: 2)
+    monkeypatch.setattr(threads, "_pool", None)  # a pool of two, made here
+    monkeypatch.setattr(threads, "_pool_workers", 0)
+    discs = shapely.buffer(shapely.points(np.zeros((8 * threads.PARALLEL_MIN, 2))), 1.0, quad_segs=1)
+    inner_threads = set()
+
+    def nested_area(part):
+        here, seen = threading.current_thread().name, set()
+        inner = threads.elementwise(
+            lambda x: seen.add(threading.current_thread().name) or shapely.area(x), part
+        )
+        assert seen == {here}  # the inner slices ran in this pool thread
+        inner_threads.add(here)
+        return inner
+
+    out = {}
+
+    def work():
+        out["elementwise"] = threads.elementwise(nested_area, discs)
+        out["side"] = threads.side_by_side(
+            lambda: 1, lambda: float(threads.elementwise(shapely.area, discs).sum())
+        )
+
+    runner = threading.Thread(target=work, daemon=True)
+    runner.start()
+    runner.join(timeout=60)
+    assert not runner.is_alive(), "a nested call waited on the pool for ever"
+    assert len(inner_threads) >= 1 and all(name.startswith("elementwise") for name in inner_threads)
+    np.testing.assert_allclose(out["elementwise"], 2.0)  # a diamond of diagonal 2
+    assert out["side"] == [1, pytest.approx(2.0 * 8 * threads.PARALLEL_MIN)]
+    assert not threads._nested()  # the flag is only ever set on the pool's threads
