@@ -93,10 +93,10 @@ def block_mask_words(mask: np.ndarray, block: int) -> np.ndarray:
     return np.ascontiguousarray(blocks @ (np.uint16(1) << np.arange(block, dtype=np.uint16)))
 
 
-def _bit_words(width: int) -> int:
-    """64-bit words a row of ``width`` pixels takes as a bit per pixel (whole windows of
-    row_runs)."""
-    return -(-width // 64)
+def _bits_row_bytes(width: int) -> int:
+    """Bytes a row of ``width`` pixels takes in ``below_bits``: a bit per pixel, in whole
+    64-bit words (row_runs' windows); the label kernel and row_runs both take it."""
+    return 8 * -(-width // 64)
 
 
 def _near(last, raster: tuple, sites: np.ndarray, reach: float) -> bool:
@@ -530,7 +530,7 @@ class OpenCLBackend(Backend):
             self._buffer("moments", 4) if acc_buf is None else acc_buf,
             np.int32(acc_buf is not None),
             self._buffer("below_bits", 4) if below_bits is None else below_bits,
-            np.int32(0 if below_bits is None else 8 * _bit_words(w)),
+            np.int32(0 if below_bits is None else _bits_row_bytes(w)),
         )
         local = self.local_size
         if self.block > 0:  # one work-item per STRIP blocks of a row
@@ -649,7 +649,7 @@ class OpenCLBackend(Backend):
         suspect = self._buffer("suspect_cells", n)
         listing = (ends, runs, labels_of, found, counts)
         bits = self._buffer("below_bits", 4) if below_bits is None else below_bits
-        raster = (np.int32(w), np.int32(h), labels_buf, bits, np.int32(period))
+        raster = (np.int32(w), np.int32(h), labels_buf, bits, np.int32(_bits_row_bytes(w)), np.int32(period))
         self._wall_kernel(metric, "row_runs", h, *raster, np.uint32(cap), *listing)
         self._wall_kernel(metric, "suspect_cells", n, np.int32(n), ends, suspect)
         keeping = (found, suspect, runs, labels_of, kept, parent)
@@ -717,7 +717,7 @@ class OpenCLBackend(Backend):
         # the label kernel leaves the bits of which pixels have the label below them,
         # where it has them at hand (inside its blocks), for row_runs
         period = self._bits_period()
-        bits = (self._buffer("below_bits", 8 * _bit_words(w) * h), period) if period else (None, 0)
+        bits = (self._buffer("below_bits", _bits_row_bytes(w) * h), period) if period else (None, 0)
         acc_buf, labels_buf = self._enqueue_moments(sites, angles, scales, metric, grid, bits[0])
         area = self._mask_pixels if grid.mask is not None else w * h
         try:

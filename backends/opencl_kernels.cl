@@ -702,7 +702,8 @@ inline void end_run(volatile __global uint *ends, __global int2 *slots, __global
    below come from the label kernel where it left them (below_bits, for the rows whose
    neighbour is in the same block of `period` rows), else from the rows' labels. */
 __kernel void row_runs(const int width, const int height, __global const int *labels,
-                       __global const ulong *below_bits, const int period, const uint cap,
+                       __global const ulong *below_bits, const int bits_stride, const int period,
+                       const uint cap,
                        volatile __global uint *ends, __global int2 *runs,
                        __global int *run_label, __global uint *row_count,
                        volatile __global uint *counts)
@@ -711,8 +712,8 @@ __kernel void row_runs(const int width, const int height, __global const int *la
     if (i >= height)
         return;
     /* the label kernel's bits of the row pairs inside its blocks of `period` rows (0:
-       none), a 64-bit word per window */
-    const int words = (width + 63) / 64;
+       none), a 64-bit word per window, bits_stride bytes a row as it wrote them */
+    const int words = bits_stride / 8;
     __global const ulong *bits_up = period > 0 && i % period != 0 ? below_bits + (size_t)(i - 1) * words : 0;
     __global const ulong *bits_down =
         period > 0 && i % period != period - 1 ? below_bits + (size_t)i * words : 0;
@@ -883,8 +884,9 @@ __kernel void pieces_site(const int n, const int width, const uint cap, __global
     if (l >= n || !suspect[l])
         return;
     const int s = site_at[l];
-    const uint first = (uint)(s / width) * cap;
-    uint lo = first, hi = first + row_kept[s / width];
+    const int row = s / width;
+    const uint first = (uint)row * cap;
+    uint lo = first, hi = first + row_kept[row];
     while (lo < hi) { /* the first run that begins after the pixel */
         const uint mid = (lo + hi) / 2;
         if (runs[mid].x <= s)
@@ -896,6 +898,14 @@ __kernel void pieces_site(const int n, const int width, const uint cap, __global
     if (lo > first && s < runs[lo - 1].x + runs[lo - 1].y && run_label[lo - 1] == l)
         own = piece_root(parent, (int)lo - 1);
     site_piece[l] = own;
+}
+
+/* the sums of a run (first pixel, length) taken from its cell's */
+inline void drop_run(volatile __global acc_t *acc, const int n, const int cell, const int2 run,
+                     const int width)
+{
+    const int i = run.x / width, j = run.x - i * width;
+    flush_run(acc, n, cell, j, j + run.y - 1, i, (ulong)0 - 1);
 }
 
 /* 3. the runs outside the piece their cell keeps, where that is the site's: their sums
@@ -918,9 +928,7 @@ __kernel void pieces_dropped(PIECES_KERNEL_ARGS, __global const int2 *runs, __gl
         }
         if (piece_root(parent, (int)k) == own)
             continue;
-        const int2 run = runs[k];
-        const int i = run.x / width, j = run.x - i * width;
-        flush_run(acc, n, l, j, j + run.y - 1, i, (ulong)0 - 1);
+        drop_run(acc, n, l, runs[k], width);
     }
 }
 
@@ -968,8 +976,6 @@ __kernel void pieces_homeless(__global const int2 *runs, __global const int *run
         const int l = run_label[e.x];
         if (e.y == last[l])
             continue;
-        const int2 run = runs[e.x];
-        const int i = run.x / width, j = run.x - i * width;
-        flush_run(acc, n, l, j, j + run.y - 1, i, (ulong)0 - 1);
+        drop_run(acc, n, l, runs[e.x], width);
     }
 }
