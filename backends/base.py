@@ -27,7 +27,7 @@ import numpy as np
 from compact_distributions.cvt.errors import InputError
 from compact_distributions.cvt.metrics import Metric
 from compact_distributions.cvt.moments import Moments, moments_from_labels
-from compact_distributions.cvt.placement import FitCells, search_on_host
+from compact_distributions.cvt.placement.fit import FitCells, search_on_host
 from compact_distributions.cvt.problem import Grid
 from compact_distributions.cvt.resources import RUNTIME
 

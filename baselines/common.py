@@ -33,7 +33,7 @@ from compact_distributions.cvt.evaluate import region_polygon
 from compact_distributions.cvt.lloyd import iterate
 from compact_distributions.cvt.methods import Method, MethodOption, SweepVariant
 from compact_distributions.cvt.metrics import Metric
-from compact_distributions.cvt.placement import contour_samples, parse_gap
+from compact_distributions.cvt.placement.fit import contour_samples, parse_gap
 from compact_distributions.cvt.problem import Grid, Problem, in_own_cell
 from compact_distributions.cvt.seeding import initial_sites
 from compact_distributions.cvt.shapes import (

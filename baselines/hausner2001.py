@@ -55,7 +55,7 @@ from compact_distributions.cvt.distribution import Distribution
 from compact_distributions.cvt.lloyd import LloydSetup, final_labels, lloyd
 from compact_distributions.cvt.metrics import make_metric
 from compact_distributions.cvt.pixels import pixel_index
-from compact_distributions.cvt.placement import parse_gap
+from compact_distributions.cvt.placement.fit import parse_gap
 from compact_distributions.cvt.problem import Grid, Problem
 
 from .common import BUDGET_DELTA, baseline, budget_size, make_elements, tile_shape

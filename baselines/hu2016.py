@@ -59,7 +59,7 @@ from scipy import ndimage
 from compact_distributions.cvt.distribution import Distribution
 from compact_distributions.cvt.evaluate import region_polygon
 from compact_distributions.cvt.lloyd import iterate
-from compact_distributions.cvt.placement import parse_gap
+from compact_distributions.cvt.placement.fit import parse_gap
 from compact_distributions.cvt.problem import Grid, Problem
 from compact_distributions.cvt.seeding import initial_sites
 from compact_distributions.cvt.shapes import element_polygons

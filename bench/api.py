@@ -107,7 +107,7 @@ def run(
     ``element``: the shape placed (default the metric's own); ``gap``: grout in px;
     ``method_options``: the method's own declared options (checked against its record);
     ``progress(k, iterations, energy)`` is called after each Lloyd step."""
-    from compact_distributions.cvt.mosaic import resolve_method
+    from compact_distributions.cvt.mosaic.pipeline import resolve_method
 
     if not isinstance(problem, Problem):
         raise InputError(f"problem must be a Problem (compact_distributions.problem(...)), got {problem!r}")
@@ -124,7 +124,7 @@ def mosaic(image, *, backend="numpy", **options):
     """A mosaic of ``image`` (a file path or an array): :func:`cvt.mosaic.make_mosaic` with
     the backend given by name (started and closed here) or live; ``options`` are
     make_mosaic's (``n_elements``, ``element``, ``method``, ``method_options``, ...)."""
-    from compact_distributions.cvt.mosaic import make_mosaic
+    from compact_distributions.cvt.mosaic.pipeline import make_mosaic
 
     with _backend(backend) as live:
         return make_mosaic(image, live, **options)

@@ -482,7 +482,7 @@ def to_jsonable(obj):
     if isinstance(obj, float) and not np.isfinite(obj):
         return None
     if hasattr(obj, "geom_type"):  # a shapely geometry: its outline, as result.json lists it
-        from compact_distributions.cvt.render import element_coordinates
+        from compact_distributions.cvt.mosaic.render import element_coordinates
 
         return element_coordinates([obj])[0]
     return obj
@@ -492,7 +492,7 @@ def _item_texts(value) -> list[str] | None:
     """The JSON text of each item of a list, built whole-array where the list is a
     finite float or an integer array (1-D or rows) or a list of shapely geometries and
     None (their outlines); None for anything else (converted item by item)."""
-    from compact_distributions.cvt.render import element_coordinates_json, format_rows
+    from compact_distributions.cvt.mosaic.render import element_coordinates_json, format_rows
 
     if isinstance(value, np.ndarray) and value.ndim in (1, 2) and value.size:
         ints = np.issubdtype(value.dtype, np.integer)
@@ -545,7 +545,7 @@ def write_lines(path, chunks) -> None:
 
 
 def write_sites_csv(path, sites, angles, scales) -> None:
-    from compact_distributions.cvt.render import format_rows
+    from compact_distributions.cvt.mosaic.render import format_rows
 
     sites = np.asarray(sites, dtype=np.float64).reshape(-1, 2)
     angles, scales = np.asarray(angles, dtype=np.float64), np.asarray(scales, dtype=np.float64)

@@ -224,7 +224,7 @@ def effect_picture(elements, grid, side: int = 512, crop: float | None = None):
     """The top-left ``crop`` fraction of the region (default :func:`picture_crop`) with its
     elements drawn (PIL image, ``side`` px on its long side): dark background, the region
     lighter, elements in a colour-blind safe palette."""
-    from compact_distributions.cvt.render import draw_elements
+    from compact_distributions.cvt.mosaic.render import draw_elements
 
     crop = picture_crop(len(elements)) if crop is None else crop
     cw, ch = grid.width * crop, grid.height * crop

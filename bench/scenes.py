@@ -46,7 +46,7 @@ def scene_problem(scene: str, size: int, n: int, metric, seed: int):
     from compact_distributions.cvt.problem import Grid, Problem
     from compact_distributions.cvt.validate import one_of
 
-    from .figures_cmd import ring_mask, star_mask
+    from .commands.figures import ring_mask, star_mask
 
     density, field, region = SCENES[one_of(scene, "scene", list(SCENES))]
     mask = {"star": star_mask, "ring": ring_mask, None: lambda _: None}[region](size)

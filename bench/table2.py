@@ -27,7 +27,6 @@ per method: seed 0, the top-left corner of the region with about 250 elements) a
 
 from __future__ import annotations
 
-import argparse
 import sys
 import time
 from dataclasses import dataclass, field
@@ -585,22 +584,6 @@ def render_picture(table, out: Path, suite_specs: list[RunSpec], path: Path) -> 
     return True
 
 
-def add_parser(sub):
-    p = sub.add_parser(
-        "table2",
-        help="regenerate the paper's Table 2 into reports/",
-        description=__doc__,
-        formatter_class=argparse.RawDescriptionHelpFormatter,
-    )
-    options.add_sweep_options(p, "small version (256² px, N=250, 2 seeds): < 2 min")
-    options.add_seeds_option(p)
-    options.add_list_options(p, "methods", "backends", "shapes")
-    options.add_method_option(p, several=True)
-    options.add_cluster_options(p, exclusive=True)
-    options.add_memory_option(p)
-    p.set_defaults(func=run)
-
-
 def sweep_backends(names) -> tuple[list[str], dict[str, str]]:
     """The variants ``names`` gives (a list, or ``--backends``' comma text; default: every
     variant that computes every metric) and the reasons of those that cannot run here."""
@@ -673,10 +656,6 @@ def prepare(req: Table2Request) -> dict:
     )
     check_memory(specs, req.memory_limit, lower="run the --quick set, or fewer --methods or --shapes")
     return {"out": req.out, "cfg": cfg, "seeds": seeds, "specs": specs, "unavailable": unavailable}
-
-
-def run(args) -> int:
-    return table2(Table2Request.from_args(args))
 
 
 def table2(req: Table2Request) -> int:
@@ -752,4 +731,4 @@ def _print_summary(table, out: Path, written: list[str]) -> None:
     print(f"wrote {out}/{', '.join(written)}", file=sys.stderr)
 
 
-__all__ = ["Table2Request", "table2", "problem_set", "aggregate", "run", "prepare", "discussion"]
+__all__ = ["Table2Request", "table2", "problem_set", "aggregate", "prepare", "discussion"]

@@ -25,7 +25,6 @@ seed) and ``OUT/raw/table3*/``.
 
 from __future__ import annotations
 
-import argparse
 import math
 import sys
 import time
@@ -193,7 +192,7 @@ def discussion(table) -> str:
                 f"{ext['direction_fidelity_mean']:.2f}°."
             )
     lines.append(
-        "- ours-compact caps its sizes only under a density (`cvt.methods.density_caps`): under a "
+        "- ours-compact caps its sizes only under a density (`cvt.placement.ours.density_caps`): under a "
         "uniform density (the field and region scenes) each element grows by the room around it, "
         "which is what buys Table 2's coverage and what the size error counts."
     )
@@ -499,30 +498,6 @@ def table3(req: Table3Request) -> int:
         memory_limit=req.memory_limit,
         command=req.command,
     )
-    return 0
-
-
-def add_parser(sub):
-    p = sub.add_parser(
-        "table3",
-        help="Table 3: density, direction and region, with fidelity measures",
-        description=__doc__,
-        formatter_class=argparse.RawDescriptionHelpFormatter,
-    )
-    options.add_sweep_options(p, "small version (192² px, N=150, 2 seeds)")
-    options.add_seeds_option(p)
-    options.add_list_options(p, "methods", "shapes")
-    p.add_argument("--scenes", default=None, help=f"comma list of scenes (default all: {', '.join(SCENES)})")
-    options.add_cluster_options(p)
-    options.add_memory_option(p)
-    p.set_defaults(func=run)
-
-
-def run(args) -> int:
-    from .outputs import command_line
-
-    cmd = command_line(getattr(args, "argv", None) or ["table3"] + (["--quick"] if args.quick else []))
-    run_table3(**prepare(args), command=cmd)
     return 0
 
 

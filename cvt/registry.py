@@ -1,4 +1,4 @@
-"""The one registry of methods: the paper's variants, then every method that an installed
+"""The one registry of methods: every method that an installed
 distribution declares through the entry point group ``compact_distributions.methods``.
 
 The suite's own baselines come in through that group too (this distribution declares
@@ -15,7 +15,7 @@ from functools import lru_cache
 from importlib.metadata import entry_points
 
 from .errors import InputError
-from .methods import METHODS, Method
+from .methods import Method
 from .validate import one_of
 
 METHOD_GROUP = "compact_distributions.methods"
@@ -45,7 +45,7 @@ def records_of(obj, name: str) -> list[Method]:
 
 @lru_cache(maxsize=1)
 def _load() -> tuple[dict[str, Method], dict[str, str]]:
-    found: dict[str, Method] = dict(METHODS)
+    found: dict[str, Method] = {}
     failed: dict[str, str] = {}
     loaded = []
     for ep in group_entry_points(METHOD_GROUP):
@@ -53,7 +53,13 @@ def _load() -> tuple[dict[str, Method], dict[str, str]]:
             loaded += records_of(ep.load(), ep.name)
         except Exception as exc:  # a broken plug-in is listed with its reason, never a crash
             failed[ep.name] = f"{type(exc).__name__}: {exc}"
-    for record in sorted(loaded, key=lambda m: (_ROLE_ORDER[m.role], m.year or 9999, m.name)):
+
+    # by role, then year; a package's own records keep their declared order (the sort is
+    # stable), other distributions' by name
+    def order(m: Method):
+        return (_ROLE_ORDER[m.role], m.year or 9999, m.name if m.role == "plugin" else "")
+
+    for record in sorted(loaded, key=order):
         if record.name in found:
             failed.setdefault(record.name, f"the name {record.name!r} is taken by another method")
             continue

@@ -3,7 +3,7 @@ status 2, one line on stderr, no traceback."""
 
 from __future__ import annotations
 
-from compact_distributions.bench.cli import main
+from compact_distributions.bench.commands.cli import main
 
 
 def one_error(argv, capsys) -> str:

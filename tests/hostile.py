@@ -15,7 +15,7 @@ import time
 import zlib
 from pathlib import Path
 
-CLI = [sys.executable, "-m", "compact_distributions.bench.cli"]
+CLI = [sys.executable, "-m", "compact_distributions.bench.commands.cli"]
 CAP = 4 * 2**30  # address space of a child: a regression fails the test, not the machine
 
 
@@ -48,7 +48,7 @@ def run_measured(argv, cwd=None, env=None, timeout=300):
     which the child reports as it exits): the rusage of a forked child also counts the
     pages of this process it shared before exec.  A child killed before it reports falls
     back to that rusage."""
-    from compact_distributions.bench.pipeline_cmd import PEAK_LAUNCHER
+    from compact_distributions.bench.commands.pipeline import PEAK_LAUNCHER
 
     report = Path(tempfile.mkdtemp(prefix="hostile-peak-")) / "peak_kb"
     t0 = time.perf_counter()

@@ -59,7 +59,7 @@ def test_mosaic_by_name():
 
 def cvtbench(*args):
     return subprocess.run(
-        [sys.executable, "-m", "compact_distributions.bench.cli", *args],
+        [sys.executable, "-m", "compact_distributions.bench.commands.cli", *args],
         capture_output=True,
         text=True,
         timeout=300,
@@ -95,7 +95,7 @@ def test_a_cold_opencl_build_prints_nothing(tmp_path, ocl):
     env = {**os.environ, "POCL_CACHE_DIR": str(tmp_path / "cache")}
     env.pop("PYOPENCL_COMPILER_OUTPUT", None)
     done = subprocess.run(
-        [sys.executable, "-m", "compact_distributions.bench.cli", "run", "--backend", "opencl"]
+        [sys.executable, "-m", "compact_distributions.bench.commands.cli", "run", "--backend", "opencl"]
         + ["--elements", "60", "--size", "64", "--iterations", "2", "--quiet", "--out", str(tmp_path / "r")],
         capture_output=True,
         text=True,

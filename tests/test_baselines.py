@@ -305,7 +305,7 @@ def test_gap_shrinks_fixed_tiles():
 
 
 def test_cli_runs_a_baseline(tmp_path, capsys):
-    from compact_distributions.bench.cli import main
+    from compact_distributions.bench.commands.cli import main
 
     out = tmp_path / "run"
     code = main(

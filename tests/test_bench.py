@@ -11,8 +11,9 @@ import numpy as np
 import pandas as pd
 import pytest
 
-from compact_distributions.bench import regress_cmd, sweep
-from compact_distributions.bench.cli import main
+from compact_distributions.bench import sweep
+from compact_distributions.bench.commands import regress as regress_cmd
+from compact_distributions.bench.commands.cli import main
 from compact_distributions.bench.report import git_commit
 from compact_distributions.bench.runs import RunSpec, effect_picture
 from compact_distributions.bench.sweep import run_sweep
@@ -347,10 +348,10 @@ def test_bad_bench_options_are_one_line_errors(argv, text, capsys, tmp_path):
 def test_reproduce_hands_each_part_a_typed_request(tmp_path):
     import argparse
 
-    from compact_distributions.bench.backends_cmd import BackendsRequest, backends
-    from compact_distributions.bench.figures_cmd import FiguresRequest
-    from compact_distributions.bench.pipeline_cmd import PipelineRequest
-    from compact_distributions.bench.reproduce_cmd import requests
+    from compact_distributions.bench.commands.backends import BackendsRequest, backends
+    from compact_distributions.bench.commands.figures import FiguresRequest
+    from compact_distributions.bench.commands.pipeline import PipelineRequest
+    from compact_distributions.bench.commands.reproduce import requests
     from compact_distributions.bench.table2 import Table2Request, table2
     from compact_distributions.bench.table3 import Table3Request
 
@@ -418,7 +419,7 @@ def test_effect_picture_draws_elements():
 
 
 def test_backend_timings_are_read_back_only_when_this_code_made_them(tmp_path, monkeypatch):
-    from compact_distributions.bench import backends_cmd
+    from compact_distributions.bench.commands import backends as backends_cmd
 
     spec = backends_cmd.TimingSpec("t", "numpy", "l2", 40, 64, 0, 1)
     calls = []

@@ -8,7 +8,7 @@ import numpy as np
 import pytest
 from PIL import Image
 
-from compact_distributions.bench.cli import main
+from compact_distributions.bench.commands.cli import main
 
 
 def run_cli(argv, capsys):
@@ -214,7 +214,7 @@ def test_info_lists_every_backend(capsys):
 
 def test_console_script_end_to_end(tmp_path):
     """The installed entry point, as a user runs it (subprocess, real exit status)."""
-    exe = [sys.executable, "-m", "compact_distributions.bench.cli"]
+    exe = [sys.executable, "-m", "compact_distributions.bench.commands.cli"]
     ok = subprocess.run(
         exe + ["run", "--elements", "30", "--size", "64", "--iterations", "2", "--out", str(tmp_path / "o")],
         capture_output=True,

@@ -27,7 +27,7 @@ import pandas as pd
 import pytest
 
 from compact_distributions.bench import cluster, table2
-from compact_distributions.bench.cli import main
+from compact_distributions.bench.commands.cli import main
 from compact_distributions.bench.sweep import made_by, run_sweep
 
 ROOT = Path(__file__).resolve().parent.parent
@@ -140,6 +140,9 @@ def start_workers(address: str, folder: Path, n: int, env: dict | None = None):
         stdout=subprocess.DEVNULL,
         stderr=open(folder / "workers.log", "w"),
         env=env,
+        # not the repository's root, whose compact_distributions/ folder `python -m` would
+        # put ahead of PYTHONPATH
+        cwd=folder,
     )
     with Client(address, timeout=10) as client:
         try:
@@ -403,7 +406,7 @@ def test_exclusive_runs_never_share_a_host(tmp_path):
 
 
 def test_reports_name_hosts_when_rows_come_from_several():
-    from compact_distributions.bench.backends_cmd import with_ratios
+    from compact_distributions.bench.commands.backends import with_ratios
 
     rows = [
         {

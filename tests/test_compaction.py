@@ -14,14 +14,23 @@ from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
 from compact_distributions.backends.numpy_backend import NumpyBackend
-from compact_distributions.cvt.alternate import alternate_triangles, alternating_turns, check_alternate
-from compact_distributions.cvt.compaction import _best_pair_directions, _Unit, boundary_segments, compact
 from compact_distributions.cvt.errors import InputError
 from compact_distributions.cvt.evaluate import evaluate, region_polygon
 from compact_distributions.cvt.fields import DensityMap
 from compact_distributions.cvt.lloyd import final_labels, lloyd
 from compact_distributions.cvt.metrics import make_metric
-from compact_distributions.cvt.placement import fit_centres, placement_sizes
+from compact_distributions.cvt.placement.alternate import (
+    alternate_triangles,
+    alternating_turns,
+    check_alternate,
+)
+from compact_distributions.cvt.placement.compaction import (
+    _best_pair_directions,
+    _Unit,
+    boundary_segments,
+    compact,
+)
+from compact_distributions.cvt.placement.fit import fit_centres, placement_sizes
 from compact_distributions.cvt.problem import Grid, Problem, lattice_sites
 from compact_distributions.cvt.shapes import ELEMENT_SHAPES, element_ball, element_polygons, transform
 
@@ -182,7 +191,7 @@ def test_tiles_solved_in_threads_give_the_same_elements():
 def round_program(monkeypatch, shape, seed, n, region, gap):
     """The arguments of the first round's program of a random layout (as compaction
     builds it), caught on their way to the PDHG solver."""
-    from compact_distributions.cvt import compaction
+    from compact_distributions.cvt.placement import compaction
 
     grid, sites, angles, sizes = random_layout(shape, seed, n, region, gap)
     caught = []
@@ -212,7 +221,12 @@ def test_pdhg_reaches_the_optimum_highs_finds(monkeypatch, shape, seed, region, 
     program as one model: run to convergence, the same optimal area gain to 1e-6 and rows
     met to 1e-7 px; after the default steps, within 2 % of it; at any step count the
     moves and growths within their bounds exactly."""
-    from compact_distributions.cvt.compaction import _PDHG_ITERATIONS, _STEP_RATIO, _solve_lp, _solve_pdhg
+    from compact_distributions.cvt.placement.compaction import (
+        _PDHG_ITERATIONS,
+        _STEP_RATIO,
+        _solve_lp,
+        _solve_pdhg,
+    )
 
     args = round_program(monkeypatch, shape, seed, 40, region, gap)
     rows, act, c, r, gap_, delta, lo_dr, hi_dr, weight = args[:9]
@@ -253,7 +267,7 @@ def test_rows_no_shrinking_can_meet_put_their_elements_back():
     onto the border) would cost an element: both are put back where the round started,
     and a third element whose row with a put-back one then fails follows them; the
     others keep their new state, and the result is apart (shapely)."""
-    from compact_distributions.cvt.compaction import _revert_hopeless, _Rows, _shrink_to_fit
+    from compact_distributions.cvt.placement.compaction import _revert_hopeless, _Rows, _shrink_to_fit
 
     grid = Grid(60, 20)
     c = np.array([[10.0, 10.0], [20.0, 10.0], [30.0, 10.0], [50.0, 10.0]])
@@ -524,7 +538,7 @@ def test_product_is_the_sparse_product():
     the steps used before, bit for bit."""
     import scipy.sparse as sp
 
-    from compact_distributions.cvt.compaction import _product
+    from compact_distributions.cvt.placement.compaction import _product
 
     m = sp.random(300, 200, density=0.03, format="csr", random_state=4)
     v = np.random.default_rng(4).normal(size=200)
@@ -543,7 +557,7 @@ def test_product_falls_back_when_scipys_kernel_is_gone(monkeypatch):
 
     import scipy.sparse as sp
 
-    from compact_distributions.cvt import compaction
+    from compact_distributions.cvt.placement import compaction
 
     compaction._csr_matvec.cache_clear()
     monkeypatch.setitem(sys.modules, "scipy.sparse._sparsetools", None)  # import fails
@@ -648,7 +662,7 @@ def test_tightest_pieces_keep_the_same_constraints():
     rows kept are one per (element, direction), each the least of its group (brute force
     over the groups), and at random states every element's tightest piece slack is the
     same with all rows as with those kept."""
-    from compact_distributions.cvt.compaction import _Rows
+    from compact_distributions.cvt.placement.compaction import _Rows
 
     rng = np.random.default_rng(3)
     m = 400
@@ -686,7 +700,7 @@ def test_tightest_pieces_keep_the_same_constraints():
 def test_sorted_pairs_are_lexicographic():
     """_sorted_pairs sorts index pairs as np.lexsort does (by the first, then the
     second), equal pairs included."""
-    from compact_distributions.cvt.compaction import _sorted_pairs
+    from compact_distributions.cvt.placement.compaction import _sorted_pairs
 
     rng = np.random.default_rng(5)
     ab = np.unique(rng.integers(0, 1000, (5000, 2)), axis=0)[rng.permutation(4000)]

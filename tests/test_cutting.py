@@ -8,9 +8,9 @@ import pytest
 import shapely
 from scipy.optimize import minimize
 
-from compact_distributions.cvt import mosaic
-from compact_distributions.cvt.cutting import cut_to_walls
-from compact_distributions.cvt.mosaic import geometric_median
+from compact_distributions.cvt.mosaic import pipeline as mosaic
+from compact_distributions.cvt.mosaic.cutting import cut_to_walls
+from compact_distributions.cvt.mosaic.pipeline import geometric_median
 
 W, H = 64, 48
 
@@ -196,7 +196,7 @@ def test_wall_lines_and_their_margin_pieces_are_the_walls():
     """The merged lines are the pixel steps, and their margin in pieces (any run length)
     covers the same ground as the steps grown one by one (square ends: right angles
     only)."""
-    from compact_distributions.cvt.cutting import _margin_pieces, wall_lines
+    from compact_distributions.cvt.mosaic.cutting import _margin_pieces, wall_lines
 
     walls, truth = wall_network()
     lines = wall_lines(walls)
@@ -233,7 +233,7 @@ def test_cut_tiles_keep_the_guarantees_beside_crossing_walls(gap, turn):
 
 
 def test_a_cut_outline_starts_nearest_its_whole_tiles_first_vertex():
-    from compact_distributions.cvt.cutting import _started_as
+    from compact_distributions.cvt.mosaic.cutting import _started_as
 
     rng = np.random.default_rng(2)
     cut, whole = [], []

@@ -8,8 +8,8 @@ import pytest
 import shapely
 
 from compact_distributions.cvt.evaluate import empty_cells, evaluate, pixels_under, region_polygon
+from compact_distributions.cvt.mosaic.render import PAPER, draw_elements, element_coordinates, svg_document
 from compact_distributions.cvt.problem import Grid
-from compact_distributions.cvt.render import PAPER, draw_elements, element_coordinates, svg_document
 
 SVG = "{http://www.w3.org/2000/svg}"
 

@@ -10,7 +10,7 @@ import math
 import numpy as np
 import pytest
 
-from compact_distributions.bench import regress_cmd
+from compact_distributions.bench.commands import regress as regress_cmd
 
 from .cli_errors import one_error
 
@@ -111,7 +111,7 @@ def test_table2_never_makes_a_row_of_a_nan_coverage():
 def test_an_oversized_init_file_is_refused_in_seconds_and_little_memory(tmp_path):
     """Ten million sites under a 3 GB limit: the raster fits, the sites do not.  The file
     is sized by a streamed row count and refused before any row is parsed."""
-    from compact_distributions.bench.pipeline_cmd import run_measured
+    from compact_distributions.bench.commands.pipeline import run_measured
 
     path = tmp_path / "big.csv"
     rows = 10_000_000
@@ -124,7 +124,7 @@ def test_an_oversized_init_file_is_refused_in_seconds_and_little_memory(tmp_path
     code, err, seconds, peak = run_measured(
         [
             "-m",
-            "compact_distributions.bench.cli",
+            "compact_distributions.bench.commands.cli",
             "run",
             "--size",
             "4096",

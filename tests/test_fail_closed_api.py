@@ -14,7 +14,7 @@ from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
 import compact_distributions as cd
-from compact_distributions.cvt.mosaic import make_mosaic
+from compact_distributions.cvt.mosaic.pipeline import make_mosaic
 
 # anything: numbers of every kind, text, containers (ragged ones too), None, objects
 scalars = st.one_of(

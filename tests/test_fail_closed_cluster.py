@@ -31,7 +31,7 @@ def test_a_scheduler_killed_mid_sweep_is_one_line_and_resumable(tmp_path):
             [
                 sys.executable,
                 "-m",
-                "compact_distributions.bench.cli",
+                "compact_distributions.bench.commands.cli",
                 *ARGV,
                 "--out",
                 str(out),
@@ -66,7 +66,7 @@ def test_a_scheduler_killed_mid_sweep_is_one_line_and_resumable(tmp_path):
     # the same command in-process resumes: it reads the stored runs back and runs the rest
     env = {**os.environ}
     done = subprocess.run(
-        [sys.executable, "-m", "compact_distributions.bench.cli", *ARGV, "--out", str(out)],
+        [sys.executable, "-m", "compact_distributions.bench.commands.cli", *ARGV, "--out", str(out)],
         capture_output=True,
         text=True,
         timeout=600,
@@ -81,7 +81,7 @@ def test_a_scheduler_killed_mid_sweep_is_one_line_and_resumable(tmp_path):
 def test_a_local_cluster_that_cannot_start_is_one_line(tmp_path, monkeypatch, capsys):
     import distributed
 
-    from compact_distributions.bench.cli import main
+    from compact_distributions.bench.commands.cli import main
 
     def refuse(*args, **kwargs):
         raise OSError("no more processes")

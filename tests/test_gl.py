@@ -104,7 +104,7 @@ def field_problem(name, n=220, w=256, h=256, seed=3):
 @pytest.mark.parametrize("name", METRIC_NAMES)
 def test_cone_twenty_iterations_energy_and_coverage(name, cone, reference):
     from compact_distributions.cvt.evaluate import evaluate
-    from compact_distributions.cvt.placement import element_for, place_elements
+    from compact_distributions.cvt.placement.fit import element_for, place_elements
 
     problem = field_problem(name)
     runs = {}

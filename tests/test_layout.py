@@ -90,7 +90,7 @@ def test_no_upward_import(layer, module_path, path):
         ("cvt", "from ..backends import create_backend\n"),
         ("backends", "import compact_distributions.baselines.hu2016\n"),
         ("backends", "from compact_distributions import bench\n"),
-        ("baselines", "REGISTRY = {'x': 'compact_distributions.bench.cli:main'}\n"),
+        ("baselines", "REGISTRY = {'x': 'compact_distributions.bench.commands.cli:main'}\n"),
         ("bench", "from bench import runner\n"),  # the old top-level package
     ],
 )
@@ -124,6 +124,83 @@ def test_each_baseline_is_registered_and_cites_its_paper():
         doc = ast.get_docstring(ast.parse((ROOT / "baselines" / f"{record.name}.py").read_text()))
         assert doc and record.name[-4:] in doc and "depart" in doc.lower(), record.name
         assert record.paper and str(record.year) in record.paper, record.name
+
+
+# ----------------------------------------------------------------------- cvt's rooms
+# Inside cvt the core sits at the top; placement builds on the core, mosaic on both.
+CVT_ROOMS = ["core", "placement", "mosaic"]
+
+
+def room_of(dotted: str) -> str | None:
+    """The room of cvt that a dotted module path (inside the package) lies in."""
+    parts = dotted.split(".")
+    if parts[:2] != [PACKAGE, "cvt"] or len(parts) < 3:
+        return None
+    return parts[2] if parts[2] in CVT_ROOMS[1:] else "core"
+
+
+def upward_room_imports(source: str, module_path: list[str]) -> list[str]:
+    """Imports of a cvt module (``module_path`` inside cvt) from a room above its own."""
+    own = room_of(".".join([PACKAGE, "cvt", *module_path]))
+    bad = []
+    for node in ast.walk(ast.parse(source)):
+        names = []
+        if isinstance(node, ast.Import):
+            names = [a.name for a in node.names]
+        elif isinstance(node, ast.ImportFrom):
+            module = node.module or ""
+            if node.level:
+                base = [PACKAGE, "cvt", *module_path][: -node.level]
+                module = ".".join(base + ([node.module] if node.module else []))
+            names = [module] + [f"{module}.{a.name}" for a in node.names]
+        elif isinstance(node, ast.Constant) and isinstance(node.value, str):
+            names = [node.value.split(":")[0]] if node.value.startswith(PACKAGE + ".cvt.") else []
+        for name in names:
+            target = room_of(name)
+            if target is not None and CVT_ROOMS.index(target) > CVT_ROOMS.index(own):
+                bad.append(f"line {node.lineno}: cvt.{own} imports cvt.{target}")
+    return sorted(set(bad))
+
+
+@pytest.mark.parametrize(
+    "module_path",
+    [rel for layer, rel, _ in modules() if layer == "cvt"],
+    ids=[".".join(rel) for layer, rel, _ in modules() if layer == "cvt"],
+)
+def test_no_import_from_a_higher_room(module_path):
+    path = ROOT / "cvt" / Path(*module_path).with_suffix(".py")
+    assert upward_room_imports(path.read_text(), module_path) == []
+
+
+@pytest.mark.parametrize(
+    "module_path,snippet,caught",
+    [
+        (["lloyd"], "from .placement.fit import parse_gap\n", True),
+        (["metrics"], "from compact_distributions.cvt.mosaic import render\n", True),
+        (["placement", "fit"], "from ..mosaic.render import draw_elements\n", True),
+        (["placement", "fit"], "from ..metrics import make_metric\nfrom .compaction import compact\n", False),
+        (["mosaic", "pipeline"], "from ..placement.ours import run_ours\nfrom ..lloyd import lloyd\n", False),
+    ],
+)
+def test_the_room_check(module_path, snippet, caught):
+    assert bool(upward_room_imports(snippet, module_path)) is caught
+
+
+def test_cvt_keeps_its_top_small():
+    """The core at cvt's top, at most 20 modules; the rest in its rooms."""
+    top = sorted(p.name for p in (ROOT / "cvt").glob("*.py"))
+    assert len(top) <= 20, top
+    for room in CVT_ROOMS[1:]:
+        assert (ROOT / "cvt" / room / "__init__.py").is_file()
+
+
+def test_each_command_is_a_module_of_bench_commands():
+    """``cvtbench``'s subcommands are the modules of bench/commands (besides the entry point)."""
+    from compact_distributions.bench.commands.cli import build_parser
+
+    commands = set(build_parser()._subparsers._group_actions[0].choices)
+    modules_ = {p.stem for p in (ROOT / "bench" / "commands").glob("*.py")} - {"__init__", "cli"}
+    assert commands == modules_
 
 
 # ---------------------------------------------------------------------------- cycles
@@ -289,8 +366,6 @@ def test_every_module_declares_its_public_names(layer, module_path, path):
     if module_path[-1] == "__init__" and not defines and not declared:
         return
     assert declared, f"{path.relative_to(ROOT)} has no __all__"
-    if layer == "bench" and module_path[0] == "toplevel":
-        return  # the top-level package, whose names load on first use
     name = ".".join([PACKAGE, layer, *module_path]).removesuffix(".__init__")
     module = importlib.import_module(name)
     missing = [n for n in module.__all__ if not hasattr(module, n)]

@@ -15,10 +15,10 @@ import shapely
 from PIL import Image
 
 from compact_distributions.backends.numpy_backend import NumpyBackend
-from compact_distributions.bench.cli import main
+from compact_distributions.bench.commands.cli import main
 from compact_distributions.cvt.errors import InputError
-from compact_distributions.cvt.image_fields import gaussian_filter, gaussian_smooth, picture_fields
-from compact_distributions.cvt.mosaic import make_mosaic, picture_array, raster_size, resample
+from compact_distributions.cvt.mosaic.image_fields import gaussian_filter, gaussian_smooth, picture_fields
+from compact_distributions.cvt.mosaic.pipeline import make_mosaic, picture_array, raster_size, resample
 
 SVG = "{http://www.w3.org/2000/svg}"
 NUMPY = NumpyBackend()
@@ -78,7 +78,7 @@ def test_gaussian_filter_is_ndimages_filter_bit_for_bit(shape, sigma, order, mon
     truth, to the last bit; bands of 4 rows so that band edges are crossed."""
     from scipy import ndimage
 
-    from compact_distributions.cvt import image_fields
+    from compact_distributions.cvt.mosaic import image_fields
 
     monkeypatch.setattr(image_fields, "ROW_BAND", 4)
     image = np.random.default_rng(7).random(shape) * 50 - 10

@@ -15,11 +15,11 @@ import shapely
 from PIL import Image
 
 from compact_distributions.backends.numpy_backend import NumpyBackend
-from compact_distributions.bench.cli import main
-from compact_distributions.cvt.colour import lab_to_srgb, srgb_to_lab
+from compact_distributions.bench.commands.cli import main
 from compact_distributions.cvt.errors import InputError
-from compact_distributions.cvt.image_fields import DEFAULT_EDGE_THRESHOLD, edge_contrast, strong_edges
-from compact_distributions.cvt.mosaic import WalledBackend, make_mosaic, split_cells, split_moments
+from compact_distributions.cvt.mosaic.colour import lab_to_srgb, srgb_to_lab
+from compact_distributions.cvt.mosaic.image_fields import DEFAULT_EDGE_THRESHOLD, edge_contrast, strong_edges
+from compact_distributions.cvt.mosaic.pipeline import WalledBackend, make_mosaic, split_cells, split_moments
 
 from .cli_errors import one_error
 
@@ -53,7 +53,7 @@ def test_lab_of_a_picture_in_bands_is_lab_of_each_pixel(monkeypatch):
     """A picture is converted a band of pixels at a time: bands of 7 pixels (ending
     inside rows) give what one band of the whole picture gives, within rounding of
     what each pixel gets alone, and the published white and black wherever they lie."""
-    from compact_distributions.cvt import colour
+    from compact_distributions.cvt.mosaic import colour
 
     pic = np.random.default_rng(3).random((6, 5, 3))
     pic[0, 0], pic[5, 4] = 1.0, 0.0
@@ -335,7 +335,7 @@ def test_same_seed_same_mosaic_with_walls():
 
 
 def test_method_is_any_registered_name_a_record_or_a_callable():
-    from compact_distributions.cvt.methods import run_ours
+    from compact_distributions.cvt.placement.ours import run_ours
     from compact_distributions.cvt.registry import get_method
 
     pic = line_picture()

@@ -344,7 +344,7 @@ def test_raster_too_large_for_the_device_is_one_clear_error():
 
 
 def test_cli_run_and_info(tmp_path, capsys):
-    from compact_distributions.bench.cli import main
+    from compact_distributions.bench.commands.cli import main
 
     out = tmp_path / "run"
     code = main(

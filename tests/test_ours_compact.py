@@ -8,12 +8,12 @@ import pytest
 import shapely
 
 from compact_distributions.backends.numpy_backend import NumpyBackend
-from compact_distributions.bench.cli import main
+from compact_distributions.bench.commands.cli import main
 from compact_distributions.cvt.errors import InputError
 from compact_distributions.cvt.evaluate import evaluate, region_polygon
 from compact_distributions.cvt.fields import DensityMap, DirectionField
-from compact_distributions.cvt.methods import run_ours, run_ours_compact
 from compact_distributions.cvt.metrics import ELEMENT_METRIC, make_metric
+from compact_distributions.cvt.placement.ours import run_ours, run_ours_compact
 from compact_distributions.cvt.problem import Grid, Problem
 
 SIZE = 96
@@ -131,7 +131,7 @@ def test_density_caps_keep_the_sizes_the_density_asks_for():
     within 1.1x of ours' and still covers far more."""
     from compact_distributions.bench.scenes import scene_problem
     from compact_distributions.cvt.evaluate import fidelity
-    from compact_distributions.cvt.methods import density_caps
+    from compact_distributions.cvt.placement.ours import density_caps
 
     problem = scene_problem("density", 160, 100, make_metric("linf"), 0)
     backend = NumpyBackend()

@@ -17,7 +17,7 @@ from pathlib import Path
 import pytest
 
 from compact_distributions.bench import outputs
-from compact_distributions.bench.cli import main
+from compact_distributions.bench.commands.cli import main
 from compact_distributions.bench.outputs import (
     COMMAND_OUTPUTS,
     TEMP_MARK,

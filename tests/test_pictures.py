@@ -9,10 +9,10 @@ import numpy as np
 import pytest
 from PIL import Image
 
-from compact_distributions.bench.cli import main
+from compact_distributions.bench.commands.cli import main
 from compact_distributions.cvt.errors import InputError
 from compact_distributions.cvt.fields import DirectionField, parse_field_spec
-from compact_distributions.cvt.images import load_grey, load_rgb, read_picture, upright_size
+from compact_distributions.cvt.mosaic.images import load_grey, load_rgb, read_picture, upright_size
 
 from .cli_errors import one_error
 from .hostile import blank_png, run_measured

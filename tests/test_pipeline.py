@@ -6,8 +6,8 @@ import numpy as np
 import pandas as pd
 import pytest
 
-from compact_distributions.bench.cli import main
-from compact_distributions.bench.pipeline_cmd import growth_exponent, raster_side, run_measured
+from compact_distributions.bench.commands.cli import main
+from compact_distributions.bench.commands.pipeline import growth_exponent, raster_side, run_measured
 
 
 def test_growth_exponent_by_hand():

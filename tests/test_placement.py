@@ -10,13 +10,18 @@ import shapely
 from PIL import Image
 
 from compact_distributions.backends.numpy_backend import NumpyBackend
-from compact_distributions.bench.cli import main
+from compact_distributions.bench.commands.cli import main
 from compact_distributions.cvt.errors import InputError
 from compact_distributions.cvt.evaluate import evaluate
 from compact_distributions.cvt.fields import DensityMap, DirectionField
-from compact_distributions.cvt.methods import run_ours
 from compact_distributions.cvt.metrics import METRIC_NAMES, make_metric
-from compact_distributions.cvt.placement import contour_samples, element_for, place_elements, placement_sizes
+from compact_distributions.cvt.placement.fit import (
+    contour_samples,
+    element_for,
+    place_elements,
+    placement_sizes,
+)
+from compact_distributions.cvt.placement.ours import run_ours
 from compact_distributions.cvt.problem import Grid, Problem, lattice_sites
 
 from .cli_errors import one_error
@@ -354,7 +359,7 @@ def test_figures_quick(tmp_path, capsys):
 )
 def test_centre_fit_grows_elements_and_stays_in_cell(metric, shape):
     from compact_distributions.cvt.lloyd import final_labels, lloyd
-    from compact_distributions.cvt.placement import fit_centres
+    from compact_distributions.cvt.placement.fit import fit_centres
 
     p = Problem(Grid(160, 128), 70, make_metric(metric), seed=2)
     b = NumpyBackend()
@@ -455,7 +460,7 @@ def test_centre_fit_matches_a_search_cell_by_cell(metric, shape, gap, field, sea
     textbook gauge, from the same two starts, to rounding; the centres too, except where
     both starts reach one size."""
     from compact_distributions.cvt.lloyd import final_labels, lloyd
-    from compact_distributions.cvt.placement import _inscribed_centres, fit_centres
+    from compact_distributions.cvt.placement.fit import _inscribed_centres, fit_centres
     from compact_distributions.cvt.shapes import element_ball
 
     grid = Grid(72, 56)
@@ -514,7 +519,7 @@ def test_opencl_search_is_the_hosts_bit_for_bit(ocl, shape, aspect, gap):
     """The OpenCL kernel's search ends where the host's does, bit for bit (centres and
     sizes), on relaxed cells under a field and on hostile ones; every value finite."""
     from compact_distributions.cvt.lloyd import final_labels, lloyd
-    from compact_distributions.cvt.placement import fit_centres
+    from compact_distributions.cvt.placement.fit import fit_centres
 
     grid = Grid(150, 110)
     p = Problem(grid, 90, make_metric("l2"), field=DirectionField.named("circular", 150, 110), seed=3)
@@ -537,9 +542,9 @@ def test_opencl_inscribed_starts_are_the_hosts_distance_transform(ocl, shape, as
     """The kernel's second starts (the deepest pixel of each cell, the first in raster
     order) are the host's distance transform's, bit for bit: under a grout wider than
     every cell no element grows, so each search ends where it starts."""
-    from compact_distributions.cvt import placement as pl
     from compact_distributions.cvt.lloyd import final_labels, lloyd
     from compact_distributions.cvt.metrics import compile_sites
+    from compact_distributions.cvt.placement import fit as pl
     from compact_distributions.cvt.shapes import element_ball
 
     p = Problem(Grid(130, 97), 60, make_metric("linf"), seed=8)
@@ -556,7 +561,7 @@ def test_opencl_inscribed_starts_are_the_hosts_distance_transform(ocl, shape, as
 
 def test_no_cell_no_search():
     """A raster without cells places nothing and never calls the search."""
-    from compact_distributions.cvt.placement import fit_centres
+    from compact_distributions.cvt.placement.fit import fit_centres
 
     def refuse(cells):
         raise AssertionError("searched")
@@ -569,8 +574,8 @@ def test_no_cell_no_search():
 
 def test_ours_compact_fits_with_its_backends_search():
     """ours-compact and ours-fit hand the fit to their backend's ``fit_search``."""
-    from compact_distributions.cvt.methods import run_ours_compact
-    from compact_distributions.cvt.placement import search_on_host
+    from compact_distributions.cvt.placement.fit import search_on_host
+    from compact_distributions.cvt.placement.ours import run_ours_compact
 
     class Counting(NumpyBackend):
         calls = 0
@@ -590,8 +595,8 @@ def test_witness_bounds_never_skip_a_trial_that_would_grow():
     """Searching with witness bounds (a trial evaluated in full only where a few samples
     allow it to grow) gives the sizes and centres of evaluating every trial in full, bit
     for bit, with angles and grout, on polygons and ellipses alike."""
-    from compact_distributions.cvt import placement as pl
     from compact_distributions.cvt.metrics import compile_sites
+    from compact_distributions.cvt.placement import fit as pl
     from compact_distributions.cvt.shapes import element_ball
 
     grid = Grid(96, 80)
@@ -618,7 +623,7 @@ def test_witness_bounds_never_skip_a_trial_that_would_grow():
 def _search_in_full(labels, ids, terms, gauge, centres, anchor):
     """The pattern search of fit_centres with every trial's size taken over all of its
     cell's samples (the search before witness bounds)."""
-    from compact_distributions.cvt import placement as pl
+    from compact_distributions.cvt.placement import fit as pl
 
     h, w = labels.shape
 
@@ -649,7 +654,7 @@ def _search_in_full(labels, ids, terms, gauge, centres, anchor):
 
 
 def test_stable_order_is_numpys_stable_argsort():
-    from compact_distributions.cvt.placement import _stable_order
+    from compact_distributions.cvt.placement.fit import _stable_order
 
     rng = np.random.default_rng(0)
     for n in (1, 7, 1 << 16, (1 << 16) + 1, 300_000, (1 << 31) - 1):
@@ -660,8 +665,8 @@ def test_stable_order_is_numpys_stable_argsort():
 def test_pick_columns_and_rows_last_reach_match_plain_indexing():
     """The flat gathers pick what two-axis indexing picks, and the size reached from the
     picked samples, laid out with the row last, is the same bit for bit."""
-    from compact_distributions.cvt import placement as pl
     from compact_distributions.cvt.metrics import compile_sites
+    from compact_distributions.cvt.placement import fit as pl
     from compact_distributions.cvt.shapes import element_ball
 
     rng = np.random.default_rng(1)
@@ -699,7 +704,7 @@ def test_squared_depth_is_scipys_euclidean_transform(spacing):
     random masks, or None (SciPy's then) where a pixel lies too deep."""
     from scipy import ndimage
 
-    from compact_distributions.cvt.placement import _squared_depth
+    from compact_distributions.cvt.placement.fit import _squared_depth
 
     rng = np.random.default_rng(3)
     done = 0

@@ -46,7 +46,8 @@ import numpy as np
 import shapely
 
 from compact_distributions.backends.base import Backend
-from compact_distributions.cvt.methods import Method, MethodOption, run_ours
+from compact_distributions.cvt.methods import Method, MethodOption
+from compact_distributions.cvt.placement.ours import run_ours
 from compact_distributions.cvt.metrics import compile_sites
 from compact_distributions.cvt.validate import real_number
 
@@ -115,7 +116,7 @@ def plugin_env(tmp_path_factory):
 
 def cvtbench(env, *args, timeout=600):
     return subprocess.run(
-        [sys.executable, "-m", "compact_distributions.bench.cli", *args],
+        [sys.executable, "-m", "compact_distributions.bench.commands.cli", *args],
         env=env,
         capture_output=True,
         text=True,

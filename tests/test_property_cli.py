@@ -15,7 +15,7 @@ from hypothesis import HealthCheck, event, given, settings
 from hypothesis import strategies as st
 from PIL import Image
 
-from compact_distributions.bench.cli import main
+from compact_distributions.bench.commands.cli import main
 from compact_distributions.bench.outputs import TEMP_MARK
 
 RUN_FILES = {"result.json", "sites.csv", "cells.png", "elements.svg", "elements.png"}

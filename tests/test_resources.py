@@ -102,7 +102,7 @@ def test_sweeps_and_canvases_are_refused_before_they_start(argv, what, tmp_path)
 
 
 def test_the_limit_option_lowers_and_raises_the_bar(tmp_path, capsys):
-    from compact_distributions.bench.cli import main
+    from compact_distributions.bench.commands.cli import main
 
     argv = [
         "run",

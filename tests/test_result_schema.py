@@ -12,7 +12,7 @@ import numpy as np
 import pytest
 from PIL import Image
 
-from compact_distributions.bench.cli import main
+from compact_distributions.bench.commands.cli import main
 from compact_distributions.bench.results import SCHEMA_FILE, schema
 
 ROOT = Path(__file__).resolve().parent.parent

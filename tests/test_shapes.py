@@ -10,7 +10,7 @@ import numpy as np
 import pytest
 import shapely
 
-from compact_distributions.bench.cli import main
+from compact_distributions.bench.commands.cli import main
 from compact_distributions.cvt.errors import InputError
 from compact_distributions.cvt.metrics import SHAPES, Shape, convex_unit_ball, make_metric
 from compact_distributions.cvt.problem import Grid

@@ -18,7 +18,7 @@ from compact_distributions.baselines import get_method
 from compact_distributions.cvt.errors import InputError
 from compact_distributions.cvt.fields import DensityMap, DirectionField
 from compact_distributions.cvt.metrics import make_metric
-from compact_distributions.cvt.mosaic import make_mosaic
+from compact_distributions.cvt.mosaic.pipeline import make_mosaic
 from compact_distributions.cvt.problem import Grid, Problem
 
 from .cli_errors import one_error

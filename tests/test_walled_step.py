@@ -18,7 +18,7 @@ from compact_distributions.backends.numpy_backend import NumpyBackend
 from compact_distributions.cvt.errors import BackendUnavailable, InputError
 from compact_distributions.cvt.metrics import make_metric
 from compact_distributions.cvt.moments import moments_from_labels
-from compact_distributions.cvt.mosaic import WalledBackend, make_mosaic, split_cells, split_moments
+from compact_distributions.cvt.mosaic.pipeline import WalledBackend, make_mosaic, split_cells, split_moments
 from compact_distributions.cvt.problem import Grid
 
 from .test_mosaic_edges import flood_fill_split, hand_moments
@@ -259,7 +259,7 @@ def test_a_walled_mosaic_has_the_same_sites_on_either_path(monkeypatch):
     """Lloyd iterations of a walled mosaic (density, field, walls from the picture's
     edges) land on identical sites whether OpenCL lists the runs or the host reads its
     labels."""
-    from compact_distributions.bench.mosaic_cmd import SAMPLES_DIR
+    from compact_distributions.bench.commands.mosaic import SAMPLES_DIR
 
     with OpenCLBackend() as ocl:
         run = dict(n_elements=600, size=256, iterations=4, method="ours")

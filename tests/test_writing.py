@@ -8,8 +8,8 @@ import pytest
 import shapely
 
 from compact_distributions.bench.outputs import dumps, write_sites_csv
-from compact_distributions.cvt import render
-from compact_distributions.cvt.render import (
+from compact_distributions.cvt.mosaic import render
+from compact_distributions.cvt.mosaic.render import (
     PAPER,
     cells_image,
     draw_elements,

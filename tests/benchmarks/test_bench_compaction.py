@@ -20,9 +20,9 @@ import pytest
 import shapely
 
 from compact_distributions.backends.ckdtree import CKDTreeBackend
-from compact_distributions.cvt.compaction import compact, wall_segments
 from compact_distributions.cvt.metrics import make_metric
-from compact_distributions.cvt.placement import fit_centres
+from compact_distributions.cvt.placement.compaction import compact, wall_segments
+from compact_distributions.cvt.placement.fit import fit_centres
 from compact_distributions.cvt.problem import Grid
 from compact_distributions.cvt.shapes import element_polygons
 

@@ -11,7 +11,7 @@ import pytest
 from compact_distributions.backends.ckdtree import CKDTreeBackend
 from compact_distributions.cvt.evaluate import evaluate, region_polygon
 from compact_distributions.cvt.metrics import make_metric
-from compact_distributions.cvt.placement import place_elements
+from compact_distributions.cvt.placement.fit import place_elements
 from compact_distributions.cvt.problem import Grid
 
 SIZE, N = 1024, 4000

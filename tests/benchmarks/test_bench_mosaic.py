@@ -11,7 +11,7 @@ With the suite's default --benchmark-disable it runs once as a plain test; with
 import pytest
 
 from compact_distributions.cvt.errors import BackendUnavailable
-from compact_distributions.cvt.mosaic import DEFAULT_METHOD, make_mosaic
+from compact_distributions.cvt.mosaic.pipeline import DEFAULT_METHOD, make_mosaic
 
 try:
     from compact_distributions.backends.opencl import OpenCLBackend
@@ -20,7 +20,7 @@ try:
 except BackendUnavailable as exc:
     pytest.skip(f"OpenCL backend unavailable: {exc}", allow_module_level=True)
 
-from compact_distributions.bench.mosaic_cmd import SAMPLES_DIR  # noqa: E402
+from compact_distributions.bench.commands.mosaic import SAMPLES_DIR  # noqa: E402
 from compact_distributions.bench.results import stages_of  # noqa: E402
 
 SCENE = SAMPLES_DIR / "scene.jpg"

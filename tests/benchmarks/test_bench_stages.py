@@ -23,10 +23,10 @@ import time
 import numpy as np
 import pytest
 
-from compact_distributions.cvt.compaction import compact
 from compact_distributions.cvt.lloyd import final_labels, lloyd
 from compact_distributions.cvt.metrics import make_metric
-from compact_distributions.cvt.placement import fit_centres
+from compact_distributions.cvt.placement.compaction import compact
+from compact_distributions.cvt.placement.fit import fit_centres
 from compact_distributions.cvt.problem import Grid, Problem
 from compact_distributions.cvt.shapes import element_polygons
 

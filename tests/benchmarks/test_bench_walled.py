@@ -20,7 +20,7 @@ import numpy as np
 import pytest
 
 from compact_distributions.cvt.errors import BackendUnavailable
-from compact_distributions.cvt.mosaic import WalledBackend, make_mosaic, split_moments
+from compact_distributions.cvt.mosaic.pipeline import WalledBackend, make_mosaic, split_moments
 
 try:
     from compact_distributions.backends.opencl import OpenCLBackend
@@ -29,7 +29,7 @@ try:
 except BackendUnavailable as exc:
     pytest.skip(f"OpenCL backend unavailable: {exc}", allow_module_level=True)
 
-from compact_distributions.bench.mosaic_cmd import SAMPLES_DIR  # noqa: E402
+from compact_distributions.bench.commands.mosaic import SAMPLES_DIR  # noqa: E402
 
 PATHS = {
     "unwalled": lambda ocl, sites, args: ocl.moments(

@@ -1,7 +1,7 @@
 """Picture to mosaic (paper §4.1, Figures 16-19): the Python API.
 
     >>> from compact_distributions.backends import create_backend
-    >>> from compact_distributions.cvt.mosaic import make_mosaic
+    >>> from compact_distributions.cvt.mosaic.pipeline import make_mosaic
     >>> with create_backend("numpy") as backend:
     ...     m = make_mosaic("samples/shapes.png", backend, n_elements=1500, element="square")
     >>> m.coverage, len(m.sites), m.colours.shape
@@ -37,11 +37,21 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from ..distribution import Distribution
+from ..errors import InputError
+from ..evaluate import Evaluation, colour_error, evaluate, pixels_under, straddling_tiles
+from ..metrics import make_metric
+from ..moments import Moments, moments_from_runs
+from ..pixels import index_ranges, pixel_index
+from ..placement.fit import parse_gap
+from ..problem import Grid, Problem, parse_size
+from ..registry import resolve_method
+from ..resources import mosaic_estimate
+from ..shapes import ELEMENT_SHAPES, element_ball, resolve_shapes, shape_record, unit_outline
+from ..threads import side_by_side
+from ..validate import live_backend, real_number, whole_number
 from .colour import lab_to_srgb, quantised, srgb_to_lab
 from .cutting import cut_to_walls
-from .distribution import Distribution
-from .errors import InputError
-from .evaluate import Evaluation, colour_error, evaluate, pixels_under, straddling_tiles
 from .image_fields import (
     CONTRAST_RANGE,
     DEFAULT_CONTRAST,
@@ -50,17 +60,7 @@ from .image_fields import (
     picture_fields,
     strong_edges,
 )
-from .metrics import make_metric
-from .moments import Moments, moments_from_runs
-from .pixels import index_ranges, pixel_index
-from .placement import parse_gap
-from .problem import Grid, Problem, parse_size
-from .registry import resolve_method
 from .render import draw_elements, ellipse_parameters, parse_colour, svg_lines
-from .resources import mosaic_estimate
-from .shapes import ELEMENT_SHAPES, element_ball, resolve_shapes, shape_record, unit_outline
-from .threads import side_by_side
-from .validate import live_backend, real_number, whole_number
 
 # The method that places the tiles when none is named: compaction, whose tiles share their
 # walls with the grout asked for.

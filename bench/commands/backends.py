@@ -36,8 +36,8 @@ from compact_distributions.cvt.errors import InputError
 from compact_distributions.cvt.metrics import METRIC_NAMES, PAPER_METRICS
 from compact_distributions.cvt.validate import json_object, name_list, one_of, whole_number
 
-from . import options
-from .timing import time_lloyd
+from .. import options
+from ..timing import time_lloyd
 
 FULL = {
     "sites": [1000, 4000, 16000],
@@ -114,7 +114,7 @@ class TimingSpec:
     def memory_estimate(self):
         from compact_distributions.cvt.resources import run_estimate
 
-        from .sweep import memory_class
+        from ..sweep import memory_class
 
         return run_estimate(
             self.size,
@@ -127,7 +127,7 @@ class TimingSpec:
         )
 
     def execute(self, backend) -> dict:
-        from .outputs import machine, versions
+        from ..outputs import machine, versions
 
         secs = time_lloyd(backend, self.metric, self.n_elements, self.size, self.warmup, self.repeats)
         ms = np.asarray(secs) * 1000
@@ -187,7 +187,7 @@ def with_ratios(rows: list[dict]):
 def render_markdown(
     df, prov: dict, command: str, quick: bool, cfg: dict, elapsed: float, cached: int, plotted: bool = True
 ) -> str:
-    from .report import header_markdown, markdown_table, several_hosts
+    from ..report import header_markdown, markdown_table, several_hosts
 
     notes = [
         "what is timed: one Lloyd iteration (angles/scales at the sites, labels + integer moments on the "
@@ -266,7 +266,7 @@ def render_plot(df, path: Path) -> bool:
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
-    from .report import save_figure
+    from ..report import save_figure
 
     ok = df[df["status"] == "ok"]
     if ok.empty:
@@ -425,8 +425,8 @@ class BackendsRequest(options.SweepRequest):
 def prepare(req: BackendsRequest) -> dict:
     """Every option checked, the report folder and the memory of each configuration
     too, before anything runs (``cvtbench reproduce`` checks all its parts this way)."""
-    from .outputs import check_folder
-    from .sweep import check_memory
+    from ..outputs import check_folder
+    from ..sweep import check_memory
 
     out = req.out
     check_folder(out)
@@ -454,10 +454,10 @@ def run(args) -> int:
 
 def backends(req: BackendsRequest) -> int:
     """Time every configuration and write the report (what ``cvtbench backends`` does)."""
-    from .cluster import executor_for
-    from .outputs import report_folder
-    from .report import provenance, write_csv, write_markdown, written_files
-    from .sweep import run_sweep
+    from ..cluster import executor_for
+    from ..outputs import report_folder
+    from ..report import provenance, write_csv, write_markdown, written_files
+    from ..sweep import run_sweep
 
     t0 = time.perf_counter()
     plan = prepare(req)

@@ -32,7 +32,7 @@ import numpy as np
 from compact_distributions.backends import variant_names, variant_status
 from compact_distributions.cvt.validate import name_list, one_of, whole_number
 
-from . import options
+from .. import options
 
 KINDS = ("ours-compact", "mosaic")
 FULL_ELEMENTS = (1000, 4000, 16000, 64000)
@@ -130,7 +130,7 @@ class PipelineSpec:
     def memory_estimate(self):
         from compact_distributions.cvt.resources import mosaic_estimate, run_estimate
 
-        from .sweep import memory_class
+        from ..sweep import memory_class
 
         if self.kind == "mosaic":
             return mosaic_estimate(
@@ -152,18 +152,20 @@ class PipelineSpec:
         """The command line of this configuration, writing into ``out``."""
         common = ["--elements", str(self.n_elements), "--backend", self.backend, "--quiet", "--out", str(out)]
         if self.kind == "mosaic":
-            from .mosaic_cmd import SAMPLES_DIR
+            from .mosaic import SAMPLES_DIR
 
             return ["mosaic", str(SAMPLES_DIR / SAMPLE), "--size", str(self.size), *common]
         return ["run", "--method", self.kind, "--element", "square", "--size", str(self.size), *common]
 
     def execute(self, backend) -> dict:
         """Run the command in a process of its own (its peak memory is its own)."""
-        from .outputs import machine, versions
+        from ..outputs import machine, versions
 
         with tempfile.TemporaryDirectory(prefix="cvtbench-pipeline-") as tmp:
             out = Path(tmp) / "out"
-            code, err, whole, peak = run_measured(["-m", "compact_distributions.bench.cli", *self.argv(out)])
+            code, err, whole, peak = run_measured(
+                ["-m", "compact_distributions.bench.commands.cli", *self.argv(out)]
+            )
             if code != 0:
                 raise RuntimeError(
                     f"`cvtbench {' '.join(self.argv(out))}` exited {code}: {err.strip()[-300:]}"
@@ -241,8 +243,8 @@ def add_parser(sub):
 
 def prepare(req: PipelineRequest) -> dict:
     """Every option, the report folder and each configuration's memory checked first."""
-    from .outputs import check_folder
-    from .sweep import check_memory
+    from ..outputs import check_folder
+    from ..sweep import check_memory
 
     check_folder(req.out)
     status = variant_status()
@@ -264,9 +266,9 @@ def pipeline(req: PipelineRequest) -> int:
     """Run every configuration and write the report (what ``cvtbench pipeline`` does)."""
     import pandas as pd
 
-    from .outputs import report_folder
-    from .report import provenance, write_csv, write_markdown, written_files
-    from .sweep import run_sweep
+    from ..outputs import report_folder
+    from ..report import provenance, write_csv, write_markdown, written_files
+    from ..sweep import run_sweep
 
     t0 = time.perf_counter()
     plan = prepare(req)
@@ -300,7 +302,7 @@ def growth_exponent(n, seconds) -> float:
 
 
 def render_markdown(table, prov: dict, command: str, elapsed: float, plotted: bool) -> str:
-    from .report import fmt_seconds, header_markdown, markdown_table
+    from ..report import fmt_seconds, header_markdown, markdown_table
 
     notes = [
         "each configuration is the whole command run in its own process: `cvtbench run --method ours-compact "
@@ -361,7 +363,7 @@ def render_plot(table, path: Path) -> bool:
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
-    from .report import save_figure
+    from ..report import save_figure
 
     ok = table[table["status"] == "ok"]
     groups = list(ok.groupby(["kind", "backend"], sort=False))

@@ -42,11 +42,11 @@ from compact_distributions.backends import variant_metrics
 from compact_distributions.cvt.errors import InputError
 from compact_distributions.cvt.validate import json_object, name_list
 
-from . import options
+from .. import options
 
 CKDTREE = "ckdtree"  # the common CPU tool NumPy is timed against
 
-BASELINE_FILE = Path(__file__).with_name("regress_baseline.json")
+BASELINE_FILE = Path(__file__).resolve().parents[1] / "regress_baseline.json"
 COVERAGE_DROP_PP = 0.5  # percentage points
 SLOWDOWN = 2.0  # ratio against the reference measured in the same run
 
@@ -145,7 +145,7 @@ def coverage_specs(cfg: dict, methods: list[str], backends: list[str]):
     backend and element of the set, each other method on squares on the reference."""
     from compact_distributions.cvt.registry import get_method
 
-    from .runs import RunSpec
+    from ..runs import RunSpec
 
     specs = []
     for element in cfg["elements"]:
@@ -193,7 +193,7 @@ def speed_key(backend: str, reference: str, metric: str, n: int, size: int) -> s
 
 
 def measure_coverage(cfg, methods, backends, unavailable, quiet) -> tuple[dict, dict, list[str]]:
-    from .sweep import run_sweep
+    from ..sweep import run_sweep
 
     specs = coverage_specs(cfg, methods, backends)
     rows = run_sweep(specs, out=".", store=False, quiet=quiet, unavailable=dict(unavailable))
@@ -221,8 +221,8 @@ def measure_speed_pair(backend: str, reference: str, metric: str, n: int, size: 
     """Ratio of ``backend``'s time to ``reference``'s on the same problem, their Lloyd
     iterations interleaved (ref, backend, ref, backend, ...) so that a neighbour's load
     hits both alike, each the fastest of its timed iterations (the least disturbed one)."""
-    from .sweep import BackendCache
-    from .timing import LloydStepper
+    from ..sweep import BackendCache
+    from ..timing import LloydStepper
 
     # the reference's backend instance is made first and kept only while it is timed:
     # BackendCache holds one backend at a time, so the pair gets two caches
@@ -261,7 +261,7 @@ def measure_speed(cfg, backends, unavailable, baseline_speed: dict, quiet) -> tu
     better of the two kept (a noisy neighbour must not fail CI)."""
     from tqdm import tqdm
 
-    from .sweep import BackendCache
+    from ..sweep import BackendCache
 
     sp = cfg["speed"]
     n, size = sp["n_elements"], sp["size"]
@@ -379,9 +379,9 @@ def add_parser(sub):
 def run(args) -> int:
     from compact_distributions.baselines import method_names
 
-    from .outputs import atomic_write, dumps, folder_problem
-    from .report import provenance
-    from .table2 import sweep_backends
+    from ..outputs import atomic_write, dumps, folder_problem
+    from ..report import provenance
+    from ..table2 import sweep_backends
 
     t0 = time.perf_counter()
     mode = "quick" if args.quick else "full"

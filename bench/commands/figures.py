@@ -32,8 +32,8 @@ from compact_distributions.cvt.fields import DensityMap, DirectionField
 from compact_distributions.cvt.metrics import make_metric
 from compact_distributions.cvt.problem import Grid, Problem
 
-from . import options
-from .panels import panel_grid, png_bytes
+from .. import options
+from ..panels import panel_grid, png_bytes
 
 DEFAULT_OUT = "reports/figures"
 
@@ -103,8 +103,8 @@ def panel_problem(st: Settings, metric: str, *, density=None, field=None, mask=N
 def _elements_panel(problem: Problem, backend, st: Settings, element=None):
     """Run ours, place the elements, return (picture, coverage, the distribution)."""
     from compact_distributions.cvt.evaluate import evaluate, region_polygon
-    from compact_distributions.cvt.methods import run_ours
-    from compact_distributions.cvt.render import PAPER, draw_elements
+    from compact_distributions.cvt.mosaic.render import PAPER, draw_elements
+    from compact_distributions.cvt.placement.ours import run_ours
 
     dist = run_ours(problem, backend, iterations=st.iterations, element=element)
     g = problem.grid
@@ -124,8 +124,8 @@ def _elements_panel(problem: Problem, backend, st: Settings, element=None):
 def figure_metrics(backend, st: Settings):
     from PIL import Image
 
-    from compact_distributions.cvt.methods import run_ours
-    from compact_distributions.cvt.render import cells_image
+    from compact_distributions.cvt.mosaic.render import cells_image
+    from compact_distributions.cvt.placement.ours import run_ours
 
     names = [
         ("l2", "(a) L2"),
@@ -242,7 +242,7 @@ def prepare(req: FiguresRequest) -> dict:
     """The options and the output folder checked before anything is drawn."""
     from compact_distributions.backends import resolve
 
-    from .outputs import check_folder
+    from ..outputs import check_folder
 
     check_folder(req.out)
     resolve(req.backend, **req.backend_options)
@@ -257,8 +257,8 @@ def figures(req: FiguresRequest) -> int:
     """Draw every figure into ``req.out`` (what ``cvtbench figures`` does)."""
     from compact_distributions.backends import create_backend
 
-    from .mosaic_cmd import write_paper_figures
-    from .outputs import atomic_write, report_folder
+    from ..outputs import atomic_write, report_folder
+    from .mosaic import write_paper_figures
 
     plan = prepare(req)
     out, st = plan["out"], plan["settings"]

@@ -30,9 +30,9 @@ from __future__ import annotations
 import numpy as np
 import shapely
 
-from .compaction import wall_segments
-from .evaluate import straddling_tiles
-from .threads import elementwise
+from ..evaluate import straddling_tiles
+from ..placement.compaction import wall_segments
+from ..threads import elementwise
 
 CUT_ENLARGE = 1.8  # a cut tile lies within its tile grown by this factor about its centre
 CUT_REACH = 1.0  # tiles this many element spacings or closer to a wall are cut to fit

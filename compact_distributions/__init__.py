@@ -50,7 +50,7 @@ _NAMES = {
     "make_metric": "cvt.metrics:make_metric",
     "evaluate": "cvt.evaluate:evaluate",
     "Distribution": "cvt.distribution:Distribution",
-    "MosaicResult": "cvt.mosaic:MosaicResult",
+    "MosaicResult": "cvt.mosaic.pipeline:MosaicResult",
     "InputError": "cvt.errors:InputError",
     "BackendUnavailable": "cvt.errors:BackendUnavailable",
 }

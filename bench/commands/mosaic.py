@@ -33,8 +33,8 @@ import numpy as np
 from compact_distributions.cvt.errors import InputError
 from compact_distributions.cvt.validate import real_number, whole_number
 
-from . import options
-from .panels import panel_grid
+from .. import options
+from ..panels import panel_grid
 
 DEFAULT_OUT = "out/mosaic"
 
@@ -45,8 +45,8 @@ COMPARE_METHODS = ("ours", "ours-compact", "hausner2001")
 
 
 def add_parser(sub):
-    from compact_distributions.cvt.image_fields import DEFAULT_EDGE_THRESHOLD
-    from compact_distributions.cvt.mosaic import DEFAULT_ELEMENTS, DEFAULT_METHOD
+    from compact_distributions.cvt.mosaic.image_fields import DEFAULT_EDGE_THRESHOLD
+    from compact_distributions.cvt.mosaic.pipeline import DEFAULT_ELEMENTS, DEFAULT_METHOD
 
     p = sub.add_parser(
         "mosaic",
@@ -118,16 +118,16 @@ def mosaic_options(args) -> dict:
     """make_mosaic keyword arguments from the parsed command line (validated; the
     raster size is not among them: it depends on the picture, see :func:`run`)."""
     from compact_distributions.baselines import get_method
-    from compact_distributions.cvt.image_fields import (
+    from compact_distributions.cvt.lloyd import MAX_ITERATIONS
+    from compact_distributions.cvt.metrics import ASPECT_RANGE, METRIC_NAMES
+    from compact_distributions.cvt.mosaic.image_fields import (
         CONTRAST_RANGE,
         DEFAULT_CONTRAST,
         DEFAULT_EDGE_THRESHOLD,
     )
-    from compact_distributions.cvt.lloyd import MAX_ITERATIONS
-    from compact_distributions.cvt.metrics import ASPECT_RANGE, METRIC_NAMES
-    from compact_distributions.cvt.placement import parse_gap
+    from compact_distributions.cvt.mosaic.render import parse_colour
+    from compact_distributions.cvt.placement.fit import parse_gap
     from compact_distributions.cvt.problem import MAX_SEED
-    from compact_distributions.cvt.render import parse_colour
     from compact_distributions.cvt.shapes import ELEMENT_SHAPES
     from compact_distributions.cvt.validate import one_of
 
@@ -164,11 +164,11 @@ def mosaic_result_json(args, m, backend, stage_seconds: dict | None = None) -> d
     import dataclasses
 
     from compact_distributions.cvt.evaluate import empty_cells, evaluate
+    from compact_distributions.cvt.mosaic.render import hex_colour, hex_colours
     from compact_distributions.cvt.problem import Grid
-    from compact_distributions.cvt.render import hex_colour, hex_colours
 
-    from .outputs import command_line
-    from .results import build_result
+    from ..outputs import command_line
+    from ..results import build_result
 
     # coverage of the whole picture (wall pixels count as grout), as make_mosaic measured it
     if m.evaluation is None:
@@ -211,8 +211,8 @@ PNG_SCALE_RANGE = (0.01, 100.0)
 
 def run(args) -> int:
     from compact_distributions.backends import backend_class
-    from compact_distributions.cvt.images import open_picture, upright_size
-    from compact_distributions.cvt.mosaic import (
+    from compact_distributions.cvt.mosaic.images import open_picture, upright_size
+    from compact_distributions.cvt.mosaic.pipeline import (
         make_mosaic,
         picture_array,
         raster_size,
@@ -221,7 +221,7 @@ def run(args) -> int:
     )
     from compact_distributions.cvt.resources import mosaic_estimate
 
-    from .outputs import COMMAND_OUTPUTS, OutputFolder, write_json, write_lines, write_sites_csv
+    from ..outputs import COMMAND_OUTPUTS, OutputFolder, write_json, write_lines, write_sites_csv
 
     # every option, the picture's header and the memory it all asks for are checked first
     t0 = time.perf_counter()
@@ -318,7 +318,7 @@ def comparison_figure(picture: np.ndarray, without, with_, what: str, scale: flo
 
 def compare_methods(picture, backend, opts: dict, done=None):
     """Mosaics of ``picture`` by each method of COMPARE_METHODS: a list of (caption, mosaic)."""
-    from compact_distributions.cvt.mosaic import make_mosaic
+    from compact_distributions.cvt.mosaic.pipeline import make_mosaic
 
     out = []
     for name in COMPARE_METHODS:
@@ -336,7 +336,7 @@ def compare_figure(picture, backend, opts: dict, what: str, done=None):
     with ``opts``, reused where a panel asks for the same."""
     from PIL import Image
 
-    from compact_distributions.cvt.mosaic import make_mosaic
+    from compact_distributions.cvt.mosaic.pipeline import make_mosaic
 
     if what == "method":
         runs = compare_methods(picture, backend, opts, done)
@@ -375,7 +375,7 @@ PAPER_FIGURES = [
 ]
 
 
-SAMPLES_DIR = Path(__file__).resolve().parent.parent / "samples"
+SAMPLES_DIR = Path(__file__).resolve().parents[2] / "samples"
 # the README's full-size mosaic and its comparisons: a photograph-like picture, defaults
 SCENE = "scene.jpg"
 SCENE_FIGURES = {
@@ -392,10 +392,10 @@ def write_paper_figures(
     the README's mosaic of samples/scene.jpg (2000 tiles, the defaults) with its
     comparisons without walls and by method (``fewer``: divide the number of elements,
     for a quick smoke test)."""
-    from compact_distributions.cvt.mosaic import DEFAULT_ELEMENTS, make_mosaic, picture_array
+    from compact_distributions.cvt.mosaic.pipeline import DEFAULT_ELEMENTS, make_mosaic, picture_array
 
-    from .outputs import atomic_path, atomic_write
-    from .panels import png_bytes
+    from ..outputs import atomic_path, atomic_write
+    from ..panels import png_bytes
 
     samples_dir = Path(samples_dir or SAMPLES_DIR)
     out_dir = Path(out_dir)

@@ -29,7 +29,7 @@ from compact_distributions.cvt.problem import Grid, Problem, parse_size
 from compact_distributions.cvt.shapes import resolve_shapes
 from compact_distributions.cvt.validate import whole_number
 
-from . import options
+from .. import options
 
 DEFAULT_SIZE = "512"
 DEFAULT_ELEMENTS = 1000
@@ -149,7 +149,7 @@ def parse_problem_options(args) -> ProblemOptions:
     """Every problem option checked (the init CSV sized, images not yet): InputError
     with a one-line message naming the option."""
     from compact_distributions.cvt.fields import FIELD_HELP, parse_field_spec
-    from compact_distributions.cvt.images import open_picture
+    from compact_distributions.cvt.mosaic.images import open_picture
     from compact_distributions.cvt.problem import MAX_SEED
 
     w, h = parse_size(args.size, "--size")
@@ -208,7 +208,7 @@ def load_init(opts: ProblemOptions) -> None:
 
 def build_problem(opts: ProblemOptions) -> Problem:
     """The Problem, with its images read and resampled to the raster."""
-    from compact_distributions.cvt.images import load_grey, load_mask
+    from compact_distributions.cvt.mosaic.images import load_grey, load_mask
 
     w, h = opts.width, opts.height
     mask = load_mask(opts.region, w, h, name="--region") if opts.region else None
@@ -251,12 +251,19 @@ def run(args) -> int:
     from compact_distributions.baselines import get_method
     from compact_distributions.cvt.evaluate import evaluate, region_polygon
     from compact_distributions.cvt.lloyd import MAX_ITERATIONS
-    from compact_distributions.cvt.placement import parse_gap
-    from compact_distributions.cvt.render import PAPER, cells_image, draw_elements, svg_lines
+    from compact_distributions.cvt.mosaic.render import PAPER, cells_image, draw_elements, svg_lines
+    from compact_distributions.cvt.placement.fit import parse_gap
     from compact_distributions.cvt.resources import run_estimate
 
-    from .outputs import COMMAND_OUTPUTS, OutputFolder, command_line, write_json, write_lines, write_sites_csv
-    from .results import build_result
+    from ..outputs import (
+        COMMAND_OUTPUTS,
+        OutputFolder,
+        command_line,
+        write_json,
+        write_lines,
+        write_sites_csv,
+    )
+    from ..results import build_result
 
     # every option is checked, and the memory it asks for, before anything is computed
     iterations = whole_number(args.iterations, "--iterations", minimum=0, maximum=MAX_ITERATIONS)

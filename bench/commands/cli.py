@@ -17,16 +17,16 @@ from compact_distributions.cvt.quiet import configure as configure_output
 
 # subcommand modules, in the order `cvtbench --help` lists them
 SUBCOMMANDS = [
-    "compact_distributions.bench.run_cmd",
-    "compact_distributions.bench.info_cmd",
-    "compact_distributions.bench.figures_cmd",
-    "compact_distributions.bench.table2",
-    "compact_distributions.bench.table3",
-    "compact_distributions.bench.mosaic_cmd",
-    "compact_distributions.bench.backends_cmd",
-    "compact_distributions.bench.pipeline_cmd",
-    "compact_distributions.bench.regress_cmd",
-    "compact_distributions.bench.reproduce_cmd",
+    "compact_distributions.bench.commands.run",
+    "compact_distributions.bench.commands.info",
+    "compact_distributions.bench.commands.figures",
+    "compact_distributions.bench.commands.table2",
+    "compact_distributions.bench.commands.table3",
+    "compact_distributions.bench.commands.mosaic",
+    "compact_distributions.bench.commands.backends",
+    "compact_distributions.bench.commands.pipeline",
+    "compact_distributions.bench.commands.regress",
+    "compact_distributions.bench.commands.reproduce",
 ]
 
 

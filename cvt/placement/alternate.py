@@ -25,9 +25,9 @@ import math
 
 import numpy as np
 
-from .errors import InputError
-from .placement import FITS, fit_centres, placement_sizes
-from .validate import one_of
+from ..errors import InputError
+from ..validate import one_of
+from .fit import FITS, fit_centres, placement_sizes
 
 
 def alternate_triangles(

@@ -66,12 +66,12 @@ import math
 
 import numpy as np
 
-from .errors import InputError
-from .metrics import Metric, compile_sites
-from .pixels import PIXEL_BAND
-from .problem import MAX_SIDE, Grid, in_own_cell
-from .shapes import check_shape, element_ball, element_polygons, shape_record
-from .validate import one_of, real_number
+from ..errors import InputError
+from ..metrics import Metric, compile_sites
+from ..pixels import PIXEL_BAND
+from ..problem import MAX_SIDE, Grid, in_own_cell
+from ..shapes import check_shape, element_ball, element_polygons, shape_record
+from ..validate import one_of, real_number
 
 
 def parse_gap(value, name: str = "gap") -> float:

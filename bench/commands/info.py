@@ -13,7 +13,7 @@ def run(args) -> int:
     from compact_distributions.backends import probe_all
     from compact_distributions.cvt.registry import methods, unavailable_methods
 
-    from .outputs import versions
+    from ..outputs import versions
 
     print("backends:")
     for name, ok, text in probe_all():

@@ -149,12 +149,12 @@ from dataclasses import dataclass, field
 import numpy as np
 from scipy.spatial import cKDTree
 
-from .errors import InputError
-from .placement import parse_gap
-from .problem import Grid
-from .shapes import check_shape, element_ball
-from .threads import usable_cores
-from .validate import one_of, real_number, whole_number
+from ..errors import InputError
+from ..problem import Grid
+from ..shapes import check_shape, element_ball
+from ..threads import usable_cores
+from ..validate import one_of, real_number, whole_number
+from .fit import parse_gap
 
 SLACK = 1e-7  # px: every kept constraint holds with at least this much after a round
 SEGMENT_LENGTH = 32  # px: longest boundary piece
@@ -885,7 +885,7 @@ def _solve_lp(
     tiles HiGHS did not solve to optimality (those keep Δ = 0)."""
     import highspy
 
-    from .quiet import quiet_highs
+    from ..quiet import quiet_highs
 
     n = len(r)
     # active elements ordered by tile: each tile's columns are one contiguous block

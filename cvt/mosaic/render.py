@@ -19,8 +19,8 @@ from __future__ import annotations
 import numpy as np
 import shapely
 
-from .errors import InputError
-from .pixels import index_ranges, pixel_index
+from ..errors import InputError
+from ..pixels import index_ranges, pixel_index
 
 DARK = "#202020"  # outside the region, and joints between elements
 PAPER = "#f4f1ea"  # inside the region, where no element is

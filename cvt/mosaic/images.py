@@ -21,8 +21,8 @@ import warnings
 
 import numpy as np
 
-from .errors import InputError
-from .resources import Estimate
+from ..errors import InputError
+from ..resources import Estimate
 
 # EXIF orientations that swap width and height (a turn by 90 or 270 degrees)
 _TRANSPOSED = (5, 6, 7, 8)

@@ -15,7 +15,7 @@ import sys
 import time
 from pathlib import Path
 
-from . import options
+from .. import options
 
 
 def add_parser(sub):
@@ -34,11 +34,11 @@ def add_parser(sub):
 
 def requests(args, out: Path, scheduler: str | None) -> list[tuple[str, object, object]]:
     """(name, work function, typed request) of each part, from reproduce's own options."""
-    from .backends_cmd import BackendsRequest, backends
-    from .figures_cmd import FiguresRequest, figures
-    from .pipeline_cmd import PipelineRequest, pipeline
-    from .table2 import FULL, QUICK, Table2Request, table2
-    from .table3 import Table3Request, table3
+    from ..table2 import FULL, QUICK, Table2Request, table2
+    from ..table3 import Table3Request, table3
+    from .backends import BackendsRequest, backends
+    from .figures import FiguresRequest, figures
+    from .pipeline import PipelineRequest, pipeline
 
     common = dict(
         quick=bool(args.quick),
@@ -95,13 +95,13 @@ def requests(args, out: Path, scheduler: str | None) -> list[tuple[str, object, 
 
 
 def run(args) -> int:
-    from .backends_cmd import prepare as prepare_backends
-    from .cluster import chosen, scheduler_address
-    from .figures_cmd import prepare as prepare_figures
-    from .outputs import command_line, report_folder
-    from .pipeline_cmd import prepare as prepare_pipeline
-    from .table2 import prepare as prepare_table2
-    from .table3 import check as prepare_table3
+    from ..cluster import chosen, scheduler_address
+    from ..outputs import command_line, report_folder
+    from ..table2 import prepare as prepare_table2
+    from ..table3 import check as prepare_table3
+    from .backends import prepare as prepare_backends
+    from .figures import prepare as prepare_figures
+    from .pipeline import prepare as prepare_pipeline
 
     chosen(args)  # bad cluster options fail before anything starts
     out = options.report_out(args)
@@ -123,7 +123,7 @@ def run(args) -> int:
 
 
 def _run_parts(parts, out: Path, cmd: str, quick: bool) -> int:
-    from .report import header_markdown, markdown_table, provenance, write_markdown
+    from ..report import header_markdown, markdown_table, provenance, write_markdown
 
     results = []
     t_all = time.perf_counter()

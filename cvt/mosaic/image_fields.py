@@ -71,10 +71,10 @@ from functools import lru_cache
 import numpy as np
 from scipy import ndimage
 
-from .errors import InputError
-from .fields import DensityMap, DirectionField
-from .shapes import check_shape, shape_record
-from .validate import real_number
+from ..errors import InputError
+from ..fields import DensityMap, DirectionField
+from ..shapes import check_shape, shape_record
+from ..validate import real_number
 
 DEFAULT_CONTRAST = 3.0
 FIELD_SMOOTHING = 1.5  # the field's Gaussian, in element spacings

@@ -1,0 +1,376 @@
+"""The paper's own method and the suite's two extensions of it, as method records.
+
+``ours`` is the paper's method: Lloyd relaxation under the element's metric, then each
+element centred at its site, as large as its cell allows.  ``ours-fit`` moves each element
+inside its cell to where it can be largest; ``ours-compact`` then compacts them, so that
+neighbouring elements share their walls.  The records are found by the method registry
+through the ``compact_distributions.methods`` entry point group, like every other method.
+"""
+
+from __future__ import annotations
+
+import math
+import time
+from types import MappingProxyType
+
+import numpy as np
+
+from ..distribution import Distribution
+from ..errors import InputError
+from ..lloyd import LloydSetup, final_labels, lloyd
+from ..methods import Method, MethodOption, SweepVariant
+from ..metrics import SHAPES
+from ..problem import Problem
+from ..shapes import element_polygons, packing_density, shape_record
+from ..validate import whole_number
+from .alternate import alternate_triangles, alternating_turns, check_alternate
+from .compaction import compact
+from .fit import element_for, fit_centres, parse_gap, place_elements
+
+
+def _backend_search(backend):
+    """The backend's centre search for ``cvt.placement.fit_centres`` (its ``fit_search``:
+    a kernel where it has one), None for the host's (a backend without one)."""
+    return getattr(backend, "fit_search", None)
+
+
+def run_ours(
+    problem: Problem,
+    backend,
+    *,
+    iterations: int = 20,
+    progress=None,
+    element: str | None = None,
+    gap: float = 0.0,
+    fit: str = "site",
+) -> Distribution:
+    """The paper's method: Lloyd relaxation under the metric whose unit ball is the
+    element's shape, on any backend, then one element per cell (cvt.placement).
+
+    ``element`` (default: the metric's own shape) and ``gap`` (grout, px) are for placing
+    the elements; ``fit`` "site" centres each element at its site (the default, "ours"),
+    "centre" moves it inside its cell to grow it (``cvt.placement.fit_centres``,
+    method "ours-fit").  ``lloyd_seconds`` covers the Lloyd iterations (what the paper's
+    timings measure; the whole method's time is ``method_seconds``, set by the record); the final labelling and the placement are timed apart in
+    ``extra`` (``final_label_seconds``, ``placement_seconds``)."""
+    shape, turn = element_for(problem.metric, element)
+    gap = parse_gap(gap)
+    t0 = time.perf_counter()
+    res = lloyd(problem, backend, iterations, progress=progress)
+    total = time.perf_counter() - t0
+    t1 = time.perf_counter()
+    labels = final_labels(problem, backend, res)
+    t2 = time.perf_counter()
+    elements = place_elements(
+        labels,
+        res.sites,
+        res.angles + turn,
+        shape,
+        problem.metric.aspect,
+        problem.grid,
+        gap,
+        fit=fit,
+        search=_backend_search(backend),
+    )
+    t3 = time.perf_counter()
+    return Distribution(
+        method="ours" if fit == "site" else "ours-fit",
+        sites=res.sites,
+        angles=res.angles,
+        scales=res.scales,
+        elements=elements,
+        energy=res.energy,
+        seconds=res.seconds,
+        lloyd_seconds=total,
+        empty=res.empty,
+        empty_sites=res.empty_sites,
+        labels=labels,
+        extra={
+            "element": shape,
+            "element_turn_deg": round(math.degrees(turn), 6),
+            "gap": gap,
+            "final_label_seconds": t2 - t1,
+            "placement_seconds": t3 - t2,
+        },
+    )
+
+
+def run_ours_fit(problem: Problem, backend, **options) -> Distribution:
+    """Ours, with each element's centre moved inside its cell to the place where it can
+    be largest (the paper's "adjust the size ... based on the contour", §3.4)."""
+    return run_ours(problem, backend, fit="centre", **options)
+
+
+# ours-compact under a density: each size capped at (1 + slack) × the size that follows the
+# density exactly (see density_caps); without caps compaction grows elements by the room
+# around them, not by the density, and the sizes' spread about the density grows
+DENSITY_CAP_SLACK = 0.02
+
+
+def density_caps(
+    problem: Problem, centres, sizes, shape: str, aspect: float, slack: float, packing: float = 1.0
+) -> np.ndarray:
+    """(N,) size caps that follow the density: κ·s_i·(1 + ``slack``), s_i the density's
+    size factor at element i's centre and κ the size at which elements of size κ·s_i (the
+    placed ones, ``sizes`` > 0) would together have ``packing`` × the region's area (the
+    shape's densest packing, the shape record's ``packing``: caps no element can reach
+    would not bind)."""
+    import shapely
+
+    from ..shapes import unit_outline
+
+    s = problem.scales_at(centres)
+    unit_area = float(shapely.area(shapely.Polygon(unit_outline(shape, aspect))))
+    weight = float(np.sum(s[np.asarray(sizes) > 0] ** 2)) * unit_area
+    kappa = math.sqrt(packing * problem.grid.pixel_count / weight) if weight > 0 else 1.0
+    return kappa * s * (1.0 + slack)
+
+
+def run_ours_compact(
+    problem: Problem,
+    backend,
+    *,
+    iterations: int = 20,
+    progress=None,
+    element: str | None = None,
+    gap: float = 0.0,
+    alternate: bool = False,
+    rounds: int | None = None,
+    density_slack: float | None = DENSITY_CAP_SLACK,
+    turn_to_field: bool = True,
+) -> Distribution:
+    """Ours, then compaction: Lloyd as ``ours``, each element fitted in its cell from
+    several starts (``cvt.placement.fit_centres``), then rounds of a linear program in
+    which neighbouring elements share their walls (``cvt.compaction.compact``): every pair
+    keeps ``gap`` px, the region's border ``gap``/2, angles stay the field's and sizes
+    keep the density's contrast; after the last round each element is turned to the
+    field at its own centre (compaction moves it off its site) and shrunk where that
+    turn made it overlap.
+
+    ``alternate`` (triangles only) lets each triangle point either way: half the sites
+    are turned by 180° during Lloyd, so that cells take both shapes, and each cell keeps
+    the orientation whose triangle fits larger (``cvt.alternate``).  ``rounds``: at most
+    this many compaction rounds.  The compaction's time and rounds are in ``extra``.
+
+    Under a density, each element starts at and grows to at most its cap of
+    :func:`density_caps` (``density_slack`` above the size that follows the density;
+    None: no caps), so that compaction keeps the sizes the density asks for.
+    ``turn_to_field``: under a field, turn each element to the field at its final centre
+    and run one more round (False: elements keep their sites' angles).
+
+    Where the problem has thin walls (``Problem.walls``), elements come up to the walls'
+    centre lines (G/2 off them) instead of stopping at their pixels."""
+    shape, turn = element_for(problem.metric, element)
+    check_alternate(shape, alternate)
+    gap = parse_gap(gap)
+    if rounds is None:
+        rounds = shape_record(shape).compaction_rounds
+    spacing = float(np.sqrt(problem.grid.pixel_count / problem.n_elements))
+    if gap >= spacing:
+        raise InputError(
+            f"gap {gap:g} px is not smaller than the elements: {problem.n_elements} elements in "
+            f"{problem.grid.pixel_count} px are about {spacing:.3g} px apart"
+        )
+    setup = LloydSetup.of(problem)
+    if alternate:
+        turns = alternating_turns(problem.n_elements, problem.seed)
+        setup = LloydSetup.of(problem, angles_at=lambda sites: problem.angles_at(sites) + turns)
+    aspect = problem.metric.aspect
+    t0 = time.perf_counter()
+    res = lloyd(problem, backend, iterations, progress=progress, setup=setup)
+    total = time.perf_counter() - t0
+    t1 = time.perf_counter()
+    labels = final_labels(problem, backend, res, setup=setup)
+    t2 = time.perf_counter()
+    angles = res.angles + turn
+    if alternate:
+        angles, centres, sizes = alternate_triangles(
+            labels, res.sites, angles, aspect, gap, search=_backend_search(backend)
+        )
+    else:
+        centres, sizes = fit_centres(
+            labels, res.sites, angles, shape, aspect, gap, search=_backend_search(backend)
+        )
+    t3 = time.perf_counter()
+    caps = None
+    if problem.density is not None and density_slack is not None:
+        # triangles that point either way tile the plane; one way, they pack at 2/3
+        packing = 1.0 if alternate else packing_density(shape)
+        caps = density_caps(problem, centres, sizes, shape, aspect, density_slack, packing)
+        sizes = np.minimum(sizes, caps)
+    packed = compact(
+        centres,
+        angles,
+        sizes,
+        shape,
+        aspect,
+        problem.grid,
+        gap=gap,
+        walls=problem.walls,
+        rounds=rounds,
+        max_sizes=caps,
+    )
+    if turn_to_field and problem.field is not None:
+        # compaction moved the elements off their sites: turn each by the field's change
+        # between its site and its centre, then shrink whatever that turn made overlap
+        angles = angles + problem.angles_at(packed.centres) - problem.angles_at(res.sites)
+        turned = compact(
+            packed.centres,
+            angles,
+            packed.sizes,
+            shape,
+            aspect,
+            problem.grid,
+            gap=gap,
+            walls=problem.walls,
+            rounds=1,
+            max_sizes=caps,
+        )
+        packed.centres, packed.sizes = turned.centres, turned.sizes
+        packed.dropped += turned.dropped
+    placed = np.flatnonzero(packed.sizes > 0)
+    elements = np.full(len(res.sites), None, dtype=object)
+    if len(placed):
+        elements[placed] = element_polygons(
+            shape, aspect, packed.centres[placed], angles[placed], packed.sizes[placed]
+        )
+    return Distribution(
+        method="ours-compact",
+        sites=res.sites,
+        angles=angles - turn,
+        scales=res.scales,
+        elements=elements.tolist(),
+        energy=res.energy,
+        seconds=res.seconds,
+        lloyd_seconds=total,
+        empty=res.empty,
+        empty_sites=res.empty_sites,
+        labels=labels,
+        extra={
+            "element": shape,
+            "element_turn_deg": round(math.degrees(turn), 6),
+            "gap": gap,
+            "alternate": bool(alternate),
+            "final_label_seconds": t2 - t1,
+            "fit_seconds": t3 - t2,
+            "placement_seconds": time.perf_counter() - t2,
+            **packed.as_dict(),
+        },
+    )
+
+
+# compaction's peak per element (near pairs, their directions, the linear program):
+# measured 3-6 kB for squares, rectangles and triangles at 16 000-256 000 elements; under a
+# density's size contrast (up to 10:1) the larger elements' reach brings more pairs
+COMPACTION_PER_SITE = 8_000
+COMPACTION_DENSITY_FACTOR = 6
+
+
+def compaction_memory(pixels: int, n_elements: int, element: str | None, density: bool):
+    """The peak memory of ours-compact's compaction (:attr:`Method.memory`).
+
+    Parameters
+    ----------
+    pixels, n_elements : int
+        The raster's pixels (unused: compaction works on the elements) and the sites.
+    element : str or None
+        The element shape (unused: the figure holds for every shape measured).
+    density : bool
+        Whether a density makes the elements' sizes differ.
+
+    Returns
+    -------
+    (str, float)
+        The step's name and its bytes.
+    """
+    factor = COMPACTION_DENSITY_FACTOR if density else 1
+    return "compacting the elements", COMPACTION_PER_SITE * factor * n_elements
+
+
+def _rounds(value, name: str) -> int:
+    return whole_number(value, name, minimum=0, maximum=1000)
+
+
+PAPER_TABLE2 = (0.856, "19 s")  # the paper's own row of its Table 2: "ours"
+# tiles turned by a field and stopped by walls settle slower than a plain lattice: two
+# more compaction rounds measured +1 point of coverage for +1 s at 2000 tiles
+MOSAIC_COMPACTION_ROUNDS = 6
+
+OURS = Method(
+    "ours",
+    run_ours,
+    role="paper",
+    sweep_backends="every",
+    compared_on=None,
+    paper_table2=PAPER_TABLE2,
+    summary="the paper's method: Lloyd under the element's metric, each element centred at its site",
+)
+OURS_FIT = Method(
+    "ours-fit",
+    run_ours_fit,
+    role="extension",
+    sweep_backends="fastest",
+    compared_on=None,
+    paper_table2=PAPER_TABLE2,
+    summary="ours, each element moved inside its cell to where it can be largest",
+    fits=True,
+)
+OURS_COMPACT = Method(
+    "ours-compact",
+    run_ours_compact,
+    role="extension",
+    sweep_backends="fastest",
+    compared_on=None,
+    paper_table2=PAPER_TABLE2,
+    tight=True,
+    options=(
+        MethodOption(
+            "alternate",
+            bool,
+            False,
+            "triangles only: each triangle points either way (its "
+            "angle or the angle + 180°), whichever fits larger in its cell",
+            tag="alt",
+            label="alternate",
+        ),
+        MethodOption(
+            "rounds",
+            int,
+            None,
+            "compaction rounds at most (0 to 1000; default: the element's own, "
+            + ", ".join(f"{s.name}s {s.compaction_rounds}" for s in SHAPES.values())
+            + ")",
+            check=_rounds,
+            tag="r",
+            label="rounds={}",
+        ),
+    ),
+    sweep_variants=(SweepVariant({"alternate": True}, ("triangle",), pictured=True),),
+    beyond_paper=("hexagon", "octagon"),
+    # mosaics keep compaction without density caps and field turn: their measured coverage,
+    # figures and tests predate them
+    mosaic_options=MappingProxyType(
+        {"rounds": MOSAIC_COMPACTION_ROUNDS, "density_slack": None, "turn_to_field": False}
+    ),
+    summary="ours, fitted, then compacted: neighbouring elements share their walls",
+    fits=True,
+    memory=compaction_memory,
+)
+
+METHODS = (OURS, OURS_FIT, OURS_COMPACT)
+"""The paper's method and its variants, in the order the reports list them."""
+
+__all__ = [
+    "METHODS",
+    "OURS",
+    "OURS_FIT",
+    "OURS_COMPACT",
+    "run_ours",
+    "run_ours_fit",
+    "run_ours_compact",
+    "density_caps",
+    "MOSAIC_COMPACTION_ROUNDS",
+    "COMPACTION_PER_SITE",
+    "COMPACTION_DENSITY_FACTOR",
+    "compaction_memory",
+]
