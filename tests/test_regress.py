@@ -8,7 +8,9 @@ from __future__ import annotations
 import copy
 import json
 import math
+import sys
 import xml.etree.ElementTree as ET
+from types import SimpleNamespace
 
 import numpy as np
 import pytest
@@ -310,18 +312,24 @@ def plugin(tmp_path, monkeypatch):
     monkeypatch.syspath_prepend(str(site))
     registry.reload()
     assert "regress-plugin" in registry.method_names()
-    yield "regress-plugin"
-    monkeypatch.undo()
-    registry.reload()
+
+    def uninstall():
+        if str(site) in sys.path:
+            sys.path.remove(str(site))
+        registry.reload()
+
+    yield SimpleNamespace(name="regress-plugin", uninstall=uninstall)
+    uninstall()
 
 
 def test_a_plugin_is_new_until_update_then_guarded(today, plugin, tmp_path, tiny, capsys):
+    name = plugin.name
     path = tmp_path / "b.json"
     path.write_text(json.dumps(today))
     report = tmp_path / "r.json"
-    argv = ["regress", "--quick", "--baseline", str(path), "--methods", plugin, "--backends", "numpy"]
+    argv = ["regress", "--quick", "--baseline", str(path), "--methods", name, "--backends", "numpy"]
     argv += ["--no-mosaic", "--no-speed", "--quiet", "--json", str(report)]
-    group = f"{plugin}/numpy/square/combined"
+    group = f"{name}/numpy/square/combined"
 
     def statuses():
         return {
@@ -342,6 +350,12 @@ def test_a_plugin_is_new_until_update_then_guarded(today, plugin, tmp_path, tiny
     capsys.readouterr()
     assert main(argv) == 1
     assert f"REGRESSION: {group}: coverage" in capsys.readouterr().err
+    # uninstalled: its checks are reported as not checked, with the reason
+    plugin.uninstall()
+    argv = ["regress", "--quick", "--baseline", str(path), "--backends", "numpy", "--shapes", "square"]
+    assert main([*argv, "--no-mosaic", "--no-speed", "--quiet", "--json", str(report)]) == 0
+    assert set(statuses().values()) == {"not checked"}
+    assert all(name in c["message"] for c in json.loads(report.read_text())["checks"] if c["group"] == group)
 
 
 # ---------------------------------------------------------------------------------------

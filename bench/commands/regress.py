@@ -172,24 +172,57 @@ def unit_of(measure: str) -> str:
 
 
 def tolerance_of(sd: float, checked: int, unit: str) -> float:
-    """The tolerance of a figure whose sd over seeds is ``sd``, checked as the mean of
-    ``checked`` seeds (module docstring)."""
+    """The tolerance of a figure (the rule of the module docstring).
+
+    Parameters
+    ----------
+    sd : float
+        The sample standard deviation of the figure over the spread seeds (NaN: unknown).
+    checked : int
+        How many seeds the check averages.
+    unit : str
+        The figure's unit, a key of :data:`RESOLUTION`.
+
+    Returns
+    -------
+    float
+        ``max(RESOLUTION[unit], SPREAD_Z * sd / sqrt(checked))``.
+    """
     spread = SPREAD_Z * sd / math.sqrt(max(1, checked)) if math.isfinite(sd) else 0.0
     return float(max(RESOLUTION[unit], spread))
 
 
 def figure_of(by_seed: dict, check_seeds: list[int], unit: str, better: str, spread: bool) -> dict | None:
-    """One measure's figure from its value per seed: the mean over ``check_seeds`` (NaN
-    if one of them is missing or not finite), the values, and where ``spread`` (an update)
-    the sd over every seed and the tolerance; None when no seed has a finite value (the
-    measure does not apply, as a circle's direction)."""
+    """One measure's figure from its value per seed.
+
+    Parameters
+    ----------
+    by_seed : dict
+        Seed -> value (None or NaN where it was not measured).
+    check_seeds : list of int
+        The seeds whose mean the check compares.
+    unit : str
+        The measure's unit (a key of :data:`RESOLUTION`).
+    better : {"higher", "lower"}
+        Which way the measure improves.
+    spread : bool
+        Also the sd over every seed and the tolerance (an update).
+
+    Returns
+    -------
+    dict or None
+        ``mean`` (over ``check_seeds``; NaN if one of them has no finite value),
+        ``values``, ``seeds``, ``better``, ``unit``, and where ``spread``: ``sd``,
+        ``spread_seeds``, ``tolerance``.  None when no seed has a finite value (the
+        measure does not apply, as a circle's direction), or, for an update, when one of
+        them has none (a figure that is not always measured cannot be guarded).
+    """
     seeds = sorted(by_seed)
-    values = [float(by_seed[s]) if by_seed[s] is not None else math.nan for s in seeds]
-    if not any(math.isfinite(v) for v in values):
+    values = [math.nan if by_seed[s] is None else float(by_seed[s]) for s in seeds]
+    finite = [v for v in values if math.isfinite(v)]
+    if not finite or (spread and len(finite) < len(values)):
         return None
-    checked = [
-        float(by_seed.get(s, math.nan) if by_seed.get(s) is not None else math.nan) for s in check_seeds
-    ]
+    checked = [math.nan if by_seed.get(s) is None else float(by_seed[s]) for s in check_seeds]
     out = {
         "mean": float(np.mean(checked)) if checked else math.nan,
         "values": [round(v, 6) for v in values],
@@ -198,14 +231,33 @@ def figure_of(by_seed: dict, check_seeds: list[int], unit: str, better: str, spr
         "unit": unit,
     }
     if spread:
-        finite = [v for v in values if math.isfinite(v)]
         sd = float(np.std(finite, ddof=1)) if len(finite) > 1 else math.nan
         out.update(sd=sd, spread_seeds=len(finite), tolerance=tolerance_of(sd, len(check_seeds), unit))
     return out
 
 
 def speed_figure(values: list[float], floor: float, per: str, slack: float = SPEED_SLACK, **extra) -> dict:
-    """A speed figure: the fastest of ``values`` (ratios), its rule's constants."""
+    """A speed figure and its rule's constants.
+
+    Parameters
+    ----------
+    values : list of float
+        The ratios measured (one per seed or repeat); the figure is the smallest.
+    floor : float
+        The part of the ratio that is its own denominator (1 for a whole time over its
+        own Lloyd time, else 0): the rule lets the rest double.
+    per : str
+        What the ratio divides by, in words ("its Lloyd time").
+    slack : float
+        What the rest may grow beyond double (a share of the denominator).
+    **extra
+        More fields to keep (the milliseconds of a Lloyd step pair).
+
+    Returns
+    -------
+    dict
+        ``ratio``, ``values``, ``per``, ``floor``, ``slowdown``, ``slack`` and ``extra``.
+    """
     return {
         "ratio": float(min(values)),
         "values": [round(float(v), 4) for v in values],
@@ -912,7 +964,11 @@ def add_parser(sub):
 
 def _asked(baseline: dict, args, methods, backends, shapes) -> dict:
     """The baseline's groups this invocation measures: a --methods/--backends/--shapes
-    subset or a --no-... switch is not a regression of what it leaves out."""
+    subset or a --no-... switch is not a regression of what it leaves out.  Without
+    --methods, the groups of a method that is not installed here stay (not checked)."""
+    if args.methods is None:
+        methods = [*methods, *(g.get("method") for s in JUDGES for g in baseline.get(s, {}).values())]
+        methods = [m for m in dict.fromkeys(methods) if m]
 
     def wanted(section: str, g: dict) -> bool:
         kind = g.get("kind")
@@ -988,6 +1044,7 @@ def remeasure(cfg, args, current: dict, failing: set[str], backends, unavailable
 
 def run(args) -> int:
     from compact_distributions.baselines import method_names
+    from compact_distributions.cvt.registry import unavailable_methods
     from compact_distributions.cvt.shapes import ELEMENT_SHAPES
 
     from ..outputs import atomic_write, dumps, folder_problem
@@ -1019,6 +1076,14 @@ def run(args) -> int:
 
     current = measure(cfg, args, methods, backends, shapes, unavailable, fastest, spread=args.update)
     asked = _asked(baseline, args, methods, backends, shapes)
+    missing = unavailable_methods()
+    for section in JUDGES:
+        for group, g in asked[section].items():
+            if g.get("kind") == "method" and g.get("method") not in all_methods:
+                why = missing.get(g["method"], "not installed here")
+                current["unavailable"].setdefault(group, f"method {g['method']!r}: {why}")
+            elif g.get("backend") in unavailable:
+                current["unavailable"].setdefault(group, unavailable[g["backend"]])
     checks = compare(asked, current)
     failing = {
         c.group for c in checks if c.status == "fail" and c.section == "speed" and c.current is not None
