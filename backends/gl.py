@@ -104,7 +104,9 @@ def shared_context():
         _CONTEXT_ERROR = "gl backend: moderngl is not installed (pip install 'compact-distributions[gl]')"
         raise BackendUnavailable(_CONTEXT_ERROR) from None
     try:
-        ctx = moderngl.create_context(standalone=True, backend="egl")
+        # ask for 4.3: moderngl asks EGL for 3.3 by default, and NVIDIA's driver then gives
+        # exactly 3.3 (Mesa gives its highest whatever is asked)
+        ctx = moderngl.create_context(standalone=True, backend="egl", require=430)
     except Exception as exc:  # moderngl raises plain Exception for EGL failures
         reason = str(exc).strip().splitlines()[0] if str(exc).strip() else type(exc).__name__
         _CONTEXT_ERROR = f"gl backend: no headless EGL OpenGL context ({reason})"
