@@ -72,9 +72,15 @@ def problem(
         size = f"{size[0]}x{size[1]}"
     width, height = parse_size(str(size) if not isinstance(size, str) else size, "size")
     n_elements = whole_number(n_elements, "n_elements", minimum=1, maximum=width * height)
-    metric_name, _ = resolve_shapes(metric, element)
+    metric_name, element_name = resolve_shapes(metric, element)
     return Problem(
-        Grid(width, height, mask), n_elements, make_metric(metric_name, aspect), density, field, seed
+        Grid(width, height, mask),
+        n_elements,
+        make_metric(metric_name, aspect),
+        density,
+        field,
+        seed,
+        element=element_name,
     )
 
 

@@ -26,6 +26,7 @@ from typing import Any, NamedTuple
 import numpy as np
 
 from .errors import InputError
+from .metrics import REFERENCE_SHAPE
 
 # --------------------------------------------------------------------------- records
 
@@ -157,7 +158,7 @@ class Method:
     role: str = "plugin"
     elements: tuple[str, ...] | None = None
     sweep_backends: str = "reference"
-    compared_on: tuple[str, ...] | None = ("square",)
+    compared_on: tuple[str, ...] | None = (REFERENCE_SHAPE,)
     beyond_paper: tuple[str, ...] = ()
     sweep_variants: tuple[SweepVariant, ...] = ()
     tight: bool = False

@@ -12,8 +12,9 @@ import numpy as np
 
 from .errors import InputError
 from .fields import DensityMap, DirectionField
-from .metrics import Metric, make_metric
+from .metrics import DEFAULT_ELEMENT, ELEMENT_METRIC, Metric, make_metric
 from .pixels import pixel_index
+from .shapes import check_shape
 from .validate import whole_number
 
 MAX_SIDE = 32768
@@ -85,7 +86,7 @@ class Problem:
 
     grid: Grid
     n_elements: int
-    metric: Metric = field(default_factory=lambda: make_metric("l2"))
+    metric: Metric = field(default_factory=lambda: make_metric(ELEMENT_METRIC[DEFAULT_ELEMENT]))
     density: DensityMap | None = None
     field: DirectionField | None = None
     seed: int = 0
@@ -94,6 +95,8 @@ class Problem:
     # picture's strong edges).  Cells stop at them like at any border; a method that can
     # (compaction) brings elements up to the walls' centre lines instead of their sides.
     walls: np.ndarray | None = None
+    # the element shape its cells hold (a name or ``polygon:FILE``); None: the metric's own
+    element: str | None = None
 
     def __post_init__(self):
         if not isinstance(self.grid, Grid):
@@ -107,6 +110,8 @@ class Problem:
             if value is not None and not isinstance(value, kind):
                 raise InputError(f"{name} must be a {kind.__name__} or None, got {value!r}")
         self.seed = whole_number(self.seed, "seed", minimum=0, maximum=MAX_SEED)
+        if self.element is not None:
+            self.element = check_shape(self.element)
         if self.walls is not None:
             walls = np.ascontiguousarray(self.walls, dtype=bool)
             if walls.shape != self.grid.shape:
@@ -133,10 +138,10 @@ class Problem:
                 )
             self.init_sites = pts
             self.n_elements = len(pts)
-        self.n_elements = whole_number(self.n_elements, "number of sites", minimum=1)
+        self.n_elements = whole_number(self.n_elements, "n_elements", minimum=1)
         if self.n_elements > self.grid.pixel_count:
             raise InputError(
-                f"{self.n_elements} sites do not fit in a region of {self.grid.pixel_count} pixels"
+                f"{self.n_elements} elements do not fit in a region of {self.grid.pixel_count} pixels"
             )
         for name, img in (("density", self.density), ("field", self.field)):
             if img is not None and img.shape is not None and img.shape != self.grid.shape:

@@ -40,6 +40,13 @@ import numpy as np
 from compact_distributions.backends import REFERENCE as REFERENCE_BACKEND
 from compact_distributions.backends import variant_metrics
 from compact_distributions.cvt.errors import InputError
+from compact_distributions.cvt.metrics import (
+    PAPER_METRICS,
+    PAPER_SHAPES,
+    REFERENCE_SHAPE,
+    SHAPES,
+    make_metric,
+)
 from compact_distributions.cvt.validate import json_object, name_list
 
 from .. import options
@@ -56,21 +63,27 @@ SETS = {
         "n_elements": 250,
         "iterations": 20,
         "seeds": [0, 1],
-        "elements": ["square", "circle", "triangle"],
+        "elements": [s.name for s in SHAPES.values() if s.paper and not s.axial],
         "baseline_seeds": [0],
-        "speed": {"size": 512, "n_elements": 2000, "metrics": ["l2", "linf"], "warmup": 1, "repeats": 7},
+        "speed": {
+            "size": 512,
+            "n_elements": 2000,
+            "metrics": [m for m in PAPER_METRICS if make_metric(m).minkowski_p in (2, math.inf)],
+            "warmup": 1,
+            "repeats": 7,
+        },
     },
     "full": {
         "size": 512,
         "n_elements": 1000,
         "iterations": 20,
         "seeds": [0, 1, 2],
-        "elements": ["square", "rectangle", "ellipse", "triangle", "circle"],
+        "elements": list(PAPER_SHAPES),
         "baseline_seeds": [0, 1, 2],
         "speed": {
             "size": 1024,
             "n_elements": 4000,
-            "metrics": ["l2", "l1", "linf", "linf-axial", "l2-axial", "triangle"],
+            "metrics": list(PAPER_METRICS),
             "warmup": 1,
             "repeats": 7,
         },
@@ -166,7 +179,7 @@ def coverage_specs(cfg: dict, methods: list[str], backends: list[str]):
                         )
                         for s in cfg["seeds"]
                     ]
-            elif element == "square" and REFERENCE_BACKEND in backends:
+            elif element == REFERENCE_SHAPE and REFERENCE_BACKEND in backends:
                 specs += [
                     RunSpec(
                         "regress",
