@@ -118,6 +118,17 @@ class Shape:
     ----------
     curved : bool
         Whether its outline is curved (an ellipse: drawn as a 128-gon, SVG ellipses).
+
+    Examples
+    --------
+    >>> from compact_distributions.cvt.metrics import SHAPES
+    >>> hexagon = SHAPES["hexagon"]
+    >>> hexagon.metric, hexagon.symmetry, hexagon.sides, hexagon.phase
+    ('hexagon', 6, 6, 90.0)
+    >>> SHAPES["circle"].curved, SHAPES["rectangle"].axial
+    (True, True)
+    >>> SHAPES["rectangle"].ball(0.5).offsets.tolist()  # 2/β wide, 2β high
+    [2.0, 0.5, 2.0, 0.5]
     """
 
     name: str
@@ -398,15 +409,17 @@ def _polygon_from_halfplanes(normals: np.ndarray, offsets: np.ndarray) -> np.nda
 
 
 def make_metric(name: str, aspect: float | None = None, *, option: str = "aspect") -> Metric:
-    """The metric ``name``: the unit ball of the shape record whose metric it is (or of
-    ``polygon:FILE``, the user's polygon), or a turned ball (l1).
+    """Build the metric (the Lloyd distance) of a name: one convex unit ball.
+
+    The ball is that of the shape record whose metric it is (or of ``polygon:FILE``, the
+    user's polygon), or a record's ball turned (l1: the square's, by 45°).
 
     Parameters
     ----------
     name : str
         One of :data:`METRIC_NAMES`, or ``polygon:FILE``.
     aspect : float, optional
-        β, in :data:`ASPECT_RANGE`, used by the axial shapes only (default
+        The β of the axial shapes, in :data:`ASPECT_RANGE`, used by them only (default
         :data:`DEFAULT_ASPECT` for them).
     option : str
         How messages name ``aspect`` (``--aspect`` on the command line).

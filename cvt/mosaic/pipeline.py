@@ -513,8 +513,88 @@ def ellipse_rows(polygons, element: str, aspect: float) -> np.ndarray | None:
 
 @dataclass
 class MosaicResult:
-    """A picture turned into a mosaic: one tile per site (``polygons[k]`` is None where
-    the method placed none)."""
+    """A picture turned into a mosaic: one tile per site, its colour and the measures.
+
+    :func:`compact_distributions.mosaic` returns one; :meth:`svg` and :meth:`render`
+    draw it.  Arrays are indexed by site: tile ``k`` is ``polygons[k]`` (None where the
+    method placed none), centred near ``sites[k]``, filled with ``colours[k]``.
+
+    Parameters
+    ----------
+    sites : numpy.ndarray
+        (N, 2) sites in pixel units of the mosaic's raster.
+    angles : numpy.ndarray
+        (N,) tile angles in radians, positive = clockwise on screen.
+    scales : numpy.ndarray
+        (N,) size factors from the picture's density (ones without a density).
+    polygons : list of shapely.Polygon or None
+        The tiles, one per site, None where a site has none.
+    colours : numpy.ndarray
+        (N, 3) sRGB fills in 0..1 (8-bit values): each tile's mean colour.
+    coverage : float
+        Area of the union of the tiles / area of the raster.
+    overlap : float
+        Area covered more than once / area of the raster.
+    colour_error : float
+        Mean ΔE*ab between the picture and the fills over the tiled area.
+    straddling : float
+        Share of the tiles that straddle a strong edge of the picture.
+    width : int
+        Raster width in pixels.
+    height : int
+        Raster height in pixels.
+    metric : str
+        The Lloyd distance.
+    element : str
+        The tile shape.
+    aspect : float
+        The β of rectangles and ellipses.
+    gap : float
+        Grout width in pixels.
+    method : str, optional
+        The method that placed the tiles.
+    method_options : dict, optional
+        The method's own options, as given.
+    contrast : float, optional
+        Densest / sparsest cell area of the density from the picture.
+    grout : tuple of float, optional
+        The grout's sRGB colour in 0..1.
+    edge_threshold : float, optional
+        The contrast (ΔE*ab) from which a picture's edge is strong.
+    walls : bool, optional
+        Whether strong edges were walls (removed from the region).
+    cut_tiles : int, optional
+        The number of tiles cut to fit along the walls.
+    picture : numpy.ndarray or None, optional
+        (H, W, 3) the picture resampled to the raster.
+    edges : numpy.ndarray or None, optional
+        (H, W) bool, the strong edges.
+    straddles : numpy.ndarray or None, optional
+        (N,) bool, the tiles that straddle a strong edge.
+    fields : PictureFields or None, optional
+        The density and direction field read from the picture.
+    problem : Problem or None, optional
+        The problem the method solved.
+    distribution : Distribution or None, optional
+        What the method returned.
+    evaluation : Evaluation or None, optional
+        Coverage and overlap, as measured.
+    backend : str, optional
+        The backend variant that ran the Lloyd iterations.
+    device : str, optional
+        The backend's device.
+    source : str, optional
+        Where the picture came from (its path, or a description of the array).
+    method_seconds : float, optional
+        Wall time of the whole mosaic call.
+
+    Attributes
+    ----------
+    placed : int
+        The number of tiles placed.
+    labels : numpy.ndarray or None
+        The method's final label raster, where it has one.
+    """
 
     sites: np.ndarray  # (N, 2) pixel units of the mosaic raster
     angles: np.ndarray  # (N,) radians, positive = clockwise on screen
