@@ -198,6 +198,23 @@ def test_the_gallery_holds_eight_executed_examples_with_pictures():
             assert (page.parent / url).stat().st_size > 2000, f"{page.name}: {url} is empty"
 
 
+@pytest.mark.parametrize("page, csv", [("table2", "table2.csv"), ("table3", "table3.csv")])
+def test_each_report_row_links_its_method_to_its_api_entry_and_paper(page, csv):
+    """One link to the method's callable and one to its paper per row of the CSV (the
+    link test above checks that their anchors exist)."""
+    import pandas as pd
+
+    site = _site()
+    rows = pd.read_csv(ROOT / "reports" / csv)
+    rows = rows[rows["status"].isin(["ok", "partial"])]
+    hrefs = [url for tag, url in _parse(site / "reports" / f"{page}.html").refs if tag == "a"]
+    api = [h for h in hrefs if "methods.html#compact_distributions." in h]
+    paper = [h for h in hrefs if "methods.html#method-" in h]
+    assert len(api) == len(rows) and len(paper) == len(rows), (len(api), len(paper), len(rows))
+    named = {urlsplit(h).fragment.removeprefix("method-") for h in paper}
+    assert named == {m.split(" ")[0] for m in rows["method"]}
+
+
 def test_commands_reference_holds_every_option_of_every_parser():
     """The generated reference names every option string of every subparser."""
     from compact_distributions.bench.commands.cli import build_parser
