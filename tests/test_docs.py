@@ -11,7 +11,8 @@ anchor it names) and each image, stylesheet and script is checked to exist.  The
 index, an API page and a gallery page are opened in headless Chromium (``CD_CHROMIUM``,
 else ``chromium`` on the PATH; skipped where there is none) from a local HTTP server: a
 checking page loads each into a frame, loads every image of it again and fetches every
-internal link, and Chromium prints the result with ``--dump-dom``.
+internal link, waits for MathJax to typeset the formulas, and Chromium prints the result
+with ``--dump-dom``.  The measures page is opened too: its formulas must be typeset.
 """
 
 from __future__ import annotations
@@ -242,8 +243,12 @@ const page = new URLSearchParams(location.search).get("page");
 const frame = document.createElement("iframe");
 frame.style.width = "1400px";
 frame.style.height = "4000px";
+const pause = (ms) => new Promise((resolve) => setTimeout(resolve, ms));
 frame.onload = async () => {
   const doc = frame.contentDocument;
+  // MathJax typesets after the load event: wait (at most 10 s) for every formula
+  const formulas = doc.querySelectorAll(".math").length;
+  for (let k = 0; k < 100 && doc.querySelectorAll("mjx-container").length < formulas; k++) await pause(100);
   const probe = (src) => new Promise((resolve) => {
     const img = new Image();
     img.onload = () => resolve({src, ok: img.naturalWidth > 0});
@@ -263,6 +268,7 @@ frame.onload = async () => {
     text: main.innerText.length,
     width: doc.documentElement.scrollWidth,
     styled: getComputedStyle(doc.body).fontFamily,
+    formulas, typeset: doc.querySelectorAll("mjx-container").length,
     images, links,
   });
 };
@@ -347,6 +353,7 @@ def _open_in_chromium(base: str, page: str, tmp_path: Path) -> tuple[dict, str]:
         ("index.html", "compact-distributions", True),
         ("api/_autosummary/compact_distributions.run.html", "compact_distributions.run", False),
         ("auto_examples/plot_mosaic_edges.html", "A photograph to a mosaic, with its edges", True),
+        ("guide/measures.html", "fidelity measures", False),
     ],
 )
 def test_page_renders_in_chromium_with_no_broken_image_or_link(served, page, heading, pictured, tmp_path):
@@ -359,5 +366,9 @@ def test_page_renders_in_chromium_with_no_broken_image_or_link(served, page, hea
     assert not broken, f"{page}: broken images {broken}"
     dead = [link for link in result["links"] if link["status"] != 200]
     assert result["links"] and not dead, f"{page}: dead links {dead}"
+    # formulas are typeset by the MathJax the site serves itself (no network)
+    assert result["typeset"] >= result["formulas"], (
+        f"{result['typeset']} of {result['formulas']} formulas typeset"
+    )
     errors = [line for line in log.splitlines() if "Uncaught" in line]
     assert not errors, errors
