@@ -166,9 +166,26 @@ class Shape:
         return self.semi_axes is not None
 
     def ball(self, aspect: float = 1.0, *, name: str | None = None, turn: float = 0.0, scale: float = 1.0):
-        """The unit ball as a :class:`Metric`: stretched by β = ``aspect`` when axial,
-        turned by ``turn`` degrees and scaled by ``scale`` (a metric whose ball is this
-        element's turned, like l1's), and named ``name`` (default the shape's metric)."""
+        """Build the record's unit ball as a :class:`Metric`.
+
+        Parameters
+        ----------
+        aspect : float
+            The β an axial shape is stretched by: 1/β along x, β along y (unchecked here;
+            :func:`make_metric` checks it).
+        name : str, optional
+            The metric's name (default the shape's own metric).
+        turn : float
+            Degrees the ball is turned by (a metric whose ball is this element's turned,
+            like l1's).
+        scale : float
+            Factor the ball is scaled by.
+
+        Returns
+        -------
+        Metric
+            The ball, with this shape as its element.
+        """
         name = self.metric if name is None else name
         beta = aspect if self.axial else 1.0
         common = dict(

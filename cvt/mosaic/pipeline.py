@@ -641,7 +641,7 @@ class MosaicResult:
     def svg(self, grout=None, precision: int = 2) -> str:
         """The mosaic as SVG text: a grout-coloured background and one filled tile per
         placed site, in pixel units (viewBox = the raster).  Polygonal tiles are paths
-        with their exact corners; circles and ellipses are rotated ``<ellipse>``s."""
+        with their exact corners; circles and ellipses are rotated ``<ellipse>`` elements."""
         return "".join(self.svg_lines(grout, precision))
 
     def svg_lines(self, grout=None, precision: int = 2):
