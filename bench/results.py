@@ -20,7 +20,18 @@ SCHEMA_FILE = Path(__file__).with_name("result.schema.json")
 
 
 def schema() -> dict:
-    return json.loads(SCHEMA_FILE.read_text())
+    """The result.json schema, with the metric and element names read from the shape table
+    (the file itself names no shape: a new record needs no edit there)."""
+    from compact_distributions.cvt.metrics import METRIC_NAMES, POLYGON_PREFIX, SHAPES
+
+    out = json.loads(SCHEMA_FILE.read_text())
+    users = {"type": "string", "pattern": f"^{POLYGON_PREFIX}."}
+    for name, names in (("metric", METRIC_NAMES), ("element", tuple(SHAPES))):
+        out["properties"][name] = {
+            "description": out["properties"][name]["description"],
+            "anyOf": [{"enum": list(names)}, users],
+        }
+    return out
 
 
 def stages_of(dist) -> dict:

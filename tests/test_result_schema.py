@@ -84,11 +84,26 @@ def test_both_commands_write_the_one_schema(outputs, kind):
         {"kind": "table"},
         {"coverage": 1.5},
         {"size": [64]},
+        {"element": "blob"},
+        {"metric": "l3"},
+        {"element": "polygon:"},
     ],
 )
 def test_a_record_that_breaks_the_schema_is_refused(outputs, change):
     with pytest.raises(jsonschema.ValidationError):
         jsonschema.validate({**outputs["run"], **change}, schema())
+
+
+@pytest.mark.parametrize(
+    "change",
+    [
+        {"element": "hexagon", "metric": "hexagon"},
+        {"element": "octagon", "metric": "octagon"},
+        {"element": "polygon:pentagon.json", "metric": "polygon:pentagon.json"},
+    ],
+)
+def test_every_shape_of_the_table_and_a_users_polygon_fit_the_schema(outputs, change):
+    jsonschema.validate({**outputs["run"], **change}, schema())
 
 
 def test_mosaic_fields_are_required_for_a_mosaic(outputs):
