@@ -1,6 +1,6 @@
 """The one ``result.json`` of every command that writes one (``cvtbench run``,
 ``cvtbench mosaic``).  Its JSON Schema ships beside this module as
-``result.schema.json``; the README lists the fields.
+``result.schema.json``; the documentation's result.json page lists the fields.
 
 ``kind`` says which command wrote it; ``elements`` is always the list of element
 outlines (one per site, null where a site has no element) and ``placed`` their count.

@@ -251,7 +251,7 @@ def render_markdown(
         "record compares it on (the baselines on squares; rectangle and ellipse β = 0.5)",
         "the baselines on the NumPy reference backend, the others on the OpenCL backend where it is "
         "available (else NumPy)",
-        "measures (cvt.evaluate, formulas in the README): "
+        "measures (cvt.evaluate, formulas on the documentation's measures page, docs/guide/measures.md): "
         + "; ".join(f"{m}: {text}" for m, (text, _) in MEASURES.items()),
         f"this command took {fmt_seconds(elapsed)}; {cached} of {total} runs were read back from raw/ "
         "(run with --force to redo them)",
