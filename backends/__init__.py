@@ -17,6 +17,8 @@ from __future__ import annotations
 
 import importlib
 from functools import lru_cache
+from importlib.metadata import EntryPoint
+from typing import Any
 
 from compact_distributions.cvt.errors import BackendUnavailable, InputError
 from compact_distributions.cvt.registry import group_entry_points
@@ -25,7 +27,7 @@ from compact_distributions.cvt.validate import one_of
 from .base import Backend
 
 # name -> "module:Class"
-REGISTRY = {
+REGISTRY: dict[str, str] = {
     "numpy": "compact_distributions.backends.numpy_backend:NumpyBackend",
     "opencl": "compact_distributions.backends.opencl:OpenCLBackend",
     "gl": "compact_distributions.backends.gl:GLBackend",
@@ -33,7 +35,7 @@ REGISTRY = {
 }
 # variant -> (registry name, constructor options), for backends offered in several modes;
 # a backend with no entry here is its own one variant
-VARIANTS = {
+VARIANTS: dict[str, tuple[str, dict[str, Any]]] = {
     "gl-cone": ("gl", {"mode": "cone"}),
     "gl-exact": ("gl", {"mode": "exact"}),
 }
@@ -43,7 +45,7 @@ BUILT_IN = tuple(REGISTRY)
 
 
 @lru_cache(maxsize=1)
-def _plugins() -> dict:
+def _plugins() -> dict[str, EntryPoint]:
     """Entry points of other distributions' backends, by name (built-in names win)."""
     return {ep.name: ep for ep in group_entry_points(BACKEND_GROUP) if ep.name not in BUILT_IN}
 
@@ -57,14 +59,31 @@ _register_plugins()
 
 
 def variant_names() -> list[str]:
-    """Every variant, in registry order."""
-    out = []
+    """Return the name of every backend variant, in registry order.
+
+    A variant is a backend with options under one name (``gl-cone``, ``gl-exact``); a
+    backend offered in one mode is its own one variant.  Other distributions' backends
+    (entry point group ``compact_distributions.backends``) come after the built-in ones.
+    The names are listed whether or not their runtimes are present on this machine.
+
+    Returns
+    -------
+    list of str
+        The names :func:`create_backend` and ``--backend`` accept.
+
+    Examples
+    --------
+    >>> import compact_distributions as cd
+    >>> cd.backend_names()[:5]
+    ['numpy', 'opencl', 'gl-cone', 'gl-exact', 'ckdtree']
+    """
+    out: list[str] = []
     for name in REGISTRY:
         out += [v for v, (base, _) in VARIANTS.items() if base == name] or [name]
     return out
 
 
-def resolve(name: str, **options) -> tuple[str, dict]:
+def resolve(name: str, **options: Any) -> tuple[str, dict[str, Any]]:
     """(registry name, options) of a backend or variant name plus explicit options."""
     one_of(name, "backend", [*REGISTRY, *VARIANTS])
     if name in VARIANTS:
@@ -95,9 +114,46 @@ def backend_class(name: str) -> type[Backend]:
     return getattr(mod, cls)
 
 
-def create_backend(name: str, **options) -> Backend:
-    """An instance of backend or variant ``name`` (options override the variant's);
-    raises BackendUnavailable naming what is missing."""
+def create_backend(name: str | Backend, **options: Any) -> Backend:
+    """Start a backend by name.
+
+    The backend holds its device (an OpenCL context, an EGL context) until it is closed:
+    use it as a context manager.
+
+    Parameters
+    ----------
+    name : str or Backend
+        A name of :func:`backend_names` (a Backend is passed through as it is).
+    **options
+        The backend's constructor options; they override the variant's own (``mode``
+        of ``gl``).
+
+    Returns
+    -------
+    Backend
+        The live backend.
+
+    Raises
+    ------
+    InputError
+        If ``name`` is neither a known name nor a Backend.
+    BackendUnavailable
+        If the backend's runtime is missing (no OpenCL platform, no EGL, ...); the
+        message names what is missing.
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> import compact_distributions as cd
+    >>> with cd.create_backend("numpy") as backend:
+    ...     labels = backend.label(
+    ...         np.array([[8.0, 8.0], [24.0, 8.0]]),
+    ...         metric=cd.make_metric("l2"),
+    ...         grid=cd.Grid(32, 16),
+    ...     )
+    >>> labels.shape, int(labels[0, 0]), int(labels[0, -1])
+    ((16, 32), 0, 1)
+    """
     if isinstance(name, Backend):
         return name
     if not isinstance(name, str):
@@ -109,7 +165,7 @@ def create_backend(name: str, **options) -> Backend:
 def probe_all() -> list[tuple[str, bool, str]]:
     """(name, available, device description or the reason it is unavailable), per
     registry entry."""
-    rows = []
+    rows: list[tuple[str, bool, str]] = []
     for name in REGISTRY:
         try:
             rows.append((name, True, backend_class(name).probe()))

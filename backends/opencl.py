@@ -77,7 +77,7 @@ REACH_MARGIN = 1e-4  # relative slack on the search bound against float32 roundi
 
 def _facet_count(metric: Metric) -> int:
     """K of the kernels built for ``metric`` (0: an ellipse)."""
-    return 0 if metric.kind == "ellipse" else np.asarray(metric.normals).shape[0]
+    return 0 if metric.curved else np.asarray(metric.normals).shape[0]
 
 
 def block_mask_words(mask: np.ndarray, block: int) -> np.ndarray:
@@ -105,6 +105,24 @@ def _near(last, raster: tuple, sites: np.ndarray, reach: float) -> bool:
     if last is None or last[0] != raster or last[1].shape != sites.shape:
         return False
     return bool(np.abs(sites - last[1]).max(initial=0.0) <= reach)
+
+
+def _site_grid(sites, spacing: float, w: int, h: int):
+    """The uniform grid of the label search: cells of about ``spacing`` px (about one
+    site each over the region); returns the cell side, the cells across and down, the
+    sites in cell order and where each cell's sites start."""
+    # float32-exact, so the host's buckets and the kernel's cell edges agree
+    cell = float(np.float32(max(1.0, spacing)))
+    ncx, ncy = max(1, math.ceil(w / cell)), max(1, math.ceil(h / cell))
+    cx = np.clip(np.floor(sites[:, 0] / cell), 0, ncx - 1).astype(np.int64)
+    cy = np.clip(np.floor(sites[:, 1] / cell), 0, ncy - 1).astype(np.int64)
+    cid = cy * ncx + cx
+    # stable, so a cell's sites stay in index order; 16-bit keys get numpy's radix sort
+    key_type = np.uint16 if ncx * ncy <= 65535 else np.int32
+    order = np.argsort(cid.astype(key_type), kind="stable")
+    starts = np.zeros(ncx * ncy + 1, dtype=np.int32)
+    np.cumsum(np.bincount(cid, minlength=ncx * ncy), out=starts[1:])
+    return cell, ncx, ncy, order, starts
 
 
 def _fit_key(ellipse: bool, k: int) -> tuple:
@@ -347,10 +365,10 @@ class OpenCLBackend(Backend):
     # ---------------------------------------------------------------- programs
     def _kernels(self, metric: Metric, k: int):
         """The built (label, moments) kernels for this metric kind; built once."""
-        key = (metric.kind, k, self.int64_atomics, self.block)
+        key = (metric.curved, k, self.int64_atomics, self.block)
         if key not in self._programs:
             cl = self._cl
-            stride = 8 if metric.kind == "ellipse" else 4 + 2 * k
+            stride = 8 if metric.curved else 4 + 2 * k
             opts = [
                 f"-DSTRIDE={stride}",
                 f"-DK={k}",
@@ -358,7 +376,7 @@ class OpenCLBackend(Backend):
                 f"-DBH={self.block or 8}",
                 f"-DSTRIP={STRIP}",
             ]
-            if metric.kind == "ellipse":
+            if metric.curved:
                 opts.append("-DMETRIC_ELLIPSE")
             if self.int64_atomics:
                 opts.append("-DUSE_INT64_ATOMICS")
@@ -370,7 +388,7 @@ class OpenCLBackend(Backend):
                 opts.append(f"-DVW={FIT_VECTOR}")
             prg = self._build(files, opts)
             if self._fits_on_device:
-                self._programs[_fit_key(metric.kind == "ellipse", k)] = prg
+                self._programs[_fit_key(metric.curved, k)] = prg
             label_name = "label_blocks" if self.block > 0 else "label_pixels"
             self._programs[key] = (cl.Kernel(prg, label_name), cl.Kernel(prg, "row_moments"))
         return self._programs[key]
@@ -417,7 +435,7 @@ class OpenCLBackend(Backend):
                 one
                 if n == 1
                 else type(one)(
-                    one.kind,
+                    one.curved,
                     sites,
                     facets=None
                     if one.facets is None
@@ -429,7 +447,7 @@ class OpenCLBackend(Backend):
             coeffs = compile_sites(metric, sites, angles, scales)
         hi = sites.astype(np.float32)
         lo = (sites - hi.astype(np.float64)).astype(np.float32)
-        if metric.kind == "ellipse":
+        if metric.curved:
             qxx, qxy, qyy = coeffs.quad.T
             l11 = np.sqrt(qxx)
             l21 = qxy / l11
@@ -462,18 +480,7 @@ class OpenCLBackend(Backend):
             self._mask_source, self._mask_pixels = grid.mask, int(grid.mask.sum())
         area = self._mask_pixels if use_mask else w * h
 
-        # the uniform grid: about one site per cell over the region
-        # float32-exact, so the host's buckets and the kernel's cell edges agree
-        cell = float(np.float32(max(1.0, self.cell_factor * math.sqrt(area / n))))
-        ncx, ncy = max(1, math.ceil(w / cell)), max(1, math.ceil(h / cell))
-        cx = np.clip(np.floor(sites[:, 0] / cell), 0, ncx - 1).astype(np.int64)
-        cy = np.clip(np.floor(sites[:, 1] / cell), 0, ncy - 1).astype(np.int64)
-        cid = cy * ncx + cx
-        # stable, so a cell's sites stay in index order; 16-bit keys get numpy's radix sort
-        key_type = np.uint16 if ncx * ncy <= 65535 else np.int32
-        order = np.argsort(cid.astype(key_type), kind="stable")
-        starts = np.zeros(ncx * ncy + 1, dtype=np.int32)
-        np.cumsum(np.bincount(cid, minlength=ncx * ncy), out=starts[1:])
+        cell, ncx, ncy, order, starts = _site_grid(sites, self.cell_factor * math.sqrt(area / n), w, h)
 
         cl = self._cl
         starts_buf = self._upload("cell_start", starts)
@@ -747,7 +754,7 @@ class OpenCLBackend(Backend):
         if self._queue is None:
             raise RuntimeError("opencl: this backend was closed; create a new one")
         cl = self._cl
-        ellipse = cells.kind == "ellipse"
+        ellipse = cells.curved
         k = 1 if ellipse else len(cells.slack)
         key = _fit_key(ellipse, k)
         if key not in self._programs:  # no label program of this shape built the fit's

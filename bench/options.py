@@ -14,7 +14,7 @@ from pathlib import Path
 
 from compact_distributions.backends import REGISTRY, VARIANTS, create_backend, resolve
 from compact_distributions.cvt.errors import InputError
-from compact_distributions.cvt.metrics import ELEMENT_METRIC, METRIC_NAMES
+from compact_distributions.cvt.metrics import DEFAULT_ELEMENT, ELEMENT_METRIC, METRIC_NAMES
 from compact_distributions.cvt.shapes import ELEMENT_SHAPES
 from compact_distributions.cvt.validate import whole_number
 
@@ -68,7 +68,7 @@ def open_backend(args):
     return create_backend(name, **options)
 
 
-def add_shape_options(p, default_element: str = "square") -> None:
+def add_shape_options(p, default_element: str = DEFAULT_ELEMENT) -> None:
     """``--metric``, ``--element`` (either implies the other; neither: ``default_element``)
     and ``--aspect``."""
     p.add_argument(

@@ -34,6 +34,7 @@ from types import SimpleNamespace
 
 from compact_distributions.backends import REFERENCE as REFERENCE_BACKEND
 from compact_distributions.cvt.evaluate import MEASURES
+from compact_distributions.cvt.metrics import REFERENCE_SHAPE
 from compact_distributions.cvt.registry import get_method, method_names
 from compact_distributions.cvt.shapes import ELEMENT_SHAPES, PAPER_SHAPES
 from compact_distributions.cvt.validate import name_list, one_of
@@ -170,7 +171,7 @@ def discussion(table) -> str:
     paper's method (its record's role) is set against the paper's method."""
     lines = ["", "## What the measures show", ""]
     ok = table[table["status"].isin(["ok", "partial"])]
-    sq = ok[ok["element"] == "square"]
+    sq = ok[ok["element"] == REFERENCE_SHAPE]
     row = {(r["scene"], r["method"]): r for _, r in sq.iterrows()}
     role = {m: get_method(m).role for m in dict.fromkeys(sq["method"])}
     paper = next((m for m, r in role.items() if r == "paper"), None)
@@ -250,7 +251,7 @@ def render_markdown(
         "record compares it on (the baselines on squares; rectangle and ellipse β = 0.5)",
         "the baselines on the NumPy reference backend, the others on the OpenCL backend where it is "
         "available (else NumPy)",
-        "measures (cvt.evaluate, formulas in the README): "
+        "measures (cvt.evaluate, formulas on the documentation's measures page, docs/guide/measures.md): "
         + "; ".join(f"{m}: {text}" for m, (text, _) in MEASURES.items()),
         f"this command took {fmt_seconds(elapsed)}; {cached} of {total} runs were read back from raw/ "
         "(run with --force to redo them)",
@@ -304,7 +305,7 @@ def render_tradeoff(rows: list[dict], path: Path) -> bool:
 
     from .report import save_figure
 
-    df = pd.DataFrame([r for r in rows if r.get("status") == "ok" and r.get("element") == "square"])
+    df = pd.DataFrame([r for r in rows if r.get("status") == "ok" and r.get("element") == REFERENCE_SHAPE])
     panels = [
         ("size_fidelity", "density", "size error: RMS log2(area / target)"),
         ("direction_fidelity", "field", "direction error: mean angle to the field (°)"),

@@ -21,11 +21,16 @@ import time
 from collections.abc import Callable, Mapping
 from dataclasses import dataclass, field
 from types import MappingProxyType
-from typing import Any, NamedTuple
+from typing import TYPE_CHECKING, Any, NamedTuple
 
 import numpy as np
 
 from .errors import InputError
+from .metrics import REFERENCE_SHAPE
+
+if TYPE_CHECKING:
+    from .distribution import Distribution
+    from .problem import Problem
 
 # --------------------------------------------------------------------------- records
 
@@ -40,11 +45,46 @@ SWEEP_BACKENDS = ("every", "fastest", "reference")
 class MethodOption:
     """One keyword of a method that users may set (``--NAME`` on the command line).
 
-    ``kind`` is ``bool`` (a flag), ``int``, ``float`` or ``str``; ``check(value, name)``
-    returns the parsed value or raises InputError naming ``name`` (default: ``kind``'s
-    conversion).  ``tag`` names the option in a run's key (``__TAG`` for a flag,
-    ``__TAGVALUE`` otherwise; default the name) and ``label`` in report rows (a flag's
-    word, or a format such as ``"δ={:g}"``; default ``NAME=VALUE``)."""
+    A method's record declares its options; the command line offers them as flags, the
+    API checks them (:meth:`Method.parse_options`) and a run's key and report label name
+    them.
+
+    Parameters
+    ----------
+    name : str
+        The keyword the method's ``run`` receives (a Python identifier).
+    kind : type
+        ``bool`` (a flag), ``int``, ``float`` or ``str``.
+    default : object
+        The value the method uses when the option is not given (shown in ``--help``).
+    help : str
+        One line for ``--help``.
+    check : callable or None, optional
+        ``check(value, name) -> parsed value``, raising InputError naming ``name``;
+        default: ``kind``'s conversion (finite numbers only).
+    tag : str or None, optional
+        The option's name in a run's key: ``__TAG`` for a set flag, ``__TAGVALUE``
+        otherwise; default the name.
+    label : str or None, optional
+        The option in report rows: a flag's word, or a format such as ``"δ={:g}"``;
+        default ``NAME=VALUE``.
+
+    Attributes
+    ----------
+    flag : str
+        The command-line spelling, ``--name-with-dashes``.
+
+    Examples
+    --------
+    >>> from compact_distributions import MethodOption
+    >>> rounds = MethodOption("max_rounds", int, 4, "rounds at most", tag="r")
+    >>> rounds.flag
+    '--max-rounds'
+    >>> rounds.parse("6")
+    6
+    >>> rounds.key_part(6)
+    '__r6'
+    """
 
     name: str
     kind: type
@@ -59,8 +99,26 @@ class MethodOption:
         """The command-line spelling, ``--name-with-dashes``."""
         return "--" + self.name.replace("_", "-")
 
-    def parse(self, value, name: str | None = None):
-        """``value`` checked and converted (InputError naming ``name``, default the flag)."""
+    def parse(self, value: Any, name: str | None = None) -> Any:
+        """Check and convert a value given for this option.
+
+        Parameters
+        ----------
+        value : object
+            What the user gave (a string from the command line, or a Python value).
+        name : str or None, optional
+            How messages name the option; default its flag.
+
+        Returns
+        -------
+        object
+            The value, converted to ``kind`` (or as ``check`` returns it).
+
+        Raises
+        ------
+        InputError
+            If the value does not convert, is not finite, or ``check`` rejects it.
+        """
         name = name or self.flag
         if self.check is not None:
             return self.check(value, name)
@@ -76,13 +134,37 @@ class MethodOption:
             raise InputError(f"{name} must be a finite number, got {value!r}")
         return parsed
 
-    def key_part(self, value) -> str:
+    def key_part(self, value: Any) -> str:
+        """Return the part of a run's key this option makes with ``value``.
+
+        Parameters
+        ----------
+        value : object
+            The option's parsed value.
+
+        Returns
+        -------
+        str
+            ``__TAG`` for a set flag, empty for an unset one, ``__TAGVALUE`` otherwise.
+        """
         tag = self.tag or self.name
         if self.kind is bool:
             return f"__{tag}" if value else ""
         return f"__{tag}{value:g}" if isinstance(value, (int, float)) else f"__{tag}{value}"
 
-    def label_part(self, value) -> str:
+    def label_part(self, value: Any) -> str:
+        """Return how report rows name this option set to ``value``.
+
+        Parameters
+        ----------
+        value : object
+            The option's parsed value.
+
+        Returns
+        -------
+        str
+            The flag's word (empty when unset), or ``label`` formatted with the value.
+        """
         if self.kind is bool:
             return (self.label or self.name) if value else ""
         return (self.label or f"{self.name}={{}}").format(value)
@@ -92,7 +174,7 @@ class SweepVariant(NamedTuple):
     """Another option set the sweeps run a method with: on ``elements`` (None: every shape
     the method is compared on), with an effect picture where ``pictured``."""
 
-    options: Mapping
+    options: Mapping[str, Any]
     elements: tuple[str, ...] | None = None
     pictured: bool = False
 
@@ -100,6 +182,10 @@ class SweepVariant(NamedTuple):
 @dataclass(frozen=True)
 class Method:
     """A method as everything else sees it: one record per method.
+
+    The registry (:func:`compact_distributions.get_method`) holds one per method: the
+    paper's and its variants, the baselines, other distributions' plug-ins.  Calling
+    the record runs the method and times it.
 
     Parameters
     ----------
@@ -145,10 +231,35 @@ class Method:
     memory : callable or None
         ``memory(pixels, n_elements, element, density) -> (step, bytes)``: the peak
         memory of its own step beyond placing (``cvt.resources.run_estimate``).
+
+    Raises
+    ------
+    InputError
+        If the name is not a word, ``run`` is not callable, ``role`` or
+        ``sweep_backends`` is not one of the known values, an option is declared twice,
+        or a sweep variant's options do not parse.
+
+    Examples
+    --------
+    A method of one's own, run like the registered ones:
+
+    >>> import numpy as np
+    >>> import compact_distributions as cd
+    >>> def lattice(problem, backend, **common):
+    ...     k = int(np.sqrt(problem.n_elements))
+    ...     w, h = problem.grid.width, problem.grid.height
+    ...     x, y = np.meshgrid((np.arange(k) + 0.5) * w / k, (np.arange(k) + 0.5) * h / k)
+    ...     sites = np.stack([x.ravel(), y.ravel()], axis=1)
+    ...     n = len(sites)
+    ...     return cd.Distribution("lattice", sites, np.zeros(n), np.ones(n))
+    >>> record = cd.Method("lattice", lattice, summary="sites on a square lattice")
+    >>> dist = record(cd.problem(16, 64), None)
+    >>> dist.sites.shape
+    (16, 2)
     """
 
     name: str
-    run: Callable
+    run: Callable[..., Distribution]
     options: tuple[MethodOption, ...] = ()
     fixed_size: bool = False
     paper: str = ""
@@ -157,16 +268,16 @@ class Method:
     role: str = "plugin"
     elements: tuple[str, ...] | None = None
     sweep_backends: str = "reference"
-    compared_on: tuple[str, ...] | None = ("square",)
+    compared_on: tuple[str, ...] | None = (REFERENCE_SHAPE,)
     beyond_paper: tuple[str, ...] = ()
     sweep_variants: tuple[SweepVariant, ...] = ()
     tight: bool = False
-    mosaic_options: Mapping = field(default_factory=lambda: MappingProxyType({}))
+    mosaic_options: Mapping[str, Any] = field(default_factory=lambda: MappingProxyType({}))
     summary: str = ""
     fits: bool = False
-    memory: Callable | None = None
+    memory: Callable[..., tuple[str, float]] | None = None
 
-    def __post_init__(self):
+    def __post_init__(self) -> None:
         if not isinstance(self.name, str) or not self.name or any(c.isspace() for c in self.name):
             raise InputError(f"a method's name must be a word, got {self.name!r}")
         if not callable(self.run):
@@ -186,7 +297,7 @@ class Method:
         if len(set(names)) != len(names):
             raise InputError(f"method {self.name!r} declares an option twice: {names}")
 
-    def __call__(self, problem, backend, **options):
+    def __call__(self, problem: Problem, backend: Any, **options: Any) -> Distribution:
         """Run the method; the Distribution's ``method_seconds`` is the whole call's wall
         time (problem to placed elements), whatever the method measures itself."""
         t0 = time.perf_counter()
@@ -195,13 +306,40 @@ class Method:
         return dist
 
     def option(self, name: str) -> MethodOption | None:
-        """The declared option ``name``, or None."""
+        """Return the declared option ``name``.
+
+        Parameters
+        ----------
+        name : str
+            The option's keyword.
+
+        Returns
+        -------
+        MethodOption or None
+            The option, or None where the method declares none of that name.
+        """
         return next((o for o in self.options if o.name == name), None)
 
-    def parse_options(self, values: Mapping, flags: bool = False) -> dict:
-        """``values`` (option name -> value) checked against the declared options:
-        InputError for an undeclared one or a bad value, naming it as the user wrote it
-        (``--name`` where ``flags``)."""
+    def parse_options(self, values: Mapping[str, Any] | None, flags: bool = False) -> dict[str, Any]:
+        """Check option values against the declared options.
+
+        Parameters
+        ----------
+        values : mapping of str to object, or None
+            Option name -> value, as the user gave them.
+        flags : bool, optional
+            Name options as command-line flags (``--name``) in messages.
+
+        Returns
+        -------
+        dict of str to object
+            Option name -> parsed value, in the order given.
+
+        Raises
+        ------
+        InputError
+            For an undeclared option or a bad value, naming it as the user wrote it.
+        """
         out = {}
         for name, value in dict(values or {}).items():
             opt = self.option(name)
@@ -216,17 +354,39 @@ class Method:
             out[name] = opt.parse(value, shown)
         return out
 
-    def key(self, options: Mapping) -> str:
-        """The part of a run's key that its options make (declared order)."""
+    def key(self, options: Mapping[str, Any]) -> str:
+        """Return the part of a run's key that its options make.
+
+        Parameters
+        ----------
+        options : mapping of str to object
+            Parsed option values.
+
+        Returns
+        -------
+        str
+            Each given option's :meth:`MethodOption.key_part`, in declared order.
+        """
         return "".join(o.key_part(options[o.name]) for o in self.options if o.name in options)
 
-    def label(self, options: Mapping) -> str:
-        """How reports name a run of it with ``options``: the name, then its set options."""
+    def label(self, options: Mapping[str, Any]) -> str:
+        """Return how reports name a run of this method with ``options``.
+
+        Parameters
+        ----------
+        options : mapping of str to object
+            Parsed option values.
+
+        Returns
+        -------
+        str
+            The method's name, then each set option's label.
+        """
         parts = [o.label_part(options[o.name]) for o in self.options if o.name in options]
         return " ".join([self.name, *[p for p in parts if p]])
 
 
-def __getattr__(name: str):
+def __getattr__(name: str) -> Any:
     # the paper's own methods moved to ``cvt.placement.ours``; their old names keep
     # working for one release
     if name in _MOVED:

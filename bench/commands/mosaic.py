@@ -376,7 +376,7 @@ PAPER_FIGURES = [
 
 
 SAMPLES_DIR = Path(__file__).resolve().parents[2] / "samples"
-# the README's full-size mosaic and its comparisons: a photograph-like picture, defaults
+# the documentation's full-size mosaic and its comparisons: a photograph-like picture, defaults
 SCENE = "scene.jpg"
 SCENE_FIGURES = {
     "mosaic": "mosaic_scene.png",
@@ -389,7 +389,7 @@ def write_paper_figures(
     out_dir, backend, samples_dir=None, iterations: int = 20, fewer: int = 1, quiet: bool = False
 ) -> list[Path]:
     """Re-make Figures 18-19 (original | without | with) from the sample pictures, and
-    the README's mosaic of samples/scene.jpg (2000 tiles, the defaults) with its
+    the documentation's mosaic of samples/scene.jpg (2000 tiles, the defaults) with its
     comparisons without walls and by method (``fewer``: divide the number of elements,
     for a quick smoke test)."""
     from compact_distributions.cvt.mosaic.pipeline import DEFAULT_ELEMENTS, make_mosaic, picture_array

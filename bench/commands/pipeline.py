@@ -30,6 +30,7 @@ from pathlib import Path
 import numpy as np
 
 from compact_distributions.backends import variant_names, variant_status
+from compact_distributions.cvt.metrics import REFERENCE_SHAPE
 from compact_distributions.cvt.validate import name_list, one_of, whole_number
 
 from .. import options
@@ -134,7 +135,7 @@ class PipelineSpec:
 
         if self.kind == "mosaic":
             return mosaic_estimate(
-                self.size, self.size, self.n_elements, memory_class(self.backend), element="square"
+                self.size, self.size, self.n_elements, memory_class(self.backend), element=REFERENCE_SHAPE
             )
         from compact_distributions.baselines import get_method
 
@@ -143,7 +144,7 @@ class PipelineSpec:
             self.size,
             self.n_elements,
             memory_class(self.backend),
-            element="square",
+            element=REFERENCE_SHAPE,
             method=get_method(self.kind),
             what=f"the run {self.describe()}",
         )
@@ -155,7 +156,7 @@ class PipelineSpec:
             from .mosaic import SAMPLES_DIR
 
             return ["mosaic", str(SAMPLES_DIR / SAMPLE), "--size", str(self.size), *common]
-        return ["run", "--method", self.kind, "--element", "square", "--size", str(self.size), *common]
+        return ["run", "--method", self.kind, "--element", REFERENCE_SHAPE, "--size", str(self.size), *common]
 
     def execute(self, backend) -> dict:
         """Run the command in a process of its own (its peak memory is its own)."""

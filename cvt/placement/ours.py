@@ -24,7 +24,7 @@ from ..problem import Problem
 from ..shapes import element_polygons, packing_density, shape_record
 from ..validate import whole_number
 from .alternate import alternate_triangles, alternating_turns, check_alternate
-from .compaction import compact
+from .compaction import CompactionSettings, compact
 from .fit import element_for, fit_centres, parse_gap, place_elements
 
 
@@ -53,7 +53,7 @@ def run_ours(
     method "ours-fit").  ``lloyd_seconds`` covers the Lloyd iterations (what the paper's
     timings measure; the whole method's time is ``method_seconds``, set by the record); the final labelling and the placement are timed apart in
     ``extra`` (``final_label_seconds``, ``placement_seconds``)."""
-    shape, turn = element_for(problem.metric, element)
+    shape, turn = element_for(problem.metric, problem.element if element is None else element)
     gap = parse_gap(gap)
     t0 = time.perf_counter()
     res = lloyd(problem, backend, iterations, progress=progress)
@@ -160,17 +160,7 @@ def run_ours_compact(
 
     Where the problem has thin walls (``Problem.walls``), elements come up to the walls'
     centre lines (G/2 off them) instead of stopping at their pixels."""
-    shape, turn = element_for(problem.metric, element)
-    check_alternate(shape, alternate)
-    gap = parse_gap(gap)
-    if rounds is None:
-        rounds = shape_record(shape).compaction_rounds
-    spacing = float(np.sqrt(problem.grid.pixel_count / problem.n_elements))
-    if gap >= spacing:
-        raise InputError(
-            f"gap {gap:g} px is not smaller than the elements: {problem.n_elements} elements in "
-            f"{problem.grid.pixel_count} px are about {spacing:.3g} px apart"
-        )
+    shape, turn, gap, rounds = _compaction_plan(problem, element, gap, alternate, rounds)
     setup = LloydSetup.of(problem)
     if alternate:
         turns = alternating_turns(problem.n_elements, problem.seed)
@@ -198,36 +188,10 @@ def run_ours_compact(
         packing = 1.0 if alternate else packing_density(shape)
         caps = density_caps(problem, centres, sizes, shape, aspect, density_slack, packing)
         sizes = np.minimum(sizes, caps)
-    packed = compact(
-        centres,
-        angles,
-        sizes,
-        shape,
-        aspect,
-        problem.grid,
-        gap=gap,
-        walls=problem.walls,
-        rounds=rounds,
-        max_sizes=caps,
+    settings = CompactionSettings(gap=gap, rounds=rounds)
+    packed, angles = _compact_and_turn(
+        problem, res.sites, (centres, angles, sizes, caps), shape, settings, turn_to_field
     )
-    if turn_to_field and problem.field is not None:
-        # compaction moved the elements off their sites: turn each by the field's change
-        # between its site and its centre, then shrink whatever that turn made overlap
-        angles = angles + problem.angles_at(packed.centres) - problem.angles_at(res.sites)
-        turned = compact(
-            packed.centres,
-            angles,
-            packed.sizes,
-            shape,
-            aspect,
-            problem.grid,
-            gap=gap,
-            walls=problem.walls,
-            rounds=1,
-            max_sizes=caps,
-        )
-        packed.centres, packed.sizes = turned.centres, turned.sizes
-        packed.dropped += turned.dropped
     placed = np.flatnonzero(packed.sizes > 0)
     elements = np.full(len(res.sites), None, dtype=object)
     if len(placed):
@@ -257,6 +221,50 @@ def run_ours_compact(
             **packed.as_dict(),
         },
     )
+
+
+def _compaction_plan(problem: Problem, element, gap, alternate, rounds):
+    """ours-compact's element, its turn, the gap and the rounds, each checked."""
+    shape, turn = element_for(problem.metric, problem.element if element is None else element)
+    check_alternate(shape, alternate)
+    gap = parse_gap(gap)
+    if rounds is None:
+        rounds = shape_record(shape).compaction_rounds
+    spacing = float(np.sqrt(problem.grid.pixel_count / problem.n_elements))
+    if gap >= spacing:
+        raise InputError(
+            f"gap {gap:g} px is not smaller than the elements: {problem.n_elements} elements in "
+            f"{problem.grid.pixel_count} px are about {spacing:.3g} px apart"
+        )
+    return shape, turn, gap, rounds
+
+
+def _compact_and_turn(problem: Problem, sites, placed, shape, settings, turn_to_field):
+    """Compaction of the fitted elements ``placed`` (centres, angles, sizes, size caps),
+    then, under a field, each turned to the field at its final centre and one more round
+    to shrink whatever that turn made overlap.  Returns the result and the angles."""
+    centres, angles, sizes, caps = placed
+    aspect, grid, walls = problem.metric.aspect, problem.grid, problem.walls
+    packed = compact(centres, angles, sizes, shape, aspect, grid, settings, walls=walls, max_sizes=caps)
+    if turn_to_field and problem.field is not None:
+        # compaction moved the elements off their sites: turn each by the field's change
+        # between its site and its centre
+        angles = angles + problem.angles_at(packed.centres) - problem.angles_at(sites)
+        turned = compact(
+            packed.centres,
+            angles,
+            packed.sizes,
+            shape,
+            aspect,
+            grid,
+            settings,
+            walls=walls,
+            max_sizes=caps,
+            rounds=1,
+        )
+        packed.centres, packed.sizes = turned.centres, turned.sizes
+        packed.dropped += turned.dropped
+    return packed, angles
 
 
 # compaction's peak per element (near pairs, their directions, the linear program):
@@ -346,7 +354,7 @@ OURS_COMPACT = Method(
         ),
     ),
     sweep_variants=(SweepVariant({"alternate": True}, ("triangle",), pictured=True),),
-    beyond_paper=("hexagon", "octagon"),
+    beyond_paper=tuple(s.name for s in SHAPES.values() if not s.paper),
     # mosaics keep compaction without density caps and field turn: their measured coverage,
     # figures and tests predate them
     mosaic_options=MappingProxyType(
