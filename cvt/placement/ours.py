@@ -17,7 +17,7 @@ import numpy as np
 
 from ..distribution import Distribution
 from ..errors import InputError
-from ..lloyd import LloydSetup, final_labels, lloyd
+from ..lloyd import LLOYD_OPTIONS, LloydSetup, final_labels, lloyd
 from ..methods import Method, MethodOption, SweepVariant
 from ..metrics import SHAPES
 from ..problem import Problem
@@ -43,6 +43,8 @@ def run_ours(
     element: str | None = None,
     gap: float = 0.0,
     fit: str = "site",
+    tolerance: float | None = None,
+    accelerate: bool = False,
 ) -> Distribution:
     """The paper's method: Lloyd relaxation under the metric whose unit ball is the
     element's shape, on any backend, then one element per cell (cvt.placement).
@@ -52,11 +54,12 @@ def run_ours(
     "centre" moves it inside its cell to grow it (``cvt.placement.fit_centres``,
     method "ours-fit").  ``lloyd_seconds`` covers the Lloyd iterations (what the paper's
     timings measure; the whole method's time is ``method_seconds``, set by the record); the final labelling and the placement are timed apart in
-    ``extra`` (``final_label_seconds``, ``placement_seconds``)."""
+    ``extra`` (``final_label_seconds``, ``placement_seconds``).  ``tolerance`` and
+    ``accelerate`` go to :func:`cvt.lloyd.lloyd`; ``extra`` says how its loop ran."""
     shape, turn = element_for(problem.metric, element)
     gap = parse_gap(gap)
     t0 = time.perf_counter()
-    res = lloyd(problem, backend, iterations, progress=progress)
+    res = lloyd(problem, backend, iterations, progress=progress, tolerance=tolerance, accelerate=accelerate)
     total = time.perf_counter() - t0
     t1 = time.perf_counter()
     labels = final_labels(problem, backend, res)
@@ -91,6 +94,7 @@ def run_ours(
             "gap": gap,
             "final_label_seconds": t2 - t1,
             "placement_seconds": t3 - t2,
+            **res.convergence(),
         },
     )
 
@@ -138,6 +142,8 @@ def run_ours_compact(
     rounds: int | None = None,
     density_slack: float | None = DENSITY_CAP_SLACK,
     turn_to_field: bool = True,
+    tolerance: float | None = None,
+    accelerate: bool = False,
 ) -> Distribution:
     """Ours, then compaction: Lloyd as ``ours``, each element fitted in its cell from
     several starts (``cvt.placement.fit_centres``), then rounds of a linear program in
@@ -159,7 +165,8 @@ def run_ours_compact(
     and run one more round (False: elements keep their sites' angles).
 
     Where the problem has thin walls (``Problem.walls``), elements come up to the walls'
-    centre lines (G/2 off them) instead of stopping at their pixels."""
+    centre lines (G/2 off them) instead of stopping at their pixels.  ``tolerance`` and
+    ``accelerate`` go to :func:`cvt.lloyd.lloyd`."""
     shape, turn = element_for(problem.metric, element)
     check_alternate(shape, alternate)
     gap = parse_gap(gap)
@@ -177,7 +184,15 @@ def run_ours_compact(
         setup = LloydSetup.of(problem, angles_at=lambda sites: problem.angles_at(sites) + turns)
     aspect = problem.metric.aspect
     t0 = time.perf_counter()
-    res = lloyd(problem, backend, iterations, progress=progress, setup=setup)
+    res = lloyd(
+        problem,
+        backend,
+        iterations,
+        progress=progress,
+        setup=setup,
+        tolerance=tolerance,
+        accelerate=accelerate,
+    )
     total = time.perf_counter() - t0
     t1 = time.perf_counter()
     labels = final_labels(problem, backend, res, setup=setup)
@@ -255,6 +270,7 @@ def run_ours_compact(
             "fit_seconds": t3 - t2,
             "placement_seconds": time.perf_counter() - t2,
             **packed.as_dict(),
+            **res.convergence(),
         },
     )
 
@@ -303,6 +319,7 @@ OURS = Method(
     sweep_backends="every",
     compared_on=None,
     paper_table2=PAPER_TABLE2,
+    options=LLOYD_OPTIONS,
     summary="the paper's method: Lloyd under the element's metric, each element centred at its site",
 )
 OURS_FIT = Method(
@@ -312,6 +329,7 @@ OURS_FIT = Method(
     sweep_backends="fastest",
     compared_on=None,
     paper_table2=PAPER_TABLE2,
+    options=LLOYD_OPTIONS,
     summary="ours, each element moved inside its cell to where it can be largest",
     fits=True,
 )
@@ -344,6 +362,7 @@ OURS_COMPACT = Method(
             tag="r",
             label="rounds={}",
         ),
+        *LLOYD_OPTIONS,
     ),
     sweep_variants=(SweepVariant({"alternate": True}, ("triangle",), pictured=True),),
     beyond_paper=("hexagon", "octagon"),
