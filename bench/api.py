@@ -99,6 +99,8 @@ def run(
     element: str | None = None,
     gap: float = 0.0,
     progress=None,
+    tolerance: float | None = None,
+    accelerate: bool = False,
     **method_options,
 ) -> RunResult:
     """Run ``method`` (a registered name, a record, or a callable with the method
@@ -106,12 +108,20 @@ def run(
 
     ``element``: the shape placed (default the metric's own); ``gap``: grout in px;
     ``method_options``: the method's own declared options (checked against its record);
-    ``progress(k, iterations, energy)`` is called after each Lloyd step."""
+    ``progress(k, iterations, energy)`` is called after each Lloyd step.  ``tolerance``
+    (stop Lloyd once its energy settles, ``iterations`` the cap) and ``accelerate``
+    (accelerated Lloyd) are for the methods whose record declares them (ours, ours-fit,
+    ours-compact; :func:`cvt.lloyd.lloyd`); the result's ``distribution.extra`` says
+    why the loop stopped (``stopped_by``)."""
     from compact_distributions.cvt.mosaic.pipeline import resolve_method
 
     if not isinstance(problem, Problem):
         raise InputError(f"problem must be a Problem (compact_distributions.problem(...)), got {problem!r}")
     record = resolve_method(method)
+    if tolerance is not None:
+        method_options["tolerance"] = tolerance
+    if accelerate is not False:
+        method_options["accelerate"] = accelerate
     options = record.parse_options(method_options)
     with _backend(backend) as live:
         dist = record(

@@ -356,7 +356,7 @@ TOLERANCE_OPTION = MethodOption(
     "tolerance",
     float,
     None,
-    "stop Lloyd once its lowest energy improved by less than TOL (relative) over the last "
+    "stop Lloyd once its lowest energy improved by less than TOLERANCE (relative) over the last "
     f"{TOLERANCE_WINDOW} iterations, with --iterations as the cap (default 20: raise it, "
     "e.g. --iterations 2000); result.json's stopped_by says which ended the loop",
     check=parse_tolerance,
