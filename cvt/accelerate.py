@@ -134,7 +134,9 @@ def accelerated_step(evaluate: Callable, grid: Grid) -> Callable:
         off = ~inside(proposed)
         proposed[off] = plain[off]
         centroids, energy, empty = measure(state, proposed)
-        if not energy <= state.energy * (1.0 + SLACK):  # NaN falls back as well
+        # the plain step itself (every w_i = 1: after a fallback, at the start) is not refused
+        relaxed = bool((w > 1.0).any())
+        if relaxed and not energy <= state.energy * (1.0 + SLACK):  # NaN falls back as well
             state.fallbacks += 1
             proposed, w, move = plain, np.ones(len(x)), None
             centroids, energy, empty = measure(state, proposed)
