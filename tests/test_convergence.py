@@ -296,3 +296,41 @@ def test_run_command_records_why_it_stopped(tmp_path):
 )
 def test_bad_options_are_one_line_errors(argv, message, tmp_path, capsys):
     assert message in one_error([*argv, "--out", str(tmp_path / "o")], capsys)
+
+
+# ------------------------------------------------------------------ cvtbench converge
+def test_summary_by_hand():
+    from types import SimpleNamespace
+
+    from compact_distributions.bench.commands.converge import summary
+
+    # plain: energies of x_0..x_4, one second per iteration; accelerated: 1.5 s each
+    plain = SimpleNamespace(energy=[10.0, 8.0, 7.0, 6.5, 6.2], seconds=[1.0] * 5)
+    fast = SimpleNamespace(energy=[7.5, 6.6, 6.1, 6.0], seconds=[1.5] * 4, evaluations=6, fallbacks=1)
+    s = summary(plain, fast, 4)  # plain's energy after 4 iterations: 6.2, in 4 s
+    assert (s["plain_energy_k"], s["plain_seconds_k"]) == (6.2, 4.0)
+    assert (s["fast_reach_iterations"], s["fast_reach_seconds"], s["time_ratio"]) == (3, 4.5, 4.5 / 4.0)
+    never = SimpleNamespace(energy=[9.0, 8.0], seconds=[1.0, 1.0], evaluations=3, fallbacks=0)
+    assert np.isnan(summary(plain, never, 4)["time_ratio"])
+
+
+def test_converge_command_writes_its_report(tmp_path, monkeypatch):
+    import pandas as pd
+
+    from compact_distributions.bench.commands import converge as cmd
+
+    tiny = cmd.Settings(48, 12, 8, 60, None, False)  # a smoke test: the same code, a smaller problem
+    monkeypatch.setattr(cmd, "QUICK", tiny)
+    out = tmp_path / "rep"
+    assert cmd.converge(cmd.ConvergeRequest(out=out, quick=True, quiet=True, backend="numpy")) == 0
+    table = pd.read_csv(out / "converge.csv")
+    assert len(table) == 7 and (table["status"] == "ok").all() and (table["iterations"] == 8).all()
+    assert set(table["plain_tol_stopped_by"]) | set(table["fast_tol_stopped_by"]) <= {
+        "tolerance",
+        "iterations",
+    }
+    curves = pd.read_csv(out / "converge_curves.csv")
+    assert len(curves) == 7 * ((8 + 1) + 8)
+    text = (out / "converge.md").read_text()
+    assert "Table 2's problems: accelerated Lloyd reaches" in text and "density picture scene.jpg" in text
+    assert (out / "converge.png").stat().st_size > 0
