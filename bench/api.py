@@ -182,6 +182,8 @@ def run(
     element: str | None = None,
     gap: float = 0.0,
     progress: Callable[[int, int, float], object] | None = None,
+    tolerance: float | None = None,
+    accelerate: bool = False,
     **method_options: Any,
 ) -> RunResult:
     """Run a method on a problem and measure its elements.
@@ -205,6 +207,12 @@ def run(
         Grout between elements, in pixels.
     progress : callable or None, optional
         ``progress(k, iterations, energy)``, called after each Lloyd step.
+    tolerance : float or None, optional
+        Stop Lloyd once its energy settles (``iterations`` the cap), for the methods whose
+        record declares it (ours, ours-fit, ours-compact); ``distribution.extra`` says why
+        the loop stopped (``stopped_by``).
+    accelerate : bool, optional
+        Accelerated Lloyd (:mod:`cvt.accelerate`), for the same methods.
     **method_options
         The method's own declared options (its record's ``options``), such as
         ``rounds=8`` for ``ours-compact``.
@@ -235,6 +243,10 @@ def run(
     if not isinstance(problem, Problem):
         raise InputError(f"problem must be a Problem (compact_distributions.problem(...)), got {problem!r}")
     record = resolve_method(method)
+    if tolerance is not None:
+        method_options["tolerance"] = tolerance
+    if accelerate is not False:
+        method_options["accelerate"] = accelerate
     options = record.parse_options(method_options)
     with _backend(backend) as live:
         dist = record(

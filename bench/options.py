@@ -143,7 +143,9 @@ def method_options(args, method=None) -> dict:
 
 def add_run_options(p, iterations: int = 20, seed_help: str = "random seed (default 0)") -> None:
     p.add_argument(
-        "--iterations", default=str(iterations), help=f"Lloyd iterations (default {iterations}; 0 allowed)"
+        "--iterations",
+        default=str(iterations),
+        help=f"Lloyd iterations (default {iterations}; 0 allowed); with --tolerance, their cap",
     )
     p.add_argument("--seed", default="0", help=seed_help)
 

@@ -98,6 +98,8 @@ def build_result(
         "region": sources.get("region"),
         "region_pixels": g.pixel_count,
         "iterations": dist.iterations,
+        # a method whose loop is cvt.lloyd.lloyd says why it stopped; the others run their count
+        "stopped_by": dist.extra.get("stopped_by", "iterations"),
         "sites": dist.sites,
         "angles": dist.angles,
         "scales": dist.scales,

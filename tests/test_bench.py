@@ -239,6 +239,7 @@ def test_reproduce_hands_each_part_a_typed_request(tmp_path):
     import argparse
 
     from compact_distributions.bench.commands.backends import BackendsRequest, backends
+    from compact_distributions.bench.commands.converge import ConvergeRequest
     from compact_distributions.bench.commands.figures import FiguresRequest
     from compact_distributions.bench.commands.pipeline import PipelineRequest
     from compact_distributions.bench.commands.reproduce import requests
@@ -254,9 +255,11 @@ def test_reproduce_hands_each_part_a_typed_request(tmp_path):
         ("table3", Table3Request),
         ("backends", BackendsRequest),
         ("pipeline", PipelineRequest),
+        ("converge", ConvergeRequest),
         ("figures", FiguresRequest),
     ]
-    t2, t3, bk, _, fig = (req for _, _, req in parts)
+    t2, t3, bk, _, cv, fig = (req for _, _, req in parts)
+    assert (cv.out, cv.quick, cv.memory_limit) == (tmp_path, True, "2G")
     assert (t3.seeds, t3.quick, t3.scheduler) == (3, True, "tcp://127.0.0.1:1")
     assert parts[0][1] is table2 and parts[2][1] is backends
     assert (t2.out, t2.seeds, t2.exclusive, t2.scheduler, t2.memory_limit) == (

@@ -25,6 +25,7 @@ SUBCOMMANDS = [
     "compact_distributions.bench.commands.mosaic",
     "compact_distributions.bench.commands.backends",
     "compact_distributions.bench.commands.pipeline",
+    "compact_distributions.bench.commands.converge",
     "compact_distributions.bench.commands.regress",
     "compact_distributions.bench.commands.reproduce",
 ]
