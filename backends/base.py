@@ -26,7 +26,7 @@ from typing import TYPE_CHECKING, Any
 import numpy as np
 import numpy.typing as npt
 
-from compact_distributions.cvt.errors import InputError
+from compact_distributions.cvt.errors import InputError, PluginError, exception_line, kind_of
 from compact_distributions.cvt.metrics import Metric
 from compact_distributions.cvt.moments import Moments, moments_from_labels
 from compact_distributions.cvt.placement.fit import FitCells, search_on_host
@@ -213,7 +213,7 @@ class Backend(ABC):
             positive, or this backend does not support the inputs.
         """
         sites, angles, scales = self.check_inputs(sites, angles, scales, metric, grid)
-        return self._label(sites, angles, scales, metric, grid)
+        return self._checked_labels(sites, angles, scales, metric, grid)
 
     def moments(
         self,
@@ -251,7 +251,8 @@ class Backend(ABC):
             As :meth:`label`.
         """
         sites, angles, scales = self.check_inputs(sites, angles, scales, metric, grid)
-        return self._moments(sites, angles, scales, metric, grid)
+        found = self._guarded("computing moments", self._moments, sites, angles, scales, metric, grid)
+        return self.check_moments(found, len(sites), grid)
 
     def walled_moments(
         self,
@@ -294,7 +295,10 @@ class Backend(ABC):
             As :meth:`label`.
         """
         sites, angles, scales = self.check_inputs(sites, angles, scales, metric, grid)
-        return self._walled_moments(sites, angles, scales, metric, grid)
+        found = self._guarded(
+            "computing walled moments", self._walled_moments, sites, angles, scales, metric, grid
+        )
+        return None if found is None else self.check_moments(found, len(sites), grid)
 
     def _walled_moments(
         self, sites: np.ndarray, angles: np.ndarray, scales: np.ndarray, metric: Metric, grid: Grid
@@ -312,7 +316,82 @@ class Backend(ABC):
         self, sites: np.ndarray, angles: np.ndarray, scales: np.ndarray, metric: Metric, grid: Grid
     ) -> Moments:
         """The default labels and sums on the host."""
-        return moments_from_labels(self._label(sites, angles, scales, metric, grid), len(sites))
+        return moments_from_labels(self._checked_labels(sites, angles, scales, metric, grid), len(sites))
+
+    # ------------------------------------------------------------------ the boundary
+    # a plug-in (another distribution's backend) is named by backends.create_backend,
+    # which sets ``plugin``; what any backend returns is checked here, once per call
+    plugin: str | None = None
+
+    @property
+    def who(self) -> str:
+        """The backend as an error names it: a plug-in with its entry point and distribution."""
+        return self.plugin or f"backend {self.variant!r}"
+
+    def _guarded(self, doing: str, call, *args):
+        """``call(*args)``; a plug-in's exception is a PluginError naming it (the suite's
+        own backends' errors pass unchanged)."""
+        if self.plugin is None:
+            return call(*args)
+        try:
+            return call(*args)
+        except (KeyboardInterrupt, PluginError):
+            raise
+        except BaseException as exc:
+            raise PluginError(f"{self.who} raised {exception_line(exc)} while {doing}") from exc
+
+    def _checked_labels(self, sites, angles, scales, metric: Metric, grid: Grid) -> np.ndarray:
+        labels = self._guarded("labelling", self._label, sites, angles, scales, metric, grid)
+        return self.check_labels(labels, len(sites), grid)
+
+    def check_labels(self, labels, n: int, grid: Grid) -> np.ndarray:
+        """``labels`` as (H, W) int32, or a PluginError naming this backend: not an
+        integer array, another size than ``grid``, or a label outside -1 .. n-1."""
+        if not isinstance(labels, np.ndarray) or labels.dtype.kind not in "iu":
+            what = f"{labels.dtype} values" if isinstance(labels, np.ndarray) else kind_of(labels)
+            raise PluginError(f"{self.who} returned labels that are {what}, not an integer raster")
+        if labels.shape != (grid.height, grid.width):
+            raise PluginError(
+                f"{self.who} returned labels of shape {labels.shape} for a {grid.width}x{grid.height} "
+                f"grid (shape ({grid.height}, {grid.width}))"
+            )
+        low, high = int(labels.min()), int(labels.max())
+        if low < -1 or high >= n:
+            raise PluginError(
+                f"{self.who} returned labels from {low} to {high} for {n} sites (-1 .. {n - 1})"
+            )
+        return labels.astype(np.int32, copy=False)
+
+    def check_moments(self, found, n: int, grid: Grid) -> Moments:
+        """``found`` if it is the :class:`Moments` of ``n`` sites on ``grid`` (five
+        integer arrays of length n, counts >= 0, every centroid on the raster), else a
+        PluginError naming this backend."""
+        if not isinstance(found, Moments):
+            raise PluginError(f"{self.who} returned moments that are {kind_of(found)}, not Moments")
+        for name in ("count", "sx", "sy", "sxx", "syy"):
+            value = getattr(found, name)
+            if not isinstance(value, np.ndarray) or value.dtype.kind not in "iu" or value.shape != (n,):
+                what = (
+                    f"{value.dtype} values of shape {value.shape}"
+                    if isinstance(value, np.ndarray)
+                    else kind_of(value)
+                )
+                raise PluginError(f"{self.who} returned moments whose {name} is {what}, not {n} integers")
+        count = found.count
+        if (
+            (count < 0).any()
+            or (found.sx < 0).any()
+            or (found.sy < 0).any()
+            or (found.sxx < 0).any()
+            or (found.syy < 0).any()
+            or (found.sx > (grid.width - 1) * count).any()
+            or (found.sy > (grid.height - 1) * count).any()
+        ):
+            raise PluginError(
+                f"{self.who} returned moments that no labelling of a {grid.width}x{grid.height} grid "
+                "has (a negative count or sum, or a centroid off the raster)"
+            )
+        return found
 
     def check_inputs(
         self,
