@@ -95,6 +95,9 @@ class Backend(ABC):
     # what its runtime adds to the process: PoCL and llvmpipe load LLVM (~100 MiB) and
     # build a kernel the first time (~120 MiB more); numpy and scipy add nothing
     runtime_bytes: float = RUNTIME
+    # whether its runtime cannot take the process down (NumPy and SciPy only): a sweep
+    # runs it in its own process; otherwise (a driver, a compiler, a plug-in) in a worker
+    contained: bool = False
 
     @classmethod
     def memory_estimate(cls, width: int, height: int, n_elements: int) -> float:

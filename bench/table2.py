@@ -683,7 +683,7 @@ def table2(req: Table2Request) -> int:
     from .cluster import executor_for
     from .outputs import report_folder
     from .report import provenance, write_csv, write_markdown, written_files
-    from .sweep import run_sweep
+    from .sweep import check_runs, run_sweep
 
     t0 = time.perf_counter()
     plan = prepare(req)
@@ -730,6 +730,7 @@ def table2(req: Table2Request) -> int:
             out, ["table2.md", "table2.csv", "table2.png", "coverage_overlap.csv", "coverage_overlap.png"]
         )
     _print_summary(table, out, written)
+    check_runs(specs, rows, "table2")  # the report is written; a failed run still fails the command
     return 0
 
 
