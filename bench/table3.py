@@ -36,7 +36,7 @@ from compact_distributions.backends import REFERENCE as REFERENCE_BACKEND
 from compact_distributions.cvt.evaluate import MEASURES
 from compact_distributions.cvt.metrics import REFERENCE_SHAPE
 from compact_distributions.cvt.registry import get_method, method_names
-from compact_distributions.cvt.shapes import ELEMENT_SHAPES, PAPER_SHAPES
+from compact_distributions.cvt.shapes import PAPER_SHAPES
 from compact_distributions.cvt.validate import name_list, one_of
 
 from . import options
@@ -356,7 +356,7 @@ def prepare(args) -> dict:
         "quick": args.quick,
         "seeds": args.seeds,
         "methods": name_list(args.methods, "--methods", method_names()),
-        "shapes": name_list(args.shapes, "--shapes", ELEMENT_SHAPES),
+        "shapes": options.shape_names(args.shapes),
         "scenes": name_list(args.scenes, "--scenes", list(SCENES)),
         "force": args.force,
         "quiet": args.quiet,
@@ -389,7 +389,7 @@ def plan(
     cfg = QUICK if quick else FULL
     k = options.seeds_value(seeds, cfg["seeds"])
     methods = [one_of(m, "--methods", method_names()) for m in (methods or method_names())]
-    shapes = [one_of(s, "--shapes", ELEMENT_SHAPES) for s in (shapes or PAPER_SHAPES)]
+    shapes = options.shape_names(shapes or PAPER_SHAPES)
     scenes = [one_of(s, "--scenes", list(SCENES)) for s in (scenes or SCENES)]
     check_folder(out)
     _, unavailable = sweep_backends(None)

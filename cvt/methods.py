@@ -434,7 +434,8 @@ def check_distribution(dist, problem, who: str = "the method") -> None:
     that the suite cannot measure or write: anything but a
     :class:`~.distribution.Distribution`; sites that are not an (N, 2) array of finite
     numbers; angles or scales of another length or not finite; elements that are not
-    one shapely polygon (or None) per site, or whose vertices are not finite; a label
+    one shapely polygon (or None) per site, or whose vertices are not finite (elements
+    None: no element at any site, and so set); a label
     raster of another size than the problem's, or labels outside -1 .. N-1; timings that
     are not finite.  Whole-array checks (the elements' vertices in one pass)."""
     import shapely
@@ -461,6 +462,8 @@ def check_distribution(dist, problem, who: str = "the method") -> None:
             raise bad(f"{name} of shape {values.shape} for {n} sites")
         if not np.isfinite(values).all():
             raise bad(f"{name} that are NaN or infinite")
+    if dist.elements is None:  # a method that places no elements (a lattice of sites): none at any site
+        dist.elements = [None] * n
     elements = dist.elements
     if not isinstance(elements, (list, tuple, np.ndarray)) or len(elements) != n:
         got = (
