@@ -28,6 +28,7 @@ from __future__ import annotations
 import hashlib
 import json
 import math
+import os
 import platform
 import signal
 import sys
@@ -157,7 +158,7 @@ def suspects(spec, starting: bool = False) -> str:
     return " on ".join(names)
 
 
-WORKER = "worker process"  # a record's ``worker`` when it ran in one
+WORKER = "worker process"  # a record's ``worker`` when it ran in one: "worker process PID"
 
 
 def _serve(conn) -> None:
@@ -166,7 +167,7 @@ def _serve(conn) -> None:
     cache = BackendCache()
     try:
         while (spec := conn.recv()) is not None:
-            outcome = execute(spec, cache, WORKER, stage=conn.send)
+            outcome = execute(spec, cache, f"{WORKER} {os.getpid()}", stage=conn.send)
             try:
                 conn.send(outcome)
             except Exception as exc:  # a record that does not pickle is that run's failure

@@ -474,8 +474,9 @@ def check_distribution(dist, problem, who: str = "the method") -> None:
         raise bad(f"{got} for {n} sites (one polygon or None per site)")
     geoms = np.empty(n, dtype=object)
     geoms[:] = list(elements)
-    given = np.array([g is not None for g in geoms], dtype=bool) if n else np.zeros(0, bool)
-    polygonal = shapely.is_geometry(geoms) & np.isin(shapely.get_type_id(geoms), (3, 6))
+    given = ~shapely.is_missing(geoms)  # None: a site without an element
+    polygonal = shapely.is_geometry(geoms)
+    polygonal[polygonal] = np.isin(shapely.get_type_id(geoms[polygonal]), (3, 6))  # (multi)polygons
     if (given & ~polygonal).any():
         k = int(np.argmax(given & ~polygonal))
         raise bad(f"element {k} that is {kind_of(geoms[k])}, not a polygon")
