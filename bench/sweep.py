@@ -161,17 +161,21 @@ def suspects(spec, starting: bool = False) -> str:
 WORKER = "worker process"  # a record's ``worker`` when it ran in one: "worker process PID"
 
 
-def _serve(conn) -> None:
-    """A worker process: run the specs the driver sends, one at a time, on one cached
-    backend (kernels compiled once per process), telling it each stage."""
+def serve(inbox: int, outbox: int) -> None:
+    """A worker process (``python -c``, see :class:`WorkerProcess`): run the specs the
+    driver sends on the pipe ``inbox``, one at a time, on one cached backend (kernels
+    compiled once per process), telling it each stage on ``outbox``."""
+    from multiprocessing.connection import Connection
+
+    down, up = Connection(inbox, writable=False), Connection(outbox, readable=False)
     cache = BackendCache()
     try:
-        while (spec := conn.recv()) is not None:
-            outcome = execute(spec, cache, f"{WORKER} {os.getpid()}", stage=conn.send)
+        while (spec := down.recv()) is not None:
+            outcome = execute(spec, cache, f"{WORKER} {os.getpid()}", stage=up.send)
             try:
-                conn.send(outcome)
+                up.send(outcome)
             except Exception as exc:  # a record that does not pickle is that run's failure
-                conn.send(("failed", f"its record could not be sent back: {exception_line(exc)}"))
+                up.send(("failed", f"its record could not be sent back: {exception_line(exc)}"))
     except (EOFError, KeyboardInterrupt):  # the driver is gone or interrupted: stop
         pass
     finally:
@@ -189,27 +193,43 @@ def death_text(exitcode: int | None) -> str:
 
 
 class WorkerProcess:
-    """One worker process (spawned: nothing of the driver's runtimes is inherited) and the
-    pipe to it."""
+    """One worker process and the pipes to it.  A fresh interpreter (``python -c``): it
+    inherits none of the driver's runtimes (an OpenCL or GL context), and, unlike
+    multiprocessing's spawn, never re-imports the caller's main script (a script that
+    calls a sweep without a ``__main__`` guard); it sees the driver's ``sys.path``."""
 
     def __init__(self):
-        import multiprocessing
+        import subprocess
+        from multiprocessing.connection import Connection
 
-        ctx = multiprocessing.get_context("spawn")
-        self.conn, child = ctx.Pipe()
-        self.process = ctx.Process(target=_serve, args=(child,), name="cvtbench-runs", daemon=True)
-        self.process.start()
-        child.close()  # the driver reads EOF as soon as the worker is gone
+        down_r, down_w = os.pipe()
+        up_r, up_w = os.pipe()
+        path = os.pathsep.join(p for p in sys.path if p)
+        env = {**os.environ, "PYTHONPATH": path}
+        code = f"from {__name__} import serve; serve({down_r}, {up_w})"
+        try:
+            self.process = subprocess.Popen(
+                [sys.executable, "-c", code], pass_fds=(down_r, up_w), env=env, stdin=subprocess.DEVNULL
+            )
+        finally:
+            os.close(down_r)
+            os.close(up_w)  # the driver reads EOF as soon as the worker is gone
+        self.conn = Connection(down_w, readable=False)
+        self.replies = Connection(up_r, writable=False)
 
     def run(self, spec) -> tuple[str, tuple | None]:
         """(the stage it reached, (status, value)), the outcome None if the process died."""
         stage = "starting"
-        self.conn.send(spec)
+        try:
+            self.conn.send(spec)
+        except OSError:  # gone before it was asked (it died as the last backend was released)
+            self.process.wait()
+            return stage, None
         while True:
             try:
-                message = self.conn.recv()
+                message = self.replies.recv()
             except (EOFError, OSError):
-                self.process.join()
+                self.process.wait()
                 return stage, None
             if isinstance(message, str):
                 stage = message
@@ -218,18 +238,22 @@ class WorkerProcess:
 
     @property
     def ended(self) -> str:
-        return death_text(self.process.exitcode)
+        return death_text(self.process.returncode)
 
     def stop(self) -> None:
+        import subprocess
+
         try:
             self.conn.send(None)
         except OSError:
             pass
-        self.process.join(timeout=30)
-        if self.process.is_alive():
+        try:
+            self.process.wait(timeout=30)
+        except subprocess.TimeoutExpired:
             self.process.kill()
-            self.process.join()
+            self.process.wait()
         self.conn.close()
+        self.replies.close()
 
 
 class ProcessExecutor:
@@ -470,6 +494,7 @@ __all__ = [
     "runs_apart",
     "suspects",
     "WORKER",
+    "serve",
     "death_text",
     "WorkerProcess",
     "ProcessExecutor",

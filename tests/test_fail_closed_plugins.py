@@ -77,6 +77,24 @@ def test_a_misbehaving_backend_is_one_line_naming_it(env, tmp_path, name):
     assert not out.exists() and not list(tmp_path.glob(".out*"))
 
 
+@pytest.mark.parametrize(
+    "option, name, what",
+    [
+        ("--method", "returns-none", hostile.METHODS["returns-none"]),
+        ("--backend", "wrong-size", "returned labels of shape (10, 12) for a 96x96 grid"),
+    ],
+)
+def test_a_misbehaving_plugin_in_a_mosaic_is_one_line(env, tmp_path, option, name, what):
+    out = tmp_path / "m"
+    done = cvtbench(
+        env, "mosaic", ROOT / "samples" / "rings.png", option, name, "--elements", "50", "--size", "96",
+        "--iterations", "2", "--quiet", "--out", out,
+    )  # fmt: skip
+    kind = "method" if option == "--method" else "backend"
+    assert_one_line(done, f"{kind} plug-in {name!r} {NAMED}", what)
+    assert not out.exists()
+
+
 def test_verbose_adds_the_traceback(env, tmp_path):
     done = cvtbench(env, "run", "--method", "raises", *SMALL, "--out", tmp_path / "o", "--verbose")
     assert done.returncode == 1 and "Traceback" in done.stderr
