@@ -167,6 +167,7 @@ def create_backend(name: str | Backend, **options: Any) -> Backend:
     who = plugin_name(base)
     try:
         backend = cls(**opts)
+        backend.device()  # what every record asks of it: asked here, where a failure is named
     except KeyboardInterrupt:
         raise
     except BackendUnavailable as exc:

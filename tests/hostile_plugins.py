@@ -33,6 +33,7 @@ BACKENDS = {
     "float-labels": "returned labels that are float64 values",
     "label-raises": "raised ZeroDivisionError: integer division or modulo by zero while labelling",
     "bad-moments": "returned moments whose count is",
+    "no-device": "could not start: AttributeError: no such device",
 }
 CRASHERS = {"aborts": "SIGABRT", "segfaults": "SIGSEGV"}  # methods that take their process down
 
@@ -162,6 +163,11 @@ class BadMoments(Reference):
         return Moments(z, z, z, z, z)
 
 
+class NoDevice(Reference):
+    def device(self):
+        raise AttributeError("no such device")
+
+
 class Aborts(Reference):
     def _label(self, sites, angles, scales, metric, grid):
         os.abort()
@@ -179,6 +185,7 @@ BACKEND_CLASSES = {
     "float-labels": "FloatLabels",
     "label-raises": "LabelRaises",
     "bad-moments": "BadMoments",
+    "no-device": "NoDevice",
     "aborting": "Aborts",
     "hostile-ok": "Reference",
 }
