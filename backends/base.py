@@ -21,7 +21,8 @@ line in ``REGISTRY`` (``backends/__init__.py``).
 from __future__ import annotations
 
 from abc import ABC, abstractmethod
-from typing import TYPE_CHECKING, Any
+from collections.abc import Callable
+from typing import TYPE_CHECKING, Any, TypeVar
 
 import numpy as np
 import numpy.typing as npt
@@ -35,6 +36,9 @@ from compact_distributions.cvt.resources import RUNTIME
 
 if TYPE_CHECKING:
     from typing_extensions import Self
+
+
+T = TypeVar("T")  # what a guarded call returns
 
 
 class Backend(ABC):
@@ -61,6 +65,14 @@ class Backend(ABC):
         What its runtime adds to the process (LLVM, a compiled kernel).
     variant : str
         The name reports and sweeps use for this backend with its options.
+    contained : bool
+        Whether its runtime cannot take the process down (NumPy and SciPy only, declared
+        by the class itself): a sweep runs it in its own process, others in a worker.
+    plugin : str or None
+        How errors name a plug-in (its entry point and distribution), set by
+        :func:`compact_distributions.create_backend`; None for the suite's own.
+    who : str
+        The backend as an error names it.
 
     Examples
     --------
@@ -331,7 +343,7 @@ class Backend(ABC):
         """The backend as an error names it: a plug-in with its entry point and distribution."""
         return self.plugin or f"backend {self.variant!r}"
 
-    def _guarded(self, doing: str, call, *args):
+    def _guarded(self, doing: str, call: Callable[..., T], *args: Any) -> T:
         """``call(*args)``; a plug-in's exception is a PluginError naming it (the suite's
         own backends' errors pass unchanged)."""
         if self.plugin is None:
@@ -343,13 +355,35 @@ class Backend(ABC):
         except BaseException as exc:
             raise PluginError(f"{self.who} raised {exception_line(exc)} while {doing}") from exc
 
-    def _checked_labels(self, sites, angles, scales, metric: Metric, grid: Grid) -> np.ndarray:
+    def _checked_labels(
+        self, sites: np.ndarray, angles: np.ndarray, scales: np.ndarray, metric: Metric, grid: Grid
+    ) -> np.ndarray:
         labels = self._guarded("labelling", self._label, sites, angles, scales, metric, grid)
         return self.check_labels(labels, len(sites), grid)
 
-    def check_labels(self, labels, n: int, grid: Grid) -> np.ndarray:
-        """``labels`` as (H, W) int32, or a PluginError naming this backend: not an
-        integer array, another size than ``grid``, or a label outside -1 .. n-1."""
+    def check_labels(self, labels: object, n: int, grid: Grid) -> np.ndarray:
+        """Check a label raster this backend returned, once, where it enters the suite.
+
+        Parameters
+        ----------
+        labels : object
+            What the backend returned as labels.
+        n : int
+            The number of sites they label.
+        grid : Grid
+            The grid they were computed on.
+
+        Returns
+        -------
+        numpy.ndarray
+            ``labels`` as an (H, W) int32 array.
+
+        Raises
+        ------
+        PluginError
+            Naming this backend, if ``labels`` is not an integer array, has another size
+            than ``grid`` or holds a label outside -1 .. n-1.
+        """
         if not isinstance(labels, np.ndarray) or labels.dtype.kind not in "iu":
             what = f"{labels.dtype} values" if isinstance(labels, np.ndarray) else kind_of(labels)
             raise PluginError(f"{self.who} returned labels that are {what}, not an integer raster")
@@ -365,10 +399,29 @@ class Backend(ABC):
             )
         return labels.astype(np.int32, copy=False)
 
-    def check_moments(self, found, n: int, grid: Grid) -> Moments:
-        """``found`` if it is the :class:`Moments` of ``n`` sites on ``grid`` (five
-        integer arrays of length n, counts >= 0, every centroid on the raster), else a
-        PluginError naming this backend."""
+    def check_moments(self, found: object, n: int, grid: Grid) -> Moments:
+        """Check the moments this backend returned, once, where they enter the suite.
+
+        Parameters
+        ----------
+        found : object
+            What the backend returned as moments.
+        n : int
+            The number of sites.
+        grid : Grid
+            The grid they were computed on.
+
+        Returns
+        -------
+        Moments
+            ``found``, five integer arrays of length ``n``.
+
+        Raises
+        ------
+        PluginError
+            Naming this backend, if ``found`` is not :class:`Moments` of ``n`` sites, a
+            count or sum is negative, or a centroid lies off the raster.
+        """
         if not isinstance(found, Moments):
             raise PluginError(f"{self.who} returned moments that are {kind_of(found)}, not Moments")
         for name in ("count", "sx", "sy", "sxx", "syy"):

@@ -313,6 +313,7 @@ def run(
         dist = record(
             problem, live, iterations=iterations, progress=progress, element=element, gap=gap, **options
         )
+    assert dist.elements is not None  # Method.__call__ checked it (None became no element per site)
     return RunResult(problem, dist, evaluate(dist.elements, problem.grid, labels=dist.labels), options)
 
 

@@ -30,7 +30,7 @@ def exception_line(exc: BaseException) -> str:
     return f"{type(exc).__name__}: {lines[0]}" if lines else type(exc).__name__
 
 
-def kind_of(value) -> str:
+def kind_of(value: object) -> str:
     """What an error says a wrong value is: ``None``, ``a str``, ``a dict``, ..."""
     return "None" if value is None else f"a {type(value).__name__}"
 

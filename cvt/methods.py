@@ -237,6 +237,16 @@ class Method:
     distribution : str
         The installed distribution that declares it, as ``name version``.
 
+    Attributes
+    ----------
+    foreign : bool
+        Whether ``run`` is another distribution's code (or a caller's callable): what
+        it raises is its failure (:class:`~compact_distributions.cvt.errors.PluginError`),
+        not the user's input error.
+    who : str
+        The method as an error names it (a plug-in with its entry point and
+        distribution).
+
     Raises
     ------
     InputError
@@ -429,7 +439,7 @@ class Method:
 
 
 # --------------------------------------------------------------------------- the boundary
-def check_distribution(dist, problem, who: str = "the method") -> None:
+def check_distribution(dist: object, problem: Problem, who: str = "the method") -> None:
     """Refuse, with one :class:`~.errors.PluginError` naming ``who``, a method's result
     that the suite cannot measure or write: anything but a
     :class:`~.distribution.Distribution`; sites that are not an (N, 2) array of finite
@@ -442,7 +452,7 @@ def check_distribution(dist, problem, who: str = "the method") -> None:
 
     from .distribution import Distribution
 
-    def bad(what: str):
+    def bad(what: str) -> PluginError:
         return PluginError(f"{who} returned {what}")
 
     if not isinstance(dist, Distribution):

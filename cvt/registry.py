@@ -65,8 +65,10 @@ def _load() -> tuple[dict[str, Method], dict[str, str]]:
     loaded = []
     for ep in group_entry_points(METHOD_GROUP):
         try:
-            origin = {"entry_point": ep.name, "distribution": distribution_of(ep)}
-            loaded += [replace(m, **origin) for m in records_of(ep.load(), ep.name)]
+            dist = distribution_of(ep)
+            loaded += [
+                replace(m, entry_point=ep.name, distribution=dist) for m in records_of(ep.load(), ep.name)
+            ]
         except Exception as exc:  # a broken plug-in is listed with its reason, never a crash
             failed[ep.name] = f"{type(exc).__name__}: {exc}"
 
