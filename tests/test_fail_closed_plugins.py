@@ -225,6 +225,15 @@ def test_check_distribution_accepts_a_good_one_and_refuses_each_defect(small):
         assert what in str(err.value), (what, str(err.value))
 
 
+def test_a_method_that_places_no_elements_is_measured_as_such(small):
+    def lattice(problem, backend, **options):  # sites only, as the Method example's
+        sites = np.array([[8.0, 8.0], [24.0, 24.0]])
+        return Distribution("lattice", sites, np.zeros(2), np.ones(2))
+
+    result = cd.run(small, lattice)
+    assert result.elements == [None, None] and result.coverage == 0.0 and result.method == "lattice"
+
+
 def test_a_callable_of_the_api_that_fails_is_named(small):
     def returns_none(problem, backend, **options):
         return None
