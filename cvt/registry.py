@@ -144,7 +144,7 @@ def get_method(name: str | Method) -> Method:
     >>> import compact_distributions as cd
     >>> record = cd.get_method("ours-compact")
     >>> record.role, [o.name for o in record.options]
-    ('extension', ['alternate', 'rounds'])
+    ('extension', ['alternate', 'rounds', 'tolerance', 'accelerate'])
     """
     if isinstance(name, Method):
         return name
