@@ -20,8 +20,8 @@ from functools import lru_cache
 from importlib.metadata import EntryPoint
 from typing import Any
 
-from compact_distributions.cvt.errors import BackendUnavailable, InputError
-from compact_distributions.cvt.registry import group_entry_points
+from compact_distributions.cvt.errors import BackendUnavailable, InputError, PluginError, exception_line
+from compact_distributions.cvt.registry import distribution_of, group_entry_points
 from compact_distributions.cvt.validate import one_of
 
 from .base import Backend
@@ -159,7 +159,28 @@ def create_backend(name: str | Backend, **options: Any) -> Backend:
     if not isinstance(name, str):
         raise InputError(f"backend must be a backend name or a Backend, got {name!r}")
     base, opts = resolve(name, **options)
-    return backend_class(base)(**opts)
+    cls = backend_class(base)
+    if base not in _plugins():
+        return cls(**opts)
+    # another distribution's backend: whatever its constructor raises is one line naming
+    # it, and the instance carries the name errors and records give it (its entry point's)
+    who = plugin_name(base)
+    try:
+        backend = cls(**opts)
+        backend.device()  # what every record asks of it: asked here, where a failure is named
+    except KeyboardInterrupt:
+        raise
+    except BackendUnavailable as exc:
+        raise BackendUnavailable(f"{who} is unavailable: {exc}") from None
+    except BaseException as exc:
+        raise PluginError(f"{who} could not start: {exception_line(exc)}") from exc
+    backend.plugin, backend.name = who, base
+    return backend
+
+
+def plugin_name(name: str) -> str:
+    """How errors name the backend plug-in ``name``: its entry point and distribution."""
+    return f"backend plug-in {name!r} (distribution {distribution_of(_plugins()[name])})"
 
 
 def probe_all() -> list[tuple[str, bool, str]]:
@@ -199,6 +220,7 @@ __all__ = [
     "REFERENCE",
     "BUILT_IN",
     "create_backend",
+    "plugin_name",
     "probe_all",
     "variant_status",
     "variant_metrics",

@@ -21,12 +21,13 @@ line in ``REGISTRY`` (``backends/__init__.py``).
 from __future__ import annotations
 
 from abc import ABC, abstractmethod
-from typing import TYPE_CHECKING, Any
+from collections.abc import Callable
+from typing import TYPE_CHECKING, Any, TypeVar
 
 import numpy as np
 import numpy.typing as npt
 
-from compact_distributions.cvt.errors import InputError
+from compact_distributions.cvt.errors import InputError, PluginError, exception_line, kind_of
 from compact_distributions.cvt.metrics import Metric
 from compact_distributions.cvt.moments import Moments, moments_from_labels
 from compact_distributions.cvt.placement.fit import FitCells, search_on_host
@@ -35,6 +36,9 @@ from compact_distributions.cvt.resources import RUNTIME
 
 if TYPE_CHECKING:
     from typing_extensions import Self
+
+
+T = TypeVar("T")  # what a guarded call returns
 
 
 class Backend(ABC):
@@ -61,6 +65,14 @@ class Backend(ABC):
         What its runtime adds to the process (LLVM, a compiled kernel).
     variant : str
         The name reports and sweeps use for this backend with its options.
+    contained : bool
+        Whether its runtime cannot take the process down (NumPy and SciPy only, declared
+        by the class itself): a sweep runs it in its own process, others in a worker.
+    plugin : str or None
+        How errors name a plug-in (its entry point and distribution), set by
+        :func:`compact_distributions.create_backend`; None for the suite's own.
+    who : str
+        The backend as an error names it.
 
     Examples
     --------
@@ -95,6 +107,9 @@ class Backend(ABC):
     # what its runtime adds to the process: PoCL and llvmpipe load LLVM (~100 MiB) and
     # build a kernel the first time (~120 MiB more); numpy and scipy add nothing
     runtime_bytes: float = RUNTIME
+    # whether its runtime cannot take the process down (NumPy and SciPy only): a sweep
+    # runs it in its own process; otherwise (a driver, a compiler, a plug-in) in a worker
+    contained: bool = False
 
     @classmethod
     def memory_estimate(cls, width: int, height: int, n_elements: int) -> float:
@@ -213,7 +228,7 @@ class Backend(ABC):
             positive, or this backend does not support the inputs.
         """
         sites, angles, scales = self.check_inputs(sites, angles, scales, metric, grid)
-        return self._label(sites, angles, scales, metric, grid)
+        return self._checked_labels(sites, angles, scales, metric, grid)
 
     def moments(
         self,
@@ -251,7 +266,8 @@ class Backend(ABC):
             As :meth:`label`.
         """
         sites, angles, scales = self.check_inputs(sites, angles, scales, metric, grid)
-        return self._moments(sites, angles, scales, metric, grid)
+        found = self._guarded("computing moments", self._moments, sites, angles, scales, metric, grid)
+        return self.check_moments(found, len(sites), grid)
 
     def walled_moments(
         self,
@@ -294,7 +310,10 @@ class Backend(ABC):
             As :meth:`label`.
         """
         sites, angles, scales = self.check_inputs(sites, angles, scales, metric, grid)
-        return self._walled_moments(sites, angles, scales, metric, grid)
+        found = self._guarded(
+            "computing walled moments", self._walled_moments, sites, angles, scales, metric, grid
+        )
+        return None if found is None else self.check_moments(found, len(sites), grid)
 
     def _walled_moments(
         self, sites: np.ndarray, angles: np.ndarray, scales: np.ndarray, metric: Metric, grid: Grid
@@ -312,7 +331,123 @@ class Backend(ABC):
         self, sites: np.ndarray, angles: np.ndarray, scales: np.ndarray, metric: Metric, grid: Grid
     ) -> Moments:
         """The default labels and sums on the host."""
-        return moments_from_labels(self._label(sites, angles, scales, metric, grid), len(sites))
+        return moments_from_labels(self._checked_labels(sites, angles, scales, metric, grid), len(sites))
+
+    # ------------------------------------------------------------------ the boundary
+    # a plug-in (another distribution's backend) is named by backends.create_backend,
+    # which sets ``plugin``; what any backend returns is checked here, once per call
+    plugin: str | None = None
+
+    @property
+    def who(self) -> str:
+        """The backend as an error names it: a plug-in with its entry point and distribution."""
+        return self.plugin or f"backend {self.variant!r}"
+
+    def _guarded(self, doing: str, call: Callable[..., T], *args: Any) -> T:
+        """``call(*args)``; a plug-in's exception is a PluginError naming it (the suite's
+        own backends' errors pass unchanged)."""
+        if self.plugin is None:
+            return call(*args)
+        try:
+            return call(*args)
+        except (KeyboardInterrupt, PluginError):
+            raise
+        except BaseException as exc:
+            raise PluginError(f"{self.who} raised {exception_line(exc)} while {doing}") from exc
+
+    def _checked_labels(
+        self, sites: np.ndarray, angles: np.ndarray, scales: np.ndarray, metric: Metric, grid: Grid
+    ) -> np.ndarray:
+        labels = self._guarded("labelling", self._label, sites, angles, scales, metric, grid)
+        return self.check_labels(labels, len(sites), grid)
+
+    def check_labels(self, labels: object, n: int, grid: Grid) -> np.ndarray:
+        """Check a label raster this backend returned, once, where it enters the suite.
+
+        Parameters
+        ----------
+        labels : object
+            What the backend returned as labels.
+        n : int
+            The number of sites they label.
+        grid : Grid
+            The grid they were computed on.
+
+        Returns
+        -------
+        numpy.ndarray
+            ``labels`` as an (H, W) int32 array.
+
+        Raises
+        ------
+        PluginError
+            Naming this backend, if ``labels`` is not an integer array, has another size
+            than ``grid`` or holds a label outside -1 .. n-1.
+        """
+        if not isinstance(labels, np.ndarray) or labels.dtype.kind not in "iu":
+            what = f"{labels.dtype} values" if isinstance(labels, np.ndarray) else kind_of(labels)
+            raise PluginError(f"{self.who} returned labels that are {what}, not an integer raster")
+        if labels.shape != (grid.height, grid.width):
+            raise PluginError(
+                f"{self.who} returned labels of shape {labels.shape} for a {grid.width}x{grid.height} "
+                f"grid (shape ({grid.height}, {grid.width}))"
+            )
+        low, high = int(labels.min()), int(labels.max())
+        if low < -1 or high >= n:
+            raise PluginError(
+                f"{self.who} returned labels from {low} to {high} for {n} sites (-1 .. {n - 1})"
+            )
+        return labels.astype(np.int32, copy=False)
+
+    def check_moments(self, found: object, n: int, grid: Grid) -> Moments:
+        """Check the moments this backend returned, once, where they enter the suite.
+
+        Parameters
+        ----------
+        found : object
+            What the backend returned as moments.
+        n : int
+            The number of sites.
+        grid : Grid
+            The grid they were computed on.
+
+        Returns
+        -------
+        Moments
+            ``found``, five integer arrays of length ``n``.
+
+        Raises
+        ------
+        PluginError
+            Naming this backend, if ``found`` is not :class:`Moments` of ``n`` sites, a
+            count or sum is negative, or a centroid lies off the raster.
+        """
+        if not isinstance(found, Moments):
+            raise PluginError(f"{self.who} returned moments that are {kind_of(found)}, not Moments")
+        for name in ("count", "sx", "sy", "sxx", "syy"):
+            value = getattr(found, name)
+            if not isinstance(value, np.ndarray) or value.dtype.kind not in "iu" or value.shape != (n,):
+                what = (
+                    f"{value.dtype} values of shape {value.shape}"
+                    if isinstance(value, np.ndarray)
+                    else kind_of(value)
+                )
+                raise PluginError(f"{self.who} returned moments whose {name} is {what}, not {n} integers")
+        count = found.count
+        if (
+            (count < 0).any()
+            or (found.sx < 0).any()
+            or (found.sy < 0).any()
+            or (found.sxx < 0).any()
+            or (found.syy < 0).any()
+            or (found.sx > (grid.width - 1) * count).any()
+            or (found.sy > (grid.height - 1) * count).any()
+        ):
+            raise PluginError(
+                f"{self.who} returned moments that no labelling of a {grid.width}x{grid.height} grid "
+                "has (a negative count or sum, or a centroid off the raster)"
+            )
+        return found
 
     def check_inputs(
         self,

@@ -35,6 +35,7 @@ def _pixel_centres(width: int, height: int) -> np.ndarray:
 
 class CKDTreeBackend(Backend):
     name = "ckdtree"
+    contained = True  # NumPy/SciPy only: a sweep runs it in its own process
     runtime_bytes = 0  # numpy and scipy: loaded by the program itself
     bytes_per_pixel = 64  # pixel centres (float64 x, y, cached), the query's distances and indices
     bytes_per_site = 1000

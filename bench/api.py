@@ -5,8 +5,9 @@ on it, and a mosaic of a picture, each one call (the command line's ``run`` and
 from __future__ import annotations
 
 import contextlib
+import numbers
 import os
-from collections.abc import Callable, Iterator
+from collections.abc import Callable, Iterator, Mapping
 from dataclasses import dataclass
 from typing import TYPE_CHECKING, Any
 
@@ -26,6 +27,57 @@ from compact_distributions.cvt.validate import whole_number
 
 if TYPE_CHECKING:
     from compact_distributions.cvt.mosaic.pipeline import MosaicResult
+# what each keyword of the API must be (the command line parses text; Python callers pass
+# values, and a number given as text is a mistake to name, not to guess at)
+_INTEGER = "a whole number (int)"
+_REAL = "a real number (int or float)"
+_TEXT = "a str"
+TYPES = {
+    "n_elements": _INTEGER,
+    "seed": _INTEGER,
+    "iterations": _INTEGER,
+    "aspect": _REAL,
+    "gap": _REAL,
+    "contrast": _REAL,
+    "edge_threshold": _REAL,
+    "element": _TEXT,
+    "metric": _TEXT,
+}
+
+
+def check_types(**values: Any) -> None:
+    """InputError naming the first keyword of ``values`` whose value is not of the type
+    :data:`TYPES` names (None passes: the default)."""
+    for name, value in values.items():
+        want = TYPES.get(name)
+        if value is None or want is None:
+            continue
+        if want == _TEXT:
+            ok = isinstance(value, str)
+        else:
+            kind = numbers.Integral if want == _INTEGER else numbers.Real
+            ok = isinstance(value, kind) and not isinstance(value, (bool, np.bool_))
+        if not ok:
+            raise InputError(f"{name} must be {want}, got {value!r}")
+
+
+def check_option_types(record: Method, values: Mapping[str, Any]) -> None:
+    """InputError naming a method option whose value is not of its declared kind (a
+    flag a bool, a count an int, a number an int or float, a word a str)."""
+    for name, value in values.items():
+        opt = record.option(name)
+        if opt is None:
+            continue  # the record's parse_options names an undeclared option
+        if opt.kind is bool:
+            ok = isinstance(value, (bool, np.bool_))
+        elif opt.kind is int:
+            ok = isinstance(value, numbers.Integral) and not isinstance(value, (bool, np.bool_))
+        elif opt.kind is float:
+            ok = isinstance(value, numbers.Real) and not isinstance(value, (bool, np.bool_))
+        else:
+            ok = isinstance(value, opt.kind)
+        if not ok:
+            raise InputError(f"{name} must be {'a ' + opt.kind.__name__}, got {value!r}")
 
 
 @dataclass
@@ -145,7 +197,12 @@ def problem(
     >>> p.grid.shape, p.n_elements, p.metric.name
     ((96, 128), 100, 'l2-axial')
     """
+    check_types(n_elements=n_elements, seed=seed, element=element, metric=metric, aspect=aspect)
+    if isinstance(size, bool) or not isinstance(size, (numbers.Integral, str, tuple, list)):
+        raise InputError(f"size must be W, (W, H) or 'WxH', got {size!r}")
     if isinstance(size, (tuple, list)) and len(size) == 2:
+        if not all(isinstance(v, numbers.Integral) and not isinstance(v, bool) for v in size):
+            raise InputError(f"size must be W, (W, H) or 'WxH' with whole numbers, got {size!r}")
         size = f"{size[0]}x{size[1]}"
     width, height = parse_size(str(size) if not isinstance(size, str) else size, "size")
     n_elements = whole_number(n_elements, "n_elements", minimum=1, maximum=width * height)
@@ -242,18 +299,21 @@ def run(
 
     if not isinstance(problem, Problem):
         raise InputError(f"problem must be a Problem (compact_distributions.problem(...)), got {problem!r}")
+    check_types(iterations=iterations, element=element, gap=gap)
+    if progress is not None and not callable(progress):
+        raise InputError(f"progress must be a callable or None, got {progress!r}")
     record = resolve_method(method)
     if tolerance is not None:
         method_options["tolerance"] = tolerance
     if accelerate is not False:
         method_options["accelerate"] = accelerate
+    check_option_types(record, method_options)
     options = record.parse_options(method_options)
     with _backend(backend) as live:
         dist = record(
             problem, live, iterations=iterations, progress=progress, element=element, gap=gap, **options
         )
-    if dist.elements is None:  # nothing to measure: say which method, not a TypeError inside evaluate
-        raise InputError(f"method {record.name!r} placed no elements (its Distribution's elements is None)")
+    assert dist.elements is not None  # Method.__call__ checked it (None became no element per site)
     return RunResult(problem, dist, evaluate(dist.elements, problem.grid, labels=dist.labels), options)
 
 
@@ -306,10 +366,14 @@ def mosaic(
     >>> result.placed, (result.width, result.height), result.element
     (40, (64, 48), 'square')
     """
-    from compact_distributions.cvt.mosaic.pipeline import make_mosaic
+    from compact_distributions.cvt.mosaic.pipeline import DEFAULT_METHOD, make_mosaic
+    from compact_distributions.cvt.registry import resolve_method
 
+    check_types(**{k: v for k, v in options.items() if k in TYPES})
+    if isinstance(options.get("method_options"), dict):
+        check_option_types(resolve_method(options.get("method", DEFAULT_METHOD)), options["method_options"])
     with _backend(backend) as live:
         return make_mosaic(image, live, **options)
 
 
-__all__ = ["RunResult", "problem", "run", "mosaic"]
+__all__ = ["TYPES", "check_types", "check_option_types", "RunResult", "problem", "run", "mosaic"]

@@ -281,6 +281,19 @@ def add_list_options(p, *names: str) -> None:
         p.add_argument(f"--{name}", default=None, help=helps[name])
 
 
+def shape_names(items, name: str = "--shapes") -> list[str] | None:
+    """Element shapes of a sweep, checked as ``run --element`` checks one: a built-in
+    shape's name or the user's ``polygon:FILE`` (read and checked now), else InputError
+    naming ``name``; a comma list (text) or a sequence; None stays None."""
+    from compact_distributions.cvt.shapes import shape_record
+    from compact_distributions.cvt.validate import name_list
+
+    if items is None:
+        return None
+    listed = name_list(items, name) if isinstance(items, str) else list(items)
+    return [shape_record(s, name).name for s in listed]
+
+
 MAX_SEEDS = 1000
 
 
@@ -320,6 +333,7 @@ __all__ = [
     "add_cluster_options",
     "add_seeds_option",
     "add_list_options",
+    "shape_names",
     "MAX_SEEDS",
     "seeds_value",
     "add_memory_option",

@@ -39,7 +39,7 @@ from compact_distributions.backends import variant_metrics, variant_names, varia
 from compact_distributions.cvt.errors import InputError
 from compact_distributions.cvt.metrics import REFERENCE_SHAPE
 from compact_distributions.cvt.registry import get_method, method_names
-from compact_distributions.cvt.shapes import ELEMENT_SHAPES, PAPER_SHAPES
+from compact_distributions.cvt.shapes import PAPER_SHAPES
 from compact_distributions.cvt.validate import name_list, one_of
 
 from . import options
@@ -638,12 +638,9 @@ class Table2Request(options.SweepRequest):
         cfg = QUICK if args.quick else FULL
         listed = {
             name: name_list(getattr(args, name), f"--{name}", choices)
-            for name, choices in (
-                ("methods", method_names()),
-                ("backends", variant_names()),
-                ("shapes", ELEMENT_SHAPES),
-            )
+            for name, choices in (("methods", method_names()), ("backends", variant_names()))
         }
+        listed["shapes"] = options.shape_names(args.shapes)
         return cls(
             **cls.common(args),
             seeds=options.seeds_value(args.seeds, cfg["seeds"]),
@@ -665,7 +662,7 @@ def prepare(req: Table2Request) -> dict:
     chosen = [one_of(m, "--methods", all_methods) for m in req.methods or all_methods]
     methods = [m for m in all_methods if m in chosen]  # the registry's order
     backends, unavailable = sweep_backends(req.backends)
-    shapes = [one_of(s, "--shapes", ELEMENT_SHAPES) for s in req.shapes] if req.shapes else None
+    shapes = options.shape_names(req.shapes) if req.shapes else None
     for name in req.method_options:  # an option is for the methods that declare it: one of them must run
         if not any(get_method(m).option(name) for m in methods):
             raise InputError(
@@ -683,7 +680,7 @@ def table2(req: Table2Request) -> int:
     from .cluster import executor_for
     from .outputs import report_folder
     from .report import provenance, write_csv, write_markdown, written_files
-    from .sweep import run_sweep
+    from .sweep import check_runs, run_sweep
 
     t0 = time.perf_counter()
     plan = prepare(req)
@@ -730,6 +727,7 @@ def table2(req: Table2Request) -> int:
             out, ["table2.md", "table2.csv", "table2.png", "coverage_overlap.csv", "coverage_overlap.png"]
         )
     _print_summary(table, out, written)
+    check_runs(specs, rows, "table2")  # the report is written; a failed run still fails the command
     return 0
 
 

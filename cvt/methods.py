@@ -25,12 +25,13 @@ from typing import TYPE_CHECKING, Any, NamedTuple
 
 import numpy as np
 
-from .errors import InputError
+from .errors import InputError, PluginError, exception_line, kind_of
 from .metrics import REFERENCE_SHAPE
 
 if TYPE_CHECKING:
     from .distribution import Distribution
     from .problem import Problem
+_PACKAGE = __name__.split(".")[0]  # code of this suite: its errors pass the boundary unchanged
 
 # --------------------------------------------------------------------------- records
 
@@ -231,6 +232,20 @@ class Method:
     memory : callable or None
         ``memory(pixels, n_elements, element, density) -> (step, bytes)``: the peak
         memory of its own step beyond placing (``cvt.resources.run_estimate``).
+    entry_point : str
+        The entry point the registry found it through (empty: made in this process).
+    distribution : str
+        The installed distribution that declares it, as ``name version``.
+
+    Attributes
+    ----------
+    foreign : bool
+        Whether ``run`` is another distribution's code (or a caller's callable): what
+        it raises is its failure (:class:`~compact_distributions.cvt.errors.PluginError`),
+        not the user's input error.
+    who : str
+        The method as an error names it (a plug-in with its entry point and
+        distribution).
 
     Raises
     ------
@@ -276,6 +291,10 @@ class Method:
     summary: str = ""
     fits: bool = False
     memory: Callable[..., tuple[str, float]] | None = None
+    # where the registry found it: the entry point's name and its distribution ("name
+    # version"); empty for a record made in the process
+    entry_point: str = ""
+    distribution: str = ""
 
     def __post_init__(self) -> None:
         if not isinstance(self.name, str) or not self.name or any(c.isspace() for c in self.name):
@@ -299,11 +318,44 @@ class Method:
 
     def __call__(self, problem: Problem, backend: Any, **options: Any) -> Distribution:
         """Run the method; the Distribution's ``method_seconds`` is the whole call's wall
-        time (problem to placed elements), whatever the method measures itself."""
+        time (problem to placed elements), whatever the method measures itself.
+
+        This is the methods' one boundary: what ``run`` returns is checked here
+        (:func:`check_distribution`) and recorded under this record's name; a plug-in's
+        method that raises, or returns what the suite cannot use, is one
+        :class:`~.errors.PluginError` naming it (the suite's own methods' errors pass
+        unchanged: an InputError of theirs is the user's)."""
         t0 = time.perf_counter()
-        dist = self.run(problem, backend, **options)
+        try:
+            dist = self.run(problem, backend, **options)
+        except KeyboardInterrupt:
+            raise
+        except BaseException as exc:  # a plug-in's SystemExit or MemoryError is its failure too
+            if not self.foreign or isinstance(exc, PluginError):
+                raise
+            raise PluginError(f"{self.who} raised {exception_line(exc)}") from exc
+        check_distribution(dist, problem, self.who)
+        dist.method = self.name  # what the run records: the record's (entry point's) name
         dist.method_seconds = time.perf_counter() - t0
         return dist
+
+    @property
+    def foreign(self) -> bool:
+        """Whether ``run`` is another distribution's code (or a caller's callable), whose
+        exceptions are its failures, not the user's input errors."""
+        module = getattr(self.run, "__module__", None) or type(self.run).__module__
+        return not str(module).startswith(f"{_PACKAGE}.")
+
+    @property
+    def who(self) -> str:
+        """The method as an error names it: a plug-in with its entry point and distribution."""
+        if not self.foreign:
+            return f"method {self.name!r}"
+        if self.distribution:
+            entry = f"entry point {self.entry_point!r} of " if self.entry_point not in ("", self.name) else ""
+            return f"method plug-in {self.name!r} ({entry}distribution {self.distribution})"
+        module = getattr(self.run, "__module__", None) or "?"
+        return f"method {self.name!r} (a callable of module {module}, not an installed plug-in)"
 
     def option(self, name: str) -> MethodOption | None:
         """Return the declared option ``name``.
@@ -386,6 +438,91 @@ class Method:
         return " ".join([self.name, *[p for p in parts if p]])
 
 
+# --------------------------------------------------------------------------- the boundary
+def check_distribution(dist: object, problem: Problem, who: str = "the method") -> None:
+    """Refuse, with one :class:`~.errors.PluginError` naming ``who``, a method's result
+    that the suite cannot measure or write: anything but a
+    :class:`~.distribution.Distribution`; sites that are not an (N, 2) array of finite
+    numbers; angles or scales of another length or not finite; elements that are not
+    one shapely polygon (or None) per site, or whose vertices are not finite (elements
+    None: no element at any site, and so set); a label
+    raster of another size than the problem's, or labels outside -1 .. N-1; timings that
+    are not finite.  Whole-array checks (the elements' vertices in one pass)."""
+    import shapely
+
+    from .distribution import Distribution
+
+    def bad(what: str) -> PluginError:
+        return PluginError(f"{who} returned {what}")
+
+    if not isinstance(dist, Distribution):
+        raise bad(f"{kind_of(dist)}, not a Distribution")
+    arrays = {}
+    for name in ("sites", "angles", "scales"):
+        try:
+            arrays[name] = np.asarray(getattr(dist, name), dtype=np.float64)
+        except (TypeError, ValueError):
+            raise bad(f"{name} that are not numbers ({kind_of(getattr(dist, name))})") from None
+    sites = arrays["sites"]
+    if sites.ndim != 2 or sites.shape[1] != 2:
+        raise bad(f"sites of shape {sites.shape}, not (N, 2)")
+    n = len(sites)
+    for name, values in arrays.items():
+        if name != "sites" and values.shape != (n,):
+            raise bad(f"{name} of shape {values.shape} for {n} sites")
+        if not np.isfinite(values).all():
+            raise bad(f"{name} that are NaN or infinite")
+    if dist.elements is None:  # a method that places no elements (a lattice of sites): none at any site
+        dist.elements = [None] * n
+    elements = dist.elements
+    if not isinstance(elements, (list, tuple, np.ndarray)) or len(elements) != n:
+        got = (
+            f"{len(elements)} elements"
+            if isinstance(elements, (list, tuple, np.ndarray))
+            else kind_of(elements)
+        )
+        raise bad(f"{got} for {n} sites (one polygon or None per site)")
+    geoms = np.empty(n, dtype=object)
+    geoms[:] = list(elements)
+    given = ~shapely.is_missing(geoms)  # None: a site without an element
+    polygonal = shapely.is_geometry(geoms)
+    polygonal[polygonal] = np.isin(shapely.get_type_id(geoms[polygonal]), (3, 6))  # (multi)polygons
+    if (given & ~polygonal).any():
+        k = int(np.argmax(given & ~polygonal))
+        raise bad(f"element {k} that is {kind_of(geoms[k])}, not a polygon")
+    coords, index = shapely.get_coordinates(geoms[given], return_index=True)
+    broken = ~np.isfinite(coords).all(axis=1)
+    if broken.any():
+        k = int(np.flatnonzero(given)[index[np.argmax(broken)]])
+        raise bad(f"element {k} with NaN or infinite vertices")
+    labels = dist.labels
+    if labels is not None:
+        grid = problem.grid
+        if not isinstance(labels, np.ndarray) or labels.dtype.kind not in "iu":
+            raise bad(f"labels that are {kind_of(labels)}, not an integer raster")
+        if labels.shape != (grid.height, grid.width):
+            raise bad(f"labels of shape {labels.shape} for a {grid.width}x{grid.height} grid")
+        if labels.size and (labels.min() < -1 or labels.max() >= n):
+            raise bad(f"labels from {labels.min()} to {labels.max()}, outside -1 .. {n - 1}")
+    for name in ("seconds", "energy"):
+        try:
+            values = np.asarray(getattr(dist, name), dtype=np.float64)
+        except (TypeError, ValueError):
+            raise bad(f"{name} that are not numbers") from None
+        if values.ndim != 1 or (name == "seconds" and not np.isfinite(values).all()):
+            raise bad(f"{name} that are not a list of finite numbers")
+    for name in ("setup_seconds", "lloyd_seconds"):
+        value = getattr(dist, name)
+        if (
+            isinstance(value, bool)
+            or not isinstance(value, (int, float, np.number))
+            or not np.isfinite(value)
+        ):
+            raise bad(f"{name} {value!r}, not a finite number")
+    if not isinstance(dist.extra, dict):
+        raise bad(f"extra that is {kind_of(dist.extra)}, not a dict")
+
+
 def __getattr__(name: str) -> Any:
     # the paper's own methods moved to ``cvt.placement.ours``; their old names keep
     # working for one release
@@ -420,4 +557,4 @@ _MOVED = frozenset(
     }
 )
 
-__all__ = ["Method", "MethodOption", "SweepVariant", "ROLES", "SWEEP_BACKENDS"]
+__all__ = ["Method", "MethodOption", "SweepVariant", "ROLES", "SWEEP_BACKENDS", "check_distribution"]

@@ -12,6 +12,7 @@ is listed by :func:`unavailable_methods` with its reason; it never stops the oth
 from __future__ import annotations
 
 from collections.abc import Callable
+from dataclasses import replace
 from functools import lru_cache
 from importlib.metadata import EntryPoint, entry_points
 from typing import Any
@@ -30,6 +31,18 @@ def group_entry_points(group: str) -> list[EntryPoint]:
     for ep in entry_points(group=group):
         found.setdefault(ep.name, ep)
     return list(found.values())
+
+
+def distribution_of(ep: EntryPoint) -> str:
+    """``name version`` of the distribution that declares entry point ``ep`` ("?" if
+    unknown): what an error about a plug-in names."""
+    dist = getattr(ep, "dist", None)
+    if dist is None:
+        return "?"
+    try:
+        return f"{dist.name} {dist.version}"
+    except Exception:  # a broken METADATA file must not stop the listing
+        return "?"
 
 
 def records_of(obj: Any, name: str) -> list[Method]:
@@ -52,7 +65,10 @@ def _load() -> tuple[dict[str, Method], dict[str, str]]:
     loaded = []
     for ep in group_entry_points(METHOD_GROUP):
         try:
-            loaded += records_of(ep.load(), ep.name)
+            dist = distribution_of(ep)
+            loaded += [
+                replace(m, entry_point=ep.name, distribution=dist) for m in records_of(ep.load(), ep.name)
+            ]
         except Exception as exc:  # a broken plug-in is listed with its reason, never a crash
             failed[ep.name] = f"{type(exc).__name__}: {exc}"
 
@@ -162,6 +178,7 @@ __all__ = [
     "unavailable_methods",
     "group_entry_points",
     "records_of",
+    "distribution_of",
     "resolve_method",
     "reload",
 ]

@@ -459,7 +459,7 @@ def backends(req: BackendsRequest) -> int:
     from ..cluster import executor_for
     from ..outputs import report_folder
     from ..report import provenance, write_csv, write_markdown, written_files
-    from ..sweep import run_sweep
+    from ..sweep import check_runs, run_sweep
 
     t0 = time.perf_counter()
     plan = prepare(req)
@@ -489,6 +489,8 @@ def backends(req: BackendsRequest) -> int:
         write_markdown(out / "backends.md", md)
         written = written_files(out, ["backends.md", "backends.csv", "backends.png"])
     print(f"wrote {out}/{', '.join(written)} ({elapsed:.0f} s)", file=sys.stderr)
+    if plan["specs"] is not None:
+        check_runs(plan["specs"], rows, "backends")  # a failed timing fails the command
     return 0
 
 

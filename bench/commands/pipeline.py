@@ -269,7 +269,7 @@ def pipeline(req: PipelineRequest) -> int:
 
     from ..outputs import report_folder
     from ..report import provenance, write_csv, write_markdown, written_files
-    from ..sweep import run_sweep
+    from ..sweep import check_runs, run_sweep
 
     t0 = time.perf_counter()
     plan = prepare(req)
@@ -290,6 +290,7 @@ def pipeline(req: PipelineRequest) -> int:
         write_markdown(req.out / "pipeline.md", render_markdown(table, provenance(), cmd, elapsed, plotted))
         written = written_files(req.out, ["pipeline.md", "pipeline.csv", "pipeline.png"])
     print(f"wrote {req.out}/{', '.join(written)} ({elapsed:.0f} s)", file=sys.stderr)
+    check_runs(plan["specs"], rows, "pipeline")  # a failed configuration fails the command
     return 0
 
 

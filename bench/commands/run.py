@@ -321,7 +321,7 @@ def run(args) -> int:
             dist,
             ev,
             backend,
-            element=dist.extra["element"],
+            element=dist.extra.get("element", element),
             gap=gap,
             command=command_line(args.argv),
             sources=sources,
