@@ -54,6 +54,7 @@ _NAMES = {
     "MosaicResult": "cvt.mosaic.pipeline:MosaicResult",
     "InputError": "cvt.errors:InputError",
     "BackendUnavailable": "cvt.errors:BackendUnavailable",
+    "PluginError": "cvt.errors:PluginError",
 }
 
 # written out (the same names as _NAMES, tests/test_api_docs.py checks) so that type
@@ -79,6 +80,7 @@ __all__ = [
     "MosaicResult",
     "InputError",
     "BackendUnavailable",
+    "PluginError",
 ]
 
 if TYPE_CHECKING:  # the same names for type checkers, which do not run __getattr__
@@ -92,6 +94,7 @@ if TYPE_CHECKING:  # the same names for type checkers, which do not run __getatt
     from .cvt.distribution import Distribution as Distribution
     from .cvt.errors import BackendUnavailable as BackendUnavailable
     from .cvt.errors import InputError as InputError
+    from .cvt.errors import PluginError as PluginError
     from .cvt.evaluate import evaluate as evaluate
     from .cvt.methods import Method as Method
     from .cvt.methods import MethodOption as MethodOption

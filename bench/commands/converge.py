@@ -384,7 +384,7 @@ def converge(req: ConvergeRequest) -> int:
 
     from ..outputs import report_folder
     from ..report import provenance, write_csv, write_markdown, written_files
-    from ..sweep import run_sweep
+    from ..sweep import check_runs, run_sweep
 
     t0 = time.perf_counter()
     plan = prepare(req)
@@ -407,6 +407,7 @@ def converge(req: ConvergeRequest) -> int:
         )
         written = written_files(req.out, names)
     print(f"wrote {req.out}/{', '.join(written)} ({elapsed:.0f} s)", file=sys.stderr)
+    check_runs(plan["specs"], rows, "converge")  # the report is written; a failed run still fails the command
     return 0
 
 
