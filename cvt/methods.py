@@ -439,6 +439,9 @@ class Method:
 
 
 # --------------------------------------------------------------------------- the boundary
+_CHECK_CHUNK = 4096  # elements whose vertices are checked at once
+
+
 def check_distribution(dist: object, problem: Problem, who: str = "the method") -> None:
     """Refuse, with one :class:`~.errors.PluginError` naming ``who``, a method's result
     that the suite cannot measure or write: anything but a
@@ -490,11 +493,15 @@ def check_distribution(dist: object, problem: Problem, who: str = "the method") 
     if (given & ~polygonal).any():
         k = int(np.argmax(given & ~polygonal))
         raise bad(f"element {k} that is {kind_of(geoms[k])}, not a polygon")
-    coords, index = shapely.get_coordinates(geoms[given], return_index=True)
-    broken = ~np.isfinite(coords).all(axis=1)
-    if broken.any():
-        k = int(np.flatnonzero(given)[index[np.argmax(broken)]])
-        raise bad(f"element {k} with NaN or infinite vertices")
+    placed = np.flatnonzero(given)
+    # a few thousand elements at a time: all vertices at once would be a copy of every
+    # outline (2 kB per curved element)
+    for start in range(0, len(placed), _CHECK_CHUNK):
+        part = placed[start : start + _CHECK_CHUNK]
+        coords, index = shapely.get_coordinates(geoms[part], return_index=True)
+        broken = ~np.isfinite(coords).all(axis=1)
+        if broken.any():
+            raise bad(f"element {int(part[index[np.argmax(broken)]])} with NaN or infinite vertices")
     labels = dist.labels
     if labels is not None:
         grid = problem.grid
