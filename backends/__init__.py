@@ -16,6 +16,7 @@ load is listed as unavailable with its reason.
 from __future__ import annotations
 
 import importlib
+import sys
 from functools import lru_cache
 
 from compact_distributions.cvt.errors import BackendUnavailable, InputError
@@ -135,8 +136,35 @@ def variant_status() -> dict[str, tuple[bool, str]]:
     return {v: probed[resolve(v)[0]] for v in variant_names()}
 
 
+_FELL_BACK: set[str] = set()  # defaults already said to be replaced, in this process
+
+
+def fall_back(name: str, reason: str) -> str:
+    """The reference backend, in place of ``name``, which the suite chose by default and
+    which cannot run here for ``reason``; says so in one line on standard error, once per
+    process (a backend the user named that cannot run is refused instead).
+
+    Parameters
+    ----------
+    name : str
+        The backend the suite would have chosen.
+    reason : str
+        Why it is unavailable (as :func:`variant_status` gives it).
+
+    Returns
+    -------
+    str
+        The reference backend's name.
+    """
+    if name not in _FELL_BACK:
+        _FELL_BACK.add(name)
+        print(f"note: using {REFERENCE}, as {name} cannot run here: {reason}", file=sys.stderr, flush=True)
+    return REFERENCE
+
+
 __all__ = [
     "Backend",
+    "fall_back",
     "BackendUnavailable",
     "REGISTRY",
     "VARIANTS",

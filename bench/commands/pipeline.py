@@ -29,7 +29,7 @@ from pathlib import Path
 
 import numpy as np
 
-from compact_distributions.backends import variant_names, variant_status
+from compact_distributions.backends import fall_back, variant_names, variant_status
 from compact_distributions.cvt.validate import name_list, one_of, whole_number
 
 from .. import options
@@ -249,7 +249,11 @@ def prepare(req: PipelineRequest) -> dict:
     check_folder(req.out)
     status = variant_status()
     kinds = [one_of(k, "--kinds", KINDS) for k in req.kinds or KINDS]
-    default = [b for b in DEFAULT_BACKENDS if status.get(b, (False, ""))[0]] or ["numpy"]
+    default = [b for b in DEFAULT_BACKENDS if status.get(b, (False, ""))[0]]
+    if not default and not req.backends:
+        default = [
+            fall_back(DEFAULT_BACKENDS[0], status.get(DEFAULT_BACKENDS[0], (False, "not installed"))[1])
+        ]
     backends = [one_of(b, "--backends", variant_names()) for b in req.backends or default]
     counts = list(req.elements or (QUICK_ELEMENTS if req.quick else FULL_ELEMENTS))
     suite = "pipeline-quick" if req.quick else "pipeline"
