@@ -294,23 +294,29 @@ def suite_programs(block: int, int64: bool, fits: bool) -> list[ProgramSpec]:
 # ------------------------------------------------------------ can the device run them?
 # A runtime can build a program "successfully" with no kernels in it (the PoCL wheel
 # that pyopencl brings, on a processor newer than its LLVM, does so for every program it
-# reads back from its kernel cache), and once it has, it aborts the process at exit.  So
-# a device is first tried in a child process on every program the backend builds (each
-# built twice: the second is read from the cache where the runtime keeps one); the
-# verdicts are kept in a file under the user's cache folder, one per program and device,
-# so this costs once.  A device whose programs lose their kernels only when read back
-# is used with every build made outside the cache (a build option no build had before).
-CHECK_VERSION = 1  # bump when what the check tries changes
-CHECK_TIMEOUT = 600  # s for a child to build a configuration's programs
+# reads back from its kernel cache) and then abort the process at exit, or crash while a
+# kernel runs (the same wheel, with 16-pixel blocks).  So a device is first tried in a
+# child process: every program a backend of its configuration builds, each built twice
+# (the second is read back from the cache where the runtime keeps one) and checked for
+# its kernels, then run on a small problem of each ball against the NumPy reference.
+# The verdict is kept in a file under the user's cache folder, per device, driver,
+# configuration and kernel source, so this costs once.  A device whose programs lose
+# their kernels only when read back is used with every build made outside the cache (a
+# build option no build had before).
+CHECK_VERSION = 2  # bump when what the check tries changes
+CHECK_TIMEOUT = 600  # s for a child to build and run a configuration's programs
 CHECK_MARK = "cvt-opencl-check: "  # the child's verdict line on its standard output
+CHECK_ENTRY = "compact_distributions.backends.opencl"  # the child: python -m CHECK_ENTRY --check
+CHECK_AGREEMENT = 0.995  # share of the check's pixels labelled as the reference does (float32 ties)
 INSTALL_HINT = (
-    "on Debian or Ubuntu, `apt-get install pocl-opencl-icd` adds a PoCL that builds them; "
+    "on Debian or Ubuntu, `apt-get install pocl-opencl-icd` adds a PoCL that runs them; "
     "or install another OpenCL runtime"
 )
-MAX_VERDICTS = 2000  # kept in the verdict file, the newest
+MAX_VERDICTS = 1000  # kept in the verdict file, the newest
 _VERDICTS: dict[str, dict] | None = None  # this process's copy of the verdict file
 _FRESH: set[tuple] = set()  # devices whose every build is made outside the kernel cache
 _DIGESTS: dict[tuple, str] = {}  # (path, mtime, size) -> sha256 of a kernel file
+_IN_CHECK = False  # set in the check's child: its backend trusts the programs it tries
 _builds = itertools.count()
 
 
@@ -320,7 +326,7 @@ def _user_cache() -> str:
 
 def verdict_path() -> Path:
     """The file of the device check's verdicts."""
-    return Path(_user_cache()) / "compact-distributions" / "opencl-programs.json"
+    return Path(_user_cache()) / "compact-distributions" / "opencl-devices.json"
 
 
 def device_identity(dev) -> tuple[str, ...]:
@@ -340,10 +346,10 @@ def _digest(path: Path) -> str:
         return "missing"  # the build says so
 
 
-def _verdict_key(identity: tuple, spec: ProgramSpec) -> str:
-    # the kernel cache's own switch changes what a build reads back
-    what = [CHECK_VERSION, identity, [_digest(f) for f in spec.files], spec.options, spec.kernels]
-    what.append(os.environ.get("POCL_KERNEL_CACHE", ""))
+def _verdict_key(identity: tuple, programs: list[ProgramSpec], config: tuple | None) -> str:
+    what = [CHECK_VERSION, identity, config]
+    what += [[[_digest(f) for f in p.files], p.options, p.kernels] for p in programs]
+    what.append(os.environ.get("POCL_KERNEL_CACHE", ""))  # the cache's switch changes what is read back
     return hashlib.sha256(json.dumps(what).encode()).hexdigest()[:32]
 
 
@@ -362,17 +368,16 @@ def _known() -> dict:
     return _VERDICTS
 
 
-def _keep(found: dict) -> None:
-    """Add ``found`` to this process's verdicts and to the file (merged with what other
-    processes wrote since; where the file cannot be written, the check is made again)."""
-    _known().update(found)
+def _keep(key: str, verdict: dict) -> None:
+    """Add a verdict to the file (merged with what other processes wrote since; where the
+    file cannot be written, the check is made again next time)."""
     path = verdict_path()
     try:
         path.parent.mkdir(parents=True, exist_ok=True)
-        merged = {**_read_verdicts(), **found}
+        merged = {**_read_verdicts(), key: verdict}
         newest = sorted(merged.items(), key=lambda kv: kv[1].get("at", 0))[-MAX_VERDICTS:]
         tmp = path.with_name(f"{path.name}.{os.getpid()}.tmp")
-        tmp.write_text(json.dumps(dict(newest)))
+        tmp.write_text(json.dumps(dict(newest), indent=0))
         os.replace(tmp, path)
     except OSError:
         pass
@@ -392,94 +397,100 @@ def _fresh_option() -> str:
     return f"-DCVT_FRESH_BUILD={os.getpid()}_{time.time_ns()}_{next(_builds)}"
 
 
-def _child_check(cl, dev, programs: list[ProgramSpec], fresh: bool) -> list[dict]:
-    """Build ``programs`` on ``dev`` in a child process (``fresh``: each outside the
-    kernel cache, which the child then leaves alone): per program {"ok", "empty",
-    "reason"}.  A child that crashes or hangs leaves every program failed with why."""
+def _child_check(cl, dev, programs: list[ProgramSpec], config: tuple | None, fresh: bool) -> dict:
+    """Build ``programs`` on ``dev`` in a child process (``fresh``: each outside the kernel
+    cache, which the child then leaves alone), and with ``config`` (block, 64-bit atomics,
+    fits) run a backend of it on the check's problems: {"ok", "empty" (a program came
+    without its kernels), "reason", "transient"}.  A child that crashes fails the device
+    with the signal and the runtime's last line; one that hangs, for this time only."""
     i, j = _position(cl, dev)
     payload = {
         "platform": i,
         "device": j,
         "identity": list(device_identity(dev)),
         "programs": [[[str(f) for f in p.files], list(p.options), list(p.kernels)] for p in programs],
+        "config": config,
         "fresh": fresh,
+        # the files the backend builds from (a test may point them elsewhere)
+        "sources": {"KERNEL_FILE": str(KERNEL_FILE), "FIT_KERNEL_FILE": str(FIT_KERNEL_FILE)},
     }
     env = dict(os.environ, **({"POCL_KERNEL_CACHE": "0"} if fresh else {}))
-    where = describe_device(cl, dev)
-    cmd = [sys.executable, "-m", "compact_distributions.backends.opencl", "--check"]
+    cmd = [sys.executable, "-m", CHECK_ENTRY, "--check"]
     try:
         proc = subprocess.run(
             cmd, input=json.dumps(payload), capture_output=True, text=True, timeout=CHECK_TIMEOUT, env=env
         )
     except subprocess.TimeoutExpired:
-        why = f"building the suite's programs on {where} took over {CHECK_TIMEOUT} s"
-        return [{"ok": False, "empty": False, "reason": why, "transient": True} for _ in programs]
+        why = f"building and running the suite's programs took over {CHECK_TIMEOUT} s"
+        return {"ok": False, "reason": why, "transient": True}
     except OSError as exc:
-        why = f"could not start the device check ({exc})"
-        return [{"ok": False, "empty": False, "reason": why, "transient": True} for _ in programs]
+        return {"ok": False, "reason": f"could not start the device check ({exc})", "transient": True}
     for line in reversed(proc.stdout.splitlines()):
         if line.startswith(CHECK_MARK):
-            out = json.loads(line[len(CHECK_MARK) :])
-            if "error" in out:
-                return [{"ok": False, "empty": False, "reason": out["error"]} for _ in programs]
-            return out["programs"]
+            return json.loads(line[len(CHECK_MARK) :])
     code = proc.returncode
-    how = (
-        f"signal {signal.Signals(-code).name}"
-        if code < 0 and -code in signal.valid_signals()
-        else f"status {code}"
-    )
-    last = [ln.strip() for ln in proc.stderr.splitlines() if ln.strip()]
-    said = f": {last[-1][:160]}" if last else ""
-    why = f"the OpenCL runtime crashed ({how}) building the suite's programs on {where}{said}"
-    return [{"ok": False, "empty": False, "reason": why} for _ in programs]
+    sig = -code if code < 0 and -code in signal.valid_signals() else None
+    how = f"crashed (signal {signal.Signals(sig).name})" if sig else f"stopped (status {code})"
+    lines = [ln.strip() for ln in proc.stderr.splitlines() if ln.strip()]
+    steps = [ln[len(CHECK_MARK) :] for ln in lines if ln.startswith(CHECK_MARK)]
+    step = f" in {steps[-1]}" if steps else ""
+    # the runtime's own last word: an error line where it printed one, not compiler chatter
+    said = [ln for ln in lines if "error" in ln.lower() and not ln.startswith(CHECK_MARK)]
+    said = f": {said[-1][:160]}" if said else ""
+    return {
+        "ok": False,
+        "reason": f"the device check {how}{step}{said}",
+    }
 
 
-def program_verdicts(cl, dev, programs: list[ProgramSpec]) -> list[dict]:
-    """Whether ``dev`` builds each of ``programs`` with its kernels: per program {"ok",
-    "fresh" (only outside the kernel cache), "reason"}, from the verdict file or from a
-    child process that tries them (kept for next time)."""
+def check_device(cl, dev, programs: list[ProgramSpec], config: tuple | None = None) -> dict:
+    """Whether ``dev`` builds ``programs`` with their kernels (and with ``config``, runs a
+    backend of that configuration to the reference's results): {"ok", "fresh" (only
+    outside the kernel cache), "reason"}, from the verdict file or else from a child
+    process (kept for next time)."""
+    if _IN_CHECK:
+        return {"ok": True, "fresh": device_identity(dev) in _FRESH, "reason": ""}
     identity = device_identity(dev)
-    keys = [_verdict_key(identity, p) for p in programs]
-    todo = {k: p for k, p in zip(keys, programs, strict=True) if k not in _known()}
-    if todo:
-        found = dict(zip(todo, _child_check(cl, dev, list(todo.values()), fresh=False), strict=True))
-        empty = [k for k, v in found.items() if v.get("empty")]
-        if empty:  # read back without kernels: try each once more outside the cache
-            again = _child_check(cl, dev, [todo[k] for k in empty], fresh=True)
-            for k, v in zip(empty, again, strict=True):
-                found[k] = {**v, "fresh": bool(v["ok"])}
-        now = time.time()
-        verdicts = {
-            k: {"ok": bool(v["ok"]), "fresh": bool(v.get("fresh")), "reason": v.get("reason", ""), "at": now}
-            for k, v in found.items()
+    key = _verdict_key(identity, programs, config)
+    if key not in _known():
+        found = _child_check(cl, dev, programs, config, fresh=False)
+        fresh = bool(found.get("empty"))
+        if fresh:  # read back without kernels: all once more, each outside the cache
+            found = _child_check(cl, dev, programs, config, fresh=True)
+        verdict = {
+            "ok": bool(found["ok"]),
+            "fresh": fresh and bool(found["ok"]),
+            "reason": found.get("reason", ""),
+            "device": describe_device(cl, dev),
+            "at": time.time(),
         }
-        _known().update(verdicts)
-        _keep({k: v for k, v in verdicts.items() if not found[k].get("transient")})
-    out = [_known()[k] for k in keys]
-    if any(v["fresh"] for v in out):
+        _known()[key] = verdict
+        if not found.get("transient"):
+            _keep(key, verdict)
+    verdict = _known()[key]
+    if verdict["fresh"]:
         _FRESH.add(identity)
-    return out
+    return verdict
 
 
 def suite_problem(cl, dev, *, block: int | None = None, split_atomics: bool = False) -> str | None:
     """Why ``dev`` cannot run the programs a backend with these options builds, or None."""
-    bad = [
-        v
-        for v in program_verdicts(cl, dev, suite_programs(*device_config(cl, dev, block, split_atomics)))
-        if not v["ok"]
-    ]
-    return bad[0]["reason"] if bad else None
+    config = device_config(cl, dev, block, split_atomics)
+    verdict = check_device(cl, dev, suite_programs(*config), config)
+    return None if verdict["ok"] else verdict["reason"]
 
 
 def _check_main() -> int:
-    """The child process of the device check: builds the programs it is given on one
-    device, prints its verdict line, and leaves at once (PoCL aborts at exit once a
-    program came back without kernels; the verdict is out by then)."""
+    """The child process of the device check: tries what it is given on one device,
+    prints its verdict line, and leaves at once (PoCL aborts at exit once a program came
+    back without kernels; the verdict is out by then)."""
+    global _IN_CHECK
+    _IN_CHECK = True
     try:
         out = _check_here(json.loads(sys.stdin.read()))
     except Exception as exc:  # noqa: BLE001 - any failure is the device's verdict
-        out = {"error": f"the device check failed: {type(exc).__name__}: {' '.join(str(exc).split())[:200]}"}
+        said = " ".join(str(exc).split())[:300]
+        out = {"ok": False, "reason": f"the device check failed: {type(exc).__name__}: {said}"}
     sys.stdout.write(CHECK_MARK + json.dumps(out) + "\n")
     sys.stdout.flush()
     os._exit(0)
@@ -489,44 +500,123 @@ _HELD: list = []  # the child's contexts and programs, kept until it leaves
 
 
 def _check_here(payload: dict) -> dict:
+    """The child's check (see :func:`_child_check`)."""
     cl = _import_pyopencl()
     dev = _devices(cl, _platforms(cl)[payload["platform"]])[payload["device"]]
     if list(device_identity(dev)) != payload["identity"]:
-        return {"error": f"the device check found {describe_device(cl, dev)}, not the device asked for"}
-    where = describe_device(cl, dev)
+        return {
+            "ok": False,
+            "reason": f"the device check found {describe_device(cl, dev)}, not the one asked for",
+        }
     problem = compile_problem(cl, dev)
     if problem is not None:
-        return {"error": f"{where} cannot compile a kernel: {problem}"}
+        return {"ok": False, "reason": f"cannot compile a kernel: {problem}"}
     ctx = cl.Context([dev])
     _HELD.append(ctx)  # released, a context whose program came back empty aborts at once
-    results = []
+    fresh = payload["fresh"]
+    print(f"{CHECK_MARK}building the suite's programs", file=sys.stderr, flush=True)
     for files, opts, kernels in payload["programs"]:
+        if fresh and payload["config"] is not None and "label_pixels" in kernels:
+            continue  # the run below builds these (each checked for its kernels) as it needs them
         source = "\n".join(Path(f).read_text() for f in files)
         shown = " ".join(opts)
-        result = {"ok": True, "empty": False, "reason": ""}
         # twice: the second build is read back from the kernel cache, where there is one
-        for _ in range(1 if payload["fresh"] else 2):
-            extra = [_fresh_option()] if payload["fresh"] else []
+        for _ in range(1 if fresh else 2):
             try:
                 with warnings.catch_warnings():
                     warnings.simplefilter("ignore")
-                    prg = cl.Program(ctx, source).build(options=[*opts, *extra])
+                    prg = cl.Program(ctx, source).build(
+                        options=[*opts, *([_fresh_option()] if fresh else [])]
+                    )
                 _HELD.append(prg)
-                names = set(filter(None, prg.get_info(cl.program_info.KERNEL_NAMES).split(";")))
+                names = set(prg.get_info(cl.program_info.KERNEL_NAMES).split(";"))
             except cl.Error as exc:
-                result = {
+                return {
                     "ok": False,
-                    "empty": False,
-                    "reason": f"the kernels failed to build on {where} ({shown}): {_error_line(exc)}",
+                    "reason": f"the kernels failed to build ({shown}): {_error_line(exc)}",
                 }
-                break
             missing = [k for k in kernels if k not in names]
             if missing:
-                why = f"{where} built the suite's program ({shown}) without its kernels ({', '.join(missing[:3])}...)"
-                result = {"ok": False, "empty": True, "reason": why}
-                break
-        results.append(result)
-    return {"programs": results}
+                why = (
+                    f"the suite's program ({shown}) was built without its kernels ({', '.join(missing[:3])})"
+                )
+                return {"ok": False, "empty": True, "reason": why}
+    if payload["config"] is None:
+        return {"ok": True}
+    print(f"{CHECK_MARK}starting a backend", file=sys.stderr, flush=True)
+    if fresh:
+        _FRESH.add(device_identity(dev))
+    block, int64, _ = payload["config"]
+    globals().update({name: Path(path) for name, path in payload["sources"].items()})
+    device = f"{payload['platform']}:{payload['device']}"
+    try:
+        with OpenCLBackend(device=device, block=block, split_atomics=not int64) as backend:
+            why = _run_problem(backend)
+    except BackendUnavailable as exc:  # a kernel that failed, or a program without kernels
+        return {"ok": False, "reason": str(exc).removeprefix("opencl: ").split(f"; {INSTALL_HINT}")[0]}
+    return {"ok": why is None, "reason": why or ""}
+
+
+def _run_problem(backend) -> str | None:
+    """Why ``backend`` does not give the reference's results on a small problem of each
+    ball kind and facet count of the suite's metrics (labels, their sums, the walled
+    step's sums, the fit), or None."""
+    from compact_distributions.cvt.metrics import METRIC_NAMES, make_metric
+    from compact_distributions.cvt.moments import moments_from_labels
+    from compact_distributions.cvt.mosaic.pipeline import split_cells
+    from compact_distributions.cvt.placement.fit import element_for, fit_centres
+
+    from .numpy_backend import NumpyBackend
+
+    w, h, n = 83, 61, 40
+    ys, xs = np.mgrid[0:h, 0:w] + 0.5
+    mask = ((xs - w / 2) / (0.47 * w)) ** 2 + ((ys - h / 2) / (0.47 * h)) ** 2 < 1
+    mask[h // 2 - 3 : h // 2 + 3, : w // 3] = False  # a wall into the region: cells in pieces
+    rng = np.random.default_rng(7)
+    iy, ix = np.nonzero(mask)
+    pick = rng.choice(len(ix), n, replace=False)
+    sites = np.stack([ix[pick], iy[pick]], axis=1) + rng.random((n, 2))
+    angles, scales = rng.uniform(0, np.pi, n), rng.uniform(0.7, 1.4, n)
+    grid = Grid(w, h, mask)
+    shapes = {}
+    for name in METRIC_NAMES:
+        metric = make_metric(name)
+        shapes.setdefault((metric.kind, _facet_count(metric)), metric)
+    reference = NumpyBackend()
+
+    def step(what: str) -> None:  # where the child was, should the runtime crash it
+        print(f"{CHECK_MARK}{what}", file=sys.stderr, flush=True)
+
+    for metric in shapes.values():
+        args = dict(angles=angles, scales=scales, metric=metric, grid=grid)
+        step(f"the labels of {metric.name}")
+        labels = backend.label(sites, **args)
+        agree = float((labels == reference.label(sites, **args)).mean())
+        if agree < CHECK_AGREEMENT:
+            return f"{metric.name}: {100 * (1 - agree):.1f}% of the pixels labelled unlike the reference"
+        step(f"the sums of {metric.name}")
+        sums = [(backend.moments(sites, **args), moments_from_labels(labels, n), "sums")]
+        step(f"the walled step of {metric.name}")
+        sums.append(
+            (
+                backend.walled_moments(sites, **args),
+                moments_from_labels(split_cells(labels, sites), n),
+                "walled sums",
+            )
+        )
+        for got, want, what in sums:
+            if any(
+                not np.array_equal(getattr(got, f), getattr(want, f))
+                for f in ("count", "sx", "sy", "sxx", "syy")
+            ):
+                return f"{metric.name}: the {what} of its labels are not the host's"
+        shape, turn = element_for(metric)
+        step(f"the fit of {metric.name}")
+        on_device = fit_centres(labels, sites, angles + turn, shape, metric.aspect, search=backend.fit_search)
+        on_host = fit_centres(labels, sites, angles + turn, shape, metric.aspect)
+        if not all(np.array_equal(a, b) for a, b in zip(on_device, on_host, strict=True)):
+            return f"{metric.name}: the fit's centres are not the host's"
+    return None
 
 
 def _preferred(cl, devices: list, problem, named: str | None = None):
@@ -623,6 +713,8 @@ class OpenCLBackend(Backend):
         )
         self.cell_factor = float(cell_factor)
         self.local_size = None if local_size is None else tuple(int(v) for v in local_size)
+        # the programs the device check built and ran (choose_device): built without asking again
+        self._checked = set(suite_programs(self.block, self.int64_atomics, self._fits_on_device))
         # (kind, K, int64, block) -> (label, moments kernels); _fit_key -> the fit's program
         self._programs: dict[tuple, object] = {}
         self._buffers: dict[str, object] = {}
@@ -1121,14 +1213,16 @@ class OpenCLBackend(Backend):
     def _build(self, spec: ProgramSpec):
         """The program ``spec`` names, built quietly (PoCL's own compiler chatter goes to
         descriptor 2; PYOPENCL_COMPILER_OUTPUT=1 shows it), once the device check has
-        tried it in a child process (:func:`program_verdicts`; kept, so once per device);
+        tried it in a child process (:func:`check_device`; kept, so once per device);
         outside the kernel cache on a device whose programs lose their kernels there.  A
         program that fails to build, or comes without its kernels even outside the cache,
         raises BackendUnavailable saying why."""
         cl = self._cl
-        bad = [v for v in program_verdicts(cl, self._device, [spec]) if not v["ok"]]
-        if bad:
-            raise BackendUnavailable(f"opencl: {bad[0]['reason']}; {INSTALL_HINT}")
+        if spec not in self._checked:  # a user's polygon: another facet count
+            verdict = check_device(cl, self._device, [spec])
+            if not verdict["ok"]:
+                raise BackendUnavailable(f"opencl: {self.device()}: {verdict['reason']}; {INSTALL_HINT}")
+            self._checked.add(spec)
         try:
             source = "\n".join(path.read_text() for path in spec.files)
         except OSError as exc:
@@ -1187,7 +1281,7 @@ __all__ = [
     "label_program",
     "fit_program",
     "suite_programs",
-    "program_verdicts",
+    "check_device",
     "suite_problem",
     "verdict_path",
     "INSTALL_HINT",
