@@ -17,9 +17,14 @@ from functools import lru_cache
 import numpy as np
 from scipy.spatial import cKDTree
 
+from compact_distributions.cvt.metrics import METRIC_NAMES, make_metric
+
 from .base import Backend
 
-P_OF_METRIC = {"l2": 2, "l1": 1, "linf": np.inf}
+# the metrics a k-d tree query computes: the balls of a Minkowski norm, by the records
+P_OF_METRIC = {
+    name: ball.minkowski_p for name in METRIC_NAMES if (ball := make_metric(name)).minkowski_p is not None
+}
 
 
 @lru_cache(maxsize=2)
@@ -30,6 +35,7 @@ def _pixel_centres(width: int, height: int) -> np.ndarray:
 
 class CKDTreeBackend(Backend):
     name = "ckdtree"
+    contained = True  # NumPy/SciPy only: a sweep runs it in its own process
     runtime_bytes = 0  # numpy and scipy: loaded by the program itself
     bytes_per_pixel = 64  # pixel centres (float64 x, y, cached), the query's distances and indices
     bytes_per_site = 1000
@@ -41,7 +47,7 @@ class CKDTreeBackend(Backend):
     def supports(self, metric, angles, scales) -> str | None:
         if (reason := super().supports(metric, angles, scales)) is not None:
             return reason
-        if metric.name != "l2" and np.any(angles != 0):
+        if metric.minkowski_p != 2 and np.any(angles != 0):  # only the circle does not turn
             return f"metric {metric.name!r} with turned sites (a direction field) is not supported"
         if np.ptp(scales) > 0:
             return "sites of different sizes (a density) are not supported"
@@ -52,11 +58,11 @@ class CKDTreeBackend(Backend):
         centres = _pixel_centres(grid.width, grid.height)
         labels = np.full(grid.width * grid.height, -1, dtype=np.int32)
         if grid.mask is None:
-            _, idx = tree.query(centres, k=1, p=P_OF_METRIC[metric.name], workers=-1)
+            _, idx = tree.query(centres, k=1, p=metric.minkowski_p, workers=-1)
             labels[:] = idx
         else:
             inside = np.flatnonzero(grid.mask.ravel())
-            _, idx = tree.query(centres[inside], k=1, p=P_OF_METRIC[metric.name], workers=-1)
+            _, idx = tree.query(centres[inside], k=1, p=metric.minkowski_p, workers=-1)
             labels[inside] = idx
         return labels.reshape(grid.height, grid.width)
 

@@ -104,7 +104,9 @@ def shared_context():
         _CONTEXT_ERROR = "gl backend: moderngl is not installed (pip install 'compact-distributions[gl]')"
         raise BackendUnavailable(_CONTEXT_ERROR) from None
     try:
-        ctx = moderngl.create_context(standalone=True, backend="egl")
+        # ask for 4.3: moderngl asks EGL for 3.3 by default, and NVIDIA's driver then gives
+        # exactly 3.3 (Mesa gives its highest whatever is asked)
+        ctx = moderngl.create_context(standalone=True, backend="egl", require=430)
     except Exception as exc:  # moderngl raises plain Exception for EGL failures
         reason = str(exc).strip().splitlines()[0] if str(exc).strip() else type(exc).__name__
         _CONTEXT_ERROR = f"gl backend: no headless EGL OpenGL context ({reason})"
@@ -351,7 +353,7 @@ def cone_vertices(metric: Metric, segments: int) -> tuple[np.ndarray, float]:
     Polygonal balls: the outline's vertices at height 1, exact.  Elliptic balls: the
     circumscribed M-gon (contains the ball), heights scaled by 2/(1+cos(π/M)) so the
     relative error is ±tan²(π/2M) instead of 0..1-cos(π/M)."""
-    if metric.kind == "ellipse":
+    if metric.curved:
         c = math.cos(math.pi / segments)
         ring = metric.outline(segments) / c
         height = 2.0 / (1.0 + c)
@@ -406,7 +408,7 @@ def box_max_distance(coeffs, idx: np.ndarray, blocks: _Blocks) -> np.ndarray:
     px, py = coeffs.sites[idx, 0], coeffs.sites[idx, 1]
     vx0, vx1 = blocks.x0 - px, blocks.x1 - px
     vy0, vy1 = blocks.y0 - py, blocks.y1 - py
-    if coeffs.kind == "ellipse":
+    if coeffs.curved:
         q = coeffs.quad[idx]
         out = None
         for vx in (vx0, vx1):
@@ -508,7 +510,7 @@ class GLBackend(Backend):
         vendors' do)."""
         if (
             self.mode == "exact"
-            and metric.kind == "polygon"
+            and not metric.curved
             and self.ctx.info.get("GL_MAX_VERTEX_SHADER_STORAGE_BLOCKS", 0) < 1
         ):
             return "exact mode needs storage buffers in the vertex stage, which this GL driver lacks (use cone mode)"
@@ -615,24 +617,20 @@ class GLBackend(Backend):
         # margin: float32 geometry must not shave a pixel centre sitting on the boundary
         heights = heights * (1 + 1e-3) + 1e-2 / (scales * metric.inradius)
 
-        if metric.kind == "ellipse" and self.mode == "cone":
+        if metric.curved and self.mode == "cone":
             radius = float((heights * scales).max()) * metric.circumradius
             segments = ellipse_segments(radius, self.max_error_px)
-        elif metric.kind == "ellipse":
+        elif metric.curved:
             segments = EXACT_FOOTPRINT_SEGMENTS
         else:
             segments = 0
         self.last_segments = segments or None
-        facets = 0 if metric.kind == "ellipse" or self.mode == "cone" else len(metric.normals)
+        facets = 0 if metric.curved or self.mode == "cone" else len(metric.normals)
         varyings = 0 < facets <= self._varying_facets()
-        prog = self._program(metric.kind, facets, varyings)
+        prog = self._program(metric.curved, facets, varyings)
         # keyed by the ball itself: a user's polygon file may be rewritten under one name
-        ball = (
-            metric.semi_axes
-            if metric.kind == "ellipse"
-            else (metric.normals.tobytes(), metric.offsets.tobytes())
-        )
-        vao_key = (metric.kind, ball, segments, facets, varyings)
+        ball = metric.semi_axes if metric.curved else (metric.normals.tobytes(), metric.offsets.tobytes())
+        vao_key = (metric.curved, ball, segments, facets, varyings)
         reach = self._vertex_array(vao_key, metric, segments, prog)
 
         # one power of two maps every depth into [0, 1): scaling by it is exact in float
@@ -643,10 +641,10 @@ class GLBackend(Backend):
         data[:, 2], data[:, 3] = np.cos(angles), np.sin(angles)
         data[:, 4] = scales * heights
         data[:, 5] = heights * depth_scale
-        if coeffs.kind == "ellipse":
+        if coeffs.curved:
             data[:, 6:9] = coeffs.quad
         self._upload_instances(np.ascontiguousarray(data))
-        if self.mode == "exact" and coeffs.kind == "polygon":
+        if self.mode == "exact" and not coeffs.curved:
             # in the order of the faces: the face-local path reads a face's neighbours
             self._upload_facets(coeffs.facets[:, face_facets(metric)].astype(np.float32))
 
@@ -669,17 +667,17 @@ class GLBackend(Backend):
 
         return moderngl
 
-    def _program(self, kind: str, facets: int, varyings: bool):
+    def _program(self, curved: bool, facets: int, varyings: bool):
         """The drawing program; in exact mode one per kind and, for polygons, per facet
         count K (the loops' bound is a constant, so the compiler unrolls them) and per
         path of the facets (flat varyings or the storage buffer per fragment)."""
-        key = (self.mode, kind, facets, varyings)
+        key = (self.mode, curved, facets, varyings)
         if key not in self._programs:
             if self.mode == "cone":
                 frag, vert = _CONE_FRAGMENT_SHADER, _VERTEX_SHADER
             else:
-                define = "#define ELLIPSE\n" if kind == "ellipse" else f"#define FACETS {facets}\n"
-                if kind != "ellipse":
+                define = "#define ELLIPSE\n" if curved else f"#define FACETS {facets}\n"
+                if not curved:
                     define += "#define FACET_VARYINGS\n" if varyings else "#define FACE_FACETS\n"
                 frag = _EXACT_FRAGMENT_SHADER.replace("#version 430\n", "#version 430\n" + define, 1)
                 vert = _VERTEX_SHADER.replace("#version 430\n", "#version 430\n" + define, 1)

@@ -32,6 +32,7 @@ from .base import Backend
 
 class NumpyBackend(Backend):
     name = "numpy"
+    contained = True  # NumPy/SciPy only: a sweep runs it in its own process
     runtime_bytes = 0  # numpy and scipy: loaded by the program itself
 
     def __init__(self, tile: int | None = None, probe_neighbours: int = 8):

@@ -85,7 +85,7 @@ REACH_MARGIN = 1e-4  # relative slack on the search bound against float32 roundi
 
 def _facet_count(metric: Metric) -> int:
     """K of the kernels built for ``metric`` (0: an ellipse)."""
-    return 0 if metric.kind == "ellipse" else np.asarray(metric.normals).shape[0]
+    return 0 if metric.curved else np.asarray(metric.normals).shape[0]
 
 
 def block_mask_words(mask: np.ndarray, block: int) -> np.ndarray:
@@ -113,6 +113,24 @@ def _near(last, raster: tuple, sites: np.ndarray, reach: float) -> bool:
     if last is None or last[0] != raster or last[1].shape != sites.shape:
         return False
     return bool(np.abs(sites - last[1]).max(initial=0.0) <= reach)
+
+
+def _site_grid(sites, spacing: float, w: int, h: int):
+    """The uniform grid of the label search: cells of about ``spacing`` px (about one
+    site each over the region); returns the cell side, the cells across and down, the
+    sites in cell order and where each cell's sites start."""
+    # float32-exact, so the host's buckets and the kernel's cell edges agree
+    cell = float(np.float32(max(1.0, spacing)))
+    ncx, ncy = max(1, math.ceil(w / cell)), max(1, math.ceil(h / cell))
+    cx = np.clip(np.floor(sites[:, 0] / cell), 0, ncx - 1).astype(np.int64)
+    cy = np.clip(np.floor(sites[:, 1] / cell), 0, ncy - 1).astype(np.int64)
+    cid = cy * ncx + cx
+    # stable, so a cell's sites stay in index order; 16-bit keys get numpy's radix sort
+    key_type = np.uint16 if ncx * ncy <= 65535 else np.int32
+    order = np.argsort(cid.astype(key_type), kind="stable")
+    starts = np.zeros(ncx * ncy + 1, dtype=np.int32)
+    np.cumsum(np.bincount(cid, minlength=ncx * ncy), out=starts[1:])
+    return cell, ncx, ncy, order, starts
 
 
 def _fit_key(ellipse: bool, k: int) -> tuple:
@@ -284,7 +302,7 @@ def suite_programs(block: int, int64: bool, fits: bool) -> list[ProgramSpec]:
     user's polygon of another facet count is checked when it is first built)."""
     from compact_distributions.cvt.metrics import METRIC_NAMES, make_metric
 
-    shapes = sorted({(m.kind == "ellipse", _facet_count(m)) for m in map(make_metric, METRIC_NAMES)})
+    shapes = sorted({(m.curved, _facet_count(m)) for m in map(make_metric, METRIC_NAMES)})
     programs = [label_program(e, k, block, int64, fits) for e, k in shapes]
     if fits:  # an ellipse's fit uses no K: the kernel's arrays take one
         programs += [fit_program(e, 1 if e else k) for e, k in dict.fromkeys(shapes)]
@@ -581,7 +599,7 @@ def _run_problem(backend) -> str | None:
     shapes = {}
     for name in METRIC_NAMES:
         metric = make_metric(name)
-        shapes.setdefault((metric.kind, _facet_count(metric)), metric)
+        shapes.setdefault((metric.curved, _facet_count(metric)), metric)
     reference = NumpyBackend()
 
     def step(what: str) -> None:  # where the child was, should the runtime crash it
@@ -758,10 +776,10 @@ class OpenCLBackend(Backend):
     # ---------------------------------------------------------------- programs
     def _kernels(self, metric: Metric, k: int):
         """The built (label, moments) kernels for this metric kind; built once."""
-        key = (metric.kind, k, self.int64_atomics, self.block)
+        key = (metric.curved, k, self.int64_atomics, self.block)
         if key not in self._programs:
             cl = self._cl
-            ellipse = metric.kind == "ellipse"
+            ellipse = metric.curved
             prg = self._build(label_program(ellipse, k, self.block, self.int64_atomics, self._fits_on_device))
             if self._fits_on_device:
                 self._programs[_fit_key(ellipse, k)] = prg
@@ -811,7 +829,7 @@ class OpenCLBackend(Backend):
                 one
                 if n == 1
                 else type(one)(
-                    one.kind,
+                    one.curved,
                     sites,
                     facets=None
                     if one.facets is None
@@ -823,7 +841,7 @@ class OpenCLBackend(Backend):
             coeffs = compile_sites(metric, sites, angles, scales)
         hi = sites.astype(np.float32)
         lo = (sites - hi.astype(np.float64)).astype(np.float32)
-        if metric.kind == "ellipse":
+        if metric.curved:
             qxx, qxy, qyy = coeffs.quad.T
             l11 = np.sqrt(qxx)
             l21 = qxy / l11
@@ -856,18 +874,7 @@ class OpenCLBackend(Backend):
             self._mask_source, self._mask_pixels = grid.mask, int(grid.mask.sum())
         area = self._mask_pixels if use_mask else w * h
 
-        # the uniform grid: about one site per cell over the region
-        # float32-exact, so the host's buckets and the kernel's cell edges agree
-        cell = float(np.float32(max(1.0, self.cell_factor * math.sqrt(area / n))))
-        ncx, ncy = max(1, math.ceil(w / cell)), max(1, math.ceil(h / cell))
-        cx = np.clip(np.floor(sites[:, 0] / cell), 0, ncx - 1).astype(np.int64)
-        cy = np.clip(np.floor(sites[:, 1] / cell), 0, ncy - 1).astype(np.int64)
-        cid = cy * ncx + cx
-        # stable, so a cell's sites stay in index order; 16-bit keys get numpy's radix sort
-        key_type = np.uint16 if ncx * ncy <= 65535 else np.int32
-        order = np.argsort(cid.astype(key_type), kind="stable")
-        starts = np.zeros(ncx * ncy + 1, dtype=np.int32)
-        np.cumsum(np.bincount(cid, minlength=ncx * ncy), out=starts[1:])
+        cell, ncx, ncy, order, starts = _site_grid(sites, self.cell_factor * math.sqrt(area / n), w, h)
 
         cl = self._cl
         starts_buf = self._upload("cell_start", starts)
@@ -1141,7 +1148,7 @@ class OpenCLBackend(Backend):
         if self._queue is None:
             raise RuntimeError("opencl: this backend was closed; create a new one")
         cl = self._cl
-        ellipse = cells.kind == "ellipse"
+        ellipse = cells.curved
         k = 1 if ellipse else len(cells.slack)
         key = _fit_key(ellipse, k)
         if key not in self._programs:  # no label program of this shape built the fit's

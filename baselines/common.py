@@ -32,7 +32,7 @@ from compact_distributions.cvt.distribution import Distribution
 from compact_distributions.cvt.evaluate import region_polygon
 from compact_distributions.cvt.lloyd import iterate
 from compact_distributions.cvt.methods import Method, MethodOption, SweepVariant
-from compact_distributions.cvt.metrics import Metric
+from compact_distributions.cvt.metrics import REFERENCE_SHAPE, Metric
 from compact_distributions.cvt.placement.fit import contour_samples, parse_gap
 from compact_distributions.cvt.problem import Grid, Problem, in_own_cell
 from compact_distributions.cvt.seeding import initial_sites
@@ -40,6 +40,7 @@ from compact_distributions.cvt.shapes import (
     check_shape,
     element_ball,
     element_polygons,
+    rotational_symmetry,
     shape_record,
     unit_outline,
 )
@@ -66,7 +67,7 @@ DELTA_OPTION = MethodOption(
     tag="d",
     label="δ={:g}",
 )
-SMALLER_BUDGET_VARIANTS = tuple(SweepVariant({"delta": d}, ("square",)) for d in SMALLER_BUDGETS)
+SMALLER_BUDGET_VARIANTS = tuple(SweepVariant({"delta": d}, (REFERENCE_SHAPE,)) for d in SMALLER_BUDGETS)
 
 
 def baseline(
@@ -84,7 +85,7 @@ def baseline(
         paper_table2=paper_table2,
         role="baseline",
         sweep_backends="reference",
-        compared_on=("square",),
+        compared_on=(REFERENCE_SHAPE,),
         sweep_variants=SMALLER_BUDGET_VARIANTS if fixed_size else (),
         summary=summary,
     )
@@ -105,6 +106,11 @@ class TileShape:
         k = shape_record(self.name).symmetry
         return 2 * math.pi / k if k else 2 * math.pi
 
+    @property
+    def turns_freely(self) -> bool:
+        """Whether every turn maps the outline onto itself (a circle)."""
+        return rotational_symmetry(self.name, self.aspect) == 0
+
     def gauge(self, vx, vy, theta) -> np.ndarray:
         """Gauge of world offsets (vx, vy) in the frame of a tile turned by ``theta``:
         a point is inside the tile of size s iff gauge <= s."""
@@ -115,7 +121,7 @@ class TileShape:
         that test many points per tile and gather one cosine per tile."""
         ux = c * vx + s * vy  # R(-θ) v
         uy = c * vy - s * vx
-        if self.ball.kind == "ellipse":
+        if self.ball.curved:
             a, b = self.ball.semi_axes
             return np.hypot(ux / a, uy / b)
         n, h = self.ball.normals, self.ball.offsets
@@ -131,7 +137,7 @@ class TileShape:
         g = self.gauge(vx, vy, theta)
         if gap <= 0:
             return g
-        if self.ball.kind == "polygon":
+        if not self.ball.curved:
             c, s = np.cos(theta), np.sin(theta)
             ux, uy = c * vx + s * vy, c * vy - s * vx
             n, h = self.ball.normals, self.ball.offsets
@@ -148,8 +154,9 @@ class TileShape:
 
 
 def tile_shape(problem: Problem, element: str | None, default: str | None = None) -> TileShape:
-    """The element shape: ``element``, else ``default``, else the metric's own shape."""
-    name = check_shape(element or default or problem.metric.natural_element)
+    """The element shape: ``element``, else the method's ``default``, else the problem's,
+    else the metric's own shape."""
+    name = check_shape(element or default or problem.element or problem.metric.natural_element)
     aspect = problem.metric.aspect
     outline = unit_outline(name, aspect)
     x, y = outline[:, 0], outline[:, 1]

@@ -97,7 +97,7 @@ def best_fit_turn(shape):
             centres, [0.0, 0.0], [w - 1e-9, h - 1e-9]
         )  # a centre off the raster is measured from its edge
         period = shape.symmetry
-        if period >= 2 * math.pi - 1e-9 and shape.name == "circle":
+        if shape.turns_freely:
             return angles  # a circle has no orientation
         half = period / 2
         k = int(np.floor(half / COARSE_STEP))

@@ -39,7 +39,7 @@ from contextlib import contextmanager
 from functools import lru_cache
 from pathlib import Path
 
-from compact_distributions.cvt.errors import InputError, RunAborted
+from compact_distributions.cvt.errors import InputError, RunAborted, exception_line
 from compact_distributions.cvt.validate import whole_number
 
 from .outputs import versions
@@ -122,7 +122,7 @@ def check_workers(client, mine: dict) -> dict:
     found = client.run(identity, on_error="return")
     for address, theirs in sorted(found.items()):
         if isinstance(theirs, BaseException):
-            raise InputError(f"worker {address} cannot run the suite: {_one_line(theirs)}")
+            raise InputError(f"worker {address} cannot run the suite: {exception_line(theirs)}")
         diff = differences(mine, theirs)
         if diff:
             raise InputError(
@@ -218,7 +218,7 @@ class DaskExecutor:
             if self.lost():
                 raise RunAborted(
                     f"lost the Dask cluster at {self.address} in the middle of the sweep "
-                    f"({_one_line(exc)}; Dask's log: {log_file()})"
+                    f"({exception_line(exc)}; Dask's log: {log_file()})"
                 ) from None
             raise
         finally:
@@ -313,13 +313,8 @@ class DaskExecutor:
                 value["row"]["host_slots"] = 1 if self.exclusive else self.slots.get(host, 1)
             return status, value
         if future.status == "error":
-            return "failed", _one_line(future.exception())
+            return "failed", exception_line(future.exception())
         return "failed", f"the cluster lost the run ({future.status})"
-
-
-def _one_line(exc: BaseException) -> str:
-    text = str(exc).strip().splitlines()
-    return f"{type(exc).__name__}: {text[0]}" if text else type(exc).__name__
 
 
 def log_file() -> Path:
@@ -385,7 +380,7 @@ def local_cluster(n_workers: int):
             )
         except Exception as exc:  # no process could start, no port, no memory: an outcome, not a crash
             raise RunAborted(
-                f"could not start a local Dask cluster of {n_workers} workers ({_one_line(exc)}; "
+                f"could not start a local Dask cluster of {n_workers} workers ({exception_line(exc)}; "
                 f"Dask's log: {log_file()}); run without --workers to run here"
             ) from None
         with cluster:
@@ -415,7 +410,7 @@ def connect(address: str):
     try:
         client = Client(address, timeout=CONNECT_TIMEOUT_S)
     except (OSError, TimeoutError, ValueError) as exc:
-        raise InputError(f"cannot reach the Dask scheduler at {address}: {_one_line(exc)}") from None
+        raise InputError(f"cannot reach the Dask scheduler at {address}: {exception_line(exc)}") from None
     with client:
         if not client.scheduler_info()["workers"]:
             try:

@@ -14,7 +14,7 @@ from pathlib import Path
 
 from compact_distributions.backends import REGISTRY, VARIANTS, create_backend, resolve
 from compact_distributions.cvt.errors import InputError
-from compact_distributions.cvt.metrics import ELEMENT_METRIC, METRIC_NAMES
+from compact_distributions.cvt.metrics import DEFAULT_ELEMENT, ELEMENT_METRIC, METRIC_NAMES
 from compact_distributions.cvt.shapes import ELEMENT_SHAPES
 from compact_distributions.cvt.validate import whole_number
 
@@ -68,7 +68,7 @@ def open_backend(args):
     return create_backend(name, **options)
 
 
-def add_shape_options(p, default_element: str = "square") -> None:
+def add_shape_options(p, default_element: str = DEFAULT_ELEMENT) -> None:
     """``--metric``, ``--element`` (either implies the other; neither: ``default_element``)
     and ``--aspect``."""
     p.add_argument(
@@ -143,7 +143,9 @@ def method_options(args, method=None) -> dict:
 
 def add_run_options(p, iterations: int = 20, seed_help: str = "random seed (default 0)") -> None:
     p.add_argument(
-        "--iterations", default=str(iterations), help=f"Lloyd iterations (default {iterations}; 0 allowed)"
+        "--iterations",
+        default=str(iterations),
+        help=f"Lloyd iterations (default {iterations}; 0 allowed); with --tolerance, their cap",
     )
     p.add_argument("--seed", default="0", help=seed_help)
 
@@ -279,6 +281,19 @@ def add_list_options(p, *names: str) -> None:
         p.add_argument(f"--{name}", default=None, help=helps[name])
 
 
+def shape_names(items, name: str = "--shapes") -> list[str] | None:
+    """Element shapes of a sweep, checked as ``run --element`` checks one: a built-in
+    shape's name or the user's ``polygon:FILE`` (read and checked now), else InputError
+    naming ``name``; a comma list (text) or a sequence; None stays None."""
+    from compact_distributions.cvt.shapes import shape_record
+    from compact_distributions.cvt.validate import name_list
+
+    if items is None:
+        return None
+    listed = name_list(items, name) if isinstance(items, str) else list(items)
+    return [shape_record(s, name).name for s in listed]
+
+
 MAX_SEEDS = 1000
 
 
@@ -318,6 +333,7 @@ __all__ = [
     "add_cluster_options",
     "add_seeds_option",
     "add_list_options",
+    "shape_names",
     "MAX_SEEDS",
     "seeds_value",
     "add_memory_option",

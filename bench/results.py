@@ -1,6 +1,6 @@
 """The one ``result.json`` of every command that writes one (``cvtbench run``,
 ``cvtbench mosaic``).  Its JSON Schema ships beside this module as
-``result.schema.json``; the README lists the fields.
+``result.schema.json``; the documentation's result.json page lists the fields.
 
 ``kind`` says which command wrote it; ``elements`` is always the list of element
 outlines (one per site, null where a site has no element) and ``placed`` their count.
@@ -20,7 +20,18 @@ SCHEMA_FILE = Path(__file__).with_name("result.schema.json")
 
 
 def schema() -> dict:
-    return json.loads(SCHEMA_FILE.read_text())
+    """The result.json schema, with the metric and element names read from the shape table
+    (the file itself names no shape: a new record needs no edit there)."""
+    from compact_distributions.cvt.metrics import METRIC_NAMES, POLYGON_PREFIX, SHAPES
+
+    out = json.loads(SCHEMA_FILE.read_text())
+    users = {"type": "string", "pattern": f"^{POLYGON_PREFIX}."}
+    for name, names in (("metric", METRIC_NAMES), ("element", tuple(SHAPES))):
+        out["properties"][name] = {
+            "description": out["properties"][name]["description"],
+            "anyOf": [{"enum": list(names)}, users],
+        }
+    return out
 
 
 def stages_of(dist) -> dict:
@@ -87,6 +98,8 @@ def build_result(
         "region": sources.get("region"),
         "region_pixels": g.pixel_count,
         "iterations": dist.iterations,
+        # a method whose loop is cvt.lloyd.lloyd says why it stopped; the others run their count
+        "stopped_by": dist.extra.get("stopped_by", "iterations"),
         "sites": dist.sites,
         "angles": dist.angles,
         "scales": dist.scales,

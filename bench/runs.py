@@ -10,7 +10,9 @@ from __future__ import annotations
 
 import hashlib
 import io
+import re
 from dataclasses import asdict, dataclass
+from pathlib import Path
 
 import numpy as np
 
@@ -62,7 +64,7 @@ class RunSpec:
         gap = f"__gap{self.gap:g}" if self.gap else ""
         scene = f"{self.scene}__" if self.scene else ""
         return (
-            f"{scene}{self.method}__{self.backend}__{self.element}__{self.width}x{self.height}"
+            f"{scene}{self.method}__{self.backend}__{element_key(self.element)}__{self.width}x{self.height}"
             f"__n{self.n_elements}__it{self.iterations}__s{self.seed}{gap}"
             f"{self.method_record.key(dict(self.options))}"
         )
@@ -194,6 +196,19 @@ class RunSpec:
         return record
 
 
+def element_key(element: str) -> str:
+    """The element's part of a run's key (a file name): a built-in shape's name; for the
+    user's ``polygon:FILE``, the file's stem and a digest of its unit ball, so that the
+    key holds no path and a changed file is a new run."""
+    from compact_distributions.cvt.metrics import POLYGON_PREFIX
+
+    if not element.startswith(POLYGON_PREFIX):
+        return element
+    ball = np.asarray(shape_record(element).vertices, dtype=np.float64)
+    stem = re.sub(r"[^A-Za-z0-9_.-]+", "-", Path(element[len(POLYGON_PREFIX) :]).stem).strip("-.") or "file"
+    return f"polygon-{stem[:40]}-{hashlib.sha1(ball.tobytes()).hexdigest()[:10]}"
+
+
 def sites_digest(sites) -> str:
     """sha1 of the float64 sites: equal digests = bit-identical runs (across backends too)."""
     return hashlib.sha1(np.ascontiguousarray(sites, dtype=np.float64).tobytes()).hexdigest()
@@ -243,4 +258,12 @@ def effect_picture(elements, grid, side: int = 512, crop: float | None = None):
     )
 
 
-__all__ = ["RunSpec", "sites_digest", "PICTURE_ELEMENTS", "PICTURE_PALETTE", "picture_crop", "effect_picture"]
+__all__ = [
+    "RunSpec",
+    "element_key",
+    "sites_digest",
+    "PICTURE_ELEMENTS",
+    "PICTURE_PALETTE",
+    "picture_crop",
+    "effect_picture",
+]

@@ -37,8 +37,9 @@ import numpy as np
 from compact_distributions.backends import REFERENCE as REFERENCE_BACKEND
 from compact_distributions.backends import fall_back, variant_metrics, variant_names, variant_status
 from compact_distributions.cvt.errors import InputError
+from compact_distributions.cvt.metrics import REFERENCE_SHAPE
 from compact_distributions.cvt.registry import get_method, method_names
-from compact_distributions.cvt.shapes import ELEMENT_SHAPES, PAPER_SHAPES
+from compact_distributions.cvt.shapes import PAPER_SHAPES
 from compact_distributions.cvt.validate import name_list, one_of
 
 from . import options
@@ -172,7 +173,7 @@ def aggregate(rows: list[dict]):
         # the paper's figures stand on the square rows of a method run with its defaults
         paper = (
             get_method(first["base"]).paper_table2
-            if element == "square" and method == first["base"]
+            if element == REFERENCE_SHAPE and method == first["base"]
             else None
         )
         rec = {
@@ -222,13 +223,39 @@ def _every_backend(label: str) -> bool:
     return _record(label).sweep_backends == "every"
 
 
+def _equal_overlap_ranking(sq) -> list[str]:
+    """The sentence that ranks the reference shape's rows at 1 % overlap (none without
+    those figures)."""
+    from .report import fmt_pct
+
+    lines = []
+    fair = sq[sq["coverage_at_1pct_overlap"].notna()] if "coverage_at_1pct_overlap" in sq else sq.iloc[0:0]
+    fair = fair[
+        [
+            not _every_backend(m) or b == REFERENCE_BACKEND
+            for m, b in zip(fair["method"], fair["backend"], strict=True)
+        ]
+    ]
+    if len(fair):
+        ranked = fair.sort_values("coverage_at_1pct_overlap", ascending=False)
+        lines.append(
+            "- At equal overlap (every method's elements scaled about their centres until the overlap "
+            "is 1 %, `coverage_overlap.csv`, `coverage_overlap.png`) the squares rank: "
+            + ", ".join(
+                f"{r['method']} {fmt_pct(r['coverage_at_1pct_overlap'])}" for _, r in ranked.iterrows()
+            )
+            + "."
+        )
+    return lines
+
+
 def discussion(table) -> str:
     """How the measured ordering compares with the paper's, and how the methods rank at
     equal overlap: every sentence is computed from the rows at hand and the methods'
     records (which is the paper's method, which the baselines, what the paper measured)."""
     from .report import fmt_pct, fmt_seconds
 
-    sq = table[(table["element"] == "square") & table["status"].isin(["ok", "partial"])]
+    sq = table[(table["element"] == REFERENCE_SHAPE) & table["status"].isin(["ok", "partial"])]
     # one row per method: those swept over every backend by their reference backend's row
     cov = {
         r["method"]: r
@@ -295,23 +322,7 @@ def discussion(table) -> str:
             "they allow and we count; with smaller tiles: " + "; ".join(smaller) + ". The paper gives "
             "neither its tile sizes nor how it treats overlap."
         )
-    fair = sq[sq["coverage_at_1pct_overlap"].notna()] if "coverage_at_1pct_overlap" in sq else sq.iloc[0:0]
-    fair = fair[
-        [
-            not _every_backend(m) or b == REFERENCE_BACKEND
-            for m, b in zip(fair["method"], fair["backend"], strict=True)
-        ]
-    ]
-    if len(fair):
-        ranked = fair.sort_values("coverage_at_1pct_overlap", ascending=False)
-        lines.append(
-            "- At equal overlap (every method's elements scaled about their centres until the overlap "
-            "is 1 %, `coverage_overlap.csv`, `coverage_overlap.png`) the squares rank: "
-            + ", ".join(
-                f"{r['method']} {fmt_pct(r['coverage_at_1pct_overlap'])}" for _, r in ranked.iterrows()
-            )
-            + "."
-        )
+    lines += _equal_overlap_ranking(sq)
     per_backend = sq[sq["method"] == paper_method]
     fast = [
         f"{r['backend']} {fmt_seconds(r['lloyd_seconds_mean'])}"
@@ -357,6 +368,35 @@ def _problem_notes(methods: list[str]) -> list[str]:
     return notes
 
 
+def _table_rows(table, shared, by_host: bool) -> list[list]:
+    """Table 2's rows as text: the runs that finished (``shared``: their time was taken
+    beside other runs; ``by_host``: add the host)."""
+    from .report import fmt_pct, fmt_seconds
+
+    body = []
+    for k, r in table.iterrows():
+        if r["status"] not in ("ok", "partial"):
+            continue
+        body.append(
+            [
+                r["method"],
+                r["backend"],
+                r["element"],
+                fmt_pct(r["coverage_mean"], r["coverage_sd"]),
+                fmt_pct(r["overlap_mean"], r["overlap_sd"], digits=2),
+                fmt_pct(r["coverage_at_1pct_overlap"]),
+                fmt_seconds(r["method_seconds_mean"]) + (" ‡" if shared[k] else ""),
+                fmt_seconds(r["lloyd_seconds_mean"]),
+                f"{r['ms_per_iteration']:.3g}",
+                f"{r['runs']}/{r['seeds']}",
+                fmt_pct(r["paper_coverage"]) if r["paper_time"] else "",
+                r["paper_time"] or "",
+            ]
+            + ([r["hosts"]] if by_host else [])
+        )
+    return body
+
+
 def render_markdown(
     table,
     prov: dict,
@@ -370,7 +410,7 @@ def render_markdown(
     pictured: bool = True,
     methods: list[str] | None = None,
 ) -> str:
-    from .report import fmt_pct, fmt_seconds, header_markdown, markdown_table, several_hosts
+    from .report import fmt_seconds, header_markdown, markdown_table, several_hosts
 
     title = "Table 2, regenerated" + (
         " (QUICK: small raster, 2 seeds; not the paper's scale)" if quick else ""
@@ -412,27 +452,7 @@ def render_markdown(
     ]
     by_host = several_hosts(table["hosts"])  # rows from several machines say which
     shared = table["host_slots"].fillna(1) > 1  # times taken beside other runs of the sweep
-    body = []
-    for k, r in table.iterrows():
-        if r["status"] not in ("ok", "partial"):
-            continue
-        body.append(
-            [
-                r["method"],
-                r["backend"],
-                r["element"],
-                fmt_pct(r["coverage_mean"], r["coverage_sd"]),
-                fmt_pct(r["overlap_mean"], r["overlap_sd"], digits=2),
-                fmt_pct(r["coverage_at_1pct_overlap"]),
-                fmt_seconds(r["method_seconds_mean"]) + (" ‡" if shared[k] else ""),
-                fmt_seconds(r["lloyd_seconds_mean"]),
-                f"{r['ms_per_iteration']:.3g}",
-                f"{r['runs']}/{r['seeds']}",
-                fmt_pct(r["paper_coverage"]) if r["paper_time"] else "",
-                r["paper_time"] or "",
-            ]
-            + ([r["hosts"]] if by_host else [])
-        )
+    body = _table_rows(table, shared, by_host)
     text += "\n" + markdown_table(cols + (["host"] if by_host else []), body)
     if shared.any():
         text += (
@@ -502,7 +522,7 @@ def render_coverage_overlap(curves, path: Path) -> bool:
 
     from .report import save_figure
 
-    sq = curves[curves["element"] == "square"]
+    sq = curves[curves["element"] == REFERENCE_SHAPE]
     if sq.empty:
         return False
     fig, ax = plt.subplots(figsize=(8, 5.2), dpi=110, layout="constrained")
@@ -618,12 +638,9 @@ class Table2Request(options.SweepRequest):
         cfg = QUICK if args.quick else FULL
         listed = {
             name: name_list(getattr(args, name), f"--{name}", choices)
-            for name, choices in (
-                ("methods", method_names()),
-                ("backends", variant_names()),
-                ("shapes", ELEMENT_SHAPES),
-            )
+            for name, choices in (("methods", method_names()), ("backends", variant_names()))
         }
+        listed["shapes"] = options.shape_names(args.shapes)
         return cls(
             **cls.common(args),
             seeds=options.seeds_value(args.seeds, cfg["seeds"]),
@@ -645,7 +662,7 @@ def prepare(req: Table2Request) -> dict:
     chosen = [one_of(m, "--methods", all_methods) for m in req.methods or all_methods]
     methods = [m for m in all_methods if m in chosen]  # the registry's order
     backends, unavailable = sweep_backends(req.backends)
-    shapes = [one_of(s, "--shapes", ELEMENT_SHAPES) for s in req.shapes] if req.shapes else None
+    shapes = options.shape_names(req.shapes) if req.shapes else None
     for name in req.method_options:  # an option is for the methods that declare it: one of them must run
         if not any(get_method(m).option(name) for m in methods):
             raise InputError(
@@ -663,7 +680,7 @@ def table2(req: Table2Request) -> int:
     from .cluster import executor_for
     from .outputs import report_folder
     from .report import provenance, write_csv, write_markdown, written_files
-    from .sweep import run_sweep
+    from .sweep import check_runs, run_sweep
 
     t0 = time.perf_counter()
     plan = prepare(req)
@@ -710,6 +727,7 @@ def table2(req: Table2Request) -> int:
             out, ["table2.md", "table2.csv", "table2.png", "coverage_overlap.csv", "coverage_overlap.png"]
         )
     _print_summary(table, out, written)
+    check_runs(specs, rows, "table2")  # the report is written; a failed run still fails the command
     return 0
 
 

@@ -34,8 +34,9 @@ from types import SimpleNamespace
 
 from compact_distributions.backends import REFERENCE as REFERENCE_BACKEND
 from compact_distributions.cvt.evaluate import MEASURES
+from compact_distributions.cvt.metrics import REFERENCE_SHAPE
 from compact_distributions.cvt.registry import get_method, method_names
-from compact_distributions.cvt.shapes import ELEMENT_SHAPES, PAPER_SHAPES
+from compact_distributions.cvt.shapes import PAPER_SHAPES
 from compact_distributions.cvt.validate import name_list, one_of
 
 from . import options
@@ -170,7 +171,7 @@ def discussion(table) -> str:
     paper's method (its record's role) is set against the paper's method."""
     lines = ["", "## What the measures show", ""]
     ok = table[table["status"].isin(["ok", "partial"])]
-    sq = ok[ok["element"] == "square"]
+    sq = ok[ok["element"] == REFERENCE_SHAPE]
     row = {(r["scene"], r["method"]): r for _, r in sq.iterrows()}
     role = {m: get_method(m).role for m in dict.fromkeys(sq["method"])}
     paper = next((m for m, r in role.items() if r == "paper"), None)
@@ -250,7 +251,7 @@ def render_markdown(
         "record compares it on (the baselines on squares; rectangle and ellipse β = 0.5)",
         "the baselines on the NumPy reference backend, the others on the OpenCL backend where it is "
         "available (else NumPy)",
-        "measures (cvt.evaluate, formulas in the README): "
+        "measures (cvt.evaluate, formulas on the documentation's measures page, docs/guide/measures.md): "
         + "; ".join(f"{m}: {text}" for m, (text, _) in MEASURES.items()),
         f"this command took {fmt_seconds(elapsed)}; {cached} of {total} runs were read back from raw/ "
         "(run with --force to redo them)",
@@ -304,7 +305,7 @@ def render_tradeoff(rows: list[dict], path: Path) -> bool:
 
     from .report import save_figure
 
-    df = pd.DataFrame([r for r in rows if r.get("status") == "ok" and r.get("element") == "square"])
+    df = pd.DataFrame([r for r in rows if r.get("status") == "ok" and r.get("element") == REFERENCE_SHAPE])
     panels = [
         ("size_fidelity", "density", "size error: RMS log2(area / target)"),
         ("direction_fidelity", "field", "direction error: mean angle to the field (°)"),
@@ -355,7 +356,7 @@ def prepare(args) -> dict:
         "quick": args.quick,
         "seeds": args.seeds,
         "methods": name_list(args.methods, "--methods", method_names()),
-        "shapes": name_list(args.shapes, "--shapes", ELEMENT_SHAPES),
+        "shapes": options.shape_names(args.shapes),
         "scenes": name_list(args.scenes, "--scenes", list(SCENES)),
         "force": args.force,
         "quiet": args.quiet,
@@ -388,7 +389,7 @@ def plan(
     cfg = QUICK if quick else FULL
     k = options.seeds_value(seeds, cfg["seeds"])
     methods = [one_of(m, "--methods", method_names()) for m in (methods or method_names())]
-    shapes = [one_of(s, "--shapes", ELEMENT_SHAPES) for s in (shapes or PAPER_SHAPES)]
+    shapes = options.shape_names(shapes or PAPER_SHAPES)
     scenes = [one_of(s, "--scenes", list(SCENES)) for s in (scenes or SCENES)]
     check_folder(out)
     _, unavailable = sweep_backends(None)
@@ -412,7 +413,8 @@ def run_table3(
     memory_limit=None,
     command: str | None = None,
 ):
-    """Run Table 3 into the folder ``out`` and return its table (a DataFrame).
+    """Run Table 3 into the folder ``out`` and return its table (a DataFrame); where a run
+    failed, the report is written and :class:`.sweep.RunsFailed` raised naming it.
 
     ``quick``: the small set; ``seeds``: K (seeds 0..K-1; default 5, quick 2);
     ``methods``, ``shapes``, ``scenes``: subsets (default all); ``force``: re-run stored
@@ -422,7 +424,7 @@ def run_table3(
     from .cluster import chosen, executor_for
     from .outputs import report_folder
     from .report import provenance, write_csv, write_markdown, written_files
-    from .sweep import run_sweep
+    from .sweep import check_runs, run_sweep
 
     t0 = time.perf_counter()
     out = Path(out)
@@ -455,6 +457,7 @@ def run_table3(
         written = written_files(out, ["table3.md", "table3.csv", "table3_tradeoff.png"])
     if not quiet:
         print(f"wrote {out}/{', '.join(written)} in {time.perf_counter() - t0:.0f} s", file=sys.stderr)
+    check_runs(p["specs"], rows, "table3")  # the report is written; a failed run still fails the command
     return table
 
 

@@ -26,6 +26,7 @@ from __future__ import annotations
 
 import importlib
 from importlib.metadata import PackageNotFoundError, version
+from typing import TYPE_CHECKING, Any
 
 try:
     __version__ = version("compact-distributions")
@@ -53,12 +54,59 @@ _NAMES = {
     "MosaicResult": "cvt.mosaic.pipeline:MosaicResult",
     "InputError": "cvt.errors:InputError",
     "BackendUnavailable": "cvt.errors:BackendUnavailable",
+    "PluginError": "cvt.errors:PluginError",
 }
 
-__all__ = ["__version__", *_NAMES]
+# written out (the same names as _NAMES, tests/test_api_docs.py checks) so that type
+# checkers know what the package exports
+__all__ = [
+    "__version__",
+    "run",
+    "mosaic",
+    "problem",
+    "RunResult",
+    "get_method",
+    "method_names",
+    "Method",
+    "MethodOption",
+    "create_backend",
+    "backend_names",
+    "Backend",
+    "Problem",
+    "Grid",
+    "make_metric",
+    "evaluate",
+    "Distribution",
+    "MosaicResult",
+    "InputError",
+    "BackendUnavailable",
+    "PluginError",
+]
+
+if TYPE_CHECKING:  # the same names for type checkers, which do not run __getattr__
+    from .backends import create_backend as create_backend
+    from .backends import variant_names as backend_names
+    from .backends.base import Backend as Backend
+    from .bench.api import RunResult as RunResult
+    from .bench.api import mosaic as mosaic
+    from .bench.api import problem as problem
+    from .bench.api import run as run
+    from .cvt.distribution import Distribution as Distribution
+    from .cvt.errors import BackendUnavailable as BackendUnavailable
+    from .cvt.errors import InputError as InputError
+    from .cvt.errors import PluginError as PluginError
+    from .cvt.evaluate import evaluate as evaluate
+    from .cvt.methods import Method as Method
+    from .cvt.methods import MethodOption as MethodOption
+    from .cvt.metrics import make_metric as make_metric
+    from .cvt.mosaic.pipeline import MosaicResult as MosaicResult
+    from .cvt.problem import Grid as Grid
+    from .cvt.problem import Problem as Problem
+    from .cvt.registry import get_method as get_method
+    from .cvt.registry import method_names as method_names
 
 
-def __getattr__(name: str):
+def __getattr__(name: str) -> Any:
     target = _NAMES.get(name)
     if target is None:
         raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
@@ -68,5 +116,5 @@ def __getattr__(name: str):
     return value
 
 
-def __dir__():
+def __dir__() -> list[str]:
     return sorted(__all__)

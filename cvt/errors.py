@@ -18,4 +18,21 @@ class RunAborted(RuntimeError):
     it ran on was lost): the CLI prints its one line and exits with status 1."""
 
 
-__all__ = ["InputError", "BackendUnavailable", "RunAborted"]
+class PluginError(RunAborted):
+    """A method or backend of another distribution (a plug-in) that raised, or returned
+    something the suite cannot use: one line naming the plug-in, its distribution and
+    what it did; the CLI exits with status 1 (``--verbose`` adds the traceback)."""
+
+
+def exception_line(exc: BaseException) -> str:
+    """``Type: first line of the message`` of an exception (its type alone if it says nothing)."""
+    lines = str(exc).strip().splitlines()
+    return f"{type(exc).__name__}: {lines[0]}" if lines else type(exc).__name__
+
+
+def kind_of(value: object) -> str:
+    """What an error says a wrong value is: ``None``, ``a str``, ``a dict``, ..."""
+    return "None" if value is None else f"a {type(value).__name__}"
+
+
+__all__ = ["InputError", "BackendUnavailable", "RunAborted", "PluginError", "exception_line", "kind_of"]

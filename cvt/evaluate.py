@@ -17,27 +17,65 @@ than by ``union_all`` of everything (4000 circles on 1024²: ~0.03 s instead of 
 
 from __future__ import annotations
 
+from collections.abc import Iterable, Sequence
 from dataclasses import dataclass
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
+import numpy.typing as npt
 import shapely
 
 from compact_distributions.cvt.pixels import PIXEL_BAND, index_ranges
 from compact_distributions.cvt.problem import Grid
 
+if TYPE_CHECKING:
+    from compact_distributions.cvt.problem import Problem
+
 
 @dataclass
 class Evaluation:
+    """The suite's measures of placed elements: what :func:`evaluate` returns.
+
+    Parameters
+    ----------
+    coverage : float
+        Area of the union of the elements inside the region / area of the region.
+    overlap : float
+        Summed area of the elements inside the region less the union's, / area of the
+        region: the share covered more than once.
+    elements : int
+        The number of elements placed.
+    skipped : int
+        Sites without an element (empty or degenerate cells).
+    min_area : float
+        The smallest placed element's area, px² (0 with none placed).
+    max_area : float
+        The largest placed element's area, px² (0 with none placed).
+    empty_cells : int or None, optional
+        Sites whose cell holds no pixel of the label raster; None when no labels were
+        given.
+    overlapping_pairs : int, optional
+        Pairs of elements that share a positive area.
+    """
+
     coverage: float
     overlap: float
-    elements: int  # elements placed
-    skipped: int  # sites without an element (empty or degenerate cells)
-    min_area: float  # smallest placed element, px²
-    max_area: float  # largest placed element, px²
-    empty_cells: int | None = None  # sites whose cell holds no pixel (when labels given)
-    overlapping_pairs: int = 0  # pairs of elements that share a positive area
+    elements: int
+    skipped: int
+    min_area: float
+    max_area: float
+    empty_cells: int | None = None
+    overlapping_pairs: int = 0
 
-    def as_dict(self) -> dict:
+    def as_dict(self) -> dict[str, Any]:
+        """Return the measures under the names result.json gives them.
+
+        Returns
+        -------
+        dict of str to float or int or None
+            ``coverage``, ``overlap``, ``placed``, ``skipped``, ``min_element_area``,
+            ``max_element_area``, ``empty_cells``, ``overlapping_pairs``.
+        """
         return {
             "coverage": self.coverage,
             "overlap": self.overlap,
@@ -50,7 +88,7 @@ class Evaluation:
         }
 
 
-def region_polygon(grid: Grid):
+def region_polygon(grid: Grid) -> Any:
     """The region as a shapely geometry in pixel units (pixel squares, unioned)."""
     if grid.mask is None:
         return shapely.box(0, 0, grid.width, grid.height)
@@ -84,7 +122,7 @@ def empty_cells(labels: np.ndarray, n_elements: int) -> int:
 UNION_BATCH = 4096  # elements unioned at once: bounds the memory of a union
 
 
-def _union_area(geoms, a, b) -> float:
+def _union_area(geoms: np.ndarray, a: np.ndarray, b: np.ndarray) -> float:
     """Area of the union of the elements that share area with another (pairs a, b).
 
     Elements of different groups of overlapping elements (connected components of the
@@ -116,10 +154,43 @@ def _union_area(geoms, a, b) -> float:
     return total
 
 
-def evaluate(elements, grid: Grid, region=None, labels=None) -> Evaluation:
-    """Coverage and overlap of ``elements`` (shapely polygons; None entries are skipped).
+def evaluate(
+    elements: Sequence[Any], grid: Grid, region: Any = None, labels: np.ndarray | None = None
+) -> Evaluation:
+    """Measure the coverage and overlap of placed elements in a region.
 
-    ``labels`` (the final label raster, optional) adds the number of empty cells."""
+    ``coverage = area(union(elements) ∩ region) / area(region)`` and ``overlap =
+    (Σ area(element ∩ region) − area(union(elements) ∩ region)) / area(region)``,
+    with shapely's vectorised functions (no Python loop over elements or pairs).
+
+    Parameters
+    ----------
+    elements : sequence of shapely.Geometry or None
+        One per site; None and empty entries are sites without an element.
+    grid : Grid
+        The raster and its region (the union of its pixels' squares).
+    region : shapely.Geometry or None, optional
+        The region as a geometry, when the caller has it already
+        (``region_polygon(grid)``); None: made from ``grid``.
+    labels : numpy.ndarray or None, optional
+        The final (H, W) label raster, to count the empty cells.
+
+    Returns
+    -------
+    Evaluation
+        Coverage, overlap, counts and the smallest and largest element's area.
+
+    Examples
+    --------
+    Two unit-overlapping squares on a 10 x 10 raster:
+
+    >>> import shapely
+    >>> import compact_distributions as cd
+    >>> squares = [shapely.box(0, 0, 5, 5), shapely.box(4, 0, 9, 5), None]
+    >>> ev = cd.evaluate(squares, cd.Grid(10, 10))
+    >>> ev.coverage, ev.overlap, ev.elements, ev.skipped
+    (0.45, 0.05, 2, 1)
+    """
     region = region_polygon(grid) if region is None else region
     empty = None if labels is None else empty_cells(labels, len(elements))
     geoms = np.array([e for e in elements if e is not None and not e.is_empty], dtype=object)
@@ -177,7 +248,7 @@ def evaluate(elements, grid: Grid, region=None, labels=None) -> Evaluation:
 SCALE_FACTORS = (0.80, 0.85, 0.90, 0.95, 1.00, 1.05, 1.10, 1.15, 1.20)
 
 
-def scaled(elements, factor: float) -> list:
+def scaled(elements: Sequence[Any], factor: float) -> list[Any]:
     """Every element scaled by ``factor`` about its own centre (its centroid: the centre of
     every element shape, and of a clipped tile near enough)."""
     present = [k for k, e in enumerate(elements) if e is not None and not e.is_empty]
@@ -193,7 +264,9 @@ def scaled(elements, factor: float) -> list:
     return out
 
 
-def coverage_overlap_curve(elements, grid: Grid, factors=SCALE_FACTORS, region=None) -> list[list[float]]:
+def coverage_overlap_curve(
+    elements: Sequence[Any], grid: Grid, factors: Iterable[float] = SCALE_FACTORS, region: Any = None
+) -> list[list[float]]:
     """[[factor, coverage, overlap], ...]: :func:`evaluate` of the elements scaled by each
     factor.  Compares methods at equal overlap: a method that overlaps can shrink its
     elements, one that does not can grow them."""
@@ -205,7 +278,7 @@ def coverage_overlap_curve(elements, grid: Grid, factors=SCALE_FACTORS, region=N
     return out
 
 
-def coverage_at_overlap(curve, limit: float = 0.01) -> float:
+def coverage_at_overlap(curve: Iterable[Sequence[float]], limit: float = 0.01) -> float:
     """The largest coverage on the curve with overlap at most ``limit``, interpolating
     linearly between the two factors where the overlap crosses it (NaN when even the
     smallest factor overlaps more)."""
@@ -218,7 +291,11 @@ def coverage_at_overlap(curve, limit: float = 0.01) -> float:
 
 
 def coverage_at_overlap_limit(
-    elements, grid: Grid, limit: float = 0.01, factors=SCALE_FACTORS, region=None
+    elements: Sequence[Any],
+    grid: Grid,
+    limit: float = 0.01,
+    factors: Iterable[float] = SCALE_FACTORS,
+    region: Any = None,
 ) -> float:
     """:func:`coverage_at_overlap` of :func:`coverage_overlap_curve`, evaluating the factors
     in increasing order only up to the first whose overlap passes ``limit``: the overlap
@@ -242,7 +319,7 @@ CHORD_MARGIN = 1e-5
 _FLAT_EDGE = 1e-3  # px of height below which an edge's crossings are not trusted
 
 
-def pixels_under(elements, width: int, height: int) -> tuple[np.ndarray, np.ndarray]:
+def pixels_under(elements: Sequence[Any], width: int, height: int) -> tuple[np.ndarray, np.ndarray]:
     """Every pixel of a raster whose centre lies inside or on the outline of a tile.
 
     Polygonal tiles are read row by row: the crossings of the row through the pixel
@@ -297,7 +374,15 @@ def pixels_under(elements, width: int, height: int) -> tuple[np.ndarray, np.ndar
     return tiles, pixels
 
 
-def _box_segments(geoms, tiles, i0, i1, j0, j1, width):
+def _box_segments(
+    geoms: np.ndarray,
+    tiles: np.ndarray,
+    i0: np.ndarray,
+    i1: np.ndarray,
+    j0: np.ndarray,
+    j1: np.ndarray,
+    width: int,
+) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """(tile, flat pixel, 1) of the pixels of each tile's bounding box that shapely finds in it."""
     nx = np.maximum(j1[tiles] - j0[tiles] + 1, 0)
     ny = np.maximum(i1[tiles] - i0[tiles] + 1, 0)
@@ -311,7 +396,15 @@ def _box_segments(geoms, tiles, i0, i1, j0, j1, width):
     return tile[inside], ii[inside] * width + jj[inside], np.ones(int(inside.sum()), dtype=np.int64)
 
 
-def _span_segments(geoms, tiles, i0, i1, j0, j1, width):
+def _span_segments(
+    geoms: np.ndarray,
+    tiles: np.ndarray,
+    i0: np.ndarray,
+    i1: np.ndarray,
+    j0: np.ndarray,
+    j1: np.ndarray,
+    width: int,
+) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """(tile, first flat pixel, length) of the pixels of each row inside each polygonal
     tile: the sure part of every span between crossings, and the pixels near a crossing
     or on an unsure row that shapely finds in the tile."""
@@ -422,7 +515,7 @@ def colour_error(
 STRADDLE_DEPTH = 1.0  # px of tile on each side of an edge for the tile to straddle it
 
 
-def straddling_tiles(elements, edges: np.ndarray, depth: float = STRADDLE_DEPTH) -> np.ndarray:
+def straddling_tiles(elements: Sequence[Any], edges: np.ndarray, depth: float = STRADDLE_DEPTH) -> np.ndarray:
     """(N,) bool: tile k straddles a strong edge, i.e. its outline (convex hull) eroded
     by ``depth`` px holds (inside or on it) the centre of a pixel of ``edges`` ((H, W)
     bool)."""
@@ -489,20 +582,20 @@ MEASURES = {
 FIDELITY_TIE = 1e-9  # relative: a triangle's longest edge must beat the next by this to go
 
 
-def _present(elements) -> tuple[np.ndarray, np.ndarray]:
+def _present(elements: Sequence[Any]) -> tuple[np.ndarray, np.ndarray]:
     """(indices, geometries) of the elements that are placed (not None, not empty)."""
     idx = np.array([k for k, e in enumerate(elements) if e is not None and not e.is_empty], dtype=np.int64)
     return idx, np.array([elements[k] for k in idx], dtype=object)
 
 
-def size_fidelity(areas, targets) -> float:
+def size_fidelity(areas: npt.ArrayLike, targets: npt.ArrayLike) -> float:
     """RMS of log2(areas / targets) about its mean (the targets' scale fitted); NaN for
     no element.  ``targets`` need only be proportional to the wanted areas."""
     q = np.log2(np.asarray(areas, dtype=np.float64) / np.asarray(targets, dtype=np.float64))
     return float(np.sqrt(np.mean((q - q.mean()) ** 2))) if len(q) else float("nan")
 
 
-def orientations(geoms, k: int) -> np.ndarray:
+def orientations(geoms: np.ndarray, k: int) -> np.ndarray:
     """(N,) the phase arg(Σ_edges L·e^{ikψ}) of each polygon's exterior (radians; divide
     by k for an angle): the direction of its edges modulo 360°/k, weighted by length."""
     coords, owner = shapely.get_coordinates(shapely.get_exterior_ring(geoms), return_index=True)
@@ -516,7 +609,7 @@ def orientations(geoms, k: int) -> np.ndarray:
     return np.arctan2(im, re)
 
 
-def direction_errors(geoms, field_angles, shape: str, aspect: float) -> np.ndarray:
+def direction_errors(geoms: np.ndarray, field_angles: npt.ArrayLike, shape: str, aspect: float) -> np.ndarray:
     """(N,) |angle between each element and the field angle at it| in degrees, modulo the
     shape's rotational symmetry (in [0, 180/k]); NaN for shapes without a direction."""
     from .shapes import rotational_symmetry, unit_outline
@@ -529,7 +622,7 @@ def direction_errors(geoms, field_angles, shape: str, aspect: float) -> np.ndarr
     return np.degrees(np.abs(np.angle(np.exp(1j * phase)))) / k
 
 
-def neighbour_pairs(points) -> tuple[np.ndarray, np.ndarray]:
+def neighbour_pairs(points: npt.ArrayLike) -> tuple[np.ndarray, np.ndarray]:
     """(a, b) with a < b: the edges of the Urquhart graph of ``points`` (Delaunay edges
     less each triangle's strictly longest edge).  Fewer than 3 points, or all on a line:
     consecutive points in sorted order."""
@@ -560,7 +653,7 @@ def neighbour_pairs(points) -> tuple[np.ndarray, np.ndarray]:
     return keep // n, keep % n
 
 
-def grout(geoms) -> tuple[float, float]:
+def grout(geoms: np.ndarray) -> tuple[float, float]:
     """(mean, coefficient of variation) of the exact distances between neighbouring
     elements (:func:`neighbour_pairs` of their centroids); NaN with fewer than 2."""
     if len(geoms) < 2:
@@ -571,7 +664,9 @@ def grout(geoms) -> tuple[float, float]:
     return mean, (float(d.std() / mean) if mean > 0 else float("nan"))
 
 
-def fidelity(elements, problem, shape: str, aspect: float | None = None) -> dict:
+def fidelity(
+    elements: Sequence[Any], problem: Problem, shape: str, aspect: float | None = None
+) -> dict[str, float]:
     """size_fidelity, direction_fidelity, grout_mean and grout_cv (formulas above) of the
     placed ``elements`` of ``shape`` (a ``cvt.shapes`` name; ``aspect`` β of rectangles
     and ellipses, default the problem metric's) on ``problem`` (its density and field)."""
@@ -592,7 +687,9 @@ def fidelity(elements, problem, shape: str, aspect: float | None = None) -> dict
     }
 
 
-def measures(elements, problem, shape: str, aspect: float | None = None, region=None) -> dict:
+def measures(
+    elements: Sequence[Any], problem: Problem, shape: str, aspect: float | None = None, region: Any = None
+) -> dict[str, float]:
     """Every measure of :data:`MEASURES` of the placed ``elements`` on ``problem``."""
     region = region_polygon(problem.grid) if region is None else region
     ev = evaluate(elements, problem.grid, region=region)

@@ -30,32 +30,42 @@ on the triangle equals the centroid-to-vertex length (circumradius 1, side √3)
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass, field
-from functools import cached_property
+from dataclasses import dataclass, field, replace
+from functools import cached_property, lru_cache
 
 import numpy as np
 
 from .errors import InputError
 from .validate import one_of, real_number
 
-PAPER_METRICS = ("l2", "l1", "linf", "linf-axial", "l2-axial", "triangle")  # the paper's six
-AXIAL_METRICS = ("linf-axial", "l2-axial")
 DEFAULT_ASPECT = 0.5  # the paper's examples use β = 1/2
 # β beyond this range makes elements thinner than 1/10000 of their length: no raster
 # resolves them, and 1/β overflows long before β reaches the limits of a float
 ASPECT_RANGE = (0.01, 100.0)
 
 
+def _regular_normals(angles_deg) -> np.ndarray:
+    t = np.radians(np.asarray(angles_deg, dtype=np.float64))
+    return np.stack([np.cos(t), np.sin(t)], axis=1)
+
+
 @dataclass(frozen=True)
 class Shape:
     """An element shape: every fact about it, in one record (the table :data:`SHAPES`).
+
+    The record holds the element's whole geometry: its unit ball, given once as either
+    ``facets`` (a polygon by its edges), ``sides`` and ``phase`` (a regular polygon),
+    ``vertices`` (any other convex polygon) or ``semi_axes`` (an ellipse).  The metric of
+    the same ball (:func:`make_metric`), the outline of an element, the fit, compaction,
+    cutting, the writers and every backend are built from it; nothing branches on a
+    shape's name.
 
     Parameters
     ----------
     name : str
         The element's name (``--element``).
     metric : str
-        The metric whose unit ball it is (implied by ``--element``).
+        The name of the metric whose unit ball it is (implied by ``--element``).
     symmetry : int
         Rotational symmetry: turning it by 360°/k maps it onto itself (0: every turn).
     side_period : float
@@ -64,22 +74,61 @@ class Shape:
     packing : float
         The densest packing of its translates, as a share of the plane (compaction's
         size caps under a density).
-    curved : bool
-        Whether its outline is curved (drawn as a 128-gon; SVG ellipses).
+    facets : tuple of (float, float), optional
+        A polygonal ball by its edges: (outward normal's angle in degrees, offset), so
+        that the ball is ``{v : n_k·v <= h_k}``.
+    semi_axes : tuple of (float, float), optional
+        An elliptic ball's semi-axes along x and y (a curved shape).
     axial : bool
-        Whether the aspect β stretches it (rectangles, ellipses).
+        Whether the aspect β stretches it: by 1/β along x and β along y (rectangles,
+        ellipses).  Only axis-aligned facets may be stretched.
+    unit_aspect_symmetry : int
+        An axial shape's symmetry at β = 1 (a rectangle is then a square, 4; an ellipse a
+        circle, 0).
     sides : int
         A regular polygon's number of sides (0: not one), with its first vertex at
-        ``phase`` degrees; such a shape's metric is built from it (circumradius 1).
+        ``phase`` degrees; such a shape's ball has circumradius 1.
+    phase : float
+        The angle (degrees) of a regular polygon's first vertex.
+    vertices : tuple of (x, y), optional
+        The unit ball of any other convex polygon (the user's), counter-clockwise.
     distance : str
         The distance transform that starts the fit's search in its cells:
         ``chessboard``, ``scaled`` (Euclidean with the axes scaled by β) or ``euclidean``.
-    vertices : tuple of (x, y) or None
-        The unit ball of any other convex polygon (the user's), counter-clockwise.
     compaction_rounds : int
         How many rounds ``ours-compact`` compacts by default.  Hexagons start further
         from their lattice than squares (fitted coverage 0.72 against 0.78, 1024²,
         N = 4000) and gain about a point per two rounds after the fourth: they take 12.
+    paper_distance : int
+        Where the paper lists the distance of its ball among its six (1 to 6; 0: not one
+        of the paper's), which orders :data:`PAPER_METRICS`.
+    paper : bool
+        Whether it is one of the paper's five element shapes (the tables' default shapes).
+    alternates : bool
+        Whether ``ours-compact --alternate`` may point it either way (its angle or the
+        angle + 180°): a shape that is not its own half turn.
+    minkowski_p : float, optional
+        The p of the Minkowski norm whose ball it is (what a k-d tree query computes), or
+        None.
+    reference : bool
+        Whether the paper quotes its Table 2 figures on this shape (the tables' headline
+        rows stand on it: :data:`REFERENCE_SHAPE`).
+
+    Attributes
+    ----------
+    curved : bool
+        Whether its outline is curved (an ellipse: drawn as a 128-gon, SVG ellipses).
+
+    Examples
+    --------
+    >>> from compact_distributions.cvt.metrics import SHAPES
+    >>> hexagon = SHAPES["hexagon"]
+    >>> hexagon.metric, hexagon.symmetry, hexagon.sides, hexagon.phase
+    ('hexagon', 6, 6, 90.0)
+    >>> SHAPES["circle"].curved, SHAPES["rectangle"].axial
+    (True, True)
+    >>> SHAPES["rectangle"].ball(0.5).offsets.tolist()  # 2/β wide, 2β high
+    [2.0, 0.5, 2.0, 0.5]
     """
 
     name: str
@@ -87,27 +136,145 @@ class Shape:
     symmetry: int
     side_period: float
     packing: float
-    curved: bool = False
+    facets: tuple[tuple[float, float], ...] | None = None
+    semi_axes: tuple[float, float] | None = None
     axial: bool = False
+    unit_aspect_symmetry: int = 0
     sides: int = 0
     phase: float = 0.0
-    distance: str = "euclidean"
     vertices: tuple[tuple[float, float], ...] | None = None  # any convex polygon's unit ball
+    distance: str = "euclidean"
     compaction_rounds: int = 4
+    paper_distance: int = 0
+    paper: bool = False
+    alternates: bool = False
+    minkowski_p: float | None = None
+    reference: bool = False
+
+    def __post_init__(self):
+        given = [self.facets is not None, self.semi_axes is not None, self.sides > 0]
+        if sum(given) != 1:
+            raise ValueError(f"shape {self.name!r}: give its ball once (facets, semi_axes or sides)")
+        if self.axial and self.facets is not None:
+            n = _regular_normals([a for a, _ in self.facets])
+            if not np.all(np.isclose(np.abs(n).max(axis=1), 1.0)):
+                raise ValueError(f"shape {self.name!r}: only axis-aligned facets stretch with β")
+
+    @property
+    def curved(self) -> bool:
+        """Whether the outline is curved (an elliptic ball)."""
+        return self.semi_axes is not None
+
+    def ball(self, aspect: float = 1.0, *, name: str | None = None, turn: float = 0.0, scale: float = 1.0):
+        """Build the record's unit ball as a :class:`Metric`.
+
+        Parameters
+        ----------
+        aspect : float
+            The β an axial shape is stretched by: 1/β along x, β along y (unchecked here;
+            :func:`make_metric` checks it).
+        name : str, optional
+            The metric's name (default the shape's own metric).
+        turn : float
+            Degrees the ball is turned by (a metric whose ball is this element's turned,
+            like l1's).
+        scale : float
+            Factor the ball is scaled by.
+
+        Returns
+        -------
+        Metric
+            The ball, with this shape as its element.
+        """
+        name = self.metric if name is None else name
+        beta = aspect if self.axial else 1.0
+        common = dict(
+            name=name,
+            aspect=beta,
+            element=self.name,
+            turn=math.radians(turn),
+            minkowski_p=self.minkowski_p if (turn, scale) == (0.0, 1.0) else None,
+        )
+        if self.semi_axes is not None:
+            a, b = self.semi_axes
+            if self.axial:
+                a, b = a / beta, b * beta
+            return Metric(semi_axes=(a * scale, b * scale), **common)
+        if self.facets is not None:
+            normals = _regular_normals([angle + turn for angle, _ in self.facets])
+            offsets = np.array([h for _, h in self.facets], dtype=np.float64)
+            if self.axial:  # an axis-aligned facet moves by the length of S·n, S = diag(1/β, β)
+                base = _regular_normals([angle for angle, _ in self.facets])
+                offsets = offsets * np.hypot(base[:, 0] / beta, base[:, 1] * beta)
+            return Metric(normals=normals, offsets=offsets * scale if scale != 1.0 else offsets, **common)
+        vertices = shape_vertices(self)
+        edges = np.roll(vertices, -1, axis=0) - vertices
+        normals = np.stack([edges[:, 1], -edges[:, 0]], axis=1)  # outward for counter-clockwise vertices
+        normals /= np.hypot(*normals.T)[:, None]
+        offsets = np.einsum("ij,ij->i", normals, vertices)
+        return Metric(normals=normals, offsets=offsets, **common)
+
+
+@dataclass(frozen=True)
+class TurnedBall:
+    """A metric whose unit ball is an element's ball turned and scaled (no element of its
+    own): its cells hold that element, turned by the same angle.
+
+    Parameters
+    ----------
+    name : str
+        The metric's name.
+    element : str
+        The element shape whose ball it turns.
+    turn : float
+        The turn, in degrees.
+    scale : float
+        The scale of the turned ball.
+    paper_distance : int
+        Where the paper lists it among its six distances (0: not one of them).
+    minkowski_p : float, optional
+        The p of the Minkowski norm whose ball it is, or None.
+    """
+
+    name: str
+    element: str
+    turn: float
+    scale: float
+    paper_distance: int = 0
+    minkowski_p: float | None = None
 
 
 _HEX = math.pi / math.sqrt(12.0)  # circles' densest packing (hexagonal)
 # The one table of shapes.  The paper's five pair with its metrics; a hexagon and an
 # octagon are regular polygons whose metrics are their own unit balls.  A regular
 # octagon's densest lattice packing is (4 + 4√2) / (5 + 4√2) of the plane.
+_SQUARE = ((0.0, 1.0), (90.0, 1.0), (180.0, 1.0), (270.0, 1.0))  # max(|x|, |y|) <= 1
 SHAPES: dict[str, Shape] = {
     s.name: s
     for s in (
-        Shape("square", "linf", 4, math.pi / 2, 1.0, distance="chessboard"),
-        Shape("rectangle", "linf-axial", 2, math.pi, 1.0, axial=True, distance="scaled"),
-        Shape("ellipse", "l2-axial", 2, math.pi, _HEX, curved=True, axial=True, distance="scaled"),
-        Shape("triangle", "triangle", 3, math.pi / 3, 2.0 / 3.0),
-        Shape("circle", "l2", 0, math.pi / 2, _HEX, curved=True),
+        Shape(
+            "square", "linf", 4, math.pi / 2, 1.0, facets=_SQUARE, distance="chessboard",
+            paper_distance=3, paper=True, minkowski_p=math.inf, reference=True,
+        ),
+        Shape(
+            "rectangle", "linf-axial", 2, math.pi, 1.0, facets=_SQUARE, axial=True,
+            unit_aspect_symmetry=4, distance="scaled", paper_distance=4, paper=True,
+        ),
+        Shape(
+            "ellipse", "l2-axial", 2, math.pi, _HEX, semi_axes=(1.0, 1.0), axial=True,
+            unit_aspect_symmetry=0, distance="scaled", paper_distance=5, paper=True,
+        ),
+        # vertex up on screen (y down) at (0, -1), edges at inradius 1/2: the outward
+        # normals point away from each vertex, 90° (down) and 90° ± 120°
+        Shape(
+            "triangle", "triangle", 3, math.pi / 3, 2.0 / 3.0,
+            facets=((90.0, 0.5), (210.0, 0.5), (330.0, 0.5)), paper_distance=6, paper=True,
+            alternates=True,
+        ),
+        Shape(
+            "circle", "l2", 0, math.pi / 2, _HEX, semi_axes=(1.0, 1.0), paper_distance=1,
+            paper=True, minkowski_p=2.0,
+        ),
         Shape("hexagon", "hexagon", 6, math.pi / 3, 1.0, sides=6, phase=90.0, compaction_rounds=12),
         Shape(
             "octagon",
@@ -119,30 +286,78 @@ SHAPES: dict[str, Shape] = {
             phase=22.5,
         ),
     )
+}  # fmt: skip
+# The l1 ball, |x| + |y| <= 1, is the square's turned by 45° and scaled by 1/√2: its
+# cells hold squares turned by 45°.
+TURNED_BALLS: dict[str, TurnedBall] = {
+    b.name: b
+    for b in (TurnedBall("l1", "square", 45.0, 1 / math.sqrt(2), paper_distance=2, minkowski_p=1.0),)
 }
+DEFAULT_ELEMENT = "square"  # the element of a problem that names none (the paper's first)
+REFERENCE_SHAPE = next(s.name for s in SHAPES.values() if s.reference)
+PAPER_SHAPES = tuple(s.name for s in SHAPES.values() if s.paper)  # the paper's five, table order
+PAPER_METRICS = tuple(  # the paper's six distances, in its order
+    r.metric if isinstance(r, Shape) else r.name
+    for r in sorted(
+        (r for r in (*SHAPES.values(), *TURNED_BALLS.values()) if r.paper_distance),
+        key=lambda r: r.paper_distance,
+    )
+)
 METRIC_NAMES = (*PAPER_METRICS, *(s.metric for s in SHAPES.values() if s.metric not in PAPER_METRICS))
-# The element <-> metric table, read from the records.  The reverse, a metric's natural
-# element, adds the l1 ball, a diamond, which is drawn as a square turned by 45°.
+# The element <-> metric table, read from the records: a metric's natural element is
+# its own ball's, or the element a turned ball turns.
 ELEMENT_METRIC = {s.name: s.metric for s in SHAPES.values()}
-NATURAL_ELEMENT = {**{m: e for e, m in ELEMENT_METRIC.items()}, "l1": "square"}
+NATURAL_ELEMENT = {
+    **{m: e for e, m in ELEMENT_METRIC.items()},
+    **{b.name: b.element for b in TURNED_BALLS.values()},
+}
+AXIAL_METRICS = tuple(s.metric for s in SHAPES.values() if s.axial)
 
 
 @dataclass(frozen=True)
 class Metric:
-    """A convex unit ball: either polygonal (normals, offsets) or elliptic (semi-axes)."""
+    """A convex unit ball, sized: either polygonal (normals, offsets) or elliptic
+    (semi-axes), built from a shape record by :meth:`Shape.ball` (see :func:`make_metric`).
+
+    Attributes
+    ----------
+    name : str
+        The metric's name.
+    aspect : float
+        The β it was stretched by (1 for a shape that is not axial).
+    normals : numpy.ndarray or None
+        (K, 2) unit outward normals of a polygonal ball.
+    offsets : numpy.ndarray or None
+        (K,) support values h_k > 0 of a polygonal ball.
+    semi_axes : tuple of (float, float) or None
+        An elliptic ball's semi-axes (a along x, b along y).
+    element : str
+        The element shape its cells hold (its natural element).
+    turn : float
+        The turn (radians) of that element in its cells (the l1 ball's square: π/4).
+    minkowski_p : float or None
+        The p of the Minkowski norm it is, or None.
+    """
 
     name: str
-    aspect: float
-    kind: str  # "polygon" or "ellipse"
+    aspect: float = 1.0
     normals: np.ndarray = field(default=None, repr=False)  # (K, 2) unit outward normals
     offsets: np.ndarray = field(default=None, repr=False)  # (K,) support values h_k > 0
     semi_axes: tuple[float, float] | None = None  # (a along x, b along y)
+    element: str = ""
+    turn: float = 0.0
+    minkowski_p: float | None = None
+
+    @property
+    def curved(self) -> bool:
+        """Whether the ball is elliptic (else polygonal)."""
+        return self.semi_axes is not None
 
     # ----------------------------------------------------------------- geometry
     def gauge(self, v: np.ndarray) -> np.ndarray:
         """Gauge of vectors ``v`` of shape (..., 2) in the ball's own frame."""
         v = np.asarray(v, dtype=np.float64)
-        if self.kind == "ellipse":
+        if self.curved:
             a, b = self.semi_axes
             return np.hypot(v[..., 0] / a, v[..., 1] / b)
         return np.max((v @ self.normals.T) / self.offsets, axis=-1)
@@ -150,7 +365,7 @@ class Metric:
     def outline(self, segments: int = 256) -> np.ndarray:
         """Boundary of the unit ball as polygon vertices (M, 2), counter-clockwise in
         (x, y).  Exact for polygons; ``segments`` points for ellipses."""
-        if self.kind == "ellipse":
+        if self.curved:
             a, b = self.semi_axes
             t = np.linspace(0.0, 2.0 * math.pi, segments, endpoint=False)
             return np.stack([a * np.cos(t), b * np.sin(t)], axis=1)
@@ -159,20 +374,21 @@ class Metric:
     @property
     def circumradius(self) -> float:
         """max |v| over the unit ball: gauge(v) >= |v| / circumradius."""
-        if self.kind == "ellipse":
+        if self.curved:
             return float(max(self.semi_axes))
         return float(np.max(np.hypot(*self.outline().T)))
 
     @property
     def inradius(self) -> float:
         """min over directions of the ball's extent: gauge(v) <= |v| / inradius."""
-        if self.kind == "ellipse":
+        if self.curved:
             return float(min(self.semi_axes))
         return float(np.min(self.offsets / np.hypot(*self.normals.T)))
 
     @property
     def natural_element(self) -> str:
-        return NATURAL_ELEMENT.get(self.name, self.name)  # the user's polygon is its own element
+        """The element shape its cells hold."""
+        return self.element or self.name
 
     def cone(self, height: float) -> dict:
         """Paper Table 1: the cone or pyramid whose height over a base point equals the
@@ -180,7 +396,7 @@ class Metric:
         by ``height``; its named dimensions are returned for comparison with Table 1."""
         base = self.outline() * height
         geom = {"height": float(height), "base": base}
-        if self.kind == "ellipse":
+        if self.curved:
             a, b = self.semi_axes
             geom.update(
                 geometry="circular cone" if a == b else "elliptic cone",
@@ -209,53 +425,57 @@ def _polygon_from_halfplanes(normals: np.ndarray, offsets: np.ndarray) -> np.nda
     return np.array(verts)
 
 
-def _regular_normals(angles_deg) -> np.ndarray:
-    t = np.radians(np.asarray(angles_deg, dtype=np.float64))
-    return np.stack([np.cos(t), np.sin(t)], axis=1)
-
-
 def make_metric(name: str, aspect: float | None = None, *, option: str = "aspect") -> Metric:
-    """Build one of the six metrics; ``aspect`` (β, in :data:`ASPECT_RANGE`) is used by
-    the axial ones only; ``option`` names it in messages (``--aspect`` on the command line)."""
+    """Build the metric (the Lloyd distance) of a name: one convex unit ball.
+
+    The ball is that of the shape record whose metric it is (or of ``polygon:FILE``, the
+    user's polygon), or a record's ball turned (l1: the square's, by 45°).
+
+    Parameters
+    ----------
+    name : str
+        One of :data:`METRIC_NAMES`, or ``polygon:FILE``.
+    aspect : float, optional
+        The β of the axial shapes, in :data:`ASPECT_RANGE`, used by them only (default
+        :data:`DEFAULT_ASPECT` for them).
+    option : str
+        How messages name ``aspect`` (``--aspect`` on the command line).
+
+    Returns
+    -------
+    Metric
+        The unit ball, ready for :func:`compile_sites`.
+
+    Raises
+    ------
+    InputError
+        For an unknown name or an aspect out of range.
+
+    Examples
+    --------
+    >>> make_metric("linf").offsets.tolist()
+    [1.0, 1.0, 1.0, 1.0]
+    >>> make_metric("l2-axial", 0.5).semi_axes
+    (2.0, 0.5)
+    """
     if isinstance(name, str) and name.startswith(POLYGON_PREFIX):
-        shape = polygon_shape(name)
-    else:  # a polygonal record of the table (a new shape is one record there)
-        shape = next((s for s in SHAPES.values() if s.metric == name and s.sides), None)
-    if shape is None:
+        return polygon_shape(name).ball()
+    record = next((s for s in SHAPES.values() if s.metric == name), None)
+    turned = TURNED_BALLS.get(name) if isinstance(name, str) else None
+    if record is None and turned is None:
         one_of(name, "metric", METRIC_NAMES)
     beta = 1.0 if aspect is None else real_number(aspect, option, *ASPECT_RANGE)
-    if aspect is None and name in AXIAL_METRICS:
+    if turned is not None:
+        ball = SHAPES[turned.element].ball(1.0, name=name, turn=turned.turn, scale=turned.scale)
+        return replace(ball, minkowski_p=turned.minkowski_p)
+    if aspect is None and record.axial:
         beta = DEFAULT_ASPECT
-    if name not in AXIAL_METRICS:
-        beta = 1.0
-    if shape is not None:
-        return polygon_metric(name, shape)
-    if name == "l2":
-        return Metric(name, beta, "ellipse", semi_axes=(1.0, 1.0))
-    if name == "l2-axial":
-        return Metric(name, beta, "ellipse", semi_axes=(1.0 / beta, beta))
-    if name == "l1":  # |x| + |y| <= 1: normals (±1, ±1)/√2, offset 1/√2
-        n = _regular_normals([45, 135, 225, 315])
-        return Metric(name, beta, "polygon", n, np.full(4, 1 / math.sqrt(2)))
-    if name == "linf":
-        return Metric(name, beta, "polygon", _regular_normals([0, 90, 180, 270]), np.ones(4))
-    if name == "linf-axial":  # β|x| <= 1 and |y|/β <= 1
-        n = _regular_normals([0, 90, 180, 270])
-        return Metric(name, beta, "polygon", n, np.array([1 / beta, beta, 1 / beta, beta]))
-    # triangle: vertex up on screen (y down) at (0, -1); edges at inradius 1/2.
-    # Outward normals point away from each vertex: 90° (down) and 90° ± 120°.
-    return Metric(name, beta, "polygon", _regular_normals([90, 210, 330]), np.full(3, 0.5))
+    return record.ball(beta)
 
 
 def polygon_metric(name: str, shape: Shape) -> Metric:
-    """The metric of a polygonal record: a regular polygon of ``shape.sides`` sides
-    (circumradius 1, a vertex at ``shape.phase`` degrees), or a user's polygon."""
-    vertices = shape_vertices(shape)
-    edges = np.roll(vertices, -1, axis=0) - vertices
-    normals = np.stack([edges[:, 1], -edges[:, 0]], axis=1)  # outward for counter-clockwise vertices
-    normals /= np.hypot(*normals.T)[:, None]
-    offsets = np.einsum("ij,ij->i", normals, vertices)
-    return Metric(name, 1.0, "polygon", normals, offsets)
+    """The metric of a polygonal record (kept for callers of the old path)."""
+    return shape.ball(name=name)
 
 
 def shape_vertices(shape: Shape) -> np.ndarray:
@@ -270,17 +490,30 @@ def shape_vertices(shape: Shape) -> np.ndarray:
 POLYGON_PREFIX = "polygon:"
 
 
+def _ring_as_given(pts: np.ndarray) -> np.ndarray:
+    """The ring in the order given, without repeats of a vertex in a row (nor the closing
+    one): what a user's file means by it."""
+    keep = np.ones(len(pts), dtype=bool)
+    keep[1:] = np.any(pts[1:] != pts[:-1], axis=1)
+    ring = pts[keep]
+    while len(ring) > 1 and np.array_equal(ring[0], ring[-1]):
+        ring = ring[:-1]
+    return ring
+
+
 def convex_unit_ball(points, name: str = "polygon") -> np.ndarray:
-    """(K, 2) counter-clockwise vertices of the convex polygon ``points`` (any order and
-    scale), moved to its area centroid and scaled to circumradius 1.  InputError naming
-    ``name`` for fewer than 3 distinct vertices, a degenerate polygon or one that is not
-    convex (a vertex strictly inside the hull of the others)."""
+    """(K, 2) counter-clockwise vertices of the convex polygon ``points`` (a ring in
+    either direction, closed or not, at any scale), moved to its area centroid and scaled
+    to circumradius 1.  InputError naming ``name`` for fewer than 3 distinct vertices, a
+    degenerate polygon, a ring that crosses itself, or one that is not convex (a vertex
+    strictly inside the hull of the others)."""
     try:
         pts = np.asarray(points, dtype=np.float64)
     except (TypeError, ValueError):
         raise InputError(f"{name}: its vertices must be [x, y] numbers") from None
     if pts.ndim != 2 or pts.shape[1] != 2 or not np.isfinite(pts).all():
         raise InputError(f"{name}: its vertices must be finite [x, y] pairs, got shape {pts.shape}")
+    given = _ring_as_given(pts)
     pts = np.unique(pts, axis=0)
     if len(pts) < 3:
         raise InputError(f"{name} has {len(pts)} distinct vertices; a polygon needs at least 3")
@@ -291,6 +524,10 @@ def convex_unit_ball(points, name: str = "polygon") -> np.ndarray:
     area2 = np.sum(ring[:, 0] * np.roll(ring[:, 1], -1) - np.roll(ring[:, 0], -1) * ring[:, 1])
     if scale == 0 or abs(area2) < 1e-9 * scale * scale:
         raise InputError(f"{name} is degenerate: its vertices lie on one line")
+    import shapely
+
+    if not shapely.LinearRing(given).is_simple:
+        raise InputError(f"{name} crosses itself: its vertices, in the order given, must go round it once")
     # the turn at each vertex: negative where the outline bends inwards
     before, after = ring - np.roll(ring, 1, axis=0), np.roll(ring, -1, axis=0) - ring
     turn = before[:, 0] * after[:, 1] - before[:, 1] * after[:, 0]
@@ -311,15 +548,25 @@ def convex_unit_ball(points, name: str = "polygon") -> np.ndarray:
 
 def polygon_shape(name: str) -> Shape:
     """The record of the user's polygon ``polygon:FILE`` (a CSV with columns x, y, or a
-    JSON list of [x, y]), read once and kept by its name; its metric has the same name."""
-    if name in SHAPES:
-        return SHAPES[name]
+    JSON list of [x, y]); its metric has the same name.  The record is the caller's: it
+    is not added to :data:`SHAPES` (a file read once is kept while it is unchanged)."""
+    import os
+
+    path = name[len(POLYGON_PREFIX) :]
+    try:
+        stat = os.stat(path)
+        stamp = (stat.st_mtime_ns, stat.st_size)
+    except OSError:
+        stamp = None  # read_vertices says what is wrong with it
+    return _polygon_record(name, stamp)
+
+
+@lru_cache(maxsize=64)
+def _polygon_record(name: str, stamp) -> Shape:
     path = name[len(POLYGON_PREFIX) :]
     vertices = convex_unit_ball(read_vertices(path), f"polygon {path}")
     k = len(vertices)
-    shape = Shape(name, name, 1, math.pi, 1.0, sides=k, vertices=tuple(map(tuple, vertices.tolist())))
-    SHAPES[name] = shape
-    return shape
+    return Shape(name, name, 1, math.pi, 1.0, sides=k, vertices=tuple(map(tuple, vertices.tolist())))
 
 
 def read_vertices(path: str) -> np.ndarray:
@@ -364,12 +611,12 @@ def read_vertices(path: str) -> np.ndarray:
 class SiteCoefficients:
     """Per-site evaluation coefficients, shared by every backend.
 
-    polygon: ``facets`` (N, K, 2) with d_i(x) = max_k facets[i, k]·(x - p_i);
-    ellipse: ``quad`` (N, 3) = (qxx, qxy, qyy) with
+    polygonal (``curved`` false): ``facets`` (N, K, 2) with d_i(x) = max_k facets[i, k]·(x - p_i);
+    elliptic (``curved``): ``quad`` (N, 3) = (qxx, qxy, qyy) with
              d_i(x)^2 = qxx·vx² + 2·qxy·vx·vy + qyy·vy², v = x - p_i.
     """
 
-    kind: str
+    curved: bool
     sites: np.ndarray
     facets: np.ndarray | None = None
     quad: np.ndarray | None = None
@@ -382,7 +629,7 @@ class SiteCoefficients:
         """(N, F, 2) facets of a polygon that contains each scaled, rotated ball:
         ``max_k bounds·v <= d``.  A polygon's own facets; for an ellipse the circumscribed
         octagon (support of the ellipse in direction n is |diag(a, b) n|).  For pruning."""
-        if self.kind == "polygon":
+        if not self.curved:
             return self.facets
         (a, b), c, si, s = self._octagon
         nrm = _regular_normals(np.arange(8) * 45.0)
@@ -393,7 +640,7 @@ class SiteCoefficients:
         """d_idx(x, y), broadcasting idx, x and y (float64)."""
         vx = x - self.sites[idx, 0]
         vy = y - self.sites[idx, 1]
-        if self.kind == "ellipse":
+        if self.curved:
             q = self.quad[idx]
             return np.sqrt(q[..., 0] * vx * vx + 2 * q[..., 1] * vx * vy + q[..., 2] * vy * vy)
         f = self.facets[idx]
@@ -410,7 +657,7 @@ def compile_sites(metric: Metric, sites, angles=None, scales=None) -> SiteCoeffi
     theta = np.zeros(n) if angles is None else np.asarray(angles, dtype=np.float64)
     s = np.ones(n) if scales is None else np.asarray(scales, dtype=np.float64)
     c, si = np.cos(theta), np.sin(theta)
-    if metric.kind == "ellipse":
+    if metric.curved:
         a, b = metric.semi_axes
         ia, ib = 1.0 / (a * a), 1.0 / (b * b)
         # Q = R(θ) diag(1/a², 1/b²) R(θ)^T / s²
@@ -418,9 +665,9 @@ def compile_sites(metric: Metric, sites, angles=None, scales=None) -> SiteCoeffi
         qxy = (c * si * (ia - ib)) / (s * s)
         qyy = (si * si * ia + c * c * ib) / (s * s)
         quad = np.stack([qxx, qxy, qyy], axis=1)
-        return SiteCoefficients("ellipse", sites, quad=quad, _octagon=((a, b), c, si, s))
+        return SiteCoefficients(True, sites, quad=quad, _octagon=((a, b), c, si, s))
     facets = _rotate_scale(metric.normals / metric.offsets[:, None], c, si, s)
-    return SiteCoefficients("polygon", sites, facets=facets)
+    return SiteCoefficients(False, sites, facets=facets)
 
 
 def _rotate_scale(nk: np.ndarray, c: np.ndarray, si: np.ndarray, s: np.ndarray) -> np.ndarray:
@@ -436,6 +683,11 @@ __all__ = [
     "DEFAULT_ASPECT",
     "ASPECT_RANGE",
     "Shape",
+    "TurnedBall",
+    "TURNED_BALLS",
+    "DEFAULT_ELEMENT",
+    "REFERENCE_SHAPE",
+    "PAPER_SHAPES",
     "SHAPES",
     "METRIC_NAMES",
     "ELEMENT_METRIC",

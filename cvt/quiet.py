@@ -30,35 +30,56 @@ THIRD_PARTY_LOGGERS = (
 )
 
 
+# the libraries whose own warnings (raised in their modules) are theirs, not the suite's
+THIRD_PARTY_MODULES = (
+    "numpy",
+    "scipy",
+    "shapely",
+    "matplotlib",
+    "PIL",
+    "pyopencl",
+    "pytools",
+    "moderngl",
+    "pandas",
+    "distributed",
+    "dask",
+    "highspy",
+    "tornado",
+    "bokeh",
+)
+# the suite's own modules: their numerical warnings (NaN, division by zero) show with
+# --verbose and are errors in the tests
+OWN_MODULES = r"compact_distributions(\.|$)"
+
+
 def configure(verbose: bool = False) -> None:
-    """How much of the third-party libraries' output a command shows: by default only
-    their errors (warnings and log records are theirs, not the suite's result); with
-    ``verbose`` their warnings and info records too, on standard error."""
+    """How much of the third-party libraries' output a command shows.
+
+    By default only their errors: their warnings (by the module that raised them) and
+    log records are theirs, not the suite's result; the suite's own numerical warnings (NaN, division by zero) are
+    hidden too.  These filters are appended last, so that any filter set before
+    (``python -W``, ``PYTHONWARNINGS``, pytest's ``filterwarnings``, which make the
+    suite's own warnings errors) wins.  With ``verbose``, every warning shows (once per
+    place) and the libraries' info records go to standard error.
+
+    Parameters
+    ----------
+    verbose : bool, optional
+        Show warnings and info records (``--verbose``).
+    """
     level = logging.INFO if verbose else logging.ERROR
     for name in THIRD_PARTY_LOGGERS:
         logging.getLogger(name).setLevel(level)
     if verbose:
         logging.basicConfig(level=logging.INFO, format="%(name)s: %(message)s", stream=sys.stderr)
         warnings.simplefilter("default")
-    else:
-        for module in (
-            "numpy",
-            "scipy",
-            "shapely",
-            "matplotlib",
-            "PIL",
-            "pyopencl",
-            "pytools",
-            "moderngl",
-            "pandas",
-            "distributed",
-            "dask",
-            "highspy",
-        ):
-            warnings.filterwarnings("ignore", module=module)
-        warnings.filterwarnings("ignore", category=RuntimeWarning)
-        warnings.filterwarnings("ignore", category=FutureWarning)
-        os.environ.setdefault("PYOPENCL_COMPILER_OUTPUT", "0")
+        return
+    # appended last: a filter set before (python -W, PYTHONWARNINGS, pytest's
+    # filterwarnings) wins over these defaults
+    for module in THIRD_PARTY_MODULES:
+        warnings.filterwarnings("ignore", module=rf"{module}(\.|$)", append=True)
+    warnings.filterwarnings("ignore", category=RuntimeWarning, module=OWN_MODULES, append=True)
+    os.environ.setdefault("PYOPENCL_COMPILER_OUTPUT", "0")
 
 
 @contextlib.contextmanager
@@ -92,4 +113,11 @@ def quiet_highs():
     return h
 
 
-__all__ = ["configure", "c_output_silenced", "quiet_highs"]
+__all__ = [
+    "THIRD_PARTY_LOGGERS",
+    "THIRD_PARTY_MODULES",
+    "OWN_MODULES",
+    "configure",
+    "c_output_silenced",
+    "quiet_highs",
+]

@@ -14,9 +14,10 @@ import numpy as np
 import shapely
 
 from .metrics import (
+    DEFAULT_ELEMENT,
     METRIC_NAMES,
     NATURAL_ELEMENT,
-    PAPER_METRICS,
+    PAPER_SHAPES,
     POLYGON_PREFIX,
     SHAPES,
     Metric,
@@ -27,8 +28,6 @@ from .metrics import (
 from .validate import one_of
 
 ELEMENT_SHAPES = tuple(SHAPES)  # the built-in shapes; the user's polygon is "polygon:FILE"
-# the paper's five (the default shapes of the tables, whose committed runs they are)
-PAPER_SHAPES = tuple(s.name for s in SHAPES.values() if s.metric in PAPER_METRICS)
 CURVE_SEGMENTS = 128  # inscribed 128-gon: area within 0.04 % of the ellipse
 
 
@@ -49,13 +48,11 @@ def packing_density(shape: str) -> float:
 
 def rotational_symmetry(shape: str, aspect: float = 0.5) -> int:
     """k such that turning the element by 360°/k maps it onto itself (0 for a circle, or
-    an ellipse of β = 1; an axial shape of β = 1 keeps its β = 1 symmetry: a square's 4,
-    a circle's every turn)."""
+    an ellipse of β = 1: an axial shape of β = 1 has the record's ``unit_aspect_symmetry``)."""
     record = shape_record(shape)
-    k = record.symmetry
     if record.axial and aspect is not None and np.isclose(aspect, 1.0):
-        return 0 if record.curved else 4
-    return k
+        return record.unit_aspect_symmetry
+    return record.symmetry
 
 
 def unit_outline(shape: str, aspect: float = 0.5) -> np.ndarray:
@@ -72,7 +69,7 @@ def check_shape(shape) -> str:
 def resolve_shapes(
     metric: str | None,
     element: str | None,
-    default: str = "square",
+    default: str = DEFAULT_ELEMENT,
     names: tuple[str, str] = ("metric", "element"),
 ) -> tuple[str, str]:
     """(metric, element): either one implies the other (an element's metric is the one
@@ -130,6 +127,7 @@ def element_polygons(shape: str, aspect: float, centres, angles, sizes) -> np.nd
 __all__ = [
     "ELEMENT_SHAPES",
     "PAPER_SHAPES",
+    "DEFAULT_ELEMENT",
     "CURVE_SEGMENTS",
     "shape_record",
     "packing_density",

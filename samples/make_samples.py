@@ -1,6 +1,7 @@
 """Draw the sample pictures of samples/ (self-made, no third-party content).
 
-    .venv/bin/python samples/make_samples.py      # rewrites samples/*.png
+    .venv/bin/python samples/make_samples.py            # rewrites every sample
+    .venv/bin/python samples/make_samples.py small.png  # only the one named
 
 Each picture is drawn 4x larger with Pillow and shrunk with a box filter, so edges are
 antialiased but areas stay flat colours; the pictures have the strong straight and
@@ -135,11 +136,32 @@ def scene(w: int = 512, h: int = 512, seed: int = 7) -> Image.Image:
     return Image.fromarray(np.clip(np.round(arr), 0, 255).astype(np.uint8), "RGB")
 
 
-SAMPLES = {"shapes.png": shapes, "rings.png": rings, "leaf.png": leaf, "scene.jpg": scene}
+def small(w: int = 160, h: int = 120) -> Image.Image:
+    """A small picture for the regression check of `cvtbench regress`: a sky graded from
+    blue to pale, a dark disc, a tilted orange bar and a green curved hill: a gradient,
+    straight edges at an angle and curved ones in 160x120 px."""
+    y, x = (np.mgrid[0 : h * SS, 0 : w * SS] + 0.5) / SS
+    u, v = x / w, y / h
+    rgb = np.stack([70 + 150 * v, 120 + 110 * v, 210 + 30 * v], axis=-1)
+    hill = v > 0.68 + 0.12 * np.sin(math.pi * (u * 1.4 + 0.15))
+    rgb[hill] = (70, 140, 60)
+    rgb[np.hypot(u - 0.74, (v - 0.30) * h / w) < 0.13] = (40, 40, 70)  # disc
+    # a bar tilted by 30 degrees
+    a = math.radians(30)
+    along = (u - 0.32) * math.cos(a) + (v - 0.45) * h / w * math.sin(a)
+    across = -(u - 0.32) * math.sin(a) + (v - 0.45) * h / w * math.cos(a)
+    rgb[(np.abs(along) < 0.20) & (np.abs(across) < 0.05)] = (235, 140, 40)
+    return _finish(Image.fromarray(rgb.astype(np.uint8), "RGB"), w, h)
 
 
-def main() -> None:
+SAMPLES = {"shapes.png": shapes, "rings.png": rings, "leaf.png": leaf, "scene.jpg": scene, "small.png": small}
+
+
+def main(names=None) -> None:
+    """Draw the pictures ``names`` (default: every one of SAMPLES) into this folder."""
     for name, draw in SAMPLES.items():
+        if names and name not in names:
+            continue
         path = HERE / name
         if name.endswith(".jpg"):
             draw().save(path, quality=90, optimize=True)  # a photograph: a JPEG
@@ -149,4 +171,6 @@ def main() -> None:
 
 
 if __name__ == "__main__":
-    main()
+    import sys
+
+    main(sys.argv[1:])

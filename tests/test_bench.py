@@ -1,6 +1,5 @@
-"""bench/: the sweep engine (resume, interrupt, failures), the reports (aggregation by
-hand, the committed files complete), and the regression guard (its logic on fabricated
-figures, and end to end with a fabricated baseline that must fail)."""
+"""bench/: the sweep engine (resume, interrupt, failures) and the reports (aggregation by
+hand, the committed files complete); the regression guard is tested in test_regress.py."""
 
 from __future__ import annotations
 
@@ -12,7 +11,6 @@ import pandas as pd
 import pytest
 
 from compact_distributions.bench import sweep
-from compact_distributions.bench.commands import regress as regress_cmd
 from compact_distributions.bench.commands.cli import main
 from compact_distributions.bench.report import git_commit
 from compact_distributions.bench.runs import RunSpec, effect_picture
@@ -221,114 +219,6 @@ def test_backends_quick_rerun_matches_committed_columns(tmp_path):
     assert set(full.metric) == {"l2", "l1", "linf", "linf-axial", "l2-axial", "triangle"}
 
 
-# ---------------------------------------------------------------------------------------
-# regression: logic on fabricated figures
-
-
-BASE = {
-    "coverage": {"ours/numpy/square": {"mean": 0.800}, "ours/gl/square": {"mean": 0.8}},
-    "speed": {"opencl vs numpy, l2": {"ratio": 0.10}},
-}
-
-
-def test_compare_fails_on_a_coverage_drop_over_half_a_point():
-    cur = {"coverage": {"ours/numpy/square": {"mean": 0.794}}, "speed": {}}  # -0.6 pp
-    failures, _ = regress_cmd.compare(BASE, cur)
-    assert len(failures) == 1 and "ours/numpy/square" in failures[0] and "0.60 pp" in failures[0]
-    cur = {"coverage": {"ours/numpy/square": {"mean": 0.796}}, "speed": {}}  # -0.4 pp
-    assert regress_cmd.compare(BASE, cur)[0] == []
-
-
-def test_compare_speed_uses_ratios_only():
-    # 10x slower machine, same ratio: no regression
-    cur = {
-        "coverage": {},
-        "speed": {"opencl vs numpy, l2": {"ratio": 0.10, "ms": 500.0, "reference_ms": 5000}},
-    }
-    assert regress_cmd.compare(BASE, cur)[0] == []
-    cur["speed"]["opencl vs numpy, l2"]["ratio"] = 0.21  # 2.1x slower relative to numpy
-    failures, _ = regress_cmd.compare(BASE, cur)
-    assert len(failures) == 1 and "2.10 times slower" in failures[0]
-
-
-def test_compare_reports_missing_and_new_entries_without_failing():
-    cur = {
-        "coverage": {"ours/numpy/square": {"mean": 0.8}, "ours/new/square": {"mean": 0.5}},
-        "speed": {},
-        "unavailable": {"ours/gl/square": "no EGL"},
-    }
-    failures, notes = regress_cmd.compare(BASE, cur)
-    assert failures == []
-    text = "\n".join(notes)
-    assert "ours/gl/square (no EGL)" in text and "new: coverage ours/new/square" in text
-    assert "speed opencl vs numpy, l2 (not run here)" in text
-
-
-def test_merge_keeps_entries_not_measured_now():
-    merged = regress_cmd.merge(BASE, {"coverage": {"ours/numpy/square": {"mean": 0.9}}, "speed": {}})
-    assert merged["coverage"]["ours/numpy/square"]["mean"] == 0.9
-    assert merged["coverage"]["ours/gl/square"]["mean"] == 0.8 and "opencl vs numpy, l2" in merged["speed"]
-
-
-# ---------------------------------------------------------------------------------------
-# regression end to end (numpy only, to stay fast)
-
-
-REGRESS_COVERAGE = ["regress", "--quick", "--methods", "ours", "--backends", "numpy", "--no-speed", "--quiet"]
-REGRESS_SPEED = ["regress", "--quick", "--backends", "numpy", "--no-coverage", "--quiet"]
-
-
-def _baseline_of_today(tmp_path, argv, coverage_shift=0.0, speed_ratio=None):
-    """A baseline measured now by --update, then shifted by hand: the truth the guard is
-    checked against is the shift, not the figures."""
-    path = tmp_path / "baseline.json"
-    path.unlink(missing_ok=True)
-    assert main(argv + ["--update", "--baseline", str(path)]) == 0
-    quick = json.loads(path.read_text())["quick"]
-    cov = {k: dict(v, mean=v["mean"] + coverage_shift) for k, v in quick["coverage"].items()}
-    speed = {
-        k: dict(v, ratio=v["ratio"] if speed_ratio is None else speed_ratio)
-        for k, v in quick["speed"].items()
-    }
-    path.write_text(json.dumps({"quick": {"coverage": cov, "speed": speed}}))
-    return path
-
-
-def test_regress_passes_unchanged_and_fails_on_a_drop(tmp_path, capsys):
-    assert main(REGRESS_COVERAGE + ["--baseline", str(_baseline_of_today(tmp_path, REGRESS_COVERAGE))]) == 0
-    out = capsys.readouterr().out
-    assert "no regression" in out and "3 coverage" in out
-    # the baseline says 1 point more than the code reaches: a drop of 1 pp must fail
-    shifted = _baseline_of_today(tmp_path, REGRESS_COVERAGE, coverage_shift=0.01)
-    assert main(REGRESS_COVERAGE + ["--baseline", str(shifted)]) == 1
-    err = capsys.readouterr().err
-    assert "REGRESSION: coverage of ours/numpy/square fell" in err
-
-
-def test_regress_fails_on_fabricated_slowdown(tmp_path, capsys):
-    # a baseline where NumPy took 1 % of cKDTree's time: today's ratio is far over 2x that
-    path = _baseline_of_today(tmp_path, REGRESS_SPEED, speed_ratio=0.01)
-    assert main(REGRESS_SPEED + ["--baseline", str(path)]) == 1
-    assert "REGRESSION: speed of numpy vs ckdtree" in capsys.readouterr().err
-
-
-def test_the_committed_baseline_names_every_check_of_the_quick_set():
-    assert regress_cmd.BASELINE_FILE.exists(), "bench/regress_baseline.json must be committed"
-    quick = json.loads(regress_cmd.BASELINE_FILE.read_text())["quick"]
-    from compact_distributions.baselines import method_names
-
-    keys = {
-        regress_cmd.coverage_key(s.method, s.backend, s.element)
-        for s in regress_cmd.coverage_specs(regress_cmd.SETS["quick"], method_names(), ["numpy"])
-    }
-    assert keys <= set(quick["coverage"])
-
-
-def test_regress_without_baseline_is_an_input_error(tmp_path, capsys):
-    assert main(["regress", "--quick", "--baseline", str(tmp_path / "none.json")]) == 2
-    assert "regress --update" in capsys.readouterr().err
-
-
 @pytest.mark.parametrize(
     "argv, text",
     [
@@ -349,6 +239,7 @@ def test_reproduce_hands_each_part_a_typed_request(tmp_path):
     import argparse
 
     from compact_distributions.bench.commands.backends import BackendsRequest, backends
+    from compact_distributions.bench.commands.converge import ConvergeRequest
     from compact_distributions.bench.commands.figures import FiguresRequest
     from compact_distributions.bench.commands.pipeline import PipelineRequest
     from compact_distributions.bench.commands.reproduce import requests
@@ -364,9 +255,11 @@ def test_reproduce_hands_each_part_a_typed_request(tmp_path):
         ("table3", Table3Request),
         ("backends", BackendsRequest),
         ("pipeline", PipelineRequest),
+        ("converge", ConvergeRequest),
         ("figures", FiguresRequest),
     ]
-    t2, t3, bk, _, fig = (req for _, _, req in parts)
+    t2, t3, bk, _, cv, fig = (req for _, _, req in parts)
+    assert (cv.out, cv.quick, cv.memory_limit) == (tmp_path, True, "2G")
     assert (t3.seeds, t3.quick, t3.scheduler) == (3, True, "tcp://127.0.0.1:1")
     assert parts[0][1] is table2 and parts[2][1] is backends
     assert (t2.out, t2.seeds, t2.exclusive, t2.scheduler, t2.memory_limit) == (

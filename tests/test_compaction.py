@@ -464,7 +464,7 @@ def test_overlapping_start_is_repaired():
 
 
 # ------------------------------------------------------------------ separating directions
-@pytest.mark.parametrize("shape", [s for s in ELEMENT_SHAPES if element_ball(s, 0.5).kind == "polygon"])
+@pytest.mark.parametrize("shape", [s for s in ELEMENT_SHAPES if not element_ball(s, 0.5).curved])
 def test_pair_gaps_along_face_normals_match_the_outlines(shape):
     """The gap a pair is given (along the direction chosen) is the gap of the two exact
     outlines along it, and no face normal of either outline separates them more: the

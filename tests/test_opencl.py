@@ -252,8 +252,8 @@ def test_programs_are_built_once_per_metric_kind():
         sites = np.random.default_rng(0).random((50, 2)) * 64
         for name in ("l1", "linf", "l1", "l2", "l2-axial", "triangle"):
             ocl.label(sites, metric=make_metric(name), grid=Grid(64, 64))
-        kinds = sorted((kind, k) for kind, k, *_ in ocl._programs if kind != "fit")
-        assert kinds == [("ellipse", 0), ("polygon", 3), ("polygon", 4)]
+        kinds = sorted((curved, k) for curved, k, *_ in ocl._programs if curved != "fit")
+        assert kinds == [(False, 3), (False, 4), (True, 0)]  # (curved, facets K)
         # the element fit's kernel is built with them, in the same programs
         fits = sorted(key[1:] for key in ocl._programs if key[0] == "fit")
         assert fits == ([(False, 3), (False, 4), (True,)] if ocl._fits_on_device else [])

@@ -21,7 +21,7 @@ import numpy as np
 import pytest
 
 import compact_distributions.backends.opencl as ocl_module
-from compact_distributions.backends import REFERENCE, fall_back
+from compact_distributions.backends import REFERENCE, fall_back, first_available
 from compact_distributions.cvt.errors import BackendUnavailable
 
 SUITE_KERNELS = set(ocl_module.LABEL_KERNELS) | {"fit_search"}
@@ -277,7 +277,7 @@ def test_suite_programs_cover_every_metric_the_backend_builds():
     facet count of the suite's metrics, and with float64 a fit program for each."""
     from compact_distributions.cvt.metrics import METRIC_NAMES, make_metric
 
-    shapes = {(m.kind == "ellipse", ocl_module._facet_count(m)) for m in map(make_metric, METRIC_NAMES)}
+    shapes = {(m.curved, ocl_module._facet_count(m)) for m in map(make_metric, METRIC_NAMES)}
     with_fit = ocl_module.suite_programs(8, True, True)
     assert len(with_fit) == 2 * len(shapes)
     assert {p.options for p in with_fit} >= {
@@ -286,3 +286,11 @@ def test_suite_programs_cover_every_metric_the_backend_builds():
     assert len(ocl_module.suite_programs(0, False, False)) == len(shapes)
     assert all(set(p.kernels) <= SUITE_KERNELS for p in with_fit)
     assert np.all([p.files[0].exists() for p in with_fit])
+
+
+def test_the_first_default_that_runs_is_chosen_else_the_reference(capsys):
+    status = {"fast": (False, "no runtime"), "faster": (True, "a device"), REFERENCE: (True, "CPU")}
+    assert first_available(["faster", "fast"], status) == "faster"
+    assert capsys.readouterr().err == ""
+    assert first_available(["fast"], status) == REFERENCE
+    assert capsys.readouterr().err.strip() == f"note: using {REFERENCE}, as fast cannot run here: no runtime"

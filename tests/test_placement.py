@@ -410,7 +410,7 @@ def _size_by_hand(ball, samples, centre, angle, half, labels, i):
     c, s = math.cos(angle), math.sin(angle)
     v = samples - centre
     u = np.stack([c * v[:, 0] + s * v[:, 1], -s * v[:, 0] + c * v[:, 1]], axis=1)  # R(-θ) v
-    if ball.kind == "polygon":
+    if not ball.curved:
         f = ball.normals / ball.offsets[:, None]
         reach = (u @ f.T - half * np.hypot(f[:, 0], f[:, 1])).max(axis=1)
     else:

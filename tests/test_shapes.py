@@ -102,11 +102,28 @@ def test_opencl_labels_the_users_polygon_as_numpy(tmp_path, reference, ocl):
         ([[0, 0], [1, 1], [2, 2]], "degenerate"),
         ([[0, 0], [1, 1], [0, 0], [1, 1]], "2 distinct vertices"),
         ([[0, 0], [1, "a"]], "vertices"),
+        ([[0, 0], [4, 4], [4, 0], [0, 4]], "crosses itself"),  # a bow tie: its hull is a square
+        # a pentagram: every turn the same way, round twice
+        ([[math.cos(a), math.sin(a)] for a in np.radians(90 + 144 * np.arange(5))], "crosses itself"),
+        ([[0, 0], [4, 0], [4, 4], [0, 0], [0, 4]], "crosses itself"),  # a vertex visited twice
     ],
 )
 def test_bad_polygons_are_refused(points, text):
     with pytest.raises(InputError, match=text):
         convex_unit_ball(points)
+
+
+def test_closed_rings_and_repeated_vertices_are_the_same_polygon():
+    square = [[0, 0], [4, 0], [4, 4], [0, 4]]
+    plain = convex_unit_ball(square)
+    np.testing.assert_allclose(plain, [[-1, -1], [1, -1], [1, 1], [-1, 1]] / np.sqrt(2), atol=1e-15)
+    for ring in (
+        square + [[0, 0]],  # closed
+        [[0, 0], [4, 0], [4, 0], [4, 4], [0, 4], [0, 4]],  # repeated in a row
+        square[::-1],  # clockwise
+        [[2, 0], [4, 0], [4, 4], [0, 4], [0, 0]],  # a vertex in the middle of a side
+    ):
+        np.testing.assert_array_equal(convex_unit_ball(ring), plain)
 
 
 @pytest.mark.parametrize(

@@ -1,7 +1,10 @@
 """`cvtbench`: the command line of the suite.
 
 Each subcommand lives in its own module with ``add_parser(subparsers)``; the module
-sets ``func`` on its parser.  Errors in user input print one line and exit with 2.
+sets ``func`` on its parser.  Errors in user input print one line and exit with 2; a
+command that could not finish for another reason (a plug-in that failed, runs of a sweep
+that failed, a lost cluster) prints one line and exits with 1 (``--verbose`` adds the
+traceback).
 """
 
 from __future__ import annotations
@@ -11,6 +14,7 @@ import errno
 import importlib
 import os
 import sys
+import traceback
 
 from compact_distributions.cvt.errors import BackendUnavailable, InputError, RunAborted
 from compact_distributions.cvt.quiet import configure as configure_output
@@ -25,6 +29,7 @@ SUBCOMMANDS = [
     "compact_distributions.bench.commands.mosaic",
     "compact_distributions.bench.commands.backends",
     "compact_distributions.bench.commands.pipeline",
+    "compact_distributions.bench.commands.converge",
     "compact_distributions.bench.commands.regress",
     "compact_distributions.bench.commands.reproduce",
 ]
@@ -102,7 +107,9 @@ def main(argv=None) -> int:
     except (InputError, BackendUnavailable) as exc:
         _say(f"cvtbench: error: {exc}")
         return 2
-    except RunAborted as exc:
+    except RunAborted as exc:  # a plug-in that failed (PluginError), a lost cluster, failed runs
+        if "--verbose" in argv:  # the traceback of what went wrong, then the one line
+            traceback.print_exception(exc.__cause__ or exc, file=sys.stderr)
         _say(f"cvtbench: {exc}")
         return 1
     except KeyboardInterrupt:

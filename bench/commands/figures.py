@@ -29,7 +29,7 @@ from pathlib import Path
 import numpy as np
 
 from compact_distributions.cvt.fields import DensityMap, DirectionField
-from compact_distributions.cvt.metrics import make_metric
+from compact_distributions.cvt.metrics import SHAPES, make_metric
 from compact_distributions.cvt.problem import Grid, Problem
 
 from .. import options
@@ -173,7 +173,7 @@ def figure_more_shapes(backend, st: Settings):
     """Hexagons and octagons, each with the radial density and the circular field."""
     runs = [
         (f"({chr(97 + k)}) {shape}s: radial density, circular field", shape)
-        for k, shape in enumerate(("hexagon", "octagon"))
+        for k, shape in enumerate(s.name for s in SHAPES.values() if not s.paper)
     ]
     panels, caps = [], []
     for cap, shape in runs:

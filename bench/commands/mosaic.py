@@ -119,7 +119,7 @@ def mosaic_options(args) -> dict:
     raster size is not among them: it depends on the picture, see :func:`run`)."""
     from compact_distributions.baselines import get_method
     from compact_distributions.cvt.lloyd import MAX_ITERATIONS
-    from compact_distributions.cvt.metrics import ASPECT_RANGE, METRIC_NAMES
+    from compact_distributions.cvt.metrics import ASPECT_RANGE
     from compact_distributions.cvt.mosaic.image_fields import (
         CONTRAST_RANGE,
         DEFAULT_CONTRAST,
@@ -128,8 +128,7 @@ def mosaic_options(args) -> dict:
     from compact_distributions.cvt.mosaic.render import parse_colour
     from compact_distributions.cvt.placement.fit import parse_gap
     from compact_distributions.cvt.problem import MAX_SEED
-    from compact_distributions.cvt.shapes import ELEMENT_SHAPES
-    from compact_distributions.cvt.validate import one_of
+    from compact_distributions.cvt.shapes import shape_record
 
     return dict(
         method=get_method(args.method),
@@ -142,8 +141,9 @@ def mosaic_options(args) -> dict:
             else real_number(args.edge_threshold, "--edge-threshold", above=0)
         ),
         n_elements=whole_number(args.elements, "--elements", minimum=1),
-        metric=None if args.metric is None else one_of(args.metric, "--metric", METRIC_NAMES),
-        element=None if args.element is None else one_of(args.element, "--element", ELEMENT_SHAPES),
+        # any shape `run` takes, the user's polygon:FILE too (read and checked here)
+        metric=None if args.metric is None else _metric_name(args.metric),
+        element=None if args.element is None else shape_record(args.element, "--element").name,
         aspect=None if args.aspect is None else real_number(args.aspect, "--aspect", *ASPECT_RANGE),
         gap=None if args.gap is None else parse_gap(args.gap, "--gap"),
         use_field=not args.no_field,
@@ -157,6 +157,16 @@ def mosaic_options(args) -> dict:
         progress=options.progress_printer(args.quiet),
         memory_limit=args.memory_limit,
     )
+
+
+def _metric_name(text: str) -> str:
+    """``--metric``: a metric's name, or ``polygon:FILE`` (the file read and checked)."""
+    from compact_distributions.cvt.metrics import POLYGON_PREFIX
+    from compact_distributions.cvt.shapes import resolve_shapes, shape_record
+
+    if text.startswith(POLYGON_PREFIX):
+        return shape_record(text, "--metric").metric
+    return resolve_shapes(text, None, names=("--metric", "--element"))[0]
 
 
 def mosaic_result_json(args, m, backend, stage_seconds: dict | None = None) -> dict:
@@ -376,7 +386,7 @@ PAPER_FIGURES = [
 
 
 SAMPLES_DIR = Path(__file__).resolve().parents[2] / "samples"
-# the README's full-size mosaic and its comparisons: a photograph-like picture, defaults
+# the documentation's full-size mosaic and its comparisons: a photograph-like picture, defaults
 SCENE = "scene.jpg"
 SCENE_FIGURES = {
     "mosaic": "mosaic_scene.png",
@@ -389,7 +399,7 @@ def write_paper_figures(
     out_dir, backend, samples_dir=None, iterations: int = 20, fewer: int = 1, quiet: bool = False
 ) -> list[Path]:
     """Re-make Figures 18-19 (original | without | with) from the sample pictures, and
-    the README's mosaic of samples/scene.jpg (2000 tiles, the defaults) with its
+    the documentation's mosaic of samples/scene.jpg (2000 tiles, the defaults) with its
     comparisons without walls and by method (``fewer``: divide the number of elements,
     for a quick smoke test)."""
     from compact_distributions.cvt.mosaic.pipeline import DEFAULT_ELEMENTS, make_mosaic, picture_array

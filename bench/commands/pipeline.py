@@ -29,7 +29,8 @@ from pathlib import Path
 
 import numpy as np
 
-from compact_distributions.backends import fall_back, variant_names, variant_status
+from compact_distributions.backends import first_available, variant_names, variant_status
+from compact_distributions.cvt.metrics import REFERENCE_SHAPE
 from compact_distributions.cvt.validate import name_list, one_of, whole_number
 
 from .. import options
@@ -134,7 +135,7 @@ class PipelineSpec:
 
         if self.kind == "mosaic":
             return mosaic_estimate(
-                self.size, self.size, self.n_elements, memory_class(self.backend), element="square"
+                self.size, self.size, self.n_elements, memory_class(self.backend), element=REFERENCE_SHAPE
             )
         from compact_distributions.baselines import get_method
 
@@ -143,7 +144,7 @@ class PipelineSpec:
             self.size,
             self.n_elements,
             memory_class(self.backend),
-            element="square",
+            element=REFERENCE_SHAPE,
             method=get_method(self.kind),
             what=f"the run {self.describe()}",
         )
@@ -155,7 +156,7 @@ class PipelineSpec:
             from .mosaic import SAMPLES_DIR
 
             return ["mosaic", str(SAMPLES_DIR / SAMPLE), "--size", str(self.size), *common]
-        return ["run", "--method", self.kind, "--element", "square", "--size", str(self.size), *common]
+        return ["run", "--method", self.kind, "--element", REFERENCE_SHAPE, "--size", str(self.size), *common]
 
     def execute(self, backend) -> dict:
         """Run the command in a process of its own (its peak memory is its own)."""
@@ -249,12 +250,8 @@ def prepare(req: PipelineRequest) -> dict:
     check_folder(req.out)
     status = variant_status()
     kinds = [one_of(k, "--kinds", KINDS) for k in req.kinds or KINDS]
-    default = [b for b in DEFAULT_BACKENDS if status.get(b, (False, ""))[0]]
-    if not default and not req.backends:
-        default = [
-            fall_back(DEFAULT_BACKENDS[0], status.get(DEFAULT_BACKENDS[0], (False, "not installed"))[1])
-        ]
-    backends = [one_of(b, "--backends", variant_names()) for b in req.backends or default]
+    default = req.backends or [first_available(DEFAULT_BACKENDS, status)]
+    backends = [one_of(b, "--backends", variant_names()) for b in default]
     counts = list(req.elements or (QUICK_ELEMENTS if req.quick else FULL_ELEMENTS))
     suite = "pipeline-quick" if req.quick else "pipeline"
     specs = [PipelineSpec(suite, k, b, n, raster_side(n)) for k in kinds for b in backends for n in counts]
@@ -272,7 +269,7 @@ def pipeline(req: PipelineRequest) -> int:
 
     from ..outputs import report_folder
     from ..report import provenance, write_csv, write_markdown, written_files
-    from ..sweep import run_sweep
+    from ..sweep import check_runs, run_sweep
 
     t0 = time.perf_counter()
     plan = prepare(req)
@@ -293,6 +290,7 @@ def pipeline(req: PipelineRequest) -> int:
         write_markdown(req.out / "pipeline.md", render_markdown(table, provenance(), cmd, elapsed, plotted))
         written = written_files(req.out, ["pipeline.md", "pipeline.csv", "pipeline.png"])
     print(f"wrote {req.out}/{', '.join(written)} ({elapsed:.0f} s)", file=sys.stderr)
+    check_runs(plan["specs"], rows, "pipeline")  # a failed configuration fails the command
     return 0
 
 

@@ -1,7 +1,7 @@
 """`cvtbench reproduce`: every table and figure of the suite, in one command.
 
-Runs, in order, `cvtbench table2`, `cvtbench table3`, `cvtbench backends`, `cvtbench pipeline` and
-`cvtbench figures` (which
+Runs, in order, `cvtbench table2`, `cvtbench table3`, `cvtbench backends`, `cvtbench pipeline`,
+`cvtbench converge` and `cvtbench figures` (which
 includes the mosaic Figures 18-19), each into the same report folder, then writes ``OUT/reproduce.md``: what ran, how long each part took, and
 the machine, devices, versions and commit.  ``--quick`` runs the quick form of each
 (under 5 minutes on 2 cores) into ``reports/quick``; the full form writes ``reports``.
@@ -21,7 +21,7 @@ from .. import options
 def add_parser(sub):
     p = sub.add_parser(
         "reproduce",
-        help="table2 + table3 + backends + pipeline + figures into reports/",
+        help="table2 + table3 + backends + pipeline + converge + figures into reports/",
         description=__doc__,
         formatter_class=argparse.RawDescriptionHelpFormatter,
     )
@@ -37,6 +37,7 @@ def requests(args, out: Path, scheduler: str | None) -> list[tuple[str, object, 
     from ..table2 import FULL, QUICK, Table2Request, table2
     from ..table3 import Table3Request, table3
     from .backends import BackendsRequest, backends
+    from .converge import ConvergeRequest, converge
     from .figures import FiguresRequest, figures
     from .pipeline import PipelineRequest, pipeline
 
@@ -82,6 +83,11 @@ def requests(args, out: Path, scheduler: str | None) -> list[tuple[str, object, 
             PipelineRequest(out=out, **common, command=f"cvtbench pipeline{quick} --out {out}"),
         ),
         (
+            "converge",
+            converge,
+            ConvergeRequest(out=out, **common, command=f"cvtbench converge{quick} --out {out}"),
+        ),
+        (
             "figures",
             figures,
             FiguresRequest(
@@ -100,6 +106,7 @@ def run(args) -> int:
     from ..table2 import prepare as prepare_table2
     from ..table3 import check as prepare_table3
     from .backends import prepare as prepare_backends
+    from .converge import prepare as prepare_converge
     from .figures import prepare as prepare_figures
     from .pipeline import prepare as prepare_pipeline
 
@@ -112,6 +119,7 @@ def run(args) -> int:
         "table3": prepare_table3,
         "backends": prepare_backends,
         "pipeline": prepare_pipeline,
+        "converge": prepare_converge,
         "figures": prepare_figures,
     }
     for name, _, request in requests(args, out, None):

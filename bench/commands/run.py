@@ -24,7 +24,7 @@ import numpy as np
 
 from compact_distributions.cvt.errors import InputError
 from compact_distributions.cvt.fields import DensityMap, DirectionField, angles_from_grey
-from compact_distributions.cvt.metrics import Metric, make_metric
+from compact_distributions.cvt.metrics import DEFAULT_ELEMENT, Metric, make_metric
 from compact_distributions.cvt.problem import Grid, Problem, parse_size
 from compact_distributions.cvt.shapes import resolve_shapes
 from compact_distributions.cvt.validate import whole_number
@@ -33,13 +33,12 @@ from .. import options
 
 DEFAULT_SIZE = "512"
 DEFAULT_ELEMENTS = 1000
-DEFAULT_ELEMENT = "circle"  # with the l2 metric: the paper's plain Voronoi cells
 
 
 def add_problem_arguments(p: argparse.ArgumentParser) -> None:
     """The options that define a Problem."""
     options.add_shape_options(p, default_element=DEFAULT_ELEMENT)
-    p.add_argument("--elements", default=None, help=f"number of sites N (default {DEFAULT_ELEMENTS})")
+    p.add_argument("--elements", default=None, help=f"number of elements N (default {DEFAULT_ELEMENTS})")
     p.add_argument("--size", default=DEFAULT_SIZE, help=f"{options.SIZE_HELP} (default {DEFAULT_SIZE})")
     p.add_argument("--init", metavar="SITES.CSV", help="start from these sites (columns x,y in pixels)")
     p.add_argument(
@@ -322,7 +321,7 @@ def run(args) -> int:
             dist,
             ev,
             backend,
-            element=dist.extra["element"],
+            element=dist.extra.get("element", element),
             gap=gap,
             command=command_line(args.argv),
             sources=sources,
@@ -334,7 +333,7 @@ def run(args) -> int:
         mean = np.median(dist.seconds) * 1000 if dist.seconds else float("nan")
         print(
             f"wrote {args.out}/result.json, sites.csv, cells.png, elements.svg, elements.png  "
-            f"({len(dist.sites)} sites, {dist.iterations} iterations, median {mean:.1f} ms/iteration; "
+            f"({len(dist.sites)} elements, {dist.iterations} iterations, median {mean:.1f} ms/iteration; "
             f"{result['element']}s: coverage {ev.coverage:.2%}, overlap {ev.overlap:.3%}, "
             f"{ev.skipped} skipped)",
             file=sys.stderr,
@@ -345,7 +344,6 @@ def run(args) -> int:
 __all__ = [
     "DEFAULT_SIZE",
     "DEFAULT_ELEMENTS",
-    "DEFAULT_ELEMENT",
     "add_problem_arguments",
     "CHUNK_BYTES",
     "count_csv_rows",

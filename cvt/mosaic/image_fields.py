@@ -73,7 +73,7 @@ from scipy import ndimage
 
 from ..errors import InputError
 from ..fields import DensityMap, DirectionField
-from ..shapes import check_shape, shape_record
+from ..shapes import DEFAULT_ELEMENT, check_shape, shape_record
 from ..validate import real_number
 
 DEFAULT_CONTRAST = 3.0
@@ -291,7 +291,7 @@ def smooth_angles(angles: np.ndarray, sigma: float, period: float) -> np.ndarray
 def picture_fields(
     picture: np.ndarray,
     spacing: float,
-    element: str = "square",
+    element: str = DEFAULT_ELEMENT,
     contrast: float = DEFAULT_CONTRAST,
     sigma: float = 1.0,
 ) -> PictureFields:

@@ -513,8 +513,88 @@ def ellipse_rows(polygons, element: str, aspect: float) -> np.ndarray | None:
 
 @dataclass
 class MosaicResult:
-    """A picture turned into a mosaic: one tile per site (``polygons[k]`` is None where
-    the method placed none)."""
+    """A picture turned into a mosaic: one tile per site, its colour and the measures.
+
+    :func:`compact_distributions.mosaic` returns one; :meth:`svg` and :meth:`render`
+    draw it.  Arrays are indexed by site: tile ``k`` is ``polygons[k]`` (None where the
+    method placed none), centred near ``sites[k]``, filled with ``colours[k]``.
+
+    Parameters
+    ----------
+    sites : numpy.ndarray
+        (N, 2) sites in pixel units of the mosaic's raster.
+    angles : numpy.ndarray
+        (N,) tile angles in radians, positive = clockwise on screen.
+    scales : numpy.ndarray
+        (N,) size factors from the picture's density (ones without a density).
+    polygons : list of shapely.Polygon or None
+        The tiles, one per site, None where a site has none.
+    colours : numpy.ndarray
+        (N, 3) sRGB fills in 0..1 (8-bit values): each tile's mean colour.
+    coverage : float
+        Area of the union of the tiles / area of the raster.
+    overlap : float
+        Area covered more than once / area of the raster.
+    colour_error : float
+        Mean ΔE*ab between the picture and the fills over the tiled area.
+    straddling : float
+        Share of the tiles that straddle a strong edge of the picture.
+    width : int
+        Raster width in pixels.
+    height : int
+        Raster height in pixels.
+    metric : str
+        The Lloyd distance.
+    element : str
+        The tile shape.
+    aspect : float
+        The β of rectangles and ellipses.
+    gap : float
+        Grout width in pixels.
+    method : str, optional
+        The method that placed the tiles.
+    method_options : dict, optional
+        The method's own options, as given.
+    contrast : float, optional
+        Densest / sparsest cell area of the density from the picture.
+    grout : tuple of float, optional
+        The grout's sRGB colour in 0..1.
+    edge_threshold : float, optional
+        The contrast (ΔE*ab) from which a picture's edge is strong.
+    walls : bool, optional
+        Whether strong edges were walls (removed from the region).
+    cut_tiles : int, optional
+        The number of tiles cut to fit along the walls.
+    picture : numpy.ndarray or None, optional
+        (H, W, 3) the picture resampled to the raster.
+    edges : numpy.ndarray or None, optional
+        (H, W) bool, the strong edges.
+    straddles : numpy.ndarray or None, optional
+        (N,) bool, the tiles that straddle a strong edge.
+    fields : PictureFields or None, optional
+        The density and direction field read from the picture.
+    problem : Problem or None, optional
+        The problem the method solved.
+    distribution : Distribution or None, optional
+        What the method returned.
+    evaluation : Evaluation or None, optional
+        Coverage and overlap, as measured.
+    backend : str, optional
+        The backend variant that ran the Lloyd iterations.
+    device : str, optional
+        The backend's device.
+    source : str, optional
+        Where the picture came from (its path, or a description of the array).
+    method_seconds : float, optional
+        Wall time of the whole mosaic call.
+
+    Attributes
+    ----------
+    placed : int
+        The number of tiles placed.
+    labels : numpy.ndarray or None
+        The method's final label raster, where it has one.
+    """
 
     sites: np.ndarray  # (N, 2) pixel units of the mosaic raster
     angles: np.ndarray  # (N,) radians, positive = clockwise on screen
@@ -561,7 +641,7 @@ class MosaicResult:
     def svg(self, grout=None, precision: int = 2) -> str:
         """The mosaic as SVG text: a grout-coloured background and one filled tile per
         placed site, in pixel units (viewBox = the raster).  Polygonal tiles are paths
-        with their exact corners; circles and ellipses are rotated ``<ellipse>``s."""
+        with their exact corners; circles and ellipses are rotated ``<ellipse>`` elements."""
         return "".join(self.svg_lines(grout, precision))
 
     def svg_lines(self, grout=None, precision: int = 2):
@@ -600,6 +680,129 @@ class MosaicResult:
 # --------------------------------------------------------------------------- the API
 
 
+def _raster_picture(image, size, n_elements, backend, element, memory_limit):
+    """The picture resampled to the mosaic's raster (H, W, 3), and where it came from;
+    InputError before reading it whole when N does not fit or the memory would not do."""
+    if isinstance(image, (str, os.PathLike)):
+        from .images import open_picture, upright_size
+
+        with open_picture(image, "image") as header:
+            pw, ph = upright_size(header)
+        rgb = None
+    else:
+        rgb, source = picture_array(image)
+        ph, pw = rgb.shape[:2]
+    w, h = raster_size(pw, ph, size)
+    if n_elements > w * h:
+        raise InputError(
+            f"{n_elements} elements do not fit in a {w}x{h} raster "
+            f"(from a {pw}x{ph} picture); "
+            f"use fewer elements or a larger size (--size)"
+        )
+    mosaic_estimate(w, h, n_elements, type(backend), element=element).check(
+        memory_limit, lower="use a smaller size or fewer elements", name="memory_limit"
+    )
+    if rgb is None:
+        rgb, source = picture_array(image, at_least=(w, h), memory_limit=memory_limit)
+    picture = resample(rgb, w, h)
+    del rgb
+    return picture, source
+
+
+def _picture_analysis(picture, spacing, element, contrast, edge_threshold):
+    """The picture's fields (density, direction), its CIELAB and its strong edges."""
+
+    # the fields and the edge map read the picture apart (the edges in CIELAB): side by
+    # side on two cores.  The edge map is made in any case: the straddling measure reads it
+    def lab_and_edges():
+        lab = srgb_to_lab(picture)
+        return lab, strong_edges(lab, edge_threshold, min_length=EDGE_MIN_LENGTH * spacing)
+
+    fields, (lab, edge_map) = side_by_side(
+        lambda: picture_fields(picture, spacing, element, contrast=contrast), lab_and_edges
+    )
+    return fields, lab, edge_map
+
+
+def _after_the_method(dist, lab, edge_map, cut, gap, spacing):
+    """The stages after the method: tiles cut to the walls (``cut``), their colours and
+    the measures (coverage and overlap, straddling, colour error), each timed."""
+    polygons = [None if p is None or p.is_empty else p for p in dist.elements]
+    cut_count = 0
+    # the stages after the method are timed too (result.json's stage_seconds)
+    t0 = time.perf_counter()
+    if cut:
+        polygons, cut_count = cut_to_walls(polygons, edge_map, gap, spacing)
+    t1 = time.perf_counter()
+    h, w = edge_map.shape
+    tiles, pixels = pixels_under(polygons, w, h)
+    colours, fills_lab = tile_colours(lab, polygons, dist.sites, tiles, pixels)
+    t2 = time.perf_counter()
+    ev = evaluate(polygons, Grid(w, h))  # the whole picture: walls are grout
+    straddles = straddling_tiles(polygons, edge_map)
+    error = colour_error(lab, fills_lab, tiles, pixels)
+    t3 = time.perf_counter()
+    stages = {
+        "cutting_seconds": t1 - t0,
+        "fills_seconds": t2 - t1,
+        "evaluation_seconds": t3 - t2,
+    }
+    return polygons, colours, cut_count, (ev, straddles, error), stages
+
+
+def _method_and_options(method, method_options):
+    """The method's record, the options given (checked against it), and those it runs
+    with in a mosaic (its ``mosaic_options`` under the given ones)."""
+    record = resolve_method(method)
+    if method_options is not None and not isinstance(method_options, dict):
+        raise InputError(f"method_options must be a dict of the method's options, got {method_options!r}")
+    given_options = record.parse_options(method_options or {})
+    return record, given_options, {**record.mosaic_options, **given_options}
+
+
+def _result(dist, problem, fields, picture, edge_map, tiles, measures, settings: dict) -> MosaicResult:
+    """The mosaic's record, from the stages' results and :func:`make_mosaic`'s settings."""
+    polygons, colours, cut_count = tiles
+    ev, straddles, error = measures
+    placed = sum(p is not None for p in polygons)
+    backend = settings["backend"]
+    return MosaicResult(
+        sites=dist.sites,
+        angles=dist.angles,
+        scales=dist.scales,
+        polygons=polygons,
+        colours=colours,
+        coverage=ev.coverage,
+        overlap=ev.overlap,
+        colour_error=error,
+        straddling=float(straddles.sum() / placed) if placed else 0.0,
+        width=problem.grid.width,
+        height=problem.grid.height,
+        metric=settings["metric_name"],
+        element=settings["element"],
+        aspect=problem.metric.aspect,
+        gap=settings["gap"],
+        method=dist.method or settings["record"].name,
+        method_options=settings["given_options"],
+        contrast=settings["contrast"],
+        grout=settings["grout"],
+        edge_threshold=settings["edge_threshold"],
+        walls=settings["walls"],
+        cut_tiles=cut_count,
+        picture=picture,
+        edges=edge_map,
+        straddles=straddles,
+        fields=fields,
+        problem=problem,
+        distribution=dist,
+        evaluation=ev,
+        backend=backend.variant,
+        device=backend.device(),
+        source=settings["source"],
+        method_seconds=time.perf_counter() - settings["t_start"],
+    )
+
+
 def make_mosaic(
     image,
     backend,
@@ -627,8 +830,7 @@ def make_mosaic(
     """Turn ``image`` (a file path or a numpy array) into a mosaic of ``n_elements``.
 
     ``metric``/``element``: the Lloyd distance and the tile shape; give either (the
-    other follows: square <-> linf, rectangle <-> linf-axial, ellipse <-> l2-axial,
-    triangle <-> triangle, circle <-> l2), both, or neither (squares).  ``aspect``: β of
+    other follows, by the shape table), both, or neither (squares).  ``aspect``: β of
     rectangles and ellipses (default 0.5).  ``size``: raster (see :func:`raster_size`;
     default the picture's size, long side capped at 1024).  ``backend``: a live
     backend (``compact_distributions.backends.create_backend``), left open.  ``gap``: grout
@@ -656,50 +858,16 @@ def make_mosaic(
     contrast = real_number(contrast, "contrast", *CONTRAST_RANGE)
     edge_threshold = real_number(edge_threshold, "edge_threshold", above=0.0)
     grout = parse_colour(grout, "grout")
-    record = resolve_method(method)
-    if method_options is not None and not isinstance(method_options, dict):
-        raise InputError(f"method_options must be a dict of the method's options, got {method_options!r}")
-    given_options = record.parse_options(method_options or {})
-    method_options = {**record.mosaic_options, **given_options}
+    record, given_options, method_options = _method_and_options(method, method_options)
     metric_name, element = resolve_shapes(metric, element)
     metric_obj = make_metric(metric_name, aspect)
-
-    if isinstance(image, (str, os.PathLike)):
-        from .images import open_picture, upright_size
-
-        with open_picture(image, "image") as header:
-            pw, ph = upright_size(header)
-        rgb = None
-    else:
-        rgb, source = picture_array(image)
-        ph, pw = rgb.shape[:2]
-    w, h = raster_size(pw, ph, size)
-    if n_elements > w * h:
-        raise InputError(
-            f"{n_elements} elements do not fit in a {w}x{h} raster "
-            f"(from a {pw}x{ph} picture); "
-            f"use fewer elements or a larger size (--size)"
-        )
-    mosaic_estimate(w, h, n_elements, type(backend), element=element).check(
-        memory_limit, lower="use a smaller size or fewer elements", name="memory_limit"
-    )
-    if rgb is None:
-        rgb, source = picture_array(image, at_least=(w, h), memory_limit=memory_limit)
-    picture = resample(rgb, w, h)
-    del rgb
+    picture, source = _raster_picture(image, size, n_elements, backend, element, memory_limit)
+    h, w = picture.shape[:2]
     t_picture = time.perf_counter()
     spacing = math.sqrt(w * h / n_elements)
     gap = AUTO_GAP * spacing if gap is None else parse_gap(gap)
 
-    # the fields and the edge map read the picture apart (the edges in CIELAB): side by
-    # side on two cores.  The edge map is made in any case: the straddling measure reads it
-    def lab_and_edges():
-        lab = srgb_to_lab(picture)
-        return lab, strong_edges(lab, edge_threshold, min_length=EDGE_MIN_LENGTH * spacing)
-
-    fields, (lab, edge_map) = side_by_side(
-        lambda: picture_fields(picture, spacing, element, contrast=contrast), lab_and_edges
-    )
+    fields, lab, edge_map = _picture_analysis(picture, spacing, element, contrast, edge_threshold)
     picture_seconds = time.perf_counter() - t_picture
     walls = bool(edges) and bool(edge_map.any())
     problem = Problem(
@@ -721,67 +889,18 @@ def make_mosaic(
         gap=gap,
         **method_options,
     )
-    polygons = [None if p is None or p.is_empty else p for p in dist.elements]
     cut = record.tight if cut is None else bool(cut)
-    cut_count = 0
-    # the stages after the method are timed too (result.json's stage_seconds)
-    t0 = time.perf_counter()
-    if walls and cut:
-        polygons, cut_count = cut_to_walls(polygons, edge_map, gap, spacing)
-    t1 = time.perf_counter()
-    tiles, pixels = pixels_under(polygons, w, h)
-    colours, fills_lab = tile_colours(lab, polygons, dist.sites, tiles, pixels)
-    t2 = time.perf_counter()
-    ev = evaluate(polygons, Grid(w, h))  # the whole picture: walls are grout
-    straddles = straddling_tiles(polygons, edge_map)
-    error = colour_error(lab, fills_lab, tiles, pixels)
-    t3 = time.perf_counter()
-    stages = {
-        "picture_seconds": picture_seconds,  # Lab, density, field and strong edges of the picture
-        "cutting_seconds": t1 - t0,
-        "fills_seconds": t2 - t1,
-        "evaluation_seconds": t3 - t2,
-    }
+    polygons, colours, cut_count, measures, stages = _after_the_method(
+        dist, lab, edge_map, walls and cut, gap, spacing
+    )
+    stages = {"picture_seconds": picture_seconds, **stages}  # Lab, density, field and edges
     dist = dataclasses.replace(
         dist,
         elements=polygons,
         extra={**dist.extra, **({"cut_tiles": cut_count} if walls and cut else {}), **stages},
     )
-    placed = sum(p is not None for p in polygons)
-    return MosaicResult(
-        sites=dist.sites,
-        angles=dist.angles,
-        scales=dist.scales,
-        polygons=polygons,
-        colours=colours,
-        coverage=ev.coverage,
-        overlap=ev.overlap,
-        colour_error=error,
-        straddling=float(straddles.sum() / placed) if placed else 0.0,
-        width=w,
-        height=h,
-        metric=metric_name,
-        element=element,
-        aspect=metric_obj.aspect,
-        gap=gap,
-        method=dist.method or record.name,
-        method_options=given_options,
-        contrast=contrast,
-        grout=grout,
-        edge_threshold=edge_threshold,
-        walls=walls,
-        cut_tiles=cut_count,
-        picture=picture,
-        edges=edge_map,
-        straddles=straddles,
-        fields=fields,
-        problem=problem,
-        distribution=dist,
-        evaluation=ev,
-        backend=backend.variant,
-        device=backend.device(),
-        source=source,
-        method_seconds=time.perf_counter() - t_start,
+    return _result(
+        dist, problem, fields, picture, edge_map, (polygons, colours, cut_count), measures, locals()
     )
 
 

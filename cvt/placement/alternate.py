@@ -26,6 +26,7 @@ import math
 import numpy as np
 
 from ..errors import InputError
+from ..shapes import shape_record
 from ..validate import one_of
 from .fit import FITS, fit_centres, placement_sizes
 
@@ -62,8 +63,9 @@ def alternating_turns(n: int, seed: int = 0) -> np.ndarray:
 
 
 def check_alternate(shape: str, alternate: bool) -> None:
-    """``alternate`` is for triangles only (InputError otherwise)."""
-    if alternate and shape != "triangle":
+    """``alternate`` is for shapes that are not their own half turn, triangles (the
+    record's ``alternates``; InputError otherwise)."""
+    if alternate and not shape_record(shape).alternates:
         raise InputError(f"alternate orientation is for triangles only, not {shape!r}")
 
 

@@ -144,7 +144,7 @@ import functools
 import math
 import time
 from concurrent.futures import ThreadPoolExecutor
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 
 import numpy as np
 from scipy.spatial import cKDTree
@@ -198,10 +198,10 @@ class _Unit:
 
     def __init__(self, shape: str, aspect):
         m = element_ball(shape, aspect)
-        self.kind = m.kind
+        self.curved = m.curved
         self.rho = m.circumradius
         self.inr = m.inradius
-        if m.kind == "polygon":
+        if not m.curved:
             self.verts = m.outline()
             self.normals = m.normals / np.hypot(*m.normals.T)[:, None]
             # h along each of its own face normals: a constant of the shape
@@ -222,7 +222,7 @@ class _Unit:
         """h(n) of elements turned by θ (cos, sin broadcast against nx, ny)."""
         ux = cos * nx + sin * ny  # R(−θ) n: n in the element's own frame
         uy = cos * ny - sin * nx
-        if self.kind == "ellipse":
+        if self.curved:
             a, b = self.axes
             ux *= a
             uy *= b
@@ -358,7 +358,7 @@ def _best_pair_directions(unit, c, r, cos, sin, i, j, prev_n, enough=None, along
     gap_of = gap_for(slice(None))
     # the candidates' gaps in order of preference, written into one array: faces (walls
     # to slide along; i's, then j's), last round's n, centre line
-    faces = len(unit.normals) if unit.kind == "polygon" else 0
+    faces = len(unit.normals) if not unit.curved else 0
     other = np.arange(len(i))
     if faces and unit.symmetric:
         # j's faces seen from j: the gap along −g is the gap along g from j to i.  Where j
@@ -404,7 +404,7 @@ def _best_pair_directions(unit, c, r, cos, sin, i, j, prev_n, enough=None, along
             bx[on_face], by[on_face] = sign * fx, sign * fy
         return bx, by
 
-    curved = unit.kind == "ellipse" and unit.axes[0] != unit.axes[1]  # circles: centre line
+    curved = unit.curved and unit.axes[0] != unit.axes[1]  # circles: centre line
     return _best_direction(gap_for, g, direction_of, np.arctan2(cly, clx) if curved else None, enough)
 
 
@@ -685,7 +685,7 @@ def _near_segments(unit, c, r, cos, sin, budget, half, segs, seg_trees, prev, ac
     args = tuple(v[:, None] for v in (px, py, qx, qy, x, y, r[e], cos[e], sin[e]))
     gap_for = _gaps_of_rows(_seg_gap, unit, args)
     gap_of = gap_for(slice(None))
-    faces = len(unit.normals) if unit.kind == "polygon" else 0
+    faces = len(unit.normals) if not unit.curved else 0
     g = np.empty((len(e), faces + 3))
     g[:, 0] = gap_of(nsx[:, None], nsy[:, None])[:, 0]
     if faces:  # worked face by face along the rows, as in _face_gaps
@@ -709,7 +709,7 @@ def _near_segments(unit, c, r, cos, sin, budget, half, segs, seg_trees, prev, ac
             bx[on_face], by[on_face] = unit.face_normal(k[on_face] - 1, cos[e[on_face]], sin[e[on_face]])
         return bx, by
 
-    curved = unit.kind == "ellipse" and unit.axes[0] != unit.axes[1]  # circles: nearest point
+    curved = unit.curved and unit.axes[0] != unit.axes[1]  # circles: nearest point
     enough = half + budget[e] + _SELECT
     bx, by, best = _best_direction(gap_for, g, direction_of, np.arctan2(ty, tx) if curved else None, enough)
     keep = best < enough
@@ -877,15 +877,102 @@ def _revert_hopeless(rows: _Rows, c, r, new_c, new_r, gap, need):
     return int(back.sum())
 
 
+def _lp_columns(k, elems, delta, move_cost, weight, lo_dr, hi_dr):
+    """Cost and bounds of the columns of :func:`_solve_lp`: ``k`` per element (Δx⁺, Δx⁻,
+    Δy⁺, Δy⁻, Δr when moves cost, else Δx, Δy, Δr)."""
+    split = k == 5
+    ncol = k * len(elems)
+    cost = np.zeros(ncol)
+    lo = np.zeros(ncol)
+    hi = np.empty(ncol)
+    d = delta[elems]
+    if split:
+        for m in range(4):
+            hi[m::5] = d
+            cost[m::5] = move_cost
+    else:
+        lo[0::3] = lo[1::3] = -d
+        hi[0::3] = hi[1::3] = d
+    cost[k - 1 :: k] = -weight[elems]
+    lo[k - 1 :: k], hi[k - 1 :: k] = lo_dr[elems], hi_dr[elems]
+    return cost, lo, hi
+
+
+def _solve_tiles(k, n_tiles, model, cost, lo, hi, options, workers):
+    """Solve each tile's program with HiGHS (``model``: the element and row bounds of the
+    tiles, the rows' lower bounds and the CSR matrix), in ``workers`` threads; returns x,
+    the simplex iterations and the tiles not solved to optimality (those keep x = 0)."""
+    import highspy
+
+    from ..quiet import quiet_highs
+
+    bounds_e, r_cut, row_lo, r_start, index, value = model
+    ncol = len(cost)
+    x = np.zeros(ncol)
+    inf = highspy.kHighsInf
+    optimal = highspy.HighsModelStatus.kOptimal
+    rowwise = highspy.MatrixFormat.kRowwise
+
+    def solve(h, tiles_of_worker):
+        """Solve the given tiles, one small model each, with solver ``h``; a tile the
+        solver does not finish stays where it is (x = 0, a feasible point)."""
+        iters = failed = 0
+        for t in tiles_of_worker:  # a loop over tiles, not pairs
+            c0, c1 = k * bounds_e[t], k * bounds_e[t + 1]
+            a0, a1 = r_cut[0][t], r_cut[1][t]
+            lp = highspy.HighsLp()
+            lp.num_col_ = c1 - c0
+            lp.num_row_ = a1 - a0
+            lp.col_cost_, lp.col_lower_, lp.col_upper_ = cost[c0:c1], lo[c0:c1], hi[c0:c1]
+            lp.row_lower_ = row_lo[a0:a1]
+            lp.row_upper_ = np.full(a1 - a0, inf)
+            lp.a_matrix_.format_ = rowwise
+            lp.a_matrix_.start_ = (r_start[a0 : a1 + 1] - r_start[a0]).astype(np.int32)
+            lp.a_matrix_.index_ = index[r_start[a0] : r_start[a1]]
+            lp.a_matrix_.value_ = value[r_start[a0] : r_start[a1]]
+            h.passModel(lp)
+            h.run()
+            if h.getModelStatus() == optimal:
+                x[c0:c1] = h.getSolution().col_value
+                iters += h.getInfo().simplex_iteration_count
+            else:
+                failed += 1
+        return iters, failed
+
+    # HiGHS lets go of the interpreter while it solves: tiles are independent programs,
+    # so the workers' threads solve them side by side (each tile's answer is the same
+    # whichever worker solves it)
+    workers = max(1, min(workers, n_tiles // _TILES_PER_WORKER))
+    solvers = [quiet_highs() for _ in range(workers)]  # made here: silencing is process-wide
+    for h in solvers:
+        for key, value_ in options.items():
+            h.setOptionValue(key, value_)
+    jobs = [range(w, n_tiles, workers) for w in range(workers)]
+    if workers == 1:
+        done = [solve(solvers[0], jobs[0])]
+    else:
+
+        def work(h, job):
+            try:
+                return solve(h, job)
+            finally:  # a thread that ran HiGHS ends its scheduler before it exits, as
+                # highspy's own solver threads do (a scheduler left behind can deadlock)
+                reset = getattr(highspy.Highs, "resetThreadScheduler", None)
+                if reset is not None:
+                    reset(False)
+
+        with ThreadPoolExecutor(workers) as pool:
+            done = list(pool.map(work, solvers, jobs))
+    iters, failed = (sum(v) for v in zip(*done, strict=True))
+    return x, iters, failed
+
+
 def _solve_lp(
     rows: _Rows, act, c, r, gap, delta, lo_dr, hi_dr, weight, tile, options, move_cost=0.0, workers=1
 ):
     """The round's program in displacements (Δc, Δr) of the active elements, one HiGHS
     model per tile; returns Δc (N, 2), Δr (N,), the simplex iterations and the number of
     tiles HiGHS did not solve to optimality (those keep Δ = 0)."""
-    import highspy
-
-    from ..quiet import quiet_highs
 
     n = len(r)
     # active elements ordered by tile: each tile's columns are one contiguous block
@@ -958,76 +1045,9 @@ def _solve_lp(
     np.cumsum(real.sum(axis=1), out=r_start[1:])
     r_cut = np.searchsorted(r_tile, tiles, side="left"), np.searchsorted(r_tile, tiles, side="right")
 
-    ncol = k * len(elems)
-    cost = np.zeros(ncol)
-    lo = np.zeros(ncol)
-    hi = np.empty(ncol)
-    d = delta[elems]
-    if split:
-        for m in range(4):
-            hi[m::5] = d
-            cost[m::5] = move_cost
-    else:
-        lo[0::3] = lo[1::3] = -d
-        hi[0::3] = hi[1::3] = d
-    cost[k - 1 :: k] = -weight[elems]
-    lo[k - 1 :: k], hi[k - 1 :: k] = lo_dr[elems], hi_dr[elems]
-    x = np.zeros(ncol)
-    inf = highspy.kHighsInf
-    optimal = highspy.HighsModelStatus.kOptimal
-    rowwise = highspy.MatrixFormat.kRowwise
-
-    def solve(h, tiles_of_worker):
-        """Solve the given tiles, one small model each, with solver ``h``; a tile the
-        solver does not finish stays where it is (x = 0, a feasible point)."""
-        iters = failed = 0
-        for t in tiles_of_worker:  # a loop over tiles, not pairs
-            c0, c1 = k * bounds_e[t], k * bounds_e[t + 1]
-            a0, a1 = r_cut[0][t], r_cut[1][t]
-            lp = highspy.HighsLp()
-            lp.num_col_ = c1 - c0
-            lp.num_row_ = a1 - a0
-            lp.col_cost_, lp.col_lower_, lp.col_upper_ = cost[c0:c1], lo[c0:c1], hi[c0:c1]
-            lp.row_lower_ = row_lo[a0:a1]
-            lp.row_upper_ = np.full(a1 - a0, inf)
-            lp.a_matrix_.format_ = rowwise
-            lp.a_matrix_.start_ = (r_start[a0 : a1 + 1] - r_start[a0]).astype(np.int32)
-            lp.a_matrix_.index_ = index[r_start[a0] : r_start[a1]]
-            lp.a_matrix_.value_ = value[r_start[a0] : r_start[a1]]
-            h.passModel(lp)
-            h.run()
-            if h.getModelStatus() == optimal:
-                x[c0:c1] = h.getSolution().col_value
-                iters += h.getInfo().simplex_iteration_count
-            else:
-                failed += 1
-        return iters, failed
-
-    # HiGHS lets go of the interpreter while it solves: tiles are independent programs,
-    # so the workers' threads solve them side by side (each tile's answer is the same
-    # whichever worker solves it)
-    workers = max(1, min(workers, len(tiles) // _TILES_PER_WORKER))
-    solvers = [quiet_highs() for _ in range(workers)]  # made here: silencing is process-wide
-    for h in solvers:
-        for key, value_ in options.items():
-            h.setOptionValue(key, value_)
-    jobs = [range(w, len(tiles), workers) for w in range(workers)]
-    if workers == 1:
-        done = [solve(solvers[0], jobs[0])]
-    else:
-
-        def work(h, job):
-            try:
-                return solve(h, job)
-            finally:  # a thread that ran HiGHS ends its scheduler before it exits, as
-                # highspy's own solver threads do (a scheduler left behind can deadlock)
-                reset = getattr(highspy.Highs, "resetThreadScheduler", None)
-                if reset is not None:
-                    reset(False)
-
-        with ThreadPoolExecutor(workers) as pool:
-            done = list(pool.map(work, solvers, jobs))
-    iters, failed = (sum(v) for v in zip(*done, strict=True))
+    cost, lo, hi = _lp_columns(k, elems, delta, move_cost, weight, lo_dr, hi_dr)
+    model = (bounds_e, r_cut, row_lo, r_start, index, value)
+    x, iters, failed = _solve_tiles(k, len(tiles), model, cost, lo, hi, options, workers)
     dc = np.zeros((n, 2))
     dr = np.zeros(n)
     if split:
@@ -1078,17 +1098,10 @@ def _product(m, v, out, transpose=False):
     return out
 
 
-def _solve_pdhg(rows: _Rows, act, c, r, gap, delta, lo_dr, hi_dr, weight, iterations, step_ratio):
-    """The round's program (the same as :func:`_solve_lp`'s, untiled) solved
-    approximately by ``iterations`` steps of the primal-dual hybrid gradient method
-    (Chambolle-Pock, diagonal steps of Pock & Chambolle 2011), all elements at once, in
-    Halpern's reflected form with restarts (r2HPDHG, Lu & Yang 2024; module docstring).
-
-    Starts from x = 0, y = 0 (last round's duals, mapped by pair, were measured no
-    better).  Returns Δc (N, 2), Δr (N,), the largest row violation left and the steps
-    taken (fewer than ``iterations`` when converged).  The moves and growths always keep
-    their bounds (each step is clipped to them); the rows hold only approximately, which
-    the caller's float64 check and shrinking make exact."""
+def _pdhg_program(rows: _Rows, act, c, r, gap, delta, lo_dr, hi_dr, weight):
+    """The round's program for :func:`_solve_pdhg`: ``A x >= b`` (CSR, and its index,
+    value and row-start arrays), the bounds and the cost of x = (Δx, Δy, Δr) per active
+    element."""
     import scipy.sparse as sp
 
     n = len(r)
@@ -1127,6 +1140,25 @@ def _solve_pdhg(rows: _Rows, act, c, r, gap, delta, lo_dr, hi_dr, weight, iterat
     hi[0::3] = hi[1::3] = d
     lo[2::3], hi[2::3] = lo_dr[act], hi_dr[act]
     cost[2::3] = -weight[act]
+    return a, b, lo, hi, cost, (index, value, start)
+
+
+def _solve_pdhg(rows: _Rows, act, c, r, gap, delta, lo_dr, hi_dr, weight, iterations, step_ratio):
+    """The round's program (the same as :func:`_solve_lp`'s, untiled) solved
+    approximately by ``iterations`` steps of the primal-dual hybrid gradient method
+    (Chambolle-Pock, diagonal steps of Pock & Chambolle 2011), all elements at once, in
+    Halpern's reflected form with restarts (r2HPDHG, Lu & Yang 2024; module docstring).
+
+    Starts from x = 0, y = 0 (last round's duals, mapped by pair, were measured no
+    better).  Returns Δc (N, 2), Δr (N,), the largest row violation left and the steps
+    taken (fewer than ``iterations`` when converged).  The moves and growths always keep
+    their bounds (each step is clipped to them); the rows hold only approximately, which
+    the caller's float64 check and shrinking make exact."""
+    n = len(r)
+    a, b, lo, hi, cost, (index, value, start) = _pdhg_program(
+        rows, act, c, r, gap, delta, lo_dr, hi_dr, weight
+    )
+    ncol, npair, nseg = a.shape[1], len(rows.i), len(rows.e)
     # diagonal steps: 1 / (row or column sum of |A|), balanced by step_ratio
     absval = np.abs(value)
     col_sum = np.bincount(index, weights=absval, minlength=ncol)
@@ -1225,61 +1257,82 @@ def _region_mask(region) -> np.ndarray:
     return m
 
 
-def compact(
-    centres,
-    angles,
-    sizes,
-    shape: str,
-    aspect,
-    region,
-    gap: float = 0.0,
-    rounds: int = 4,
-    move: float = 0.5,
-    growth: float = 0.15,
-    shrink: float = 0.05,
-    max_growth: float | None = None,
-    tol: float = 1e-4,
-    tile_elements: int = 64,
-    move_cost: float = 0.0,
-    lp_options: dict | None = None,
-    on_round=None,
-    walls=None,
-    max_sizes=None,
-    threads: int | None = None,
-    solver: str = "pdhg",
-    iterations: int = _PDHG_ITERATIONS,
-) -> CompactionResult:
-    """Compact placed elements (module docstring): return new centres and sizes.
+@dataclass(frozen=True)
+class CompactionSettings:
+    """How :func:`compact` compacts: every knob in one record.
 
-    ``centres`` (N, 2) px, ``angles`` (N,) radians (kept), ``sizes`` (N,) in unit-element
-    units (0 = no element; those stay absent); ``shape`` one of ``cvt.shapes.ELEMENT_SHAPES``,
-    ``aspect`` β of rectangles and ellipses; ``region`` a :class:`cvt.problem.Grid` or an
-    (H, W) bool mask (True = inside; the raster's edge is the border too); ``gap`` G px
-    between elements (G/2 to the border).  Per round a centre moves at most ``move`` ×
-    its element's in-radius along each axis, and a size grows by at most ``growth`` or
-    shrinks by at most ``shrink`` of itself; ``max_growth`` caps each size at
-    (1 + max_growth) × its given size, ``max_sizes`` ((N,), optional) at an absolute size
-    each (a size above its cap may only shrink).  Stops after ``rounds`` or when a round adds less
-    than ``tol`` of the covered area.  ``lp_options``: extra HiGHS options;
-    ``on_round(k, centres, sizes)`` is called with each round's (overlap-free) state.
-    ``walls`` ((H, W) bool, outside the region): thin walls whose centre lines
-    (:func:`wall_segments`) bound the elements instead of their pixels' sides: each
-    element keeps G/2 from a wall's centre line, as from the border.  ``threads``: how
-    many threads solve the tiles' programs side by side (None: the cores this process may
-    use); the result does not depend on it.  ``solver``: "pdhg" (default: each round's
-    whole program by ``iterations`` PDHG steps at most) or "highs" (HiGHS' dual simplex
-    per tile of about ``tile_elements`` elements, in ``threads`` threads; also used when
-    ``move_cost`` > 0); either way every round is checked exactly (module docstring)."""
-    shape = check_shape(shape)
-    gap = parse_gap(gap)
-    mask = _region_mask(region)
-    if walls is not None:
-        walls = np.asarray(walls, dtype=bool)
-        if walls.shape != mask.shape:
-            raise InputError(
-                f"walls are {walls.shape[1]}x{walls.shape[0]}, the region {mask.shape[1]}x{mask.shape[0]}"
-            )
-        mask = mask | walls
+    Parameters
+    ----------
+    gap : float
+        G px between elements (G/2 to the border and to a wall's centre line).
+    rounds : int
+        Rounds at most (0: only make the start meet every row).
+    move : float
+        Per round a centre moves at most ``move`` × its element's in-radius along each axis.
+    growth, shrink : float
+        Per round a size grows by at most ``growth`` or shrinks by at most ``shrink`` of itself.
+    max_growth : float, optional
+        Caps each size at (1 + max_growth) × its given size.
+    tol : float
+        Stop when a round adds less than ``tol`` of the covered area.
+    tile_elements : int
+        Elements per HiGHS tile (``solver="highs"``).
+    move_cost : float
+        Cost of |Δc| in the objective (> 0 solves with HiGHS).
+    lp_options : dict, optional
+        Extra HiGHS options.
+    threads : int, optional
+        Threads that solve the tiles side by side (None: the cores this process may use);
+        the result does not depend on it.
+    solver : str
+        "pdhg" (each round's whole program by ``iterations`` PDHG steps at most) or "highs"
+        (HiGHS' dual simplex per tile); either way every round is checked exactly.
+    iterations : int
+        PDHG steps per round at most.
+    """
+
+    gap: float = 0.0
+    rounds: int = 4
+    move: float = 0.5
+    growth: float = 0.15
+    shrink: float = 0.05
+    max_growth: float | None = None
+    tol: float = 1e-4
+    tile_elements: int = 64
+    move_cost: float = 0.0
+    lp_options: dict | None = None
+    threads: int | None = None
+    solver: str = "pdhg"
+    iterations: int = _PDHG_ITERATIONS
+
+    def checked(self) -> CompactionSettings:
+        """The same settings, each checked (InputError naming it) and normalised."""
+        move_cost = real_number(self.move_cost, "move_cost", minimum=0.0)
+        solver = one_of(self.solver, "solver", SOLVERS)
+        return CompactionSettings(
+            gap=parse_gap(self.gap),
+            rounds=whole_number(self.rounds, "rounds", minimum=0),
+            move=real_number(self.move, "move", above=0.0),
+            growth=real_number(self.growth, "growth", above=0.0),
+            shrink=real_number(self.shrink, "shrink", minimum=0.0, below=1.0),
+            max_growth=None
+            if self.max_growth is None
+            else real_number(self.max_growth, "max_growth", above=0.0),
+            tol=real_number(self.tol, "tol", minimum=0.0),
+            tile_elements=whole_number(self.tile_elements, "tile_elements", minimum=1),
+            move_cost=move_cost,
+            lp_options=self.lp_options,
+            threads=usable_cores()
+            if self.threads is None
+            else whole_number(self.threads, "threads", minimum=1),
+            # |Δc| in the objective: split columns, HiGHS only
+            solver="highs" if move_cost > 0 else solver,
+            iterations=whole_number(self.iterations, "iterations", minimum=1),
+        )
+
+
+def _checked_elements(centres, angles, sizes, max_sizes):
+    """Centres (N, 2), sizes (N,), angles (N,) and size caps as float64 copies, checked."""
     c = np.array(centres, dtype=np.float64).reshape(-1, 2)
     n = len(c)
     r = np.array(sizes, dtype=np.float64).reshape(-1)
@@ -1296,40 +1349,136 @@ def compact(
         raise InputError("centres, angles and sizes must be finite")
     if (r < 0).any():
         raise InputError(f"sizes must be >= 0, got {r.min()!r}")
-    rounds = whole_number(rounds, "rounds", minimum=0)
-    tile_elements = whole_number(tile_elements, "tile_elements", minimum=1)
-    move, growth = real_number(move, "move", above=0.0), real_number(growth, "growth", above=0.0)
-    shrink = real_number(shrink, "shrink", minimum=0.0, below=1.0)
-    tol = real_number(tol, "tol", minimum=0.0)
-    move_cost = real_number(move_cost, "move_cost", minimum=0.0)
-    solver = one_of(solver, "solver", SOLVERS)
-    iterations = whole_number(iterations, "iterations", minimum=1)
-    threads = usable_cores() if threads is None else whole_number(threads, "threads", minimum=1)
-    if max_growth is not None:
-        max_growth = real_number(max_growth, "max_growth", above=0.0)
     if max_sizes is not None:
         max_sizes = np.broadcast_to(np.asarray(max_sizes, dtype=np.float64), (n,))
         if not (np.isfinite(max_sizes).all() and (max_sizes > 0).all()):
             raise InputError("max_sizes must be finite and positive")
-    unit = _Unit(shape, aspect)
+    return c, r, th, max_sizes
+
+
+def _region_and_walls(region, walls):
+    """The mask the elements stay in (the region and its walls) and the walls, checked."""
+    mask = _region_mask(region)
+    if walls is None:
+        return mask, None
+    walls = np.asarray(walls, dtype=bool)
+    if walls.shape != mask.shape:
+        raise InputError(
+            f"walls are {walls.shape[1]}x{walls.shape[0]}, the region {mask.shape[1]}x{mask.shape[0]}"
+        )
+    return mask | walls, walls
+
+
+def _check_start(unit, c, r, gap, mask) -> None:
+    """InputError where the gap is wider than an element or a centre lies off the region."""
     placed = np.flatnonzero(r > 0)
-    if len(placed):
-        widest = 2 * unit.inr * r[placed].max()
-        if gap >= widest:
-            raise InputError(
-                f"gap {gap:g} px is not smaller than the largest element "
-                f"({widest:.3g} px across its narrowest side)"
-            )
-        h, w = mask.shape
-        x, y = c[placed, 0], c[placed, 1]
-        inside = (x >= 0) & (x < w) & (y >= 0) & (y < h)
-        inside[inside] = mask[y[inside].astype(np.int64), x[inside].astype(np.int64)]
-        if not inside.all():
-            k = placed[np.argmin(inside)]
-            raise InputError(
-                f"element {k} has its centre ({c[k, 0]:g}, {c[k, 1]:g}) outside the "
-                f"region; compaction keeps elements where they start"
-            )
+    if not len(placed):
+        return
+    widest = 2 * unit.inr * r[placed].max()
+    if gap >= widest:
+        raise InputError(
+            f"gap {gap:g} px is not smaller than the largest element "
+            f"({widest:.3g} px across its narrowest side)"
+        )
+    h, w = mask.shape
+    x, y = c[placed, 0], c[placed, 1]
+    inside = (x >= 0) & (x < w) & (y >= 0) & (y < h)
+    inside[inside] = mask[y[inside].astype(np.int64), x[inside].astype(np.int64)]
+    if not inside.all():
+        k = placed[np.argmin(inside)]
+        raise InputError(
+            f"element {k} has its centre ({c[k, 0]:g}, {c[k, 1]:g}) outside the "
+            f"region; compaction keeps elements where they start"
+        )
+
+
+def _round_rows(unit, c, r, cos, sin, budget, gap, segs, seg_trees, prev):
+    """The round's rows (near pairs and near boundary pieces, the tightest piece of each),
+    and the directions to start the next round's search from."""
+    prev_p, prev_s = prev
+    n = len(r)
+    act = np.flatnonzero(r > 0)
+    # one kd-tree of the centres (per class of reach) for the pairs and the pieces
+    trees = _point_trees(c[act], unit.rho * r[act] + budget[act]) if len(act) else []
+    i, j, px, py, _ = _near_pairs(unit, c, r, cos, sin, budget, gap, prev_p, act, trees)
+    e, s, sx, sy, _ = _near_segments(
+        unit, c, r, cos, sin, budget, 0.5 * gap, segs, seg_trees, prev_s, act, trees
+    )
+    seg_m = np.minimum(sx * segs[s, 0] + sy * segs[s, 1], sx * segs[s, 2] + sy * segs[s, 3])
+    rows = _Rows(
+        i,
+        j,
+        px,
+        py,
+        unit.support(px, py, cos[i], sin[i]),
+        unit.support(-px, -py, cos[j], sin[j]),
+        e,
+        s,
+        sx,
+        sy,
+        unit.support(sx, sy, cos[e], sin[e]),
+        seg_m,
+    )
+    kp = i * n + j
+    order = np.argsort(kp)
+    prev_p = (kp[order], np.stack([px, py], axis=1)[order])
+    ks = e * len(segs) + s
+    order = np.argsort(ks)
+    prev_s = (ks[order], np.stack([sx, sy], axis=1)[order])
+    return rows.tightest_pieces(), (prev_p, prev_s), (len(i), len(e))
+
+
+def _solve_round(settings, rows, act, c, r, bounds, mask, k):
+    """Δc, Δr of one round by the settings' solver; also its steps, failed tiles and
+    the largest row violation left (PDHG)."""
+    gap, delta, lo_dr, hi_dr, weight = bounds
+    if settings.solver == "pdhg":
+        dc, dr, violation, iters = _solve_pdhg(
+            rows, act, c, r, gap, delta, lo_dr, hi_dr, weight, settings.iterations, _STEP_RATIO
+        )
+        return dc, dr, iters, 0, violation
+    tile = _tiles(c, act, mask, settings.tile_elements, k)
+    options = {"presolve": "off", **(settings.lp_options or {})}
+    dc, dr, iters, failed = _solve_lp(
+        rows, act, c, r, gap, delta, lo_dr, hi_dr, weight, tile, options, settings.move_cost, settings.threads
+    )
+    return dc, dr, iters, failed, None
+
+
+def compact(
+    centres,
+    angles,
+    sizes,
+    shape: str,
+    aspect,
+    region,
+    settings: CompactionSettings | None = None,
+    *,
+    walls=None,
+    max_sizes=None,
+    on_round=None,
+    **overrides,
+) -> CompactionResult:
+    """Compact placed elements (module docstring): return new centres and sizes.
+
+    ``centres`` (N, 2) px, ``angles`` (N,) radians (kept), ``sizes`` (N,) in unit-element
+    units (0 = no element; those stay absent); ``shape`` one of ``cvt.shapes.ELEMENT_SHAPES``,
+    ``aspect`` β of rectangles and ellipses; ``region`` a :class:`cvt.problem.Grid` or an
+    (H, W) bool mask (True = inside; the raster's edge is the border too).  ``settings``
+    (a :class:`CompactionSettings`; keyword ``overrides`` replace its fields, e.g.
+    ``gap=1.5, rounds=8``) say how far elements move and grow per round and when to stop.
+    ``max_sizes`` ((N,), optional) caps each size (a size above its cap may only shrink).
+    ``walls`` ((H, W) bool, outside the region): thin walls whose centre lines
+    (:func:`wall_segments`) bound the elements instead of their pixels' sides: each
+    element keeps G/2 from a wall's centre line, as from the border.
+    ``on_round(k, centres, sizes)`` is called with each round's (overlap-free) state."""
+    settings = replace(settings or CompactionSettings(), **overrides).checked()
+    shape = check_shape(shape)
+    gap, rounds = settings.gap, settings.rounds
+    mask, walls = _region_and_walls(region, walls)
+    c, r, th, max_sizes = _checked_elements(centres, angles, sizes, max_sizes)
+    unit = _Unit(shape, aspect)
+    _check_start(unit, c, r, gap, mask)
     t0 = time.perf_counter()
     cos, sin = np.cos(th), np.sin(th)
     r0 = r.copy()
@@ -1337,48 +1486,19 @@ def compact(
     if walls is not None and walls.any():
         segs = np.concatenate([segs, wall_segments(walls)])
     seg_trees = _segment_trees(segs)
-    prev_p = prev_s = None
+    prev = (None, None)
     result = CompactionResult(c, r, th, 0, 0.0)
-    options = {"presolve": "off", **(lp_options or {})}
-    if move_cost > 0:
-        solver = "highs"  # |Δc| in the objective: split columns, HiGHS only
     for k in range(max(rounds, 1)):
-        delta = move * unit.inr * r
-        up = growth * r
-        if max_growth is not None:
-            up = np.clip(r0 * (1 + max_growth) - r, 0.0, up)
+        delta = settings.move * unit.inr * r
+        up = settings.growth * r
+        if settings.max_growth is not None:
+            up = np.clip(r0 * (1 + settings.max_growth) - r, 0.0, up)
         if max_sizes is not None:
             up = np.clip(max_sizes - r, 0.0, up)
         budget = math.sqrt(2) * delta + unit.rho * up
-        act = np.flatnonzero(r > 0)
-        # one kd-tree of the centres (per class of reach) for the pairs and the pieces
-        trees = _point_trees(c[act], unit.rho * r[act] + budget[act]) if len(act) else []
-        i, j, px, py, _ = _near_pairs(unit, c, r, cos, sin, budget, gap, prev_p, act, trees)
-        e, s, sx, sy, _ = _near_segments(
-            unit, c, r, cos, sin, budget, 0.5 * gap, segs, seg_trees, prev_s, act, trees
+        rows, prev, (n_pairs, n_pieces) = _round_rows(
+            unit, c, r, cos, sin, budget, gap, segs, seg_trees, prev
         )
-        seg_m = np.minimum(sx * segs[s, 0] + sy * segs[s, 1], sx * segs[s, 2] + sy * segs[s, 3])
-        rows = _Rows(
-            i,
-            j,
-            px,
-            py,
-            unit.support(px, py, cos[i], sin[i]),
-            unit.support(-px, -py, cos[j], sin[j]),
-            e,
-            s,
-            sx,
-            sy,
-            unit.support(sx, sy, cos[e], sin[e]),
-            seg_m,
-        )
-        kp = i * n + j
-        order = np.argsort(kp)
-        prev_p = (kp[order], np.stack([px, py], axis=1)[order])
-        ks = e * len(segs) + s
-        order = np.argsort(ks)
-        prev_s = (ks[order], np.stack([sx, sy], axis=1)[order])
-        rows = rows.tightest_pieces()
         # the start must meet every row (placement may cross a contour by half a pixel)
         r, dropped = _shrink_to_fit(rows, c, r, gap, SLACK)
         result.dropped += dropped
@@ -1390,23 +1510,11 @@ def compact(
         if len(act) == 0:
             break
         area0 = float(np.sum(r * r))
-        lo_dr = -shrink * r
-        hi_dr = np.maximum(up, 0.0)
         weight = r / r[act].mean()  # d(area) = 2·r·dr
         tl = time.perf_counter()
         tcpu = time.process_time()
-        if solver == "pdhg":
-            dc, dr, violation, iters = _solve_pdhg(
-                rows, act, c, r, gap, delta, lo_dr, hi_dr, weight, iterations, _STEP_RATIO
-            )
-            failed = 0
-        else:
-            tile = _tiles(c, act, mask, tile_elements, k)
-            sol = _solve_lp(
-                rows, act, c, r, gap, delta, lo_dr, hi_dr, weight, tile, options, move_cost, threads
-            )
-            dc, dr, iters, failed = sol
-            violation = None
+        bounds = (gap, delta, -settings.shrink * r, np.maximum(up, 0.0), weight)
+        dc, dr, iters, failed, violation = _solve_round(settings, rows, act, c, r, bounds, mask, k)
         result.lp_seconds += time.perf_counter() - tl
         tcpu = time.process_time() - tcpu
         new_c = c + dc
@@ -1421,8 +1529,8 @@ def compact(
         result.rounds = k + 1
         result.history.append(
             {
-                "pairs": len(i),
-                "pieces": len(e),
+                "pairs": n_pairs,
+                "pieces": n_pieces,
                 "area_gain": area1 / area0 - 1,
                 "lp_cpu": tcpu,
                 "iters": iters,
@@ -1432,11 +1540,19 @@ def compact(
                 "seconds": time.perf_counter() - t0,
             }
         )
-        if area1 < area0 * (1 + tol):
+        if area1 < area0 * (1 + settings.tol):
             break
     result.centres, result.sizes = c, r
     result.seconds = time.perf_counter() - t0
     return result
 
 
-__all__ = ["SLACK", "SEGMENT_LENGTH", "CompactionResult", "boundary_segments", "wall_segments", "compact"]
+__all__ = [
+    "SLACK",
+    "SEGMENT_LENGTH",
+    "CompactionSettings",
+    "CompactionResult",
+    "boundary_segments",
+    "wall_segments",
+    "compact",
+]

@@ -82,9 +82,9 @@ def parse_gap(value, name: str = "gap") -> float:
 def element_for(metric: Metric, element: str | None = None) -> tuple[str, float]:
     """The element shape for cells of ``metric`` and the turn (radians) to add to every
     site's angle: the metric's own ball unless ``element`` names another shape; squares
-    in an l1 CVT are turned by 45° (the l1 ball is a diamond)."""
+    in an l1 CVT are turned by 45° (the l1 ball is the square's turned: ``metric.turn``)."""
     shape = metric.natural_element if element is None else check_shape(element)
-    turn = math.pi / 4 if (metric.name == "l1" and shape == "square") else 0.0
+    turn = metric.turn if shape == metric.natural_element else 0.0
     return shape, turn
 
 
@@ -165,8 +165,8 @@ class _Gauge:
     rounding only (about 1e-14 px)."""
 
     def __init__(self, coef, half: float):
-        self.kind, self.half = coef.kind, half
-        if coef.kind == "polygon":
+        self.curved, self.half = coef.curved, half
+        if not coef.curved:
             f = coef.facets  # (N, K, 2): f_k = R(θ) n_k / h_k, |f_k| = 1 / h_k
             self.fx = np.ascontiguousarray(f[:, :, 0].T)  # (K, N)
             self.fy = np.ascontiguousarray(f[:, :, 1].T)
@@ -177,7 +177,7 @@ class _Gauge:
     def prepare(self, balls, qx, qy, anchor) -> list:
         """Terms of the samples (``qx``, ``qy``: (M, W), row i in ball ``balls[i]``):
         arrays whose last two axes are (row, sample) or (row, 1); ``anchor`` (N, 2) per ball."""
-        if self.kind == "polygon":
+        if not self.curved:
             ux, uy = qx - anchor[balls, 0][:, None], qy - anchor[balls, 1][:, None]
             proj = np.empty((len(self.fx), *qx.shape))
             for k in range(len(self.fx)):  # one facet at a time: no (K, M, W) temporaries
@@ -188,7 +188,7 @@ class _Gauge:
     def rows(self, balls, anchor) -> list:
         """The per-row coefficients of :meth:`reach` for rows in balls ``balls``: arrays
         whose last axis is the row (select rows with ``[..., which]``)."""
-        if self.kind == "polygon":
+        if not self.curved:
             return [self.fx[:, balls], self.fy[:, balls], anchor[balls, 0], anchor[balls, 1]]
         return []
 
@@ -202,7 +202,7 @@ class _Gauge:
         def per_row(v):  # a value per row, against the row's samples
             return v[None, :] if rows_last else v[:, None]
 
-        if self.kind == "polygon":
+        if not self.curved:
             (proj,) = terms
             fx, fy, ax, ay = coef
             shift = fx * (points[:, 0] - ax) + fy * (points[:, 1] - ay) + self.slack[:, None]  # (K, M)
@@ -531,8 +531,8 @@ class FitCells:
         self.labels = np.ascontiguousarray(labels, dtype=np.int32)
         self.ids, self.first, self.counts = ids, samples.first, samples.counts
         self.qx, self.qy = samples.qx, samples.qy
-        self.kind, self.half = gauge.kind, gauge.half
-        if gauge.kind == "polygon":
+        self.curved, self.half = gauge.curved, gauge.half
+        if not gauge.curved:
             self.coef = np.concatenate([gauge.fx[:, ids].T, gauge.fy[:, ids].T], axis=1)
             self.slack = gauge.slack
         else:

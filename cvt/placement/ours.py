@@ -17,14 +17,14 @@ import numpy as np
 
 from ..distribution import Distribution
 from ..errors import InputError
-from ..lloyd import LloydSetup, final_labels, lloyd
+from ..lloyd import LLOYD_OPTIONS, LloydSetup, final_labels, lloyd
 from ..methods import Method, MethodOption, SweepVariant
 from ..metrics import SHAPES
 from ..problem import Problem
 from ..shapes import element_polygons, packing_density, shape_record
 from ..validate import whole_number
 from .alternate import alternate_triangles, alternating_turns, check_alternate
-from .compaction import compact
+from .compaction import CompactionSettings, compact
 from .fit import element_for, fit_centres, parse_gap, place_elements
 
 
@@ -43,6 +43,8 @@ def run_ours(
     element: str | None = None,
     gap: float = 0.0,
     fit: str = "site",
+    tolerance: float | None = None,
+    accelerate: bool = False,
 ) -> Distribution:
     """The paper's method: Lloyd relaxation under the metric whose unit ball is the
     element's shape, on any backend, then one element per cell (cvt.placement).
@@ -52,11 +54,12 @@ def run_ours(
     "centre" moves it inside its cell to grow it (``cvt.placement.fit_centres``,
     method "ours-fit").  ``lloyd_seconds`` covers the Lloyd iterations (what the paper's
     timings measure; the whole method's time is ``method_seconds``, set by the record); the final labelling and the placement are timed apart in
-    ``extra`` (``final_label_seconds``, ``placement_seconds``)."""
-    shape, turn = element_for(problem.metric, element)
+    ``extra`` (``final_label_seconds``, ``placement_seconds``).  ``tolerance`` and
+    ``accelerate`` go to :func:`cvt.lloyd.lloyd`; ``extra`` says how its loop ran."""
+    shape, turn = element_for(problem.metric, problem.element if element is None else element)
     gap = parse_gap(gap)
     t0 = time.perf_counter()
-    res = lloyd(problem, backend, iterations, progress=progress)
+    res = lloyd(problem, backend, iterations, progress=progress, tolerance=tolerance, accelerate=accelerate)
     total = time.perf_counter() - t0
     t1 = time.perf_counter()
     labels = final_labels(problem, backend, res)
@@ -91,6 +94,7 @@ def run_ours(
             "gap": gap,
             "final_label_seconds": t2 - t1,
             "placement_seconds": t3 - t2,
+            **res.convergence(),
         },
     )
 
@@ -138,6 +142,8 @@ def run_ours_compact(
     rounds: int | None = None,
     density_slack: float | None = DENSITY_CAP_SLACK,
     turn_to_field: bool = True,
+    tolerance: float | None = None,
+    accelerate: bool = False,
 ) -> Distribution:
     """Ours, then compaction: Lloyd as ``ours``, each element fitted in its cell from
     several starts (``cvt.placement.fit_centres``), then rounds of a linear program in
@@ -159,75 +165,30 @@ def run_ours_compact(
     and run one more round (False: elements keep their sites' angles).
 
     Where the problem has thin walls (``Problem.walls``), elements come up to the walls'
-    centre lines (G/2 off them) instead of stopping at their pixels."""
-    shape, turn = element_for(problem.metric, element)
-    check_alternate(shape, alternate)
-    gap = parse_gap(gap)
-    if rounds is None:
-        rounds = shape_record(shape).compaction_rounds
-    spacing = float(np.sqrt(problem.grid.pixel_count / problem.n_elements))
-    if gap >= spacing:
-        raise InputError(
-            f"gap {gap:g} px is not smaller than the elements: {problem.n_elements} elements in "
-            f"{problem.grid.pixel_count} px are about {spacing:.3g} px apart"
-        )
+    centre lines (G/2 off them) instead of stopping at their pixels.  ``tolerance`` and
+    ``accelerate`` go to :func:`cvt.lloyd.lloyd`."""
+    shape, turn, gap, rounds = _compaction_plan(problem, element, gap, alternate, rounds)
     setup = LloydSetup.of(problem)
     if alternate:
         turns = alternating_turns(problem.n_elements, problem.seed)
         setup = LloydSetup.of(problem, angles_at=lambda sites: problem.angles_at(sites) + turns)
     aspect = problem.metric.aspect
     t0 = time.perf_counter()
-    res = lloyd(problem, backend, iterations, progress=progress, setup=setup)
+    converge = dict(tolerance=tolerance, accelerate=accelerate)
+    res = lloyd(problem, backend, iterations, progress=progress, setup=setup, **converge)
     total = time.perf_counter() - t0
     t1 = time.perf_counter()
     labels = final_labels(problem, backend, res, setup=setup)
     t2 = time.perf_counter()
-    angles = res.angles + turn
-    if alternate:
-        angles, centres, sizes = alternate_triangles(
-            labels, res.sites, angles, aspect, gap, search=_backend_search(backend)
-        )
-    else:
-        centres, sizes = fit_centres(
-            labels, res.sites, angles, shape, aspect, gap, search=_backend_search(backend)
-        )
-    t3 = time.perf_counter()
-    caps = None
-    if problem.density is not None and density_slack is not None:
-        # triangles that point either way tile the plane; one way, they pack at 2/3
-        packing = 1.0 if alternate else packing_density(shape)
-        caps = density_caps(problem, centres, sizes, shape, aspect, density_slack, packing)
-        sizes = np.minimum(sizes, caps)
-    packed = compact(
-        centres,
-        angles,
-        sizes,
-        shape,
-        aspect,
-        problem.grid,
-        gap=gap,
-        walls=problem.walls,
-        rounds=rounds,
-        max_sizes=caps,
+    angles, centres, sizes = _fit_in_cells(
+        labels, res.sites, res.angles + turn, shape, aspect, gap, alternate, backend
     )
-    if turn_to_field and problem.field is not None:
-        # compaction moved the elements off their sites: turn each by the field's change
-        # between its site and its centre, then shrink whatever that turn made overlap
-        angles = angles + problem.angles_at(packed.centres) - problem.angles_at(res.sites)
-        turned = compact(
-            packed.centres,
-            angles,
-            packed.sizes,
-            shape,
-            aspect,
-            problem.grid,
-            gap=gap,
-            walls=problem.walls,
-            rounds=1,
-            max_sizes=caps,
-        )
-        packed.centres, packed.sizes = turned.centres, turned.sizes
-        packed.dropped += turned.dropped
+    t3 = time.perf_counter()
+    sizes, caps = _capped_by_density(problem, centres, sizes, shape, alternate, density_slack)
+    settings = CompactionSettings(gap=gap, rounds=rounds)
+    packed, angles = _compact_and_turn(
+        problem, res.sites, (centres, angles, sizes, caps), shape, settings, turn_to_field
+    )
     placed = np.flatnonzero(packed.sizes > 0)
     elements = np.full(len(res.sites), None, dtype=object)
     if len(placed):
@@ -255,8 +216,73 @@ def run_ours_compact(
             "fit_seconds": t3 - t2,
             "placement_seconds": time.perf_counter() - t2,
             **packed.as_dict(),
+            **res.convergence(),
         },
     )
+
+
+def _fit_in_cells(labels, sites, angles, shape, aspect, gap, alternate, backend):
+    """Each element fitted in its cell (triangles pointing either way with ``alternate``):
+    the angles, centres and sizes."""
+    if alternate:
+        return alternate_triangles(labels, sites, angles, aspect, gap, search=_backend_search(backend))
+    centres, sizes = fit_centres(labels, sites, angles, shape, aspect, gap, search=_backend_search(backend))
+    return angles, centres, sizes
+
+
+def _capped_by_density(problem: Problem, centres, sizes, shape, alternate, density_slack):
+    """The sizes capped by :func:`density_caps` under a density, and the caps (None
+    without a density or with ``density_slack`` None)."""
+    if problem.density is None or density_slack is None:
+        return sizes, None
+    # triangles that point either way tile the plane; one way, they pack at 2/3
+    packing = 1.0 if alternate else packing_density(shape)
+    caps = density_caps(problem, centres, sizes, shape, problem.metric.aspect, density_slack, packing)
+    return np.minimum(sizes, caps), caps
+
+
+def _compaction_plan(problem: Problem, element, gap, alternate, rounds):
+    """ours-compact's element, its turn, the gap and the rounds, each checked."""
+    shape, turn = element_for(problem.metric, problem.element if element is None else element)
+    check_alternate(shape, alternate)
+    gap = parse_gap(gap)
+    if rounds is None:
+        rounds = shape_record(shape).compaction_rounds
+    spacing = float(np.sqrt(problem.grid.pixel_count / problem.n_elements))
+    if gap >= spacing:
+        raise InputError(
+            f"gap {gap:g} px is not smaller than the elements: {problem.n_elements} elements in "
+            f"{problem.grid.pixel_count} px are about {spacing:.3g} px apart"
+        )
+    return shape, turn, gap, rounds
+
+
+def _compact_and_turn(problem: Problem, sites, placed, shape, settings, turn_to_field):
+    """Compaction of the fitted elements ``placed`` (centres, angles, sizes, size caps),
+    then, under a field, each turned to the field at its final centre and one more round
+    to shrink whatever that turn made overlap.  Returns the result and the angles."""
+    centres, angles, sizes, caps = placed
+    aspect, grid, walls = problem.metric.aspect, problem.grid, problem.walls
+    packed = compact(centres, angles, sizes, shape, aspect, grid, settings, walls=walls, max_sizes=caps)
+    if turn_to_field and problem.field is not None:
+        # compaction moved the elements off their sites: turn each by the field's change
+        # between its site and its centre
+        angles = angles + problem.angles_at(packed.centres) - problem.angles_at(sites)
+        turned = compact(
+            packed.centres,
+            angles,
+            packed.sizes,
+            shape,
+            aspect,
+            grid,
+            settings,
+            walls=walls,
+            max_sizes=caps,
+            rounds=1,
+        )
+        packed.centres, packed.sizes = turned.centres, turned.sizes
+        packed.dropped += turned.dropped
+    return packed, angles
 
 
 # compaction's peak per element (near pairs, their directions, the linear program):
@@ -303,6 +329,7 @@ OURS = Method(
     sweep_backends="every",
     compared_on=None,
     paper_table2=PAPER_TABLE2,
+    options=LLOYD_OPTIONS,
     summary="the paper's method: Lloyd under the element's metric, each element centred at its site",
 )
 OURS_FIT = Method(
@@ -312,6 +339,7 @@ OURS_FIT = Method(
     sweep_backends="fastest",
     compared_on=None,
     paper_table2=PAPER_TABLE2,
+    options=LLOYD_OPTIONS,
     summary="ours, each element moved inside its cell to where it can be largest",
     fits=True,
 )
@@ -344,9 +372,10 @@ OURS_COMPACT = Method(
             tag="r",
             label="rounds={}",
         ),
+        *LLOYD_OPTIONS,
     ),
     sweep_variants=(SweepVariant({"alternate": True}, ("triangle",), pictured=True),),
-    beyond_paper=("hexagon", "octagon"),
+    beyond_paper=tuple(s.name for s in SHAPES.values() if not s.paper),
     # mosaics keep compaction without density caps and field turn: their measured coverage,
     # figures and tests predate them
     mosaic_options=MappingProxyType(
