@@ -28,9 +28,14 @@ default on GPUs).
 
 Device choice, first that applies: the ``device`` option ("PLATFORM[:DEVICE]", indices
 or name fragments, as ``cvtbench run --device``), the ``PYOPENCL_CTX`` environment
-variable (same syntax), else the first GPU, else the first CPU device, else any device;
-a device whose compiler fails on a one-line probe kernel is passed over (or, when named,
-refused with the compiler's reason).  Nothing is ever asked interactively.
+variable (same syntax), else the first GPU, else the first CPU device, else any device.
+A device is used only once a child process has built every program the backend builds
+on it (with their kernels, also when read back from the runtime's kernel cache) and run
+them on a small problem of each ball against the NumPy reference (:func:`check_device`;
+the verdict is kept under the user's cache folder, so this costs once per device,
+driver, configuration and kernel source): a runtime that aborts or crashes then takes
+down the child, not the process.  A device that fails is passed over, or, when named,
+refused with the reason and what to install.  Nothing is ever asked interactively.
 """
 
 from __future__ import annotations
@@ -343,7 +348,7 @@ def _user_cache() -> str:
 
 
 def verdict_path() -> Path:
-    """The file of the device check's verdicts."""
+    """The file of the device check's verdicts (``cvtbench info --recheck`` empties it)."""
     return Path(_user_cache()) / "compact-distributions" / "opencl-devices.json"
 
 
@@ -369,6 +374,17 @@ def _verdict_key(identity: tuple, programs: list[ProgramSpec], config: tuple | N
     what += [[[_digest(f) for f in p.files], p.options, p.kernels] for p in programs]
     what.append(os.environ.get("POCL_KERNEL_CACHE", ""))  # the cache's switch changes what is read back
     return hashlib.sha256(json.dumps(what).encode()).hexdigest()[:32]
+
+
+def forget_verdicts() -> None:
+    """Forget every kept verdict: each device is tried again when next asked for."""
+    global _VERDICTS
+    _VERDICTS = {}
+    _FRESH.clear()
+    try:
+        verdict_path().unlink(missing_ok=True)
+    except OSError:
+        pass  # nothing kept where nothing can be written
 
 
 def _read_verdicts() -> dict:
@@ -455,10 +471,9 @@ def _child_check(cl, dev, programs: list[ProgramSpec], config: tuple | None, fre
     # the runtime's own last word: an error line where it printed one, not compiler chatter
     said = [ln for ln in lines if "error" in ln.lower() and not ln.startswith(CHECK_MARK)]
     said = f": {said[-1][:160]}" if said else ""
-    return {
-        "ok": False,
-        "reason": f"the device check {how}{step}{said}",
-    }
+    # killed from outside (out of memory, a user's ^C): not the device's verdict, not kept
+    outside = sig in (signal.SIGKILL, signal.SIGTERM, signal.SIGINT)
+    return {"ok": False, "reason": f"the device check {how}{step}{said}", "transient": outside}
 
 
 def check_device(cl, dev, programs: list[ProgramSpec], config: tuple | None = None) -> dict:
@@ -1291,6 +1306,7 @@ __all__ = [
     "check_device",
     "suite_problem",
     "verdict_path",
+    "forget_verdicts",
     "INSTALL_HINT",
     "CHECK_VERSION",
     "choose_device",
