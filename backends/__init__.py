@@ -16,6 +16,7 @@ load is listed as unavailable with its reason.
 from __future__ import annotations
 
 import importlib
+import sys
 from functools import lru_cache
 from importlib.metadata import EntryPoint
 from typing import Any
@@ -212,8 +213,59 @@ def variant_status() -> dict[str, tuple[bool, str]]:
     return {v: probed[resolve(v)[0]] for v in variant_names()}
 
 
+_FELL_BACK: set[str] = set()  # defaults already said to be replaced, in this process
+
+
+def fall_back(name: str, reason: str) -> str:
+    """The reference backend, in place of ``name``, which the suite chose by default and
+    which cannot run here for ``reason``; says so in one line on standard error, once per
+    process (a backend the user named that cannot run is refused instead).
+
+    Parameters
+    ----------
+    name : str
+        The backend the suite would have chosen.
+    reason : str
+        Why it is unavailable (as :func:`variant_status` gives it).
+
+    Returns
+    -------
+    str
+        The reference backend's name.
+    """
+    if name not in _FELL_BACK:
+        _FELL_BACK.add(name)
+        print(f"note: using {REFERENCE}, as {name} cannot run here: {reason}", file=sys.stderr, flush=True)
+    return REFERENCE
+
+
+def first_available(names, status: dict | None = None) -> str:
+    """The first of ``names`` (the suite's default choice, best first) that runs here,
+    else the reference in its place (:func:`fall_back`, which says so).
+
+    Parameters
+    ----------
+    names : sequence of str
+        Backend variants, best first.
+    status : dict, optional
+        :func:`variant_status`'s answer, where the caller has it already.
+
+    Returns
+    -------
+    str
+        A variant name.
+    """
+    status = variant_status() if status is None else status
+    for name in names:
+        if status.get(name, (False, ""))[0]:
+            return name
+    return fall_back(names[0], status.get(names[0], (False, "not installed"))[1])
+
+
 __all__ = [
     "Backend",
+    "fall_back",
+    "first_available",
     "BackendUnavailable",
     "REGISTRY",
     "VARIANTS",

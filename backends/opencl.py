@@ -28,17 +28,30 @@ default on GPUs).
 
 Device choice, first that applies: the ``device`` option ("PLATFORM[:DEVICE]", indices
 or name fragments, as ``cvtbench run --device``), the ``PYOPENCL_CTX`` environment
-variable (same syntax), else the first GPU, else the first CPU device, else any device;
-a device whose compiler fails on a one-line probe kernel is passed over (or, when named,
-refused with the compiler's reason).  Nothing is ever asked interactively.
+variable (same syntax), else the first GPU, else the first CPU device, else any device.
+A device is used only once a child process has built every program the backend builds
+on it (with their kernels, also when read back from the runtime's kernel cache) and run
+them on a small problem of each ball against the NumPy reference (:func:`check_device`;
+the verdict is kept under the user's cache folder, so this costs once per device,
+driver, configuration and kernel source): a runtime that aborts or crashes then takes
+down the child, not the process.  A device that fails is passed over, or, when named,
+refused with the reason and what to install.  Nothing is ever asked interactively.
 """
 
 from __future__ import annotations
 
+import hashlib
+import itertools
+import json
 import math
 import os
+import signal
+import subprocess
+import sys
+import time
 import warnings
 from contextlib import nullcontext
+from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
@@ -147,8 +160,7 @@ def pocl_cache_dir() -> str:
     ~/.cache.  PoCL offers no device at all when it cannot make this folder."""
     if os.environ.get("POCL_CACHE_DIR"):
         return os.environ["POCL_CACHE_DIR"]
-    base = os.environ.get("XDG_CACHE_HOME") or os.path.join(os.path.expanduser("~"), ".cache")
-    return os.path.join(base, "pocl", "kcache")
+    return os.path.join(_user_cache(), "pocl", "kcache")
 
 
 def cache_problem() -> str | None:
@@ -221,52 +233,462 @@ def _pick(items, token: str, what: str, source: str, names):
 _PROBE = "__kernel void probe(__global int *a) { a[get_global_id(0)] = 1; }"
 
 
+def _error_line(exc) -> str:
+    """The compiler's last error line of a failed build (or the whole message, squeezed)."""
+    lines = [ln.strip() for ln in str(exc).splitlines() if "error" in ln.lower()]
+    return (lines[-1] if lines else " ".join(str(exc).split()))[:200]
+
+
 def compile_problem(cl, dev) -> str | None:
-    """Why ``dev`` cannot compile a kernel, or None.  An OpenCL runtime can list a device
-    whose compiler then fails on every program (PoCL built with an LLVM that does not know
-    the host processor stops with "unknown target CPU 'generic'"), so a device is tried
-    with a one-line program before it is chosen."""
+    """Why ``dev`` cannot compile a one-line kernel, or None (PoCL built with an LLVM that
+    does not know the host processor stops with "unknown target CPU 'generic'"): the first
+    thing the device check tries, for the clearest reason."""
     try:
         ctx = cl.Context([dev])
         with warnings.catch_warnings():
             warnings.simplefilter("ignore")  # compiler chatter is not an error
             cl.Program(ctx, _PROBE).build()
     except cl.Error as exc:
-        lines = [ln.strip() for ln in str(exc).splitlines() if "error" in ln.lower()]
-        return (lines[-1] if lines else " ".join(str(exc).split()))[:200]
+        return _error_line(exc)
     return None
 
 
-def _preferred(cl, devices: list):
-    """The first device that compiles a kernel: GPUs, then CPUs, then any other."""
+# ------------------------------------------------------------ the suite's programs
+@dataclass(frozen=True)
+class ProgramSpec:
+    """A program the backend builds: its kernel files (one after the other), its build
+    options and the kernels it must hold."""
+
+    files: tuple[Path, ...]
+    options: tuple[str, ...]
+    kernels: tuple[str, ...]
+
+
+LABEL_KERNELS = ("label_pixels", "label_blocks", "row_moments", *WALL_KERNELS)
+
+
+def label_program(ellipse: bool, k: int, block: int, int64: bool, fits: bool) -> ProgramSpec:
+    """The program of the label, moments and walled-cell kernels for a ball kind and facet
+    count ``k``, block size (0: per pixel), 64-bit atomics or not; with ``fits`` (the
+    device has float64) the element fit's kernel rides in it: one build instead of two,
+    and the second costs most of a fit at a few thousand elements."""
+    opts = [
+        f"-DSTRIDE={8 if ellipse else 4 + 2 * k}",
+        f"-DK={k}",
+        f"-DBW={block or 8}",  # label_pixels uses none, but the program holds label_blocks too
+        f"-DBH={block or 8}",
+        f"-DSTRIP={STRIP}",
+    ]
+    opts += ["-DMETRIC_ELLIPSE"] if ellipse else []
+    opts += ["-DUSE_INT64_ATOMICS"] if int64 else []
+    if not fits:
+        return ProgramSpec((KERNEL_FILE,), tuple(opts), LABEL_KERNELS)
+    opts.append(f"-DVW={FIT_VECTOR}")
+    return ProgramSpec((KERNEL_FILE, FIT_KERNEL_FILE), tuple(opts), (*LABEL_KERNELS, "fit_search"))
+
+
+def fit_program(ellipse: bool, k: int) -> ProgramSpec:
+    """The fit kernel's own program, for a shape whose label program was not built."""
+    opts = (f"-DK={k}", f"-DVW={FIT_VECTOR}") + (("-DMETRIC_ELLIPSE",) if ellipse else ())
+    return ProgramSpec((FIT_KERNEL_FILE,), opts, ("fit_search",))
+
+
+def device_config(cl, dev, block: int | None = None, split_atomics: bool = False) -> tuple:
+    """(block, 64-bit atomics, fits on the device) of a backend on ``dev`` with these
+    options: CPUs vectorise over a block's pixels, GPUs want a pixel each."""
+    if block is None:
+        block = 0 if dev.type & cl.device_type.GPU else 8
+    int64 = "cl_khr_int64_base_atomics" in dev.extensions and not split_atomics
+    return int(block), int64, "cl_khr_fp64" in dev.extensions
+
+
+def suite_programs(block: int, int64: bool, fits: bool) -> list[ProgramSpec]:
+    """Every program a backend of this configuration builds for the suite's metrics (a
+    user's polygon of another facet count is checked when it is first built)."""
+    from compact_distributions.cvt.metrics import METRIC_NAMES, make_metric
+
+    shapes = sorted({(m.curved, _facet_count(m)) for m in map(make_metric, METRIC_NAMES)})
+    programs = [label_program(e, k, block, int64, fits) for e, k in shapes]
+    if fits:  # an ellipse's fit uses no K: the kernel's arrays take one
+        programs += [fit_program(e, 1 if e else k) for e, k in dict.fromkeys(shapes)]
+    return list(dict.fromkeys(programs))
+
+
+# ------------------------------------------------------------ can the device run them?
+# A runtime can build a program "successfully" with no kernels in it (the PoCL wheel
+# that pyopencl brings, on a processor newer than its LLVM, does so for every program it
+# reads back from its kernel cache) and then abort the process at exit, or crash while a
+# kernel runs (the same wheel, with 16-pixel blocks).  So a device is first tried in a
+# child process: every program a backend of its configuration builds, each built twice
+# (the second is read back from the cache where the runtime keeps one) and checked for
+# its kernels, then run on a small problem of each ball against the NumPy reference.
+# The verdict is kept in a file under the user's cache folder, per device, driver,
+# configuration and kernel source, so this costs once.  A device whose programs lose
+# their kernels only when read back is used with every build made outside the cache (a
+# build option no build had before).
+CHECK_VERSION = 2  # bump when what the check tries changes
+CHECK_TIMEOUT = 600  # s for a child to build and run a configuration's programs
+CHECK_MARK = "cvt-opencl-check: "  # the child's verdict line on its standard output
+CHECK_ENTRY = "compact_distributions.backends.opencl"  # the child: python -m CHECK_ENTRY --check
+CHECK_AGREEMENT = 0.995  # share of the check's pixels labelled as the reference does (float32 ties)
+INSTALL_HINT = (
+    "on Debian or Ubuntu, `apt-get install pocl-opencl-icd` adds a PoCL that runs them; "
+    "or install another OpenCL runtime"
+)
+MAX_VERDICTS = 1000  # kept in the verdict file, the newest
+_VERDICTS: dict[str, dict] | None = None  # this process's copy of the verdict file
+_FRESH: set[tuple] = set()  # devices whose every build is made outside the kernel cache
+_DIGESTS: dict[tuple, str] = {}  # (path, mtime, size) -> sha256 of a kernel file
+_IN_CHECK = False  # set in the check's child: its backend trusts the programs it tries
+_builds = itertools.count()
+
+
+def _user_cache() -> str:
+    return os.environ.get("XDG_CACHE_HOME") or os.path.join(os.path.expanduser("~"), ".cache")
+
+
+def verdict_path() -> Path:
+    """The file of the device check's verdicts (``cvtbench info --recheck`` empties it)."""
+    return Path(_user_cache()) / "compact-distributions" / "opencl-devices.json"
+
+
+def device_identity(dev) -> tuple[str, ...]:
+    """What a device's verdicts are kept under: platform, its version, device, driver."""
+    plat = dev.platform
+    return (plat.name.strip(), plat.version.strip(), dev.name.strip(), str(dev.driver_version).strip())
+
+
+def _digest(path: Path) -> str:
+    try:
+        st = path.stat()
+        tag = (str(path), st.st_mtime_ns, st.st_size)
+        if tag not in _DIGESTS:
+            _DIGESTS[tag] = hashlib.sha256(path.read_bytes()).hexdigest()
+        return _DIGESTS[tag]
+    except OSError:
+        return "missing"  # the build says so
+
+
+def _verdict_key(identity: tuple, programs: list[ProgramSpec], config: tuple | None) -> str:
+    what = [CHECK_VERSION, identity, config]
+    what += [[[_digest(f) for f in p.files], p.options, p.kernels] for p in programs]
+    what.append(os.environ.get("POCL_KERNEL_CACHE", ""))  # the cache's switch changes what is read back
+    return hashlib.sha256(json.dumps(what).encode()).hexdigest()[:32]
+
+
+def forget_verdicts() -> None:
+    """Forget every kept verdict: each device is tried again when next asked for."""
+    global _VERDICTS
+    _VERDICTS = {}
+    _FRESH.clear()
+    try:
+        verdict_path().unlink(missing_ok=True)
+    except OSError:
+        pass  # nothing kept where nothing can be written
+
+
+def _read_verdicts() -> dict:
+    try:
+        data = json.loads(verdict_path().read_text())
+    except (OSError, ValueError):
+        return {}
+    return data if isinstance(data, dict) else {}
+
+
+def _known() -> dict:
+    global _VERDICTS
+    if _VERDICTS is None:
+        _VERDICTS = _read_verdicts()
+    return _VERDICTS
+
+
+def _keep(key: str, verdict: dict) -> None:
+    """Add a verdict to the file (merged with what other processes wrote since; where the
+    file cannot be written, the check is made again next time)."""
+    path = verdict_path()
+    try:
+        path.parent.mkdir(parents=True, exist_ok=True)
+        merged = {**_read_verdicts(), key: verdict}
+        newest = sorted(merged.items(), key=lambda kv: kv[1].get("at", 0))[-MAX_VERDICTS:]
+        tmp = path.with_name(f"{path.name}.{os.getpid()}.tmp")
+        tmp.write_text(json.dumps(dict(newest), indent=0))
+        os.replace(tmp, path)
+    except OSError:
+        pass
+
+
+def _position(cl, dev) -> tuple[int, int]:
+    """(platform, device) indices of ``dev``, as a child process sees them too."""
+    for i, plat in enumerate(_platforms(cl)):
+        for j, other in enumerate(_devices(cl, plat)):
+            if other == dev:
+                return i, j
+    raise BackendUnavailable(f"opencl: {describe_device(cl, dev)} is not listed by its platform")
+
+
+def _fresh_option() -> str:
+    """A build option no build had before: PoCL's cache has nothing under it."""
+    return f"-DCVT_FRESH_BUILD={os.getpid()}_{time.time_ns()}_{next(_builds)}"
+
+
+def _child_check(cl, dev, programs: list[ProgramSpec], config: tuple | None, fresh: bool) -> dict:
+    """Build ``programs`` on ``dev`` in a child process (``fresh``: each outside the kernel
+    cache, which the child then leaves alone), and with ``config`` (block, 64-bit atomics,
+    fits) run a backend of it on the check's problems: {"ok", "empty" (a program came
+    without its kernels), "reason", "transient"}.  A child that crashes fails the device
+    with the signal and the runtime's last line; one that hangs, for this time only."""
+    i, j = _position(cl, dev)
+    payload = {
+        "platform": i,
+        "device": j,
+        "identity": list(device_identity(dev)),
+        "programs": [[[str(f) for f in p.files], list(p.options), list(p.kernels)] for p in programs],
+        "config": config,
+        "fresh": fresh,
+        # the files the backend builds from (a test may point them elsewhere)
+        "sources": {"KERNEL_FILE": str(KERNEL_FILE), "FIT_KERNEL_FILE": str(FIT_KERNEL_FILE)},
+    }
+    env = dict(os.environ, **({"POCL_KERNEL_CACHE": "0"} if fresh else {}))
+    cmd = [sys.executable, "-m", CHECK_ENTRY, "--check"]
+    try:
+        proc = subprocess.run(
+            cmd, input=json.dumps(payload), capture_output=True, text=True, timeout=CHECK_TIMEOUT, env=env
+        )
+    except subprocess.TimeoutExpired:
+        why = f"building and running the suite's programs took over {CHECK_TIMEOUT} s"
+        return {"ok": False, "reason": why, "transient": True}
+    except OSError as exc:
+        return {"ok": False, "reason": f"could not start the device check ({exc})", "transient": True}
+    for line in reversed(proc.stdout.splitlines()):
+        if line.startswith(CHECK_MARK):
+            return json.loads(line[len(CHECK_MARK) :])
+    code = proc.returncode
+    sig = -code if code < 0 and -code in signal.valid_signals() else None
+    how = f"crashed (signal {signal.Signals(sig).name})" if sig else f"stopped (status {code})"
+    lines = [ln.strip() for ln in proc.stderr.splitlines() if ln.strip()]
+    steps = [ln[len(CHECK_MARK) :] for ln in lines if ln.startswith(CHECK_MARK)]
+    step = f" in {steps[-1]}" if steps else ""
+    # the runtime's own last word: an error line where it printed one, not compiler chatter
+    said = [ln for ln in lines if "error" in ln.lower() and not ln.startswith(CHECK_MARK)]
+    said = f": {said[-1][:160]}" if said else ""
+    # killed from outside (out of memory, a user's ^C): not the device's verdict, not kept
+    outside = sig in (signal.SIGKILL, signal.SIGTERM, signal.SIGINT)
+    return {"ok": False, "reason": f"the device check {how}{step}{said}", "transient": outside}
+
+
+def check_device(cl, dev, programs: list[ProgramSpec], config: tuple | None = None) -> dict:
+    """Whether ``dev`` builds ``programs`` with their kernels (and with ``config``, runs a
+    backend of that configuration to the reference's results): {"ok", "fresh" (only
+    outside the kernel cache), "reason"}, from the verdict file or else from a child
+    process (kept for next time)."""
+    if _IN_CHECK:
+        return {"ok": True, "fresh": device_identity(dev) in _FRESH, "reason": ""}
+    identity = device_identity(dev)
+    key = _verdict_key(identity, programs, config)
+    if key not in _known():
+        found = _child_check(cl, dev, programs, config, fresh=False)
+        fresh = bool(found.get("empty"))
+        if fresh:  # read back without kernels: all once more, each outside the cache
+            found = _child_check(cl, dev, programs, config, fresh=True)
+        verdict = {
+            "ok": bool(found["ok"]),
+            "fresh": fresh and bool(found["ok"]),
+            "reason": found.get("reason", ""),
+            "device": describe_device(cl, dev),
+            "at": time.time(),
+        }
+        _known()[key] = verdict
+        if not found.get("transient"):
+            _keep(key, verdict)
+    verdict = _known()[key]
+    if verdict["fresh"]:
+        _FRESH.add(identity)
+    return verdict
+
+
+def suite_problem(cl, dev, *, block: int | None = None, split_atomics: bool = False) -> str | None:
+    """Why ``dev`` cannot run the programs a backend with these options builds, or None."""
+    config = device_config(cl, dev, block, split_atomics)
+    verdict = check_device(cl, dev, suite_programs(*config), config)
+    return None if verdict["ok"] else verdict["reason"]
+
+
+def _check_main() -> int:
+    """The child process of the device check: tries what it is given on one device,
+    prints its verdict line, and leaves at once (PoCL aborts at exit once a program came
+    back without kernels; the verdict is out by then)."""
+    global _IN_CHECK
+    _IN_CHECK = True
+    try:
+        out = _check_here(json.loads(sys.stdin.read()))
+    except Exception as exc:  # noqa: BLE001 - any failure is the device's verdict
+        said = " ".join(str(exc).split())[:300]
+        out = {"ok": False, "reason": f"the device check failed: {type(exc).__name__}: {said}"}
+    sys.stdout.write(CHECK_MARK + json.dumps(out) + "\n")
+    sys.stdout.flush()
+    os._exit(0)
+
+
+_HELD: list = []  # the child's contexts and programs, kept until it leaves
+
+
+def _check_here(payload: dict) -> dict:
+    """The child's check (see :func:`_child_check`)."""
+    cl = _import_pyopencl()
+    dev = _devices(cl, _platforms(cl)[payload["platform"]])[payload["device"]]
+    if list(device_identity(dev)) != payload["identity"]:
+        return {
+            "ok": False,
+            "reason": f"the device check found {describe_device(cl, dev)}, not the one asked for",
+        }
+    problem = compile_problem(cl, dev)
+    if problem is not None:
+        return {"ok": False, "reason": f"cannot compile a kernel: {problem}"}
+    ctx = cl.Context([dev])
+    _HELD.append(ctx)  # released, a context whose program came back empty aborts at once
+    fresh = payload["fresh"]
+    print(f"{CHECK_MARK}building the suite's programs", file=sys.stderr, flush=True)
+    for files, opts, kernels in payload["programs"]:
+        if fresh and payload["config"] is not None and "label_pixels" in kernels:
+            continue  # the run below builds these (each checked for its kernels) as it needs them
+        source = "\n".join(Path(f).read_text() for f in files)
+        shown = " ".join(opts)
+        # twice: the second build is read back from the kernel cache, where there is one
+        for _ in range(1 if fresh else 2):
+            try:
+                with warnings.catch_warnings():
+                    warnings.simplefilter("ignore")
+                    prg = cl.Program(ctx, source).build(
+                        options=[*opts, *([_fresh_option()] if fresh else [])]
+                    )
+                _HELD.append(prg)
+                names = set(prg.get_info(cl.program_info.KERNEL_NAMES).split(";"))
+            except cl.Error as exc:
+                return {
+                    "ok": False,
+                    "reason": f"the kernels failed to build ({shown}): {_error_line(exc)}",
+                }
+            missing = [k for k in kernels if k not in names]
+            if missing:
+                why = (
+                    f"the suite's program ({shown}) was built without its kernels ({', '.join(missing[:3])})"
+                )
+                return {"ok": False, "empty": True, "reason": why}
+    if payload["config"] is None:
+        return {"ok": True}
+    print(f"{CHECK_MARK}starting a backend", file=sys.stderr, flush=True)
+    if fresh:
+        _FRESH.add(device_identity(dev))
+    block, int64, _ = payload["config"]
+    globals().update({name: Path(path) for name, path in payload["sources"].items()})
+    device = f"{payload['platform']}:{payload['device']}"
+    try:
+        with OpenCLBackend(device=device, block=block, split_atomics=not int64) as backend:
+            why = _run_problem(backend)
+    except BackendUnavailable as exc:  # a kernel that failed, or a program without kernels
+        return {"ok": False, "reason": str(exc).removeprefix("opencl: ").split(f"; {INSTALL_HINT}")[0]}
+    return {"ok": why is None, "reason": why or ""}
+
+
+def _run_problem(backend) -> str | None:
+    """Why ``backend`` does not give the reference's results on a small problem of each
+    ball kind and facet count of the suite's metrics (labels, their sums, the walled
+    step's sums, the fit), or None."""
+    from compact_distributions.cvt.metrics import METRIC_NAMES, make_metric
+    from compact_distributions.cvt.moments import moments_from_labels
+    from compact_distributions.cvt.mosaic.pipeline import split_cells
+    from compact_distributions.cvt.placement.fit import element_for, fit_centres
+
+    from .numpy_backend import NumpyBackend
+
+    w, h, n = 83, 61, 40
+    ys, xs = np.mgrid[0:h, 0:w] + 0.5
+    mask = ((xs - w / 2) / (0.47 * w)) ** 2 + ((ys - h / 2) / (0.47 * h)) ** 2 < 1
+    mask[h // 2 - 3 : h // 2 + 3, : w // 3] = False  # a wall into the region: cells in pieces
+    rng = np.random.default_rng(7)
+    iy, ix = np.nonzero(mask)
+    pick = rng.choice(len(ix), n, replace=False)
+    sites = np.stack([ix[pick], iy[pick]], axis=1) + rng.random((n, 2))
+    angles, scales = rng.uniform(0, np.pi, n), rng.uniform(0.7, 1.4, n)
+    grid = Grid(w, h, mask)
+    shapes = {}
+    for name in METRIC_NAMES:
+        metric = make_metric(name)
+        shapes.setdefault((metric.curved, _facet_count(metric)), metric)
+    reference = NumpyBackend()
+
+    def step(what: str) -> None:  # where the child was, should the runtime crash it
+        print(f"{CHECK_MARK}{what}", file=sys.stderr, flush=True)
+
+    for metric in shapes.values():
+        args = dict(angles=angles, scales=scales, metric=metric, grid=grid)
+        step(f"the labels of {metric.name}")
+        labels = backend.label(sites, **args)
+        agree = float((labels == reference.label(sites, **args)).mean())
+        if agree < CHECK_AGREEMENT:
+            return f"{metric.name}: {100 * (1 - agree):.1f}% of the pixels labelled unlike the reference"
+        step(f"the sums of {metric.name}")
+        sums = [(backend.moments(sites, **args), moments_from_labels(labels, n), "sums")]
+        step(f"the walled step of {metric.name}")
+        sums.append(
+            (
+                backend.walled_moments(sites, **args),
+                moments_from_labels(split_cells(labels, sites), n),
+                "walled sums",
+            )
+        )
+        for got, want, what in sums:
+            if any(
+                not np.array_equal(getattr(got, f), getattr(want, f))
+                for f in ("count", "sx", "sy", "sxx", "syy")
+            ):
+                return f"{metric.name}: the {what} of its labels are not the host's"
+        shape, turn = element_for(metric)
+        step(f"the fit of {metric.name}")
+        on_device = fit_centres(labels, sites, angles + turn, shape, metric.aspect, search=backend.fit_search)
+        on_host = fit_centres(labels, sites, angles + turn, shape, metric.aspect)
+        if not all(np.array_equal(a, b) for a, b in zip(on_device, on_host, strict=True)):
+            return f"{metric.name}: the fit's centres are not the host's"
+    return None
+
+
+def _preferred(cl, devices: list, problem, named: str | None = None):
+    """The first device that runs the suite's programs (``problem(dev)`` is None): GPUs,
+    then CPUs, then any other.  ``named``: how the user named these devices, for the
+    error where none does."""
 
     def rank(dev):
         return 0 if dev.type & cl.device_type.GPU else 1 if dev.type & cl.device_type.CPU else 2
 
     failures = []
     for dev in sorted(devices, key=rank):  # sorted() is stable: driver order within a kind
-        problem = compile_problem(cl, dev)
-        if problem is None:
+        why = problem(dev)
+        if why is None:
             return dev
-        failures.append(f"{describe_device(cl, dev)}: {problem}")
-    raise BackendUnavailable(
-        "opencl: no OpenCL device compiles kernels ("
-        + "; ".join(failures)
-        + "); on Debian or Ubuntu, `apt-get install pocl-opencl-icd` adds a PoCL that does"
-    )
+        failures.append(f"{describe_device(cl, dev)}: {why}")
+    said = "; ".join(failures)
+    if named:
+        raise BackendUnavailable(f"opencl: {named} cannot run the suite's kernels ({said}); {INSTALL_HINT}")
+    raise BackendUnavailable(f"opencl: no OpenCL device runs the suite's kernels ({said}); {INSTALL_HINT}")
 
 
-def choose_device(cl, spec: str | None = None):
-    """The device named by ``spec``, else by PYOPENCL_CTX, else the preferred one."""
+def choose_device(cl, spec: str | None = None, *, block: int | None = None, split_atomics: bool = False):
+    """The device named by ``spec``, else by PYOPENCL_CTX, else the preferred one; only a
+    device that runs the programs a backend with these options builds (one named that
+    does not is refused with the reason)."""
     source = "device"
     if spec is None or str(spec).strip() == "":
         spec, source = os.environ.get("PYOPENCL_CTX", ""), "PYOPENCL_CTX"
     platforms = _platforms(cl)
+
+    def problem(dev):
+        return suite_problem(cl, dev, block=block, split_atomics=split_atomics)
+
     if not str(spec).strip():
         devices = [d for p in platforms for d in _devices(cl, p)]
         if not devices:
             raise _no_device("OpenCL platforms exist but none has a device")
-        return _preferred(cl, devices)
+        return _preferred(cl, devices, problem)
     parts = str(spec).split(":")
     if len(parts) > 2:
         raise InputError(f"{source}={spec!r}: expected PLATFORM[:DEVICE], e.g. 0:0")
@@ -274,9 +696,9 @@ def choose_device(cl, spec: str | None = None):
     devices = _devices(cl, platform)
     if not devices:
         raise _no_device(f"platform {platform.name.strip()!r} has no device")
-    if len(parts) == 1 or not parts[1].strip():
-        return _preferred(cl, devices)
-    return _preferred(cl, [_pick(devices, parts[1], "device", source, [d.name for d in devices])])
+    if len(parts) > 1 and parts[1].strip():
+        devices = [_pick(devices, parts[1], "device", source, [d.name for d in devices])]
+    return _preferred(cl, devices, problem, named=f"{source}={spec}")
 
 
 class OpenCLBackend(Backend):
@@ -311,7 +733,7 @@ class OpenCLBackend(Backend):
                 f"opencl: block must be one of {BLOCK_SIZES} (0: a pixel per work-item), got {block!r}"
             )
         cl = self._cl = _import_pyopencl()
-        self._device = choose_device(cl, device)
+        self._device = choose_device(cl, device, block=block, split_atomics=split_atomics)
         try:
             self._context = cl.Context([self._device])
             self._queue = cl.CommandQueue(self._context)
@@ -319,13 +741,13 @@ class OpenCLBackend(Backend):
             raise BackendUnavailable(
                 f"opencl: cannot open {describe_device(cl, self._device)}: {exc}"
             ) from None
-        has64 = "cl_khr_int64_base_atomics" in self._device.extensions
-        self.int64_atomics = has64 and not split_atomics
+        self.block, self.int64_atomics, self._fits_on_device = device_config(
+            cl, self._device, block, split_atomics
+        )
         self.cell_factor = float(cell_factor)
         self.local_size = None if local_size is None else tuple(int(v) for v in local_size)
-        if block is None:  # CPUs vectorise over a block's pixels; GPUs want a pixel each
-            block = 0 if self._device.type & cl.device_type.GPU else 8
-        self.block = int(block)
+        # the programs the device check built and ran (choose_device): built without asking again
+        self._checked = set(suite_programs(self.block, self.int64_atomics, self._fits_on_device))
         # (kind, K, int64, block) -> (label, moments kernels); _fit_key -> the fit's program
         self._programs: dict[tuple, object] = {}
         self._buffers: dict[str, object] = {}
@@ -336,7 +758,6 @@ class OpenCLBackend(Backend):
         self._labelled = None
         self._wall_kernels: dict[int, dict] = {}  # program -> walled-cell kernels by name
         self._fit_kernels: dict[tuple, object] = {}  # _fit_key -> fit kernel
-        self._fits_on_device = "cl_khr_fp64" in self._device.extensions
         self._row_room = 0  # slots for each row's runs the walled step needed so far
 
     # ------------------------------------------------------------------ device
@@ -344,9 +765,14 @@ class OpenCLBackend(Backend):
     def probe(cls) -> str:
         cl = _import_pyopencl()
         try:
-            return describe_device(cl, choose_device(cl, None))
+            dev = choose_device(cl, None)
         except InputError as exc:  # a bad PYOPENCL_CTX: `info` shows why
             raise BackendUnavailable(f"opencl: {exc}") from None
+        if device_identity(dev) in _FRESH:
+            return (
+                f"{describe_device(cl, dev)}, every program built anew (its kernel cache loses their kernels)"
+            )
+        return describe_device(cl, dev)
 
     def device(self) -> str:
         return describe_device(self._cl, self._device)
@@ -368,27 +794,10 @@ class OpenCLBackend(Backend):
         key = (metric.curved, k, self.int64_atomics, self.block)
         if key not in self._programs:
             cl = self._cl
-            stride = 8 if metric.curved else 4 + 2 * k
-            opts = [
-                f"-DSTRIDE={stride}",
-                f"-DK={k}",
-                f"-DBW={self.block or 8}",  # label_pixels uses none, but the program holds label_blocks too
-                f"-DBH={self.block or 8}",
-                f"-DSTRIP={STRIP}",
-            ]
-            if metric.curved:
-                opts.append("-DMETRIC_ELLIPSE")
-            if self.int64_atomics:
-                opts.append("-DUSE_INT64_ATOMICS")
-            # the element fit's kernel rides in the same program where it can run (it
-            # needs float64): one build instead of two, and the second costs most of a
-            # fit at a few thousand elements
-            files = [KERNEL_FILE, FIT_KERNEL_FILE] if self._fits_on_device else [KERNEL_FILE]
+            ellipse = metric.curved
+            prg = self._build(label_program(ellipse, k, self.block, self.int64_atomics, self._fits_on_device))
             if self._fits_on_device:
-                opts.append(f"-DVW={FIT_VECTOR}")
-            prg = self._build(files, opts)
-            if self._fits_on_device:
-                self._programs[_fit_key(metric.curved, k)] = prg
+                self._programs[_fit_key(ellipse, k)] = prg
             label_name = "label_blocks" if self.block > 0 else "label_pixels"
             self._programs[key] = (cl.Kernel(prg, label_name), cl.Kernel(prg, "row_moments"))
         return self._programs[key]
@@ -758,8 +1167,7 @@ class OpenCLBackend(Backend):
         k = 1 if ellipse else len(cells.slack)
         key = _fit_key(ellipse, k)
         if key not in self._programs:  # no label program of this shape built the fit's
-            opts = [f"-DK={k}", f"-DVW={FIT_VECTOR}"] + (["-DMETRIC_ELLIPSE"] if ellipse else [])
-            self._programs[key] = self._build([FIT_KERNEL_FILE], opts)
+            self._programs[key] = self._build(fit_program(ellipse, k))
         if key not in self._fit_kernels:
             self._fit_kernels[key] = cl.Kernel(self._programs[key], "fit_search")
         kernel = self._fit_kernels[key]
@@ -824,26 +1232,48 @@ class OpenCLBackend(Backend):
                 buf.release()
         return centres, sizes
 
-    def _build(self, paths: list[Path], opts: list[str]):
-        """The program of the kernel files ``paths`` (one after the other) built with
-        ``opts``, quietly (PoCL's own compiler chatter goes to descriptor 2;
-        PYOPENCL_COMPILER_OUTPUT=1 shows it); a failed build raises BackendUnavailable
-        with its log."""
+    def _build(self, spec: ProgramSpec):
+        """The program ``spec`` names, built quietly (PoCL's own compiler chatter goes to
+        descriptor 2; PYOPENCL_COMPILER_OUTPUT=1 shows it), once the device check has
+        tried it in a child process (:func:`check_device`; kept, so once per device);
+        outside the kernel cache on a device whose programs lose their kernels there.  A
+        program that fails to build, or comes without its kernels even outside the cache,
+        raises BackendUnavailable saying why."""
         cl = self._cl
+        if spec not in self._checked:  # a user's polygon: another facet count
+            verdict = check_device(cl, self._device, [spec])
+            if not verdict["ok"]:
+                raise BackendUnavailable(f"opencl: {self.device()}: {verdict['reason']}; {INSTALL_HINT}")
+            self._checked.add(spec)
         try:
-            source = "\n".join(path.read_text() for path in paths)
+            source = "\n".join(path.read_text() for path in spec.files)
         except OSError as exc:
             raise BackendUnavailable(f"opencl: kernel source missing: {exc}") from None
         shown = os.environ.get("PYOPENCL_COMPILER_OUTPUT") == "1"
-        try:
-            with warnings.catch_warnings(), nullcontext() if shown else c_output_silenced(2):
-                warnings.simplefilter("ignore")
-                return cl.Program(self._context, source).build(options=opts)
-        except cl.Error as exc:
-            log = " ".join(str(exc).split())[:400]
-            raise BackendUnavailable(
-                f"opencl: kernel failed to build on {self.device()} ({' '.join(opts)}): {log}"
-            ) from None
+        identity = device_identity(self._device)
+        for _ in range(2):
+            fresh = identity in _FRESH
+            opts = [*spec.options, *([_fresh_option()] if fresh else [])]
+            try:
+                with warnings.catch_warnings(), nullcontext() if shown else c_output_silenced(2):
+                    warnings.simplefilter("ignore")
+                    prg = cl.Program(self._context, source).build(options=opts)
+                names = set(prg.get_info(cl.program_info.KERNEL_NAMES).split(";"))
+            except cl.Error as exc:
+                log = " ".join(str(exc).split())[:400]
+                raise BackendUnavailable(
+                    f"opencl: kernel failed to build on {self.device()} ({' '.join(spec.options)}): {log}"
+                ) from None
+            missing = [k for k in spec.kernels if k not in names]
+            if not missing:
+                return prg
+            if fresh:
+                break
+            _FRESH.add(identity)  # read back without its kernels: once more, outside the cache
+        raise BackendUnavailable(
+            f"opencl: {self.device()} built the suite's program ({' '.join(spec.options)}) without "
+            f"its kernels ({', '.join(missing[:3])}); {INSTALL_HINT}"
+        )
 
 
 FIT_KERNEL_FILE = Path(__file__).with_name("opencl_fit.cl")
@@ -865,9 +1295,27 @@ __all__ = [
     "pocl_cache_dir",
     "cache_problem",
     "describe_device",
+    "device_identity",
+    "device_config",
+    "compile_problem",
+    "ProgramSpec",
+    "LABEL_KERNELS",
+    "label_program",
+    "fit_program",
+    "suite_programs",
+    "check_device",
+    "suite_problem",
+    "verdict_path",
+    "forget_verdicts",
+    "INSTALL_HINT",
+    "CHECK_VERSION",
     "choose_device",
     "OpenCLBackend",
     "FIT_KERNEL_FILE",
     "FIT_VECTOR",
     "FIT_GROUP",
 ]
+
+
+if __name__ == "__main__" and sys.argv[1:] == ["--check"]:
+    _check_main()

@@ -35,7 +35,7 @@ from pathlib import Path
 import numpy as np
 
 from compact_distributions.backends import REFERENCE as REFERENCE_BACKEND
-from compact_distributions.backends import variant_metrics, variant_names, variant_status
+from compact_distributions.backends import fall_back, variant_metrics, variant_names, variant_status
 from compact_distributions.cvt.errors import InputError
 from compact_distributions.cvt.metrics import REFERENCE_SHAPE
 from compact_distributions.cvt.registry import get_method, method_names
@@ -618,7 +618,7 @@ def sweep_backends(names) -> tuple[list[str], dict[str, str]]:
 def variant_backend(unavailable: dict) -> str:
     """The backend the variants of ours run on: OpenCL where it runs (their Lloyd
     iterations are the same as ours'; OpenCL only makes them fast), else the reference."""
-    return "opencl" if "opencl" not in unavailable else REFERENCE_BACKEND
+    return "opencl" if "opencl" not in unavailable else fall_back("opencl", unavailable["opencl"])
 
 
 @dataclass(frozen=True)

@@ -38,7 +38,7 @@ from pathlib import Path
 
 import numpy as np
 
-from compact_distributions.backends import variant_names, variant_status
+from compact_distributions.backends import first_available, variant_names, variant_status
 from compact_distributions.cvt.metrics import PAPER_SHAPES, SHAPES
 from compact_distributions.cvt.problem import MAX_SEED
 from compact_distributions.cvt.validate import one_of, whole_number
@@ -328,7 +328,7 @@ def prepare(req: ConvergeRequest) -> dict:
     check_folder(req.out)
     status = variant_status()
     if req.backend is None:
-        backend = next((b for b in DEFAULT_BACKENDS if status.get(b, (False, ""))[0]), "numpy")
+        backend = first_available(DEFAULT_BACKENDS, status)
     else:
         backend = req.backend
     specs, left_out = problems(req, backend)

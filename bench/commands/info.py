@@ -6,6 +6,12 @@ from __future__ import annotations
 
 def add_parser(sub):
     p = sub.add_parser("info", help="list backends (available, or why not), methods and versions")
+    p.add_argument(
+        "--recheck",
+        action="store_true",
+        help="try the OpenCL devices again, forgetting the kept verdicts (each device is tried "
+        "once, in a child process, and its verdict kept)",
+    )
     p.set_defaults(func=run)
 
 
@@ -15,6 +21,10 @@ def run(args) -> int:
 
     from ..outputs import versions
 
+    if args.recheck:
+        from compact_distributions.backends.opencl import forget_verdicts
+
+        forget_verdicts()
     print("backends:")
     for name, ok, text in probe_all():
         state = "available  " if ok else "unavailable"

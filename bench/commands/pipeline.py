@@ -29,7 +29,7 @@ from pathlib import Path
 
 import numpy as np
 
-from compact_distributions.backends import variant_names, variant_status
+from compact_distributions.backends import first_available, variant_names, variant_status
 from compact_distributions.cvt.metrics import REFERENCE_SHAPE
 from compact_distributions.cvt.validate import name_list, one_of, whole_number
 
@@ -250,8 +250,8 @@ def prepare(req: PipelineRequest) -> dict:
     check_folder(req.out)
     status = variant_status()
     kinds = [one_of(k, "--kinds", KINDS) for k in req.kinds or KINDS]
-    default = [b for b in DEFAULT_BACKENDS if status.get(b, (False, ""))[0]] or ["numpy"]
-    backends = [one_of(b, "--backends", variant_names()) for b in req.backends or default]
+    default = req.backends or [first_available(DEFAULT_BACKENDS, status)]
+    backends = [one_of(b, "--backends", variant_names()) for b in default]
     counts = list(req.elements or (QUICK_ELEMENTS if req.quick else FULL_ELEMENTS))
     suite = "pipeline-quick" if req.quick else "pipeline"
     specs = [PipelineSpec(suite, k, b, n, raster_side(n)) for k in kinds for b in backends for n in counts]
