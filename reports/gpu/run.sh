@@ -70,7 +70,7 @@ nvidia-smi || echo "nvidia-smi failed"
 nvidia-smi --query-gpu=name,driver_version,memory.total,clocks.max.sm --format=csv || true
 
 mkdir -p /tmp/run && cd /tmp/run   # away from the repo root's egg-info
-CVT="$PY -m compact_distributions.bench.cli"
+CVT="$PY -m compact_distributions.bench.commands.cli"
 
 stamp "probe: pyopencl platforms"
 echo "OCL_ICD_VENDORS=${OCL_ICD_VENDORS:-} LD_LIBRARY_PATH=${LD_LIBRARY_PATH:-}"
