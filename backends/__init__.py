@@ -17,6 +17,7 @@ from __future__ import annotations
 
 import importlib
 import sys
+from collections.abc import Sequence
 from functools import lru_cache
 from importlib.metadata import EntryPoint
 from typing import Any
@@ -239,7 +240,7 @@ def fall_back(name: str, reason: str) -> str:
     return REFERENCE
 
 
-def first_available(names, status: dict | None = None) -> str:
+def first_available(names: Sequence[str], status: dict | None = None) -> str:
     """The first of ``names`` (the suite's default choice, best first) that runs here,
     else the reference in its place (:func:`fall_back`, which says so).
 
