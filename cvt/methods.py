@@ -341,8 +341,10 @@ class Method:
 
     @property
     def foreign(self) -> bool:
-        """Whether ``run`` is another distribution's code (or a caller's callable), whose
-        exceptions are its failures, not the user's input errors."""
+        """Whether ``run`` is another distribution's code (or a caller's callable).
+
+        Its exceptions are then its failures, not the user's input errors.
+        """
         module = getattr(self.run, "__module__", None) or type(self.run).__module__
         return not str(module).startswith(f"{_PACKAGE}.")
 
