@@ -19,9 +19,12 @@ class RunAborted(RuntimeError):
 
 
 class PluginError(RunAborted):
-    """A method or backend of another distribution (a plug-in) that raised, or returned
-    something the suite cannot use: one line naming the plug-in, its distribution and
-    what it did; the CLI exits with status 1 (``--verbose`` adds the traceback)."""
+    """A plug-in (a method or backend of another distribution) failed.
+
+    It raised, or returned something the suite cannot use: the message is one line
+    naming the plug-in, its distribution and what it did; the command line exits with
+    status 1 (``--verbose`` adds the traceback).
+    """
 
 
 def exception_line(exc: BaseException) -> str:
