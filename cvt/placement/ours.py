@@ -76,27 +76,9 @@ def run_ours(
         search=_backend_search(backend),
     )
     t3 = time.perf_counter()
-    return Distribution(
-        method="ours" if fit == "site" else "ours-fit",
-        sites=res.sites,
-        angles=res.angles,
-        scales=res.scales,
-        elements=elements,
-        energy=res.energy,
-        seconds=res.seconds,
-        lloyd_seconds=total,
-        empty=res.empty,
-        empty_sites=res.empty_sites,
-        labels=labels,
-        extra={
-            "element": shape,
-            "element_turn_deg": round(math.degrees(turn), 6),
-            "gap": gap,
-            "final_label_seconds": t2 - t1,
-            "placement_seconds": t3 - t2,
-            **res.convergence(),
-        },
-    )
+    placed = {"final_label_seconds": t2 - t1, "placement_seconds": t3 - t2}
+    method = "ours" if fit == "site" else "ours-fit"
+    return _distribution(method, res, res.angles, elements, labels, total, (shape, turn, gap), placed)
 
 
 def run_ours_fit(problem: Problem, backend, **options) -> Distribution:
@@ -195,15 +177,33 @@ def run_ours_compact(
         elements[placed] = element_polygons(
             shape, aspect, packed.centres[placed], angles[placed], packed.sizes[placed]
         )
+    placement = {
+        "alternate": bool(alternate),
+        "final_label_seconds": t2 - t1,
+        "fit_seconds": t3 - t2,
+        "placement_seconds": time.perf_counter() - t2,
+        **packed.as_dict(),
+    }
+    element = (shape, turn, gap)
+    return _distribution(
+        "ours-compact", res, angles - turn, elements.tolist(), labels, total, element, placement
+    )
+
+
+def _distribution(method, res, angles, elements, labels, lloyd_seconds, element, placement) -> Distribution:
+    """The Distribution of a run of ``method``: the Lloyd result ``res``, the sites'
+    ``angles``, the placed ``elements``; ``element`` is (shape, its turn, the gap), and
+    ``placement`` what the placement records in ``extra`` (its times and figures)."""
+    shape, turn, gap = element
     return Distribution(
-        method="ours-compact",
+        method=method,
         sites=res.sites,
-        angles=angles - turn,
+        angles=angles,
         scales=res.scales,
-        elements=elements.tolist(),
+        elements=elements,
         energy=res.energy,
         seconds=res.seconds,
-        lloyd_seconds=total,
+        lloyd_seconds=lloyd_seconds,
         empty=res.empty,
         empty_sites=res.empty_sites,
         labels=labels,
@@ -211,11 +211,7 @@ def run_ours_compact(
             "element": shape,
             "element_turn_deg": round(math.degrees(turn), 6),
             "gap": gap,
-            "alternate": bool(alternate),
-            "final_label_seconds": t2 - t1,
-            "fit_seconds": t3 - t2,
-            "placement_seconds": time.perf_counter() - t2,
-            **packed.as_dict(),
+            **placement,
             **res.convergence(),
         },
     )
