@@ -57,7 +57,7 @@ from pathlib import Path
 import numpy as np
 
 from compact_distributions.cvt.errors import BackendUnavailable, InputError
-from compact_distributions.cvt.metrics import Metric, compile_sites
+from compact_distributions.cvt.metrics import Depth, Metric, compile_sites
 from compact_distributions.cvt.moments import Moments
 from compact_distributions.cvt.pixels import pixel_index
 from compact_distributions.cvt.problem import Grid
@@ -1174,7 +1174,7 @@ class OpenCLBackend(Backend):
         # the kernel's depths are the host's bit for bit where the host's are exact: whole
         # numbers (chessboard) or sums of squared quarters (spacings 1, 2, 1/2, ...)
         kind, sy, sx = cells.depth
-        on_device = kind == "chessboard" or (float(4 * sy).is_integer() and float(4 * sx).is_integer())
+        on_device = kind is Depth.CHESSBOARD or (float(4 * sy).is_integer() and float(4 * sx).is_integer())
         starts = np.empty((2, len(cells.ids), 2))
         starts[0] = cells.anchor
         if not on_device:
@@ -1216,7 +1216,7 @@ class OpenCLBackend(Backend):
                 slack,
                 np.float64(cells.half),
                 starts,
-                np.int32(0 if not on_device else 1 if kind == "chessboard" else 2),
+                np.int32(0 if not on_device else 1 if kind is Depth.CHESSBOARD else 2),
                 np.float64(sy),
                 np.float64(sx),
                 scratch,

@@ -29,6 +29,7 @@ on the triangle equals the centroid-to-vertex length (circumradius 1, side √3)
 
 from __future__ import annotations
 
+import enum
 import math
 from dataclasses import dataclass, field, replace
 from functools import cached_property, lru_cache
@@ -47,6 +48,16 @@ ASPECT_RANGE = (0.01, 100.0)
 def _regular_normals(angles_deg) -> np.ndarray:
     t = np.radians(np.asarray(angles_deg, dtype=np.float64))
     return np.stack([np.cos(t), np.sin(t)], axis=1)
+
+
+class Depth(enum.Enum):
+    """The distance transform that starts the fit's search in a shape's cells (the
+    shape record's ``distance``): chessboard (whole pixels, squares), Euclidean with the
+    axes scaled by the aspect β (rectangles, ellipses) or plain Euclidean."""
+
+    CHESSBOARD = "chessboard"
+    SCALED = "scaled"
+    EUCLIDEAN = "euclidean"
 
 
 @dataclass(frozen=True)
@@ -92,9 +103,8 @@ class Shape:
         The angle (degrees) of a regular polygon's first vertex.
     vertices : tuple of (x, y), optional
         The unit ball of any other convex polygon (the user's), counter-clockwise.
-    distance : str
-        The distance transform that starts the fit's search in its cells:
-        ``chessboard``, ``scaled`` (Euclidean with the axes scaled by β) or ``euclidean``.
+    distance : Depth
+        The distance transform that starts the fit's search in its cells.
     compaction_rounds : int
         How many rounds ``ours-compact`` compacts by default.  Hexagons start further
         from their lattice than squares (fitted coverage 0.72 against 0.78, 1024²,
@@ -143,7 +153,7 @@ class Shape:
     sides: int = 0
     phase: float = 0.0
     vertices: tuple[tuple[float, float], ...] | None = None  # any convex polygon's unit ball
-    distance: str = "euclidean"
+    distance: Depth = Depth.EUCLIDEAN
     compaction_rounds: int = 4
     paper_distance: int = 0
     paper: bool = False
@@ -253,16 +263,16 @@ SHAPES: dict[str, Shape] = {
     s.name: s
     for s in (
         Shape(
-            "square", "linf", 4, math.pi / 2, 1.0, facets=_SQUARE, distance="chessboard",
+            "square", "linf", 4, math.pi / 2, 1.0, facets=_SQUARE, distance=Depth.CHESSBOARD,
             paper_distance=3, paper=True, minkowski_p=math.inf, reference=True,
         ),
         Shape(
             "rectangle", "linf-axial", 2, math.pi, 1.0, facets=_SQUARE, axial=True,
-            unit_aspect_symmetry=4, distance="scaled", paper_distance=4, paper=True,
+            unit_aspect_symmetry=4, distance=Depth.SCALED, paper_distance=4, paper=True,
         ),
         Shape(
             "ellipse", "l2-axial", 2, math.pi, _HEX, semi_axes=(1.0, 1.0), axial=True,
-            unit_aspect_symmetry=0, distance="scaled", paper_distance=5, paper=True,
+            unit_aspect_symmetry=0, distance=Depth.SCALED, paper_distance=5, paper=True,
         ),
         # vertex up on screen (y down) at (0, -1), edges at inradius 1/2: the outward
         # normals point away from each vertex, 90° (down) and 90° ± 120°
@@ -682,6 +692,7 @@ __all__ = [
     "AXIAL_METRICS",
     "DEFAULT_ASPECT",
     "ASPECT_RANGE",
+    "Depth",
     "Shape",
     "TurnedBall",
     "TURNED_BALLS",

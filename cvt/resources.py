@@ -26,6 +26,7 @@ import resource
 from dataclasses import dataclass, field
 
 from .errors import InputError
+from .metrics import Depth
 from .validate import byte_size
 
 MiB = 2**20
@@ -53,7 +54,7 @@ CONTOUR_SAMPLE = 48
 CONTOUR_SAMPLES_PER_SITE = 4.5
 # moving elements inside their cells (fit): the distance transform of the cells, by the
 # shape record's distance (chessboard: int32; the others: float64 and its feature indices)
-FIT_PER_PIXEL = {"chessboard": 6, "scaled": 18, "euclidean": 18}
+FIT_PER_PIXEL = {Depth.CHESSBOARD: 6, Depth.SCALED: 18, Depth.EUCLIDEAN: 18}
 
 
 class ResourceError(InputError):

@@ -67,7 +67,7 @@ import math
 import numpy as np
 
 from ..errors import InputError
-from ..metrics import Metric, compile_sites
+from ..metrics import Depth, Metric, compile_sites
 from ..pixels import PIXEL_BAND
 from ..problem import MAX_SIDE, Grid, in_own_cell
 from ..shapes import check_shape, element_ball, element_polygons, shape_record
@@ -441,15 +441,16 @@ def _squared_depth(inner, sy: float, sx: float):
     return out
 
 
-def depth_metric(shape: str, aspect) -> tuple[str, float, float]:
-    """The distance of :func:`_inscribed_centres` for elements of ``shape``: ("chessboard",
-    1, 1) for squares, else ("euclidean", sy, sx), rows sy and columns sx apart (1/β and β
-    for rectangles and ellipses, whose gauge is about hypot(β·dx, dy/β); 1 and 1 otherwise)."""
+def depth_metric(shape: str, aspect) -> tuple[Depth, float, float]:
+    """The distance of :func:`_inscribed_centres` for elements of ``shape``:
+    (``Depth.CHESSBOARD``, 1, 1) for squares, else (``Depth.EUCLIDEAN``, sy, sx), rows sy
+    and columns sx apart (1/β and β for rectangles and ellipses, whose gauge is about
+    hypot(β·dx, dy/β); 1 and 1 otherwise)."""
     kind = shape_record(shape).distance
-    if kind == "chessboard":
+    if kind is Depth.CHESSBOARD:
         return kind, 1.0, 1.0
-    beta = element_ball(shape, aspect).aspect if kind == "scaled" else 1.0
-    return "euclidean", 1.0 / beta, beta
+    beta = element_ball(shape, aspect).aspect if kind is Depth.SCALED else 1.0
+    return Depth.EUCLIDEAN, 1.0 / beta, beta
 
 
 def _inscribed_centres(labels, shape: str, aspect, n: int) -> np.ndarray:
@@ -469,7 +470,7 @@ def _inscribed_centres(labels, shape: str, aspect, n: int) -> np.ndarray:
     inner[[0, -1]] = False
     inner[:, [0, -1]] = False
     kind, sy, sx = depth_metric(shape, aspect)
-    if kind == "chessboard":
+    if kind is Depth.CHESSBOARD:
         dt = ndimage.distance_transform_cdt(inner, metric="chessboard")
     else:
         dt = _squared_depth(inner, sy, sx)
