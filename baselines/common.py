@@ -26,7 +26,6 @@ from dataclasses import dataclass
 
 import numpy as np
 import shapely
-from scipy import ndimage
 
 from compact_distributions.cvt.distribution import Distribution
 from compact_distributions.cvt.evaluate import region_polygon
@@ -238,6 +237,8 @@ def tile_voronoi(tile_labels: np.ndarray, inside: np.ndarray) -> tuple[np.ndarra
     """Voronoi regions of the tiles: every pixel goes to the tile nearest to it
     (distance to the tile's pixels, 0 inside a tile).  Returns (labels, distance), both
     (H, W); labels -1 outside the region (and everywhere when there is no tile)."""
+    from scipy import ndimage  # here: the registry imports this module at every start
+
     empty = tile_labels < 0
     if empty.all():
         return np.full(tile_labels.shape, -1, np.int32), np.full(tile_labels.shape, np.inf)

@@ -49,7 +49,6 @@ import math
 import time
 
 import numpy as np
-from scipy import ndimage
 
 from compact_distributions.cvt.distribution import Distribution
 from compact_distributions.cvt.lloyd import LloydSetup, final_labels, lloyd
@@ -69,6 +68,8 @@ DIAMOND_TURN = math.pi / 4
 def border_distance(grid: Grid) -> np.ndarray:
     """(H, W) Euclidean distance of each pixel centre to the region's border (the
     nearest pixel outside the region or the raster), in pixels."""
+    from scipy import ndimage  # here: the registry imports this module at every start
+
     h, w = grid.shape
     pad = np.zeros((h + 2, w + 2), dtype=bool)
     pad[1:-1, 1:-1] = grid.inside()

@@ -54,7 +54,6 @@ import time
 
 import numpy as np
 import shapely
-from scipy import ndimage
 
 from compact_distributions.cvt.distribution import Distribution
 from compact_distributions.cvt.evaluate import region_polygon
@@ -125,6 +124,8 @@ def continuous_step(shape, contours: Contours, centres, angles, centroids, gap: 
 def _hole_candidates(free: np.ndarray, count: int) -> list[tuple[float, float, float]]:
     """Up to ``count`` well separated holes (x, y, radius), largest first: local maxima
     of the distance from free pixels to the nearest blocked pixel (or the raster edge)."""
+    from scipy import ndimage  # here: the registry imports this module at every start
+
     h, w = free.shape
     pad = np.zeros((h + 2, w + 2), dtype=bool)
     pad[1:-1, 1:-1] = free

@@ -149,3 +149,19 @@ def test_cells_image_paints_each_label_its_colour_and_the_sites_dark():
     want = label_colours(40)[np.where(labels >= 0, labels, 40)]
     want[[4, 80], [3, 100]] = 20
     assert img.dtype == np.uint8 and np.array_equal(img, want)
+
+
+@pytest.mark.parametrize("n, seed", [(0, 12345), (1, 12345), (7, 3), (5000, 12345)])
+def test_label_colours_are_matplotlibs_hsv_to_rgb(n, seed):
+    """The cells' colours (HSV converted without importing matplotlib) are those of
+    matplotlib.colors.hsv_to_rgb, bit for bit; the last is black."""
+    mcolors = pytest.importorskip("matplotlib.colors")
+    rng = np.random.default_rng(seed)
+    hsv = np.stack(
+        [(np.arange(n) * 0.618033988749895) % 1.0, 0.45 + 0.35 * rng.random(n), 0.70 + 0.30 * rng.random(n)],
+        axis=1,
+    )
+    got = label_colours(n, seed)
+    assert got.shape == (n + 1, 3) and got.dtype == np.uint8
+    assert np.array_equal(got[:n], np.round(mcolors.hsv_to_rgb(hsv) * 255).astype(np.uint8))
+    assert got[n].tolist() == [0, 0, 0]

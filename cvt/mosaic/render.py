@@ -85,17 +85,24 @@ def hex_colours(fills) -> list[str]:
     return [line[:-1] for line in format_rows("#{:02x}{:02x}{:02x}\n", list(rgb.T))]
 
 
+# per sixth of the hue circle, which of (v, t, p, q) are red, green and blue: HSV to RGB
+# as matplotlib.colors.hsv_to_rgb computes it (saturation > 0), without importing matplotlib
+_HSV_SECTORS = np.array([[0, 1, 2], [3, 0, 2], [2, 0, 1], [2, 3, 0], [1, 2, 0], [0, 2, 3]])
+
+
 def label_colours(n: int, seed: int = 12345) -> np.ndarray:
     """(n + 1, 3) uint8: distinct, well-spread colours per label; the last one (for -1,
     outside the region) is black."""
-    import matplotlib.colors as mcolors
-
     rng = np.random.default_rng(seed)
     hue = (np.arange(n) * 0.618033988749895) % 1.0
     sat = 0.45 + 0.35 * rng.random(n)
     val = 0.70 + 0.30 * rng.random(n)
+    sector = (hue * 6.0).astype(int)
+    f = hue * 6.0 - sector
+    vtpq = np.stack([val, val * (1.0 - sat * (1.0 - f)), val * (1.0 - sat), val * (1.0 - sat * f)])
+    rgb = vtpq[_HSV_SECTORS[sector % 6], np.arange(n)[:, None]]
     out = np.zeros((n + 1, 3), dtype=np.uint8)
-    out[:n] = np.round(mcolors.hsv_to_rgb(np.stack([hue, sat, val], axis=1)) * 255).astype(np.uint8)
+    out[:n] = np.round(rgb * 255).astype(np.uint8)
     return out
 
 
