@@ -10,9 +10,11 @@ import platform
 import re
 import shutil
 import stat
+import struct
 import sys
 import tempfile
 import time
+import zlib
 from contextlib import contextmanager
 from importlib import metadata
 from pathlib import Path
@@ -557,6 +559,76 @@ def write_sites_csv(path, sites, angles, scales) -> None:
     Path(path).write_text("".join(["x,y,angle_deg,scale\n", *rows]))
 
 
+PNG_LEVEL = 1  # zlib level of the pictures: after the Up filter, level 1 is within 5 % of 6
+PNG_BAND = 1 << 22  # bytes of picture filtered and compressed at once
+
+
+def _png_chunk(kind: bytes, data: bytes) -> bytes:
+    return struct.pack(">I", len(data)) + kind + data + struct.pack(">I", zlib.crc32(kind + data))
+
+
+def png_chunks(image, level: int = PNG_LEVEL):
+    """The bytes of an 8-bit RGB PNG of ``image`` piece by piece, a band of rows at a time.
+
+    Every row is written with PNG's Up filter (its difference from the row above), computed
+    whole-array, and deflated by zlib at ``level``: the pixels PIL's writer stores, in a
+    few times less time (PIL tries five filters on every row and deflates at level 6),
+    in files of about the same size for the suite's flat-coloured pictures.
+
+    Parameters
+    ----------
+    image : PIL.Image.Image or numpy.ndarray
+        An RGB picture, or an (H, W, 3) uint8 array.
+    level : int, optional
+        zlib's compression level, 0 to 9.
+
+    Yields
+    ------
+    bytes
+        The signature, the header, the compressed rows and the end, in file order.
+    """
+    if isinstance(image, np.ndarray):
+        pixels = np.asarray(image, dtype=np.uint8)
+        if pixels.ndim != 3 or pixels.shape[2] != 3:
+            raise ValueError(f"a PNG needs an (H, W, 3) array, got shape {pixels.shape}")
+        height, width = pixels.shape[:2]
+
+        def rows(lo: int, hi: int) -> np.ndarray:
+            return pixels[lo:hi].reshape(hi - lo, 3 * width)
+    else:
+        picture = image if image.mode == "RGB" else image.convert("RGB")
+        width, height = picture.size
+
+        def rows(lo: int, hi: int) -> np.ndarray:  # a band at a time: no full-size copy
+            return np.asarray(picture.crop((0, lo, width, hi))).reshape(hi - lo, 3 * width)
+
+    yield b"\x89PNG\r\n\x1a\n"
+    yield _png_chunk(b"IHDR", struct.pack(">IIBBBBB", width, height, 8, 2, 0, 0, 0))
+    deflate = zlib.compressobj(level)
+    step = max(1, PNG_BAND // max(1, 3 * width))
+    above = np.zeros(3 * width, dtype=np.uint8)
+    for lo in range(0, height, step):
+        band = rows(lo, min(height, lo + step))
+        out = np.empty((len(band), 3 * width + 1), dtype=np.uint8)
+        out[:, 0] = 2  # Up: each byte less the byte above it (modulo 256)
+        np.subtract(band[:1], above, out=out[:1, 1:])
+        np.subtract(band[1:], band[:-1], out=out[1:, 1:])
+        above = band[-1].copy()
+        data = deflate.compress(out)
+        if data:
+            yield _png_chunk(b"IDAT", data)
+    yield _png_chunk(b"IDAT", deflate.flush())
+    yield _png_chunk(b"IEND", b"")
+
+
+def write_png(path, image, level: int = PNG_LEVEL) -> None:
+    """Write ``image`` (a PIL RGB picture or an (H, W, 3) uint8 array) as a PNG file
+    (:func:`png_chunks`)."""
+    with open(path, "wb") as fh:
+        for chunk in png_chunks(image, level):
+            fh.write(chunk)
+
+
 def command_line(argv=None) -> str:
     import shlex
 
@@ -584,5 +656,9 @@ __all__ = [
     "write_json",
     "write_lines",
     "write_sites_csv",
+    "PNG_LEVEL",
+    "PNG_BAND",
+    "png_chunks",
+    "write_png",
     "command_line",
 ]

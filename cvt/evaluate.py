@@ -638,18 +638,19 @@ def neighbour_pairs(points: npt.ArrayLike) -> tuple[np.ndarray, np.ndarray]:
         order = np.lexsort((pts[:, 1], pts[:, 0]))
         a, b = order[:-1], order[1:]
         return np.minimum(a, b), np.maximum(a, b)
-    e = np.stack([tri[:, [0, 1]], tri[:, [1, 2]], tri[:, [2, 0]]], axis=1)  # (T, 3, 2)
-    e = np.sort(e, axis=2).astype(np.int64)  # qhull's int32 indices: a·n + b overflows past 46 340 points
-    length = np.linalg.norm(pts[e[..., 0]] - pts[e[..., 1]], axis=2)  # (T, 3)
+    tri = tri.astype(np.int64)  # qhull's int32 indices: a·n + b overflows past 46 340 points
+    turn = np.roll(tri, -1, axis=1)  # edge k of a triangle joins its vertices k and k + 1
+    lo, hi = np.minimum(tri, turn), np.maximum(tri, turn)  # (T, 3)
+    d = pts[lo] - pts[hi]
+    length = np.sqrt(np.sum(d * d, axis=2))  # (T, 3)
     srt = np.sort(length, axis=1)
     longest = np.argmax(length, axis=1)
     strict = srt[:, 2] > srt[:, 1] * (1 + FIDELITY_TIE)
-    edges = e.reshape(-1, 2)
-    drop = np.zeros((len(tri), 3), dtype=bool)
-    drop[np.flatnonzero(strict), longest[strict]] = True
-    key = edges[:, 0] * n + edges[:, 1]
-    dropped = np.unique(key[drop.ravel()])
-    keep = np.unique(key[~np.isin(key, dropped)])
+    # one sort of the edges: each distinct edge once, dropped if any of its triangles drops it
+    edges, where = np.unique((lo * n + hi).ravel(), return_inverse=True)
+    dropped = np.zeros(len(edges), dtype=bool)
+    dropped[where.reshape(-1, 3)[strict, longest[strict]]] = True
+    keep = edges[~dropped]
     return keep // n, keep % n
 
 

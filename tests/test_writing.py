@@ -7,7 +7,8 @@ import numpy as np
 import pytest
 import shapely
 
-from compact_distributions.bench.outputs import dumps, write_sites_csv
+from compact_distributions.bench import outputs
+from compact_distributions.bench.outputs import dumps, write_png, write_sites_csv
 from compact_distributions.cvt.mosaic import render
 from compact_distributions.cvt.mosaic.render import (
     PAPER,
@@ -165,3 +166,26 @@ def test_label_colours_are_matplotlibs_hsv_to_rgb(n, seed):
     assert got.shape == (n + 1, 3) and got.dtype == np.uint8
     assert np.array_equal(got[:n], np.round(mcolors.hsv_to_rgb(hsv) * 255).astype(np.uint8))
     assert got[n].tolist() == [0, 0, 0]
+
+
+@pytest.mark.parametrize(
+    "shape, band", [((1, 1), 1 << 22), ((37, 53), 1 << 22), ((37, 53), 300), ((90, 7), 1)]
+)
+def test_png_holds_the_pictures_pixels(tmp_path, monkeypatch, shape, band):
+    """The PNG writer (Up filter, zlib) read back by PIL's decoder: the same pixels, from
+    an array and from a PIL picture alike, in one band or in many (the row above a band
+    comes from the band before)."""
+    from PIL import Image
+
+    monkeypatch.setattr(outputs, "PNG_BAND", band)
+    rng = np.random.default_rng(5)
+    pixels = rng.integers(0, 256, (*shape, 3), dtype=np.uint8)
+    pixels[shape[0] // 2 :] = pixels[: shape[0] - shape[0] // 2]  # repeated rows: Up differences of 0
+    write_png(tmp_path / "a.png", pixels)
+    write_png(tmp_path / "b.png", Image.fromarray(pixels))
+    assert (tmp_path / "a.png").read_bytes() == (tmp_path / "b.png").read_bytes()
+    with Image.open(tmp_path / "a.png") as img:
+        img.verify()
+    with Image.open(tmp_path / "a.png") as img:
+        assert img.format == "PNG" and img.mode == "RGB" and img.size == (shape[1], shape[0])
+        assert np.array_equal(np.asarray(img), pixels)

@@ -260,6 +260,7 @@ def run(args) -> int:
         command_line,
         write_json,
         write_lines,
+        write_png,
         write_sites_csv,
     )
     from ..results import build_result
@@ -306,13 +307,14 @@ def run(args) -> int:
         t0 = time.perf_counter()
         write_sites_csv(tmp / "sites.csv", dist.sites, dist.angles, dist.scales)
         if dist.labels is not None:
-            cells_image(dist.labels, len(dist.sites), dist.sites).save(tmp / "cells.png")
+            write_png(tmp / "cells.png", cells_image(dist.labels, len(dist.sites), dist.sites))
         write_lines(
             tmp / "elements.svg",
             svg_lines(dist.elements, g.width, g.height, region=None if g.mask is None else region),
         )
-        draw_elements(dist.elements, g.width, g.height, region_colour=PAPER, region_mask=g.mask).save(
-            tmp / "elements.png"
+        write_png(
+            tmp / "elements.png",
+            draw_elements(dist.elements, g.width, g.height, region_colour=PAPER, region_mask=g.mask),
         )
         stages = {"evaluation": evaluation_seconds, "writing": time.perf_counter() - t0}
         result = build_result(
