@@ -277,13 +277,19 @@ def draw_elements(
         """Draw elements ``which`` on ``img``, rows top .. top + height of the picture;
         their vertices read a block of elements at a time (bounded memory)."""
         draw = ImageDraw.Draw(img)
+        # without an outline, ImageDraw.polygon is its core's fill call: made directly
+        core, ink = draw.draw, draw.draw.draw_ink
         for block in _blocks(geoms, which):
             xy, element, count = _ring_table(geoms, block)
             px, py = (xy[:, 0] - x0) * k, (xy[:, 1] - y0) * k - top  # whole-pixel move: exact
             pts, at = np.stack([px, py], axis=1).ravel().tolist(), 0
-            for e, n in zip(element.tolist(), count.tolist(), strict=True):
+            colours = list(map(tuple, rgb[element].tolist()))
+            for colour, n in zip(colours, count.tolist(), strict=True):
                 if n >= 3:
-                    draw.polygon(pts[at : at + 2 * n], fill=tuple(rgb[e].tolist()), outline=line)
+                    if line is None:
+                        core.draw_polygon(pts[at : at + 2 * n], ink(colour), 1)
+                    else:
+                        draw.polygon(pts[at : at + 2 * n], fill=colour, outline=line)
                 at += 2 * n
 
     banded = ss > 1 and window is None and big == (small[0] * ss, small[1] * ss)
@@ -320,8 +326,8 @@ def draw_elements(
         else:
             band = Image.new("RGB", (big[0], hi - lo), inside if inside is not None else rgb8(background))
         paint(band, lo, shown[near])
-        band = band.crop((0, top - lo, big[0], top - lo + n_rows))
-        out.paste(band.resize((small[0], n_rows // ss), Image.BOX), (0, top // ss))
+        box = (0, top - lo, big[0], top - lo + n_rows)  # the band's own rows, without a cropped copy
+        out.paste(band.resize((small[0], n_rows // ss), Image.BOX, box=box), (0, top // ss))
     return out
 
 
