@@ -189,3 +189,61 @@ def test_png_holds_the_pictures_pixels(tmp_path, monkeypatch, shape, band):
     with Image.open(tmp_path / "a.png") as img:
         assert img.format == "PNG" and img.mode == "RGB" and img.size == (shape[1], shape[0])
         assert np.array_equal(np.asarray(img), pixels)
+
+
+def _field_texts(rows):
+    return [bytes(row[row != 0]).decode() for row in rows]
+
+
+@pytest.mark.parametrize("digits", [0, 1, 3, 6])
+def test_decimal_texts_are_pythons_repr_and_g(digits):
+    """Numbers rounded to ``digits`` decimals, written whole-array, against Python's own
+    repr (JSON) and format(v, "g") (SVG), with g's halfway cases: exact (dyadic) ties go to
+    even, the others by the double's side of the tie."""
+    from compact_distributions.cvt.mosaic.numbers import decimal_fields
+
+    rng = np.random.default_rng(digits)
+    vals = np.concatenate(
+        [
+            rng.uniform(-5000, 5000, 4000),
+            rng.uniform(-99999, 99999, 1000),
+            rng.uniform(-1, 1, 1000),
+            [0.0, -0.0, 1000.0, 999.9995, 9999.995, 99999.95, 1234.125, 1234.375, 1234.625, 4095.5, 2.5],
+            np.arange(0, 4000) * 0.005 + 999.0,
+            np.arange(-300, 300) / 8,
+        ]
+    )
+    vals = np.round(vals, digits)
+    vals = vals[(vals == 0) | (np.abs(vals) >= 1e-4)]
+    assert _field_texts(decimal_fields(vals, digits, "json")) == [repr(v) for v in vals.tolist()]
+    assert _field_texts(decimal_fields(vals, digits, "svg")) == [format(v, "g") for v in vals.tolist()]
+
+
+def test_decimal_texts_leave_what_they_cannot_write_to_python():
+    from compact_distributions.cvt.mosaic.numbers import decimal_fields
+
+    assert decimal_fields(np.array([1.0, np.nan]), 3, "json") is None
+    assert decimal_fields(np.array([2.0**41]), 3, "json") is None
+    assert decimal_fields(np.array([1e-5]), 5, "json") is None  # repr writes 1e-05
+    assert decimal_fields(np.array([1234567.0]), 0, "svg") is None  # g writes 1.23457e+06
+    assert decimal_fields(np.array([999999.6]), 1, "svg") is None  # rounds up to 1e+06
+    assert decimal_fields(np.array([0.1234]), 3, "json") is None  # not rounded to 3 decimals
+    with pytest.raises(ValueError, match="style"):
+        decimal_fields(np.array([1.0]), 3, "csv")
+
+
+def test_outline_texts_are_the_templates():
+    """The JSON and SVG rings built whole-array are those the templates format."""
+    from compact_distributions.cvt.mosaic.numbers import ring_texts
+
+    rng = np.random.default_rng(8)
+    count = rng.integers(2, 9, 300)
+    xy = np.round(rng.uniform(-20, 5000, (int(count.sum()), 2)), 3)
+    starts = np.cumsum(count) - count
+    for style, template in (("json", render._json_ring), ("svg", render._svg_ring)):
+        want = [
+            template(c).format(*xy[s : s + c].ravel().tolist()) for s, c in zip(starts, count, strict=True)
+        ]
+        assert ring_texts(xy, count, 3, style) == want
+    assert ring_texts(xy[:1], np.array([1]), 3, "svg") is None
+    assert ring_texts(np.zeros((0, 2)), np.zeros(0, dtype=int), 3, "json") == []

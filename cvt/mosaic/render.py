@@ -21,6 +21,7 @@ import shapely
 
 from ..errors import InputError
 from ..pixels import index_ranges, pixel_index
+from .numbers import ring_texts
 
 DARK = "#202020"  # outside the region, and joints between elements
 PAPER = "#f4f1ea"  # inside the region, where no element is
@@ -188,10 +189,18 @@ def format_rows(template: str, columns) -> list[str]:
     return out
 
 
-def _ring_texts(xy, count, template_of) -> np.ndarray:
+def _ring_texts(xy, count, template_of, digits: int | None = None) -> np.ndarray:
     """Per ring (``count`` vertices each, ``xy`` one ring after another) the text
     ``template_of(V)`` (V vertices) filled with its x0, y0, x1, y1, ...: one format
-    call per distinct vertex count."""
+    call per distinct vertex count.  The JSON and SVG rings of ``xy`` rounded to
+    ``digits`` decimals are built whole-array (:func:`numbers.ring_texts`) where it can."""
+    style = {_svg_ring: "svg", _json_ring: "json"}.get(template_of)
+    if digits is not None and style is not None:
+        built = ring_texts(xy, count, digits, style)
+        if built is not None:
+            out = np.empty(len(built), dtype=object)
+            out[:] = built
+            return out
     starts = np.cumsum(count) - count
     out = np.empty(len(count), dtype=object)
     for v in np.unique(count).tolist():
@@ -420,7 +429,7 @@ def _svg_elements(elements, fills, ellipses, digits: int):
         paths = np.flatnonzero(~exact[which])
         if len(paths):
             xy, element, count = _ring_table(geoms, which[paths])
-            rings = _ring_texts(np.round(xy, digits), count, _svg_ring)
+            rings = _ring_texts(np.round(xy, digits), count, _svg_ring, digits)
             firsts = np.flatnonzero(np.r_[True, element[1:] != element[:-1]])
             data = rings if len(firsts) == len(rings) else np.add.reduceat(rings, firsts)
             ids = element[firsts]
@@ -471,7 +480,7 @@ def element_coordinates_json(elements, digits: int = 3) -> list[str]:
     present = shapely.is_geometry(geoms) & ~shapely.is_empty(geoms)
     polygons = np.flatnonzero(present & (shapely.get_type_id(geoms) == 3))
     xy, count = _exteriors(geoms[polygons])
-    out[polygons] = _ring_texts(np.round(xy, digits), count, _json_ring)
+    out[polygons] = _ring_texts(np.round(xy, digits), count, _json_ring, digits)
     for k in np.flatnonzero(present & (shapely.get_type_id(geoms) != 3)).tolist():
         out[k] = json.dumps(element_coordinates([geoms[k]], digits)[0])
     return out.tolist()
