@@ -584,8 +584,10 @@ FIDELITY_TIE = 1e-9  # relative: a triangle's longest edge must beat the next by
 
 def _present(elements: Sequence[Any]) -> tuple[np.ndarray, np.ndarray]:
     """(indices, geometries) of the elements that are placed (not None, not empty)."""
-    idx = np.array([k for k, e in enumerate(elements) if e is not None and not e.is_empty], dtype=np.int64)
-    return idx, np.array([elements[k] for k in idx], dtype=object)
+    geoms = np.empty(len(elements), dtype=object)
+    geoms[:] = list(elements)
+    idx = np.flatnonzero(shapely.is_geometry(geoms) & ~shapely.is_empty(geoms))
+    return idx, geoms[idx]
 
 
 def size_fidelity(areas: npt.ArrayLike, targets: npt.ArrayLike) -> float:
@@ -654,12 +656,15 @@ def neighbour_pairs(points: npt.ArrayLike) -> tuple[np.ndarray, np.ndarray]:
     return keep // n, keep % n
 
 
-def grout(geoms: np.ndarray) -> tuple[float, float]:
+def grout(geoms: np.ndarray, centres: np.ndarray | None = None) -> tuple[float, float]:
     """(mean, coefficient of variation) of the exact distances between neighbouring
-    elements (:func:`neighbour_pairs` of their centroids); NaN with fewer than 2."""
+    elements (:func:`neighbour_pairs` of their centroids, ``centres`` when the caller
+    has them); NaN with fewer than 2."""
     if len(geoms) < 2:
         return float("nan"), float("nan")
-    a, b = neighbour_pairs(shapely.get_coordinates(shapely.centroid(geoms)))
+    if centres is None:
+        centres = shapely.get_coordinates(shapely.centroid(geoms))
+    a, b = neighbour_pairs(centres)
     d = shapely.distance(geoms[a], geoms[b])
     mean = float(d.mean())
     return mean, (float(d.std() / mean) if mean > 0 else float("nan"))
@@ -679,7 +684,7 @@ def fidelity(
     centres = shapely.get_coordinates(shapely.centroid(geoms))
     targets = problem.scales_at(centres) ** 2
     errors = direction_errors(geoms, problem.angles_at(centres), shape, aspect)
-    mean, cv = grout(geoms)
+    mean, cv = grout(geoms, centres)
     return {
         "size_fidelity": size_fidelity(shapely.area(geoms), targets),
         "direction_fidelity": float(np.mean(errors)) if len(errors) else float("nan"),

@@ -88,6 +88,13 @@ def element_for(metric: Metric, element: str | None = None) -> tuple[str, float]
     return shape, turn
 
 
+def _row_column(at: np.ndarray, width: int) -> tuple[np.ndarray, np.ndarray]:
+    """``np.divmod(at, width)`` of flat indices below 2^40, by a float division (exact
+    there: far faster than an integer one)."""
+    row = np.floor((at + 0.5) * (1.0 / width)).astype(np.int64)
+    return row, at - row * width
+
+
 def contour_samples(labels: np.ndarray, dtype=np.float64) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """Midpoints of the cell contours, one per (cell, edge).
 
@@ -119,7 +126,7 @@ def contour_samples(labels: np.ndarray, dtype=np.float64) -> tuple[np.ndarray, n
     cut = np.empty((h, w + 1), dtype=bool)
     cut[:, 0], cut[:, w] = labels[:, 0] != -1, labels[:, w - 1] != -1
     np.not_equal(labels[:, :-1], labels[:, 1:], out=cut[:, 1:w])
-    r, c = np.divmod(np.flatnonzero(cut), w + 1)
+    r, c = _row_column(np.flatnonzero(cut), w + 1)
     del cut
     at = r * w + c
     left = np.where(c > 0, flat[np.maximum(at - 1, 0)], -1)
@@ -130,7 +137,7 @@ def contour_samples(labels: np.ndarray, dtype=np.float64) -> tuple[np.ndarray, n
     cut = np.empty((h + 1, w), dtype=bool)
     cut[0], cut[h] = labels[0] != -1, labels[h - 1] != -1
     np.not_equal(labels[:-1], labels[1:], out=cut[1:h])
-    r2, c2 = np.divmod(np.flatnonzero(cut), w)
+    r2, c2 = _row_column(np.flatnonzero(cut), w)
     del cut
     at = r2 * w + c2
     top = np.where(r2 > 0, flat[np.maximum(at - w, 0)], -1)
