@@ -193,7 +193,7 @@ def evaluate(
     """
     region = region_polygon(grid) if region is None else region
     empty = None if labels is None else empty_cells(labels, len(elements))
-    geoms = np.array([e for e in elements if e is not None and not e.is_empty], dtype=object)
+    _, geoms = _present(elements)
     skipped = len(elements) - len(geoms)
     area = shapely.area(region)
     if len(geoms) == 0:
