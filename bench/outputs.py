@@ -505,24 +505,48 @@ def _item_texts(value) -> list[str] | None:
             return list(map(str if ints else repr, value.tolist()))
         row = "[" + ", ".join([field] * value.shape[1]) + "]\n"
         return [line[:-1] for line in format_rows(row, list(value.T))]
-    if isinstance(value, list) and all(v is None or hasattr(v, "geom_type") for v in value):
-        return element_coordinates_json(value)
+    geoms = _geometries_or_none(value)
+    if geoms is not None:
+        return element_coordinates_json(geoms)
     return None
+
+
+def _geometries_or_none(value) -> np.ndarray | None:
+    """``value`` as an object array where it is a list of shapely geometries and None
+    (element outlines), tested whole-array; None otherwise."""
+    import shapely
+
+    if not isinstance(value, (list, tuple)) or not value:
+        return None
+    geoms = np.empty(len(value), dtype=object)
+    geoms[:] = list(value)
+    return geoms if shapely.is_valid_input(geoms).all() and shapely.is_geometry(geoms).any() else None
+
+
+JSON_BLOCK = 1024  # items of a long list converted at once
+OUTLINE_BLOCK = 1 << 15  # element outlines converted at once (whole-array text)
 
 
 def json_chunks(data: dict):
     """The text of :func:`dumps` piece by piece: one top-level key per line, each value
-    compact; long lists (sites, element outlines) are converted one item at a time, so
-    writing a result never holds a second copy of it."""
+    compact; long lists (sites, element outlines) are converted a block of items at a
+    time, so writing a result never holds a second copy of it."""
+    from compact_distributions.cvt.mosaic.render import element_coordinates_json
+
     yield "{\n"
     for i, (key, value) in enumerate(data.items()):
         yield (",\n" if i else "") + f" {json.dumps(str(key))}: "
         if isinstance(value, (list, tuple, np.ndarray)) and len(value) > 64:
             yield "["
-            for j in range(0, len(value), 1024):  # a block of items at a time
-                items = _item_texts(value[j : j + 1024])
+            geoms = _geometries_or_none(value)
+            step = JSON_BLOCK if geoms is None else OUTLINE_BLOCK
+            for j in range(0, len(value), step):  # a block of items at a time
+                if geoms is not None:
+                    items = element_coordinates_json(geoms[j : j + step])
+                else:
+                    items = _item_texts(value[j : j + step])
                 if items is None:
-                    items = [json.dumps(to_jsonable(item)) for item in value[j : j + 1024]]
+                    items = [json.dumps(to_jsonable(item)) for item in value[j : j + step]]
                 yield (", " if j else "") + ", ".join(items)
             yield "]"
         else:
@@ -651,6 +675,8 @@ __all__ = [
     "OutputFolder",
     "report_folder",
     "to_jsonable",
+    "JSON_BLOCK",
+    "OUTLINE_BLOCK",
     "json_chunks",
     "dumps",
     "write_json",
