@@ -126,32 +126,39 @@ def contour_samples(labels: np.ndarray, dtype=np.float64) -> tuple[np.ndarray, n
     cut = np.empty((h, w + 1), dtype=bool)
     cut[:, 0], cut[:, w] = labels[:, 0] != -1, labels[:, w - 1] != -1
     np.not_equal(labels[:, :-1], labels[:, 1:], out=cut[:, 1:w])
-    r, c = _row_column(np.flatnonzero(cut), w + 1)
+    edge = np.flatnonzero(cut)
     del cut
-    at = r * w + c
-    left = np.where(c > 0, flat[np.maximum(at - 1, 0)], -1)
-    right = np.where(c < w, flat[np.minimum(at, flat.size - 1)], -1)
-    xs, ys = c.astype(dtype), r.astype(dtype) + half
-    runs = [(left, xs, ys), (right, xs, ys)]
+    r, c = _row_column(edge, w + 1)
+    at = edge - r  # the pixel right of the edge: r·w + c
+    # the pixels either side (clipped reads at the raster's ends, where there is none)
+    left = flat.take(at - 1, mode="clip")
+    left[c == 0] = -1
+    right = flat.take(at, mode="clip")
+    right[c == w] = -1
+    runs = [(left, c, r, None, half), (right, c, r, None, half)]  # at (c, r + 1/2)
     # horizontal edges y = r (r = 0 .. h) of column c: pixel (r - 1, c) over pixel (r, c)
     cut = np.empty((h + 1, w), dtype=bool)
     cut[0], cut[h] = labels[0] != -1, labels[h - 1] != -1
     np.not_equal(labels[:-1], labels[1:], out=cut[1:h])
-    r2, c2 = _row_column(np.flatnonzero(cut), w)
+    at = np.flatnonzero(cut)  # the pixel below the edge: r·w + c
     del cut
-    at = r2 * w + c2
-    top = np.where(r2 > 0, flat[np.maximum(at - w, 0)], -1)
-    bottom = np.where(r2 < h, flat[np.minimum(at, flat.size - 1)], -1)
-    xs, ys = c2.astype(dtype) + half, r2.astype(dtype)
-    runs += [(top, xs, ys), (bottom, xs, ys)]
+    r2, c2 = _row_column(at, w)
+    top = flat.take(at - w, mode="clip")
+    top[r2 == 0] = -1
+    bottom = flat.take(at, mode="clip")
+    bottom[r2 == h] = -1
+    runs += [(top, c2, r2, half, None), (bottom, c2, r2, half, None)]  # at (c + 1/2, r)
     keeps = [run[0] >= 0 for run in runs]
     total = sum(int(k.sum()) for k in keeps)
     owner = np.empty(total, dtype=np.int32)
     x, y = np.empty(total, dtype), np.empty(total, dtype)
     start = 0
-    for (who, xs, ys), keep in zip(runs, keeps, strict=True):  # four runs, written in place
+    for (who, cols, rows, dx, dy), keep in zip(runs, keeps, strict=True):  # four runs, written in place
         end = start + int(keep.sum())
-        owner[start:end], x[start:end], y[start:end] = who[keep], xs[keep], ys[keep]
+        owner[start:end], x[start:end], y[start:end] = who[keep], cols[keep], rows[keep]
+        for out, shift in ((x, dx), (y, dy)):
+            if shift is not None:
+                out[start:end] += shift
         start = end
     return owner, x, y
 
