@@ -115,6 +115,8 @@ def empty_cells(labels: np.ndarray, n_elements: int) -> int:
     seen = np.zeros(n_elements, dtype=bool)
     for lo in range(0, lab.size, EMPTY_BAND):
         part = lab[lo : lo + EMPTY_BAND]
+        # every label of the band begins one of its runs: only those are read
+        part = np.concatenate([part[:1], part[1:][part[1:] != part[:-1]]])
         seen[part[(part >= 0) & (part < n_elements)]] = True
     return int(n_elements - np.count_nonzero(seen))
 
