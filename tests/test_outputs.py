@@ -75,6 +75,30 @@ def test_a_failing_command_leaves_the_previous_output(tmp_path, capsys, monkeypa
     assert names(tmp_path) == ["out"]
 
 
+@pytest.mark.parametrize("picture", ["cells.png", "elements.png"])
+def test_a_picture_failing_beside_the_command_leaves_the_previous_output(
+    tmp_path, capsys, monkeypatch, picture
+):
+    """The pictures are written in a thread beside the command: an error there is the
+    command's error (exit 2, its one line), and the folder keeps the previous output."""
+    out = tmp_path / "out"
+    assert main(RUN + ["--out", str(out)]) == 0
+    before = {n: (out / n).read_bytes() for n in names(out)}
+    write_png = outputs.write_png
+
+    def broken(path, image, *args):
+        if Path(path).name == picture:
+            raise InputError(f"{picture} broke half-way")
+        write_png(path, image, *args)
+
+    monkeypatch.setattr(outputs, "write_png", broken)
+    capsys.readouterr()
+    assert main(RUN + ["--out", str(out), "--seed", "3"]) == 2
+    assert f"{picture} broke half-way" in capsys.readouterr().err
+    assert {n: (out / n).read_bytes() for n in names(out)} == before
+    assert names(tmp_path) == ["out"]
+
+
 @pytest.mark.parametrize(
     "where,message",
     [
