@@ -524,7 +524,18 @@ def _geometries_or_none(value) -> np.ndarray | None:
 
 
 JSON_BLOCK = 1024  # items of a long list converted at once
-OUTLINE_BLOCK = 1 << 15  # element outlines converted at once (whole-array text)
+OUTLINE_VERTICES = 1 << 17  # vertices of element outlines converted at once (whole-array text)
+
+
+def _outline_blocks(geoms: np.ndarray) -> list[slice]:
+    """Consecutive slices of ``geoms`` of about :data:`OUTLINE_VERTICES` vertices each (at
+    least one element): the text of a block is built whole-array in bounded memory."""
+    import shapely
+
+    ends = np.cumsum(shapely.get_num_coordinates(geoms))
+    cuts = np.searchsorted(ends, np.arange(OUTLINE_VERTICES, ends[-1], OUTLINE_VERTICES), side="right")
+    edges = np.unique(np.concatenate([[0], cuts, [len(geoms)]])).tolist()
+    return [slice(a, b) for a, b in zip(edges[:-1], edges[1:], strict=True)]
 
 
 def json_chunks(data: dict):
@@ -539,15 +550,18 @@ def json_chunks(data: dict):
         if isinstance(value, (list, tuple, np.ndarray)) and len(value) > 64:
             yield "["
             geoms = _geometries_or_none(value)
-            step = JSON_BLOCK if geoms is None else OUTLINE_BLOCK
-            for j in range(0, len(value), step):  # a block of items at a time
+            if geoms is not None:
+                blocks = _outline_blocks(geoms)
+            else:
+                blocks = [slice(j, j + JSON_BLOCK) for j in range(0, len(value), JSON_BLOCK)]
+            for block in blocks:  # a block of items at a time
                 if geoms is not None:
-                    items = element_coordinates_json(geoms[j : j + step])
+                    items = element_coordinates_json(geoms[block])
                 else:
-                    items = _item_texts(value[j : j + step])
+                    items = _item_texts(value[block])
                 if items is None:
-                    items = [json.dumps(to_jsonable(item)) for item in value[j : j + step]]
-                yield (", " if j else "") + ", ".join(items)
+                    items = [json.dumps(to_jsonable(item)) for item in value[block]]
+                yield (", " if block.start else "") + ", ".join(items)
             yield "]"
         else:
             yield json.dumps(to_jsonable(value))
@@ -676,7 +690,7 @@ __all__ = [
     "report_folder",
     "to_jsonable",
     "JSON_BLOCK",
-    "OUTLINE_BLOCK",
+    "OUTLINE_VERTICES",
     "json_chunks",
     "dumps",
     "write_json",

@@ -27,7 +27,6 @@ import shapely
 
 from compact_distributions.cvt.pixels import PIXEL_BAND, index_ranges
 from compact_distributions.cvt.problem import Grid
-from compact_distributions.cvt.threads import elementwise
 
 if TYPE_CHECKING:
     from compact_distributions.cvt.problem import Problem
@@ -214,7 +213,7 @@ def evaluate(
     a, b = tree.query(clipped, predicate="intersects")
     keep = a < b
     a, b = a[keep], b[keep]
-    shared = shapely.area(elementwise(shapely.intersection, clipped[a], clipped[b])) > 0
+    shared = shapely.area(shapely.intersection(clipped[a], clipped[b])) > 0
     a, b = a[shared], b[shared]
     involved = np.zeros(len(clipped), dtype=bool)
     involved[a] = involved[b] = True
@@ -666,9 +665,9 @@ def grout(geoms: np.ndarray, centres: np.ndarray | None = None) -> tuple[float, 
     if len(geoms) < 2:
         return float("nan"), float("nan")
     if centres is None:
-        centres = shapely.get_coordinates(elementwise(shapely.centroid, geoms))
+        centres = shapely.get_coordinates(shapely.centroid(geoms))
     a, b = neighbour_pairs(centres)
-    d = elementwise(shapely.distance, geoms[a], geoms[b])  # GEOS on every core
+    d = shapely.distance(geoms[a], geoms[b])
     mean = float(d.mean())
     return mean, (float(d.std() / mean) if mean > 0 else float("nan"))
 
@@ -684,7 +683,7 @@ def fidelity(
     if len(geoms) == 0:
         nan = float("nan")
         return {"size_fidelity": nan, "direction_fidelity": nan, "grout_mean": nan, "grout_cv": nan}
-    centres = shapely.get_coordinates(elementwise(shapely.centroid, geoms))
+    centres = shapely.get_coordinates(shapely.centroid(geoms))
     targets = problem.scales_at(centres) ** 2
     errors = direction_errors(geoms, problem.angles_at(centres), shape, aspect)
     mean, cv = grout(geoms, centres)

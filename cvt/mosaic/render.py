@@ -292,13 +292,11 @@ def draw_elements(
             xy, element, count = _ring_table(geoms, block)
             px, py = (xy[:, 0] - x0) * k, (xy[:, 1] - y0) * k - top  # whole-pixel move: exact
             pts, at = np.stack([px, py], axis=1).ravel().tolist(), 0
-            colours = list(map(tuple, rgb[element].tolist()))
-            for colour, n in zip(colours, count.tolist(), strict=True):
-                if n >= 3:
-                    if line is None:
-                        core.draw_polygon(pts[at : at + 2 * n], ink(colour), 1)
-                    else:
-                        draw.polygon(pts[at : at + 2 * n], fill=colour, outline=line)
+            for colour, n in zip(map(tuple, rgb[element].tolist()), count.tolist(), strict=True):
+                if n >= 3 and line is None:
+                    core.draw_polygon(pts[at : at + 2 * n], ink(colour), 1)
+                elif n >= 3:
+                    draw.polygon(pts[at : at + 2 * n], fill=colour, outline=line)
                 at += 2 * n
 
     banded = ss > 1 and window is None and big == (small[0] * ss, small[1] * ss)
