@@ -45,8 +45,6 @@ from compact_distributions.cvt.validate import name_list, one_of
 from . import options
 from .runs import RunSpec
 
-ELEMENTS = list(PAPER_SHAPES)  # the default; --shapes may name any shape (hexagon, octagon, ...)
-
 FULL = {"size": 1024, "n_elements": 4000, "iterations": 20, "seeds": 5}
 QUICK = {"size": 256, "n_elements": 250, "iterations": 20, "seeds": 2}
 
@@ -87,23 +85,46 @@ def problem_set(
     seeds: int | None,
     methods: list[str],
     backends: list[str],
-    elements: list[str] | None = None,
+    shapes: list[str] | None = None,
     variant_backend: str = REFERENCE_BACKEND,
     method_options: dict | None = None,
 ) -> list[RunSpec]:
     """The runs of Table 2 (see the module docstring), as each method's record asks:
     on the shapes it is compared on, on every variant of ``backends`` (available or not:
     unavailable ones become skipped rows), on ``variant_backend`` (the fastest) or on the
-    reference, and again with each of its sweep variants.  ``method_options`` (name ->
-    value, as given on the command line) go to every method that declares them.  Seed 0
-    of each row group also measures the coverage-overlap curve."""
+    reference, and again with each of its sweep variants.  Seed 0 of each row group also
+    measures the coverage-overlap curve.
+
+    Parameters
+    ----------
+    quick : bool
+        The quick set (:data:`QUICK`) instead of the full one (:data:`FULL`).
+    seeds : int or None
+        Seeds 0..seeds-1 (None: the set's default).
+    methods : list of str
+        The methods, by name.
+    backends : list of str
+        The backend variants of the methods swept over every backend.
+    shapes : list of str or None, optional
+        The element shapes (None: the paper's five, and the shapes beyond them that a
+        method's record names in ``beyond_paper``, for that method only).
+    variant_backend : str, optional
+        The backend of the methods swept on the fastest one.
+    method_options : dict or None, optional
+        Option name -> value, as given on the command line, for every method that
+        declares the option.
+
+    Returns
+    -------
+    list of RunSpec
+    """
     cfg = QUICK if quick else FULL
     k = cfg["seeds"] if seeds is None else seeds
     suite = "table2-quick" if quick else "table2"
     records = [get_method(m) for m in methods]
-    chosen = elements is not None
+    chosen = shapes is not None
     if not chosen:  # the paper's shapes, then those some method is also compared on
-        elements = list(dict.fromkeys([*ELEMENTS, *(s for rec in records for s in rec.beyond_paper)]))
+        shapes = list(dict.fromkeys([*PAPER_SHAPES, *(s for rec in records for s in rec.beyond_paper)]))
     specs = []
 
     def add(method, backend, element, picture_first, options, curve=True):
@@ -125,12 +146,12 @@ def problem_set(
                 )
             )
 
-    for element in elements:
+    for element in shapes:
         for rec in records:
             if (
                 (rec.compared_on is not None and element not in rec.compared_on)
                 or (rec.elements is not None and element not in rec.elements)
-                or (not chosen and element not in ELEMENTS and element not in rec.beyond_paper)
+                or (not chosen and element not in PAPER_SHAPES and element not in rec.beyond_paper)
             ):
                 continue
             given = rec.parse_options(
