@@ -36,7 +36,6 @@ import numpy as np
 
 from compact_distributions.backends import REFERENCE as REFERENCE_BACKEND
 from compact_distributions.backends import fall_back, variant_metrics, variant_names, variant_status
-from compact_distributions.cvt.errors import InputError
 from compact_distributions.cvt.metrics import REFERENCE_SHAPE
 from compact_distributions.cvt.registry import get_method, method_names
 from compact_distributions.cvt.shapes import PAPER_SHAPES
@@ -154,9 +153,7 @@ def problem_set(
                 or (not chosen and element not in PAPER_SHAPES and element not in rec.beyond_paper)
             ):
                 continue
-            given = rec.parse_options(
-                {k: v for k, v in (method_options or {}).items() if rec.option(k)}, flags=True
-            )
+            given = options.options_for(rec, method_options)
             if rec.sweep_backends == "every":
                 for b in backends:
                     first = b == backends[0]
@@ -235,13 +232,23 @@ def aggregate(rows: list[dict]):
     return with_columns(pd.DataFrame(out), COLUMNS)
 
 
-def _record(label: str):
-    """The method record of a report row (its label is the name, then its options)."""
+def label_record(label: str):
+    """The method record of a report row (its label is the name, then its options).
+
+    Parameters
+    ----------
+    label : str
+        A row's method, as :attr:`.runs.RunSpec.label` names it.
+
+    Returns
+    -------
+    Method
+    """
     return get_method(str(label).split(" ")[0])
 
 
 def _every_backend(label: str) -> bool:
-    return _record(label).sweep_backends == "every"
+    return label_record(label).sweep_backends == "every"
 
 
 def _equal_overlap_ranking(sq) -> list[str]:
@@ -283,8 +290,8 @@ def discussion(table) -> str:
         for _, r in sq.iterrows()
         if not _every_backend(r["method"]) or r["backend"] == REFERENCE_BACKEND
     }
-    role = {m: _record(m).role for m in cov}
-    paper_method = next((m for m in cov if role[m] == "paper" and m == _record(m).name), None)
+    role = {m: label_record(m).role for m in cov}
+    paper_method = next((m for m in cov if role[m] == "paper" and m == label_record(m).name), None)
     if paper_method is None:
         return ""
 
@@ -296,11 +303,11 @@ def discussion(table) -> str:
             else "not run"
         )
 
-    plain = [m for m in cov if m == _record(m).name]  # each method with its default options
+    plain = [m for m in cov if m == label_record(m).name]  # each method with its default options
     lines = ["", "## How this compares with the paper", ""]
     in_paper = sorted(
-        (m for m in plain if role[m] in ("paper", "baseline") and _record(m).paper_table2),
-        key=lambda m: _record(m).paper_table2[0],
+        (m for m in plain if role[m] in ("paper", "baseline") and label_record(m).paper_table2),
+        key=lambda m: label_record(m).paper_table2[0],
     )
     measured = sorted(in_paper, key=lambda m: cov[m]["coverage_mean"])
     same = measured == in_paper
@@ -308,7 +315,7 @@ def discussion(table) -> str:
     baselines = [m for m in plain if role[m] not in ("paper", "extension")]
     lines.append(
         "- The paper's order ("
-        + " < ".join(f"{m} {fmt_pct(_record(m).paper_table2[0])}" for m in in_paper)
+        + " < ".join(f"{m} {fmt_pct(label_record(m).paper_table2[0])}" for m in in_paper)
         + ") is "
         + ("reproduced" if same else "**not** reproduced")
         + f" by the paper's own placement: "
@@ -325,18 +332,22 @@ def discussion(table) -> str:
         if len(beaten) < len(baseline_rows) or rc["overlap_mean"] >= 1e-4:
             continue  # said only of an extension that beats every baseline row at no overlap
         lines.append(
-            f"- {m} ({_record(m).summary}) covers {c(m)}, more than every baseline row, and none of its "
+            f"- {m} ({label_record(m).summary}) covers {c(m)}, more than every baseline row, and none of its "
             "elements overlap; the paper's "
-            + fmt_pct(_record(paper_method).paper_table2[0])
+            + fmt_pct(label_record(paper_method).paper_table2[0])
             + " "
             + (
                 "is passed"
-                if rc["coverage_mean"] > _record(paper_method).paper_table2[0]
+                if rc["coverage_mean"] > label_record(paper_method).paper_table2[0]
                 else "is not reached"
             )
             + "."
         )
-    smaller = [f"{name} {c(name)}" for name in cov if name != _record(name).name and _record(name).fixed_size]
+    smaller = [
+        f"{name} {c(name)}"
+        for name in cov
+        if name != label_record(name).name and label_record(name).fixed_size
+    ]
     if smaller:
         lines.append(
             "- The fixed-size baselines' coverage at their default tile budget is bought with overlap, which "
@@ -354,7 +365,7 @@ def discussion(table) -> str:
         lines.append(
             f"- Time for the 20 iterations of {paper_method} (mean over seeds): "
             + ", ".join(fast)
-            + f"; the paper reports {_record(paper_method).paper_table2[1]} on a GPU (N not stated)."
+            + f"; the paper reports {label_record(paper_method).paper_table2[1]} on a GPU (N not stated)."
         )
     return "\n".join(lines) + "\n"
 
@@ -550,7 +561,7 @@ def render_coverage_overlap(curves, path: Path) -> bool:
     colours = plt.get_cmap("tab20").colors
     for k, ((method, _backend), g) in enumerate(sq.groupby(["method", "backend"], sort=False)):
         g = g.sort_values("factor")
-        record = _record(method)
+        record = label_record(method)
         ours = record.role in ("paper", "extension")
         ax.plot(
             100 * g["overlap"],
@@ -684,11 +695,7 @@ def prepare(req: Table2Request) -> dict:
     methods = [m for m in all_methods if m in chosen]  # the registry's order
     backends, unavailable = sweep_backends(req.backends)
     shapes = options.shape_names(req.shapes) if req.shapes else None
-    for name in req.method_options:  # an option is for the methods that declare it: one of them must run
-        if not any(get_method(m).option(name) for m in methods):
-            raise InputError(
-                f"--{name.replace('_', '-')} is an option of none of --methods {','.join(methods)}"
-            )
+    options.check_method_options(req.method_options, methods)
     specs = problem_set(
         req.quick, seeds, methods, backends, shapes, variant_backend(unavailable), req.method_options
     )
@@ -770,4 +777,4 @@ def _print_summary(table, out: Path, written: list[str]) -> None:
     print(f"wrote {out}/{', '.join(written)}", file=sys.stderr)
 
 
-__all__ = ["Table2Request", "table2", "problem_set", "aggregate", "prepare", "discussion"]
+__all__ = ["Table2Request", "table2", "problem_set", "aggregate", "prepare", "discussion", "label_record"]
