@@ -69,6 +69,8 @@ COLUMNS = [
     "placed_mean",
     "empty_cells_mean",
     "coverage_at_1pct_overlap",
+    "energy_gap_mean",
+    "energy_gap_note",
     "paper_coverage",
     "paper_time",
     "status",
@@ -177,6 +179,7 @@ def aggregate(rows: list[dict]):
     """One line per (method, backend, element): mean ± sd over the seeds that ran."""
     import pandas as pd
 
+    from .converged import gap_columns
     from .report import fail_closed, group_status, host_slots_of, sample_sd, with_columns
 
     df = pd.DataFrame(rows)
@@ -226,6 +229,7 @@ def aggregate(rows: list[dict]):
                     else np.nan
                 ),
                 host_slots=host_slots_of(ok),
+                **gap_columns(ok),
             )
         rec.update(group_status(g, ok))
         out.append(rec)
@@ -420,6 +424,7 @@ def _table_rows(table, shared, by_host: bool) -> list[list]:
                 fmt_seconds(r["method_seconds_mean"]) + (" ‡" if shared[k] else ""),
                 fmt_seconds(r["lloyd_seconds_mean"]),
                 f"{r['ms_per_iteration']:.3g}",
+                fmt_pct(r["energy_gap_mean"], digits=2),
                 f"{r['runs']}/{r['seeds']}",
                 fmt_pct(r["paper_coverage"]) if r["paper_time"] else "",
                 r["paper_time"] or "",
@@ -442,6 +447,7 @@ def render_markdown(
     pictured: bool = True,
     methods: list[str] | None = None,
 ) -> str:
+    from .converged import gap_notes
     from .report import fmt_seconds, header_markdown, markdown_table, several_hosts
 
     title = "Table 2, regenerated" + (
@@ -462,6 +468,7 @@ def render_markdown(
         "ms/it: median per Lloyd iteration",
         "paper: Table 2 of Chen, Yang & Yang 2019 (C++/OpenGL on a GPU; N and raster not stated); "
         "shown on the square rows",
+        *gap_notes(table, ["method", "backend"]),
         f"this command took {fmt_seconds(elapsed)}; {cached} of {total} runs were read back from "
         "raw/ (run with --force to redo them)",
     ]
@@ -478,6 +485,7 @@ def render_markdown(
         "time",
         "Lloyd",
         "ms/it",
+        "energy above converged",
         "runs",
         "paper coverage",
         "paper time",
@@ -700,12 +708,20 @@ def prepare(req: Table2Request) -> dict:
         req.quick, seeds, methods, backends, shapes, variant_backend(unavailable), req.method_options
     )
     check_memory(specs, req.memory_limit, lower="run the --quick set, or fewer --methods or --shapes")
-    return {"out": req.out, "cfg": cfg, "seeds": seeds, "specs": specs, "unavailable": unavailable}
+    return {
+        "out": req.out,
+        "cfg": cfg,
+        "seeds": seeds,
+        "specs": specs,
+        "unavailable": unavailable,
+        "variant": variant_backend(unavailable),
+    }
 
 
 def table2(req: Table2Request) -> int:
     """Run Table 2's sweep and write its report (what ``cvtbench table2`` does)."""
     from .cluster import executor_for
+    from .converged import run_converged
     from .outputs import report_folder
     from .report import provenance, write_csv, write_markdown, written_files
     from .sweep import check_runs, run_sweep
@@ -716,14 +732,10 @@ def table2(req: Table2Request) -> int:
     cmd = req.command or "cvtbench table2" + (" --quick" if req.quick else "")
     with report_folder(out, command=cmd):
         with executor_for(req, exclusive=req.exclusive) as executor:
-            rows = run_sweep(
-                specs,
-                out,
-                force=req.force,
-                quiet=req.quiet,
-                unavailable=plan["unavailable"],
-                executor=executor,
-            )
+            sweep = dict(force=req.force, quiet=req.quiet, unavailable=plan["unavailable"], executor=executor)
+            rows = run_sweep(specs, out, **sweep)
+            suite = f"{specs[0].suite}-converged" if specs else ""
+            converged = run_converged(specs, rows, out, plan["variant"], suite, **sweep)
         table = aggregate(rows)
         elapsed = time.perf_counter() - t0
         cached = sum(1 for r in rows if r.get("cached"))
@@ -755,7 +767,8 @@ def table2(req: Table2Request) -> int:
             out, ["table2.md", "table2.csv", "table2.png", "coverage_overlap.csv", "coverage_overlap.png"]
         )
     _print_summary(table, out, written)
-    check_runs(specs, rows, "table2")  # the report is written; a failed run still fails the command
+    # the report is written; a failed run (or converged run) still fails the command
+    check_runs([*specs, *converged[0]], [*rows, *converged[1]], "table2")
     return 0
 
 
