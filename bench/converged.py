@@ -33,7 +33,7 @@ from .runs import RunSpec, element_key, sites_digest
 LLOYD_OPTION_NAMES = tuple(o.name for o in LLOYD_OPTIONS)
 GAP = "energy_gap"  # a run row's gap; the tables aggregate it to ``energy_gap_mean``
 GAP_NOTE = "energy_gap_note"  # why a run has no gap (empty where it has one)
-NO_LLOYD = "no Lloyd energy (its loop is its own, not cvt.lloyd's on the problem)"
+NO_LLOYD = "no Lloyd energy: its loop is its own, not cvt.lloyd's on the problem"
 
 
 def has_lloyd_energy(record) -> bool:
@@ -204,8 +204,8 @@ def gap_of(spec: RunSpec, row: dict, reference: dict | None) -> tuple[float, str
         return math.nan, f"its problem's converged run failed or was skipped ({why})"
     if row.get("sites_sha1") != reference.get("replay_sites_sha1"):
         return math.nan, (
-            f"its final sites are not those of Lloyd on the problem replayed on {reference['backend']} "
-            "(its Lloyd turns cells, or its backend's labels differ)"
+            f"its final sites are not those of Lloyd on the problem replayed on {reference['backend']}: "
+            "its Lloyd turns cells, or its backend's labels differ"
         )
     end, converged = reference.get("end_energy"), reference.get("converged_energy")
     if not all(isinstance(e, (int, float)) and math.isfinite(e) and e > 0 for e in (end, converged)):
@@ -259,7 +259,7 @@ def gap_notes(table, group: list[str]) -> list[str]:
     missing = table[table["energy_gap_note"].fillna("").astype(str) != ""]
     for why, g in missing.groupby("energy_gap_note", sort=False):
         names = list(dict.fromkeys(" ".join(map(str, r)) for r in g[group].itertuples(index=False)))
-        notes.append(f"energy above converged, none ({why}): {', '.join(names)}")
+        notes.append(f"energy above converged — for {', '.join(names)}: {why}")
     return notes
 
 

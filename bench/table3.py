@@ -64,7 +64,7 @@ COLUMNS = (
         "runs",
     ]
     + MEASURE_COLUMNS
-    + ["method_seconds_mean", "status", "reason", "device", "hosts"]
+    + ["energy_gap_mean", "energy_gap_note", "method_seconds_mean", "status", "reason", "device", "hosts"]
 )
 
 
@@ -142,6 +142,7 @@ def aggregate(rows: list[dict]):
     seeds that ran."""
     import pandas as pd
 
+    from .converged import gap_columns
     from .report import fail_closed, group_status, sample_sd, with_columns
 
     df = fail_closed(pd.DataFrame(rows), ("coverage", "overlap"))
@@ -173,6 +174,7 @@ def aggregate(rows: list[dict]):
             rec.update(
                 n_elements=int(ok["n_elements"].iloc[0]),
                 method_seconds_mean=float(ok["method_seconds"].mean()),
+                **gap_columns(ok),
             )
         rec.update(group_status(g, ok))
         out.append(rec)
@@ -275,7 +277,8 @@ def render_markdown(
     total: int,
     pictured: bool,
 ) -> str:
-    from .report import fmt_seconds, header_markdown, markdown_table
+    from .converged import gap_notes
+    from .report import fmt_pct, fmt_seconds, header_markdown, markdown_table
 
     title = "Table 3: density, direction and region" + (" (QUICK: small raster, 2 seeds)" if quick else "")
     notes = [f"scene `{s}`: {SCENE_TEXT[s]}" for s in dict.fromkeys(table["scene"])]
@@ -287,6 +290,7 @@ def render_markdown(
         "available (else NumPy)",
         "measures (cvt.evaluate, formulas on the documentation's measures page, docs/guide/measures.md): "
         + "; ".join(f"{m}: {text}" for m, (text, _) in MEASURES.items()),
+        *gap_notes(table, ["method", "backend"]),
         f"this command took {fmt_seconds(elapsed)}; {cached} of {total} runs were read back from raw/ "
         "(run with --force to redo them)",
     ]
@@ -299,13 +303,14 @@ def render_markdown(
         "direction error",
         "grout mean (px)",
         "grout CV",
+        "energy above converged",
     ]
     for scene in dict.fromkeys(table["scene"]):
         part = table[table["scene"] == scene]
         body = [
             [r["method"], r["element"]]
             + [_fmt(m, r[f"{m}_mean"], r[f"{m}_sd"]) for m in MEASURES]
-            + [f"{r['runs']}/{r['seeds']}"]
+            + [fmt_pct(r["energy_gap_mean"], digits=2), f"{r['runs']}/{r['seeds']}"]
             for _, r in part.iterrows()
             if r["status"] in ("ok", "partial")
         ]
@@ -438,9 +443,10 @@ def plan(
     options.check_method_options(method_options or {}, methods)
     check_folder(out)
     _, unavailable = sweep_backends(None)
-    specs = problem_set(quick, k, methods, shapes, scenes, variant_backend(unavailable), method_options)
+    variant = variant_backend(unavailable)
+    specs = problem_set(quick, k, methods, shapes, scenes, variant, method_options)
     check_memory(specs, memory_limit, lower="run the --quick set, or fewer --methods, --shapes or --scenes")
-    return {"cfg": cfg, "seeds": k, "specs": specs, "unavailable": unavailable}
+    return {"cfg": cfg, "seeds": k, "specs": specs, "unavailable": unavailable, "variant": variant}
 
 
 def run_table3(
@@ -470,6 +476,7 @@ def run_table3(
     ``cvtbench table2`` takes them).  Bad arguments raise InputError before anything is
     written."""
     from .cluster import chosen, executor_for
+    from .converged import run_converged
     from .outputs import report_folder
     from .report import provenance, write_csv, write_markdown, written_files
     from .sweep import check_runs, run_sweep
@@ -491,8 +498,10 @@ def run_table3(
     command = command or "cvtbench table3" + (" --quick" if quick else "")
     with report_folder(out, command=command):
         with executor_for(cluster) as executor:
-            rows = run_sweep(
-                p["specs"], out, force=force, quiet=quiet, unavailable=p["unavailable"], executor=executor
+            sweep = dict(force=force, quiet=quiet, unavailable=p["unavailable"], executor=executor)
+            rows = run_sweep(p["specs"], out, **sweep)
+            converged = run_converged(
+                p["specs"], rows, out, p["variant"], f"{SUITE[quick]}-converged", **sweep
             )
         table = aggregate(rows)
         elapsed = time.perf_counter() - t0
@@ -506,7 +515,8 @@ def run_table3(
         written = written_files(out, ["table3.md", "table3.csv", "table3_tradeoff.png"])
     if not quiet:
         print(f"wrote {out}/{', '.join(written)} in {time.perf_counter() - t0:.0f} s", file=sys.stderr)
-    check_runs(p["specs"], rows, "table3")  # the report is written; a failed run still fails the command
+    # the report is written; a failed run (or converged run) still fails the command
+    check_runs([*p["specs"], *converged[0]], [*rows, *converged[1]], "table3")
     return table
 
 

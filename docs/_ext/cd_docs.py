@@ -374,6 +374,7 @@ def table2_page(path: Path, records: dict) -> str:
                 fmt_seconds(r["method_seconds_mean"]),
                 fmt_seconds(r["lloyd_seconds_mean"]),
                 _num(r["ms_per_iteration"]),
+                fmt_pct(r.get("energy_gap_mean"), digits=2),  # absent from reports made before it
                 f"{r['runs']}/{r['seeds']}",
                 fmt_pct(r["paper_coverage"]) if paper else "",
                 md_escape(r["paper_time"]) if paper else "",
@@ -389,6 +390,7 @@ def table2_page(path: Path, records: dict) -> str:
         "time",
         "Lloyd",
         "ms/it",
+        "energy above converged",
         "runs",
         "paper coverage",
         "paper time",
@@ -404,6 +406,7 @@ def table2_page(path: Path, records: dict) -> str:
 
 
 def table3_page(path: Path, records: dict) -> str:
+    from compact_distributions.bench.report import fmt_pct
     from compact_distributions.bench.table3 import _fmt, discussion
     from compact_distributions.cvt.evaluate import MEASURES
 
@@ -422,10 +425,18 @@ def table3_page(path: Path, records: dict) -> str:
         rows = [
             [method_link(r["method"], records), _code(r["backend"]), r["element"]]
             + [md_escape(_fmt(m, r[f"{m}_mean"], r.get(f"{m}_sd"))) for m in measures]
-            + [f"{r['runs']}/{r['seeds']}"]
+            + [fmt_pct(r.get("energy_gap_mean"), digits=2), f"{r['runs']}/{r['seeds']}"]
             for _, r in group.iterrows()
         ]
-        out.append(_table(["method", "backend", "element", *[_code(m) for m in measures], "runs"], rows))
+        heads = [
+            "method",
+            "backend",
+            "element",
+            *[_code(m) for m in measures],
+            "energy above converged",
+            "runs",
+        ]
+        out.append(_table(heads, rows))
     return "\n".join(out) + _discussion(discussion(_frame(path)))
 
 
