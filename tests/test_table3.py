@@ -101,6 +101,9 @@ def test_a_small_table3_end_to_end(tmp_path):
     assert field.loc["ours-compact", "direction_fidelity_mean"] < 2.0
     dens = csv[csv.scene == "density"].set_index("method")
     assert dens.loc["ours-compact", "coverage_mean"] > dens.loc["ours", "coverage_mean"]
+    # one Lloyd, so one gap: ours-compact's sites before placement are ours'
+    assert 0 < dens.loc["ours", "energy_gap_mean"] == dens.loc["ours-compact", "energy_gap_mean"] < 0.2
+    assert "energy above converged" in text
 
 
 def test_committed_table3_holds_every_run_and_the_compaction_targets():
