@@ -56,7 +56,18 @@ def has_lloyd_energy(record) -> bool:
 
 
 def lloyd_options(spec: RunSpec) -> tuple:
-    """The Lloyd options of a run (name, value pairs, sorted): what its replay repeats."""
+    """The Lloyd options of a run: what its replay repeats.
+
+    Parameters
+    ----------
+    spec : RunSpec
+        A table's run.
+
+    Returns
+    -------
+    tuple of (str, object)
+        Its options that are the Lloyd loop's, as (name, value) pairs, sorted.
+    """
     return tuple((k, v) for k, v in spec.options if k in LLOYD_OPTION_NAMES)
 
 
@@ -106,9 +117,6 @@ class ConvergedSpec:
             "problem_key": self.problem_key,
         }
 
-    def memory_estimate(self):
-        return self.run.memory_estimate()  # Lloyd alone needs less than the run it stands for
-
     def execute(self, backend) -> dict:
         """The replay's final energy and sites digest, and the tight run's lowest energy."""
         from compact_distributions.cvt.lloyd import LloydSetup, final_energy, lloyd
@@ -150,8 +158,19 @@ class ConvergedSpec:
 
 
 def problem_key(spec: RunSpec) -> str:
-    """What a run shares with the other runs of its problem and Lloyd: its scene, shape,
-    raster, N, iterations, seed and Lloyd options (not its method or backend)."""
+    """What a run shares with the other runs of its problem and Lloyd.
+
+    Parameters
+    ----------
+    spec : RunSpec
+        A table's run.
+
+    Returns
+    -------
+    str
+        Its scene, shape, raster, N, iterations, seed and Lloyd options (not its method
+        or backend), as a file name's part.
+    """
     scene = f"{spec.scene}__" if spec.scene else ""
     opts = "".join(f"__{k}{v}" for k, v in lloyd_options(spec))
     return (
@@ -206,9 +225,25 @@ def attach_gaps(specs: list[RunSpec], rows: list[dict], converged: list[dict]) -
 
 
 def gap_of(spec: RunSpec, row: dict, reference: dict | None) -> tuple[float, str]:
-    """(gap, "") for a run whose final sites its problem's replay repeats, else (NaN,
-    why): the run or the reference did not finish, the method has no Lloyd energy, the
-    sites differ, or an energy is not finite and positive."""
+    """A run's gap, or why it has none.
+
+    Parameters
+    ----------
+    spec : RunSpec
+        The run.
+    row : dict
+        Its row (``status``, ``sites_sha1``).
+    reference : dict or None
+        The row of its problem's :class:`ConvergedSpec` (None: not measured).
+
+    Returns
+    -------
+    (float, str)
+        (gap, "") where the replay's final sites are the run's; else (NaN, why): the
+        run did not finish (no reason: its row says why), the method has no Lloyd
+        energy, the problem was not measured or its converged run did not finish, the
+        sites differ, or an energy is not finite and positive.
+    """
     if row.get("status") != "ok":
         return math.nan, ""
     if not has_lloyd_energy(spec.method_record):
