@@ -26,7 +26,6 @@ from compact_distributions.cvt.placement.alternate import (
 )
 from compact_distributions.cvt.placement.compaction import (
     _best_pair_directions,
-    _Unit,
     boundary_segments,
     compact,
 )
@@ -478,7 +477,7 @@ def test_pair_gaps_along_face_normals_match_the_outlines(shape):
     r = rng.uniform(1, 4, n)
     i, j = np.arange(0, n, 2), np.arange(1, n, 2)
     th[j[::2]] = th[i[::2]]
-    unit = _Unit(shape, 0.5)
+    unit = element_ball(shape, 0.5)
     prev = np.full((len(i), 2), np.nan)
     nx, ny, g = _best_pair_directions(unit, c, r, np.cos(th), np.sin(th), i, j, prev)
     xy = [np.asarray(shapely.get_coordinates(p)).reshape(-1, 2) for p in polygons(shape, c, th, r)]

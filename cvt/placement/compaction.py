@@ -192,70 +192,6 @@ class CompactionResult:
         }
 
 
-# --------------------------------------------------------------------- unit element
-class _Unit:
-    """The unit element of a shape: support function, face normals, radii."""
-
-    def __init__(self, shape: str, aspect):
-        m = element_ball(shape, aspect)
-        self.curved = m.curved
-        self.rho = m.circumradius
-        self.inr = m.inradius
-        if not m.curved:
-            self.verts = m.outline()
-            self.normals = m.normals / np.hypot(*m.normals.T)[:, None]
-            # h along each of its own face normals: a constant of the shape
-            self.offsets = (self.verts @ self.normals.T).max(axis=0)
-            k = len(self.verts)
-            # centrally symmetric (squares, rectangles, hexagons, octagons): vertices and
-            # normals come in opposite pairs k, k + K/2, so h(n) = max over half the
-            # vertices of |v·n| and h(−n) = h(n): half the work, the same values
-            self.symmetric = bool(
-                k % 2 == 0
-                and np.allclose(self.verts[k // 2 :], -self.verts[: k // 2], rtol=0, atol=1e-12)
-                and np.allclose(self.normals[k // 2 :], -self.normals[: k // 2], rtol=0, atol=1e-12)
-            )
-        else:
-            self.axes = m.semi_axes
-
-    def support(self, nx, ny, cos, sin):
-        """h(n) of elements turned by θ (cos, sin broadcast against nx, ny)."""
-        ux = cos * nx + sin * ny  # R(−θ) n: n in the element's own frame
-        uy = cos * ny - sin * nx
-        if self.curved:
-            a, b = self.axes
-            ux *= a
-            uy *= b
-            return np.sqrt(ux * ux + uy * uy)  # |diag(a, b) u|; faster than np.hypot
-        v = self.verts
-        if self.symmetric:  # max(a, −a, b, −b, ...) = max(|a|, |b|, ...) exactly
-            out = np.abs(v[0, 0] * ux + v[0, 1] * uy)
-            for k in range(1, len(v) // 2):
-                np.maximum(out, np.abs(v[k, 0] * ux + v[k, 1] * uy), out=out)
-            return out
-        out = v[0, 0] * ux + v[0, 1] * uy
-        for k in range(1, len(v)):
-            np.maximum(out, v[k, 0] * ux + v[k, 1] * uy, out=out)
-        return out
-
-    def face_normal(self, m, cos, sin):
-        """x and y of face normal ``m[k]`` of element k turned by θ_k (``cos``, ``sin``):
-        the numbers of :meth:`face_normals`, one per element."""
-        nx, ny = self.normals[m, 0], self.normals[m, 1]
-        return cos * nx - sin * ny, sin * nx + cos * ny
-
-    def face_normals(self, cos, sin, count=None, faces_first=False):
-        """(..., K) x and y of the outward face normals, turned by θ (``count``: the
-        first ``count`` of them only; ``faces_first``: (K, ...) instead, the same
-        numbers)."""
-        nx, ny = self.normals[:count, 0], self.normals[:count, 1]
-        if faces_first:
-            nx, ny = (v.reshape(-1, *([1] * np.ndim(cos))) for v in (nx, ny))
-            return cos * nx - sin * ny, sin * nx + cos * ny
-        c, s = cos[..., None], sin[..., None]
-        return c * nx - s * ny, s * nx + c * ny
-
-
 def _argmax_rows(g, tie=_TIE):
     """Per row, the first candidate within ``tie`` of the row's best (candidates come in
     order of preference: ties are common, e.g. a square's corner on a piece's end point
@@ -358,9 +294,9 @@ def _best_pair_directions(unit, c, r, cos, sin, i, j, prev_n, enough=None, along
     gap_of = gap_for(slice(None))
     # the candidates' gaps in order of preference, written into one array: faces (walls
     # to slide along; i's, then j's), last round's n, centre line
-    faces = len(unit.normals) if not unit.curved else 0
+    faces = len(unit.faces.normals) if not unit.curved else 0
     other = np.arange(len(i))
-    if faces and unit.symmetric:
+    if faces and unit.faces.symmetric:
         # j's faces seen from j: the gap along −g is the gap along g from j to i.  Where j
         # is turned as i is and the shape is centrally symmetric, j's faces are i's (its
         # opposite normals), later in the order of preference and of the same gap (to
@@ -404,7 +340,7 @@ def _best_pair_directions(unit, c, r, cos, sin, i, j, prev_n, enough=None, along
             bx[on_face], by[on_face] = sign * fx, sign * fy
         return bx, by
 
-    curved = unit.curved and unit.axes[0] != unit.axes[1]  # circles: centre line
+    curved = unit.curved and unit.semi_axes[0] != unit.semi_axes[1]  # circles: centre line
     return _best_direction(gap_for, g, direction_of, np.arctan2(cly, clx) if curved else None, enough)
 
 
@@ -415,10 +351,10 @@ def _face_gaps(unit, dx, dy, ra, rb, ca, sa, cb, sb, out=None):
     shape the opposite normal's gap needs no new support.  Worked face by face along
     the rows (a row's few faces as numpy's inner loop cost several times more)."""
     if out is None:
-        out = np.empty((len(ra), len(unit.normals)))
+        out = np.empty((len(ra), len(unit.faces.normals)))
     by_face = out.T
-    offsets = unit.offsets[:, None]
-    if unit.symmetric:
+    offsets = unit.faces.offsets[:, None]
+    if unit.faces.symmetric:
         h = len(by_face) // 2
         fx, fy = unit.face_normals(ca, sa, h, faces_first=True)
         nd = fx * dx + fy * dy
@@ -533,7 +469,7 @@ def _near_pairs(unit, c, r, cos, sin, budget, gap, prev, act, point_trees):
     dx, dy = c[j, 0] - c[i, 0], c[j, 1] - c[i, 1]
     d = np.hypot(dx, dy)
     enough = gap + budget[i] + budget[j] + _SELECT
-    keep = d < unit.rho * (r[i] + r[j]) + enough
+    keep = d < unit.circumradius * (r[i] + r[j]) + enough
     i, j, dx, dy, d, enough = _select(keep, i, j, dx, dy, d, enough)
     # the centre line is one of the candidates and the one chosen is within _TIE of the
     # best: pairs already far enough apart along it are left out without the others
@@ -666,7 +602,7 @@ def _near_segments(unit, c, r, cos, sin, budget, half, segs, seg_trees, prev, ac
     x, y = c[e, 0], c[e, 1]
     kx, ky = _closest_on_segment(px, py, qx, qy, x, y)
     d = np.hypot(kx - x, ky - y)
-    keep = d < unit.rho * r[e] + budget[e] + half + _SELECT
+    keep = d < unit.circumradius * r[e] + budget[e] + half + _SELECT
     e, s, px, py, qx, qy, x, y, kx, ky, d = _select(keep, e, s, px, py, qx, qy, x, y, kx, ky, d)
     prev_n = _lookup(prev, e * len(segs) + s)
     with np.errstate(invalid="ignore", divide="ignore"):
@@ -685,14 +621,14 @@ def _near_segments(unit, c, r, cos, sin, budget, half, segs, seg_trees, prev, ac
     args = tuple(v[:, None] for v in (px, py, qx, qy, x, y, r[e], cos[e], sin[e]))
     gap_for = _gaps_of_rows(_seg_gap, unit, args)
     gap_of = gap_for(slice(None))
-    faces = len(unit.normals) if not unit.curved else 0
+    faces = len(unit.faces.normals) if not unit.curved else 0
     g = np.empty((len(e), faces + 3))
     g[:, 0] = gap_of(nsx[:, None], nsy[:, None])[:, 0]
     if faces:  # worked face by face along the rows, as in _face_gaps
         fx, fy = unit.face_normals(cos[e], sin[e], faces_first=True)
         # along its own faces the element reaches out by the shape's offsets
         p_, q_ = fx * px + fy * py, fx * qx + fy * qy
-        g[:, 1 : 1 + faces].T[:] = np.minimum(p_, q_) - fx * x - fy * y - r[e] * unit.offsets[:, None]
+        g[:, 1 : 1 + faces].T[:] = np.minimum(p_, q_) - fx * x - fy * y - r[e] * unit.faces.offsets[:, None]
     # last round's n: new rows have none (NaN, never chosen)
     known = np.flatnonzero(np.isfinite(prev_n[:, 0]))
     g[:, -2] = np.nan
@@ -709,7 +645,7 @@ def _near_segments(unit, c, r, cos, sin, budget, half, segs, seg_trees, prev, ac
             bx[on_face], by[on_face] = unit.face_normal(k[on_face] - 1, cos[e[on_face]], sin[e[on_face]])
         return bx, by
 
-    curved = unit.curved and unit.axes[0] != unit.axes[1]  # circles: nearest point
+    curved = unit.curved and unit.semi_axes[0] != unit.semi_axes[1]  # circles: nearest point
     enough = half + budget[e] + _SELECT
     bx, by, best = _best_direction(gap_for, g, direction_of, np.arctan2(ty, tx) if curved else None, enough)
     keep = best < enough
@@ -1374,7 +1310,7 @@ def _check_start(unit, c, r, gap, mask) -> None:
     placed = np.flatnonzero(r > 0)
     if not len(placed):
         return
-    widest = 2 * unit.inr * r[placed].max()
+    widest = 2 * unit.inradius * r[placed].max()
     if gap >= widest:
         raise InputError(
             f"gap {gap:g} px is not smaller than the largest element "
@@ -1399,7 +1335,7 @@ def _round_rows(unit, c, r, cos, sin, budget, gap, segs, seg_trees, prev):
     n = len(r)
     act = np.flatnonzero(r > 0)
     # one kd-tree of the centres (per class of reach) for the pairs and the pieces
-    trees = _point_trees(c[act], unit.rho * r[act] + budget[act]) if len(act) else []
+    trees = _point_trees(c[act], unit.circumradius * r[act] + budget[act]) if len(act) else []
     i, j, px, py, _ = _near_pairs(unit, c, r, cos, sin, budget, gap, prev_p, act, trees)
     e, s, sx, sy, _ = _near_segments(
         unit, c, r, cos, sin, budget, 0.5 * gap, segs, seg_trees, prev_s, act, trees
@@ -1477,7 +1413,7 @@ def compact(
     gap, rounds = settings.gap, settings.rounds
     mask, walls = _region_and_walls(region, walls)
     c, r, th, max_sizes = _checked_elements(centres, angles, sizes, max_sizes)
-    unit = _Unit(shape, aspect)
+    unit = element_ball(shape, aspect)
     _check_start(unit, c, r, gap, mask)
     t0 = time.perf_counter()
     cos, sin = np.cos(th), np.sin(th)
@@ -1489,13 +1425,13 @@ def compact(
     prev = (None, None)
     result = CompactionResult(c, r, th, 0, 0.0)
     for k in range(max(rounds, 1)):
-        delta = settings.move * unit.inr * r
+        delta = settings.move * unit.inradius * r
         up = settings.growth * r
         if settings.max_growth is not None:
             up = np.clip(r0 * (1 + settings.max_growth) - r, 0.0, up)
         if max_sizes is not None:
             up = np.clip(max_sizes - r, 0.0, up)
-        budget = math.sqrt(2) * delta + unit.rho * up
+        budget = math.sqrt(2) * delta + unit.circumradius * up
         rows, prev, (n_pairs, n_pieces) = _round_rows(
             unit, c, r, cos, sin, budget, gap, segs, seg_trees, prev
         )
