@@ -401,8 +401,19 @@ def table2_page(path: Path, records: dict) -> str:
         f"{first['width']}x{first['height']} px, N = {first['n_elements']}, {first['iterations']} Lloyd "
         f"iterations, {first['seeds']} seeds; {len(frame)} rows.\n\n"
         + _table(header, rows)
+        + _gap_notes(frame)
         + _discussion(discussion(_frame(path)))
     )
+
+
+def _gap_notes(frame) -> str:
+    """What "energy above converged" is and why a row has none (the reports' own notes),
+    or nothing for a report made before the column."""
+    from compact_distributions.bench.converged import gap_notes
+
+    if "energy_gap_note" not in frame:
+        return ""
+    return "\n" + "".join(f"- {md_escape(n)}\n" for n in gap_notes(frame, ["method", "backend"]))
 
 
 def table3_page(path: Path, records: dict) -> str:
@@ -437,7 +448,7 @@ def table3_page(path: Path, records: dict) -> str:
             "runs",
         ]
         out.append(_table(heads, rows))
-    return "\n".join(out) + _discussion(discussion(_frame(path)))
+    return "\n".join(out) + "\n" + _gap_notes(frame) + _discussion(discussion(_frame(path)))
 
 
 def backends_page(path: Path, records: dict) -> str:
