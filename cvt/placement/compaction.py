@@ -136,8 +136,13 @@ included).  Anchored at the start it nears each round's optimum more closely; fr
 an exact lattice that optimum is to stay, where plain PDHG's inexact steps broke the
 symmetry (a lattice shaken by 0.1 px grows as before).
 Steps stop early only when converged (T(z) = z and no row short by more than 1e-10 px:
-small programs, which then meet HiGHS' optimum).  PDHG is plain single-threaded NumPy
-and scipy.sparse: the result does not depend on ``threads``.
+small programs, which then meet HiGHS' optimum).  PDHG is plain NumPy and
+scipy.sparse's CSR kernels; on a large program (over ``_PDHG_BLOCK_ENTRIES`` entries per
+thread) each step's products and updates are split into blocks of rows and of columns
+(Aᵀy by the rows of Aᵀ, whose sums run in the order of the CSC scatter) worked by
+``threads`` threads, and the near pairs' candidates likewise into pieces: each number is
+computed by the same operations in the same order however the work is split, so the
+result does not depend on ``threads`` (bit for bit, tested).
 
 Choices in the formulation
 --------------------------
@@ -154,6 +159,7 @@ Choices in the formulation
 from __future__ import annotations
 
 import functools
+import itertools
 import math
 import time
 from concurrent.futures import ThreadPoolExecutor
@@ -183,6 +189,8 @@ _PDHG_STILL = 1e-10  # px: PDHG has converged when T(z) = z to this and no row i
 _STEP_RATIO = 4.0  # PDHG: primal steps this much longer (dual ones shorter) than balanced
 _HALPERN_RESTART = 0.2  # PDHG: new anchor once the fixed-point residual falls by this factor
 _HALPERN_CHECK = 4  # PDHG: steps between evaluations of that residual
+_PIECE_ROWS = 100_000  # candidate pairs per thread at least (fewer: fewer threads)
+_PDHG_BLOCK_ENTRIES = 200_000  # PDHG: entries of A per thread at least (fewer: fewer threads)
 _FAIRNESS = 2.0  # under size caps: growth weighed by r·(cap / r)^this (Sizes and density)
 
 
@@ -471,30 +479,51 @@ def _pairs_within(point_trees, count, extra):
     return _sorted_pairs(np.minimum(a, b), np.maximum(a, b), count)
 
 
-def _near_pairs(unit, c, r, cos, sin, budget, gap, prev, act, point_trees):
+def _near_pairs(unit, c, r, cos, sin, budget, gap, prev, act, point_trees, threads=1):
     """Pairs whose gap could close to < gap this round; their n and current gap
     (``act``: the elements with a size, ``point_trees``: their centres by class of reach
-    ρ·r + budget, :func:`_point_trees`)."""
+    ρ·r + budget, :func:`_point_trees`).  The candidate pairs are worked in pieces by up
+    to ``threads`` threads (:func:`_in_pieces`): the same pairs, in the same order."""
     if len(act) < 2:
         e = np.zeros(0)
         return np.zeros(0, np.int64), np.zeros(0, np.int64), e, e, e
     a, b = _pairs_within(point_trees, len(act), gap + _SELECT)
-    i, j = act[a], act[b]
-    dx, dy = c[j, 0] - c[i, 0], c[j, 1] - c[i, 1]
-    d = np.hypot(dx, dy)
-    enough = gap + budget[i] + budget[j] + _SELECT
-    keep = d < unit.circumradius * (r[i] + r[j]) + enough
-    i, j, dx, dy, d, enough = _select(keep, i, j, dx, dy, d, enough)
-    # the centre line is one of the candidates and the one chosen is within _TIE of the
-    # best: pairs already far enough apart along it are left out without the others
-    with np.errstate(invalid="ignore", divide="ignore"):
-        along = _pair_gap(unit, dx, dy, r[i], r[j], cos[i], sin[i], cos[j], sin[j], dx / d, dy / d)
-    keep = ~(along >= enough + _TIE)  # coincident centres (NaN) stay
-    i, j, enough, along, dx, dy, d = _select(keep, i, j, enough, along, dx, dy, d)
-    prev_n = _lookup(prev, i * len(r) + j)
-    nx, ny, g = _best_pair_directions(unit, c, r, cos, sin, i, j, prev_n, enough, along, (dx, dy, d))
-    keep = g < enough
-    return _select(keep, i, j, nx, ny, g)
+
+    def kept(a, b):
+        """The candidates (a, b) (positions in act) that make rows, with their n and gap."""
+        i, j = act[a], act[b]
+        dx, dy = c[j, 0] - c[i, 0], c[j, 1] - c[i, 1]
+        d = np.hypot(dx, dy)
+        enough = gap + budget[i] + budget[j] + _SELECT
+        keep = d < unit.circumradius * (r[i] + r[j]) + enough
+        i, j, dx, dy, d, enough = _select(keep, i, j, dx, dy, d, enough)
+        # the centre line is one of the candidates and the one chosen is within _TIE of
+        # the best: pairs already far enough apart along it are left out without the others
+        with np.errstate(invalid="ignore", divide="ignore"):
+            along = _pair_gap(unit, dx, dy, r[i], r[j], cos[i], sin[i], cos[j], sin[j], dx / d, dy / d)
+        keep = ~(along >= enough + _TIE)  # coincident centres (NaN) stay
+        i, j, enough, along, dx, dy, d = _select(keep, i, j, enough, along, dx, dy, d)
+        prev_n = _lookup(prev, i * len(r) + j)
+        nx, ny, g = _best_pair_directions(unit, c, r, cos, sin, i, j, prev_n, enough, along, (dx, dy, d))
+        keep = g < enough
+        return _select(keep, i, j, nx, ny, g)
+
+    return _in_pieces(kept, threads, a, b)
+
+
+def _in_pieces(fn, threads, *arrays) -> tuple:
+    """fn(*arrays) for a ``fn`` that works row by row and returns a tuple of 1-D arrays:
+    run on consecutive pieces of the rows (at least ``_PIECE_ROWS`` each) by up to
+    ``threads`` threads (numpy lets go of the interpreter), the pieces' answers joined
+    in order: the same arrays as one call."""
+    count = len(arrays[0])
+    parts = max(1, min(threads, count // _PIECE_ROWS))
+    if parts == 1:
+        return fn(*arrays)
+    cuts = np.linspace(0, count, parts + 1).astype(np.int64)
+    with ThreadPoolExecutor(parts) as pool:
+        answers = list(pool.map(lambda k: fn(*(v[cuts[k] : cuts[k + 1]] for v in arrays)), range(parts)))
+    return tuple(np.concatenate(column) for column in zip(*answers, strict=True))
 
 
 def _select(keep, *arrays) -> tuple:
@@ -1093,7 +1122,30 @@ def _pdhg_program(rows: _Rows, act, c, r, gap, delta, lo_dr, hi_dr, weight):
     return a, b, lo, hi, cost, (index, value, start)
 
 
-def _solve_pdhg(rows: _Rows, act, c, r, gap, delta, lo_dr, hi_dr, weight, iterations, step_ratio):
+def _blocks(indptr, parts):
+    """``parts`` (at most) ranges of rows of a CSR matrix (``indptr``: its row starts)
+    holding about equal numbers of entries: [(first row, end row, first entry, end entry,
+    the block's own row starts)]."""
+    rows = len(indptr) - 1
+    cuts = np.searchsorted(indptr, np.linspace(0, indptr[-1], parts + 1)[1:-1])
+    bounds = np.unique(np.concatenate([[0], np.minimum(cuts, rows), [rows]]))
+    out = []
+    for r0, r1 in zip(bounds[:-1], bounds[1:], strict=True):  # a loop over a few blocks
+        e0, e1 = int(indptr[r0]), int(indptr[r1])
+        out.append((int(r0), int(r1), e0, e1, (indptr[r0 : r1 + 1] - e0).astype(indptr.dtype)))
+    return out
+
+
+def _block_product(kernel, m, block, v, out):
+    """``out[r0:r1]`` = the rows r0..r1 of the CSR matrix ``m`` times ``v`` (``block``:
+    one of :func:`_blocks`), by scipy's CSR kernel: each row's sum as in ``m @ v``."""
+    r0, r1, e0, e1, indptr = block
+    part = out[r0:r1]
+    part.fill(0.0)  # the kernel adds to out
+    kernel(r1 - r0, m.shape[1], indptr, m.indices[e0:e1], m.data[e0:e1], v, part)
+
+
+def _solve_pdhg(rows: _Rows, act, c, r, gap, delta, lo_dr, hi_dr, weight, iterations, step_ratio, threads=1):
     """The round's program (the same as :func:`_solve_lp`'s, untiled) solved
     approximately by ``iterations`` steps of the primal-dual hybrid gradient method
     (Chambolle-Pock, diagonal steps of Pock & Chambolle 2011), all elements at once, in
@@ -1103,7 +1155,12 @@ def _solve_pdhg(rows: _Rows, act, c, r, gap, delta, lo_dr, hi_dr, weight, iterat
     better).  Returns Δc (N, 2), Δr (N,), the largest row violation left and the steps
     taken (fewer than ``iterations`` when converged).  The moves and growths always keep
     their bounds (each step is clipped to them); the rows hold only approximately, which
-    the caller's float64 check and shrinking make exact."""
+    the caller's float64 check and shrinking make exact.
+
+    A large program's step is split into blocks of rows and of columns worked by up to
+    ``threads`` threads (numpy and scipy's kernels let go of the interpreter): every
+    entry is computed by the same operations in the same order whatever the split, so
+    the result does not depend on ``threads``."""
     n = len(r)
     a, b, lo, hi, cost, (index, value, start) = _pdhg_program(
         rows, act, c, r, gap, delta, lo_dr, hi_dr, weight
@@ -1119,63 +1176,125 @@ def _solve_pdhg(rows: _Rows, act, c, r, gap, delta, lo_dr, hi_dr, weight, iterat
     # z ← w·(2·T(z) − z) + (1 − w)·z₀ with w = (k + 1)/(k + 2), z₀ the anchor (the start,
     # x = 0, y = 0, until a restart); the answer is the last T(z), which keeps the bounds
     x, y, no_rows = np.zeros(ncol), np.zeros(npair + nseg), np.zeros(npair + nseg)
-    x0 = y0 = None  # the anchor: the start (0) until the first restart
+    anchor = [None, None]  # x0, y0: the start (0) until the first restart
     # every step works in these buffers: a fresh array per step would be fresh memory
     # from the system each time (page faults cost about as much as the arithmetic)
-    xt, z, scratch = np.empty(ncol), np.empty(ncol), np.empty(ncol)
-    yt, y_scratch = np.empty(npair + nseg), np.empty(npair + nseg)
+    xt, z, scratch, res_x = np.empty(ncol), np.empty(ncol), np.empty(ncol), np.empty(ncol)
+    yt, y_scratch, res_y = np.empty(npair + nseg), np.empty(npair + nseg), np.empty(npair + nseg)
     aty = np.zeros(ncol)  # Aᵀy, y = 0
     inv_tau, inv_sigma = 1.0 / tau, 1.0 / sigma
+    kernels = _csr_matvec()
+    parts = 1 if kernels is None else max(1, min(threads, len(value) // _PDHG_BLOCK_ENTRIES))
+    if parts > 1:
+        # Aᵀy by the rows of Aᵀ (CSR, entries in A's row order): each sum in the order of
+        # _product's scatter, so the same numbers, and a block of columns per thread
+        at = a.T.tocsr()
+        row_blocks, col_blocks = _blocks(a.indptr, parts), _blocks(at.indptr, parts)
+    else:
+        at, row_blocks, col_blocks = None, [(0, npair + nseg)], [(0, ncol)]
+
+    def primal(block, check, first_step):
+        """x̃ = clip(x − τ(c − Aᵀy)) and z = 2x̃ − x on a block of columns (Aᵀy first,
+        but on the first step, where y = 0), and the residual's terms if ``check``."""
+        c0, c1 = block[:2]
+        if at is not None and not first_step:
+            _block_product(kernels[0], at, block, y, aty)
+        xb, xtb, zb = x[c0:c1], xt[c0:c1], z[c0:c1]
+        np.subtract(aty[c0:c1], cost[c0:c1], out=xtb)
+        xtb *= tau[c0:c1]
+        xtb += xb
+        np.maximum(xtb, lo[c0:c1], out=xtb)  # np.clip's order: lo, then hi (lo <= hi)
+        np.minimum(xtb, hi[c0:c1], out=xtb)
+        np.multiply(xtb, 2.0, out=zb)
+        zb -= xb
+        if check:  # the residual in T's own norm (1/τ, 1/σ)
+            rb = np.subtract(xtb, xb, out=res_x[c0:c1])
+            np.multiply(rb, rb, out=rb)
+            rb *= inv_tau[c0:c1]
+
+    def dual(block, check):
+        """ỹ = max(0, y + σ(b − A z)) on a block of rows, and the residual's terms if ``check``."""
+        r0, r1 = block[:2]
+        if at is not None:
+            _block_product(kernels[0], a, block, z, yt)
+        else:
+            _product(a, z, yt)
+        ytb, yb = yt[r0:r1], y[r0:r1]
+        np.subtract(b[r0:r1], ytb, out=ytb)
+        ytb *= sigma[r0:r1]
+        ytb += yb
+        np.maximum(ytb, no_rows[r0:r1], out=ytb)  # against an array: a scalar 0 is ~4x slower
+        if check:
+            dy = np.subtract(ytb, yb, out=res_y[r0:r1])
+            np.multiply(dy, dy, out=dy)
+            dy *= inv_sigma[r0:r1]
+
+    def halpern(rows_, cols_, w):
+        """z ← w·(2T(z) − z) + (1 − w)·z₀ on a block of rows and one of columns."""
+        x0, y0 = anchor
+        if cols_ is not None:
+            c0, c1 = cols_[:2]
+            xb = x[c0:c1]
+            np.multiply(z[c0:c1], w, out=xb)  # z = 2x̃ − x
+            if x0 is not None:
+                xb += np.multiply(x0[c0:c1], 1.0 - w, out=scratch[c0:c1])
+        if rows_ is not None:
+            r0, r1 = rows_[:2]
+            yb = y[r0:r1]
+            yb *= -w
+            yb += np.multiply(yt[r0:r1], 2.0 * w, out=y_scratch[r0:r1])
+            if y0 is not None:
+                yb += np.multiply(y0[r0:r1], 1.0 - w, out=y_scratch[r0:r1])
+
+    pairs_of_blocks = list(itertools.zip_longest(row_blocks, col_blocks))
+    pool = ThreadPoolExecutor(parts) if parts > 1 else None
+
+    def each(fn, items):
+        """fn(*item) for every item: side by side in the pool, else in turn."""
+        if pool is None:
+            for item in items:
+                fn(*item)
+        else:
+            for _ in pool.map(lambda item: fn(*item), items):
+                pass
+
     first = None  # fixed-point residual |T(z) − z| after the last restart
     k = steps = 0
-    for steps in range(1, iterations + 1):  # noqa: B007 (returned) a loop over whole-array steps
-        # T: x̃ = clip(x − τ(c − Aᵀy)); ỹ = max(0, y + σ(b − A(2x̃ − x))), in place (np.clip
-        # with array bounds costs several of these passes)
-        np.subtract(aty, cost, out=xt)
-        xt *= tau
-        xt += x
-        np.maximum(xt, lo, out=xt)  # np.clip's order: lo, then hi (lo <= hi)
-        np.minimum(xt, hi, out=xt)
-        np.multiply(xt, 2.0, out=z)
-        z -= x
-        yt = _product(a, z, yt)
-        np.subtract(b, yt, out=yt)
-        yt *= sigma
-        yt += y
-        np.maximum(yt, no_rows, out=yt)  # against an array: a scalar 0 is ~4x slower
-        residual = None
-        if first is None or steps % _HALPERN_CHECK == 0:
-            # the residual in T's own norm (1/τ, 1/σ), by ufuncs (a BLAS dot wakes its
-            # threads, which costs far more than the sum on a busy machine)
-            np.subtract(xt, x, out=scratch)
-            np.multiply(scratch, scratch, out=scratch)
-            scratch *= inv_tau
-            dy = np.subtract(yt, y, out=y_scratch)
-            np.multiply(dy, dy, out=dy)
-            dy *= inv_sigma
-            residual = math.sqrt(float(scratch.sum()) + float(dy.sum()))
-            if first is None:
-                first = residual
-        if residual is not None and residual <= _HALPERN_RESTART * first:
-            # restart from T(z): the iteration then converges linearly on a program like
-            # this one, as PDHG with restarts does
-            x[:], y[:] = xt, yt
-            x0, y0 = xt.copy(), yt.copy()
-            first, k = None, 0
-        else:
-            w = (k + 1.0) / (k + 2.0)
-            np.multiply(z, w, out=x)  # z = 2x̃ − x
-            y *= -w
-            y += np.multiply(yt, 2.0 * w, out=y_scratch)
-            if x0 is not None:
-                x += np.multiply(x0, 1.0 - w, out=scratch)
-                y += np.multiply(y0, 1.0 - w, out=y_scratch)
-            k += 1
-        _product(a, y, aty, transpose=True)
-        # a fixed point of T is the program's optimum: stop when T(z) = z and x̃ meets
-        # the rows (small programs; large ones use every step)
-        if residual is not None and residual < _PDHG_STILL and np.max(b - a @ xt, initial=0.0) < _PDHG_STILL:
-            break
+    try:
+        for steps in range(1, iterations + 1):  # noqa: B007 (returned) a loop over whole-array steps
+            check = first is None or steps % _HALPERN_CHECK == 0
+            each(primal, [(blk, check, steps == 1) for blk in col_blocks])
+            each(dual, [(blk, check) for blk in row_blocks])
+            residual = None
+            if check:
+                # by ufuncs (a BLAS dot wakes its threads, which costs far more than the
+                # sum on a busy machine)
+                residual = math.sqrt(float(res_x.sum()) + float(res_y.sum()))
+                if first is None:
+                    first = residual
+            if residual is not None and residual <= _HALPERN_RESTART * first:
+                # restart from T(z): the iteration then converges linearly on a program
+                # like this one, as PDHG with restarts does
+                x[:], y[:] = xt, yt
+                anchor[:] = xt.copy(), yt.copy()
+                first, k = None, 0
+            else:
+                w = (k + 1.0) / (k + 2.0)
+                each(halpern, [(rb, cb, w) for rb, cb in pairs_of_blocks])
+                k += 1
+            if at is None:
+                _product(a, y, aty, transpose=True)
+            # a fixed point of T is the program's optimum: stop when T(z) = z and x̃ meets
+            # the rows (small programs; large ones use every step)
+            if (
+                residual is not None
+                and residual < _PDHG_STILL
+                and np.max(b - a @ xt, initial=0.0) < _PDHG_STILL
+            ):
+                break
+    finally:
+        if pool is not None:
+            pool.shutdown()
     x = xt
     dc = np.zeros((n, 2))
     dr = np.zeros(n)
@@ -1232,8 +1351,9 @@ class CompactionSettings:
     lp_options : dict, optional
         Extra HiGHS options.
     threads : int, optional
-        Threads that solve the tiles side by side (None: the cores this process may use);
-        the result does not depend on it.
+        Threads that solve the tiles side by side, or work a large PDHG program's blocks
+        and the near pairs' pieces (None: the cores this process may use); the result
+        does not depend on it.
     solver : str
         "pdhg" (each round's whole program by ``iterations`` PDHG steps at most) or "highs"
         (HiGHS' dual simplex per tile); either way every round is checked exactly.
@@ -1348,7 +1468,7 @@ def _check_start(unit, c, r, gap, mask) -> None:
         )
 
 
-def _round_rows(unit, c, r, cos, sin, budget, gap, segs, seg_trees, prev):
+def _round_rows(unit, c, r, cos, sin, budget, gap, segs, seg_trees, prev, threads=1):
     """The round's rows (near pairs and near boundary pieces, the tightest piece of each),
     and the directions to start the next round's search from."""
     prev_p, prev_s = prev
@@ -1356,7 +1476,7 @@ def _round_rows(unit, c, r, cos, sin, budget, gap, segs, seg_trees, prev):
     act = np.flatnonzero(r > 0)
     # one kd-tree of the centres (per class of reach) for the pairs and the pieces
     trees = _point_trees(c[act], unit.circumradius * r[act] + budget[act]) if len(act) else []
-    i, j, px, py, _ = _near_pairs(unit, c, r, cos, sin, budget, gap, prev_p, act, trees)
+    i, j, px, py, _ = _near_pairs(unit, c, r, cos, sin, budget, gap, prev_p, act, trees, threads)
     e, s, sx, sy, _ = _near_segments(
         unit, c, r, cos, sin, budget, 0.5 * gap, segs, seg_trees, prev_s, act, trees
     )
@@ -1401,7 +1521,18 @@ def _solve_round(settings, rows, act, c, r, bounds, mask, k):
     gap, delta, lo_dr, hi_dr, weight = bounds
     if settings.solver == "pdhg":
         dc, dr, violation, iters = _solve_pdhg(
-            rows, act, c, r, gap, delta, lo_dr, hi_dr, weight, settings.iterations, _STEP_RATIO
+            rows,
+            act,
+            c,
+            r,
+            gap,
+            delta,
+            lo_dr,
+            hi_dr,
+            weight,
+            settings.iterations,
+            _STEP_RATIO,
+            settings.threads,
         )
         return dc, dr, iters, 0, violation
     tile = _tiles(c, act, mask, settings.tile_elements, k)
@@ -1464,7 +1595,7 @@ def compact(
             up = np.clip(max_sizes - r, 0.0, up)
         budget = math.sqrt(2) * delta + unit.circumradius * up
         rows, prev, (n_pairs, n_pieces) = _round_rows(
-            unit, c, r, cos, sin, budget, gap, segs, seg_trees, prev
+            unit, c, r, cos, sin, budget, gap, segs, seg_trees, prev, settings.threads
         )
         # the start must meet every row (placement may cross a contour by half a pixel)
         r, dropped = _shrink_to_fit(rows, c, r, gap, SLACK)
