@@ -159,7 +159,6 @@ Choices in the formulation
 from __future__ import annotations
 
 import functools
-import itertools
 import math
 import time
 from concurrent.futures import ThreadPoolExecutor
@@ -1175,13 +1174,14 @@ def _solve_pdhg(rows: _Rows, act, c, r, gap, delta, lo_dr, hi_dr, weight, iterat
     # Halpern's iteration on the reflected PDHG step T (r2HPDHG, Lu & Yang 2024):
     # z ← w·(2·T(z) − z) + (1 − w)·z₀ with w = (k + 1)/(k + 2), z₀ the anchor (the start,
     # x = 0, y = 0, until a restart); the answer is the last T(z), which keeps the bounds
-    x, y, no_rows = np.zeros(ncol), np.zeros(npair + nseg), np.zeros(npair + nseg)
-    anchor = [None, None]  # x0, y0: the start (0) until the first restart
+    m = npair + nseg
+    x, y, no_rows = np.zeros(ncol), np.zeros(m), np.zeros(m)
+    # the anchor z₀ = (x0, y0): the start (0) until the first restart
+    x0, y0, anchored = np.zeros(ncol), np.zeros(m), False
     # every step works in these buffers: a fresh array per step would be fresh memory
     # from the system each time (page faults cost about as much as the arithmetic)
-    xt, z, scratch, res_x = np.empty(ncol), np.empty(ncol), np.empty(ncol), np.empty(ncol)
-    yt, y_scratch, res_y = np.empty(npair + nseg), np.empty(npair + nseg), np.empty(npair + nseg)
-    aty = np.zeros(ncol)  # Aᵀy, y = 0
+    xt, z, scratch, res_x, aty = (np.zeros(ncol) for _ in range(5))  # aty: Aᵀy, y = 0
+    yt, y_scratch, res_y = np.empty(m), np.empty(m), np.empty(m)
     inv_tau, inv_sigma = 1.0 / tau, 1.0 / sigma
     kernels = _csr_matvec()
     parts = 1 if kernels is None else max(1, min(threads, len(value) // _PDHG_BLOCK_ENTRIES))
@@ -1191,80 +1191,93 @@ def _solve_pdhg(rows: _Rows, act, c, r, gap, delta, lo_dr, hi_dr, weight, iterat
         at = a.T.tocsr()
         row_blocks, col_blocks = _blocks(a.indptr, parts), _blocks(at.indptr, parts)
     else:
-        at, row_blocks, col_blocks = None, [(0, npair + nseg)], [(0, ncol)]
+        at, row_blocks, col_blocks = None, [(0, m)], [(0, ncol)]
+    # each block's views of the arrays, made once (a slice per step and array would cost
+    # the interpreter more than the block's arithmetic)
+    col_views = [
+        (blk, *(v[blk[0] : blk[1]] for v in (x, xt, z, aty, cost, tau, lo, hi, res_x, inv_tau, x0, scratch)))
+        for blk in col_blocks
+    ]
+    row_views = [
+        (blk, *(v[blk[0] : blk[1]] for v in (y, yt, b, sigma, no_rows, res_y, inv_sigma, y0, y_scratch)))
+        for blk in row_blocks
+    ]
 
-    def primal(block, check, first_step):
-        """x̃ = clip(x − τ(c − Aᵀy)) and z = 2x̃ − x on a block of columns (Aᵀy first,
-        but on the first step, where y = 0), and the residual's terms if ``check``."""
-        c0, c1 = block[:2]
-        if at is not None and not first_step:
-            _block_product(kernels[0], at, block, y, aty)
-        xb, xtb, zb = x[c0:c1], xt[c0:c1], z[c0:c1]
-        np.subtract(aty[c0:c1], cost[c0:c1], out=xtb)
-        xtb *= tau[c0:c1]
+    def primal(views, w, check, product):
+        """On a block of columns: x's Halpern update from last step's z (``w``, None
+        after a restart or at the start), Aᵀy (``product``), then x̃ = clip(x − τ(c −
+        Aᵀy)), z = 2x̃ − x and, if ``check``, the residual's terms."""
+        blk, xb, xtb, zb, atyb, costb, taub, lob, hib, rxb, itb, x0b, sb = views
+        if w is not None:  # z ← w·(2T(z) − z) + (1 − w)·z₀, x's part (z = 2x̃ − x)
+            np.multiply(zb, w, out=xb)
+            if anchored:
+                xb += np.multiply(x0b, 1.0 - w, out=sb)
+        if product:
+            if at is not None:
+                _block_product(kernels[0], at, blk, y, aty)
+            else:
+                _product(a, y, aty, transpose=True)
+        np.subtract(atyb, costb, out=xtb)
+        xtb *= taub
         xtb += xb
-        np.maximum(xtb, lo[c0:c1], out=xtb)  # np.clip's order: lo, then hi (lo <= hi)
-        np.minimum(xtb, hi[c0:c1], out=xtb)
+        np.maximum(xtb, lob, out=xtb)  # np.clip's order: lo, then hi (lo <= hi)
+        np.minimum(xtb, hib, out=xtb)
         np.multiply(xtb, 2.0, out=zb)
         zb -= xb
         if check:  # the residual in T's own norm (1/τ, 1/σ)
-            rb = np.subtract(xtb, xb, out=res_x[c0:c1])
-            np.multiply(rb, rb, out=rb)
-            rb *= inv_tau[c0:c1]
+            np.subtract(xtb, xb, out=rxb)
+            np.multiply(rxb, rxb, out=rxb)
+            rxb *= itb
 
-    def dual(block, check):
-        """ỹ = max(0, y + σ(b − A z)) on a block of rows, and the residual's terms if ``check``."""
-        r0, r1 = block[:2]
+    def dual(views, w, check):
+        """On a block of rows: ỹ = max(0, y + σ(b − A z)), then, if ``check``, the
+        residual's terms, else y's Halpern update (``w``)."""
+        blk, yb, ytb, bb, sigb, zero, ryb, isb, y0b, ysb = views
         if at is not None:
-            _block_product(kernels[0], a, block, z, yt)
+            _block_product(kernels[0], a, blk, z, yt)
         else:
             _product(a, z, yt)
-        ytb, yb = yt[r0:r1], y[r0:r1]
-        np.subtract(b[r0:r1], ytb, out=ytb)
-        ytb *= sigma[r0:r1]
+        np.subtract(bb, ytb, out=ytb)
+        ytb *= sigb
         ytb += yb
-        np.maximum(ytb, no_rows[r0:r1], out=ytb)  # against an array: a scalar 0 is ~4x slower
+        np.maximum(ytb, zero, out=ytb)  # against an array: a scalar 0 is ~4x slower
         if check:
-            dy = np.subtract(ytb, yb, out=res_y[r0:r1])
+            dy = np.subtract(ytb, yb, out=ryb)
             np.multiply(dy, dy, out=dy)
-            dy *= inv_sigma[r0:r1]
+            dy *= isb
+        else:
+            dual_update(views, w)
 
-    def halpern(rows_, cols_, w):
-        """z ← w·(2T(z) − z) + (1 − w)·z₀ on a block of rows and one of columns."""
-        x0, y0 = anchor
-        if cols_ is not None:
-            c0, c1 = cols_[:2]
-            xb = x[c0:c1]
-            np.multiply(z[c0:c1], w, out=xb)  # z = 2x̃ − x
-            if x0 is not None:
-                xb += np.multiply(x0[c0:c1], 1.0 - w, out=scratch[c0:c1])
-        if rows_ is not None:
-            r0, r1 = rows_[:2]
-            yb = y[r0:r1]
-            yb *= -w
-            yb += np.multiply(yt[r0:r1], 2.0 * w, out=y_scratch[r0:r1])
-            if y0 is not None:
-                yb += np.multiply(y0[r0:r1], 1.0 - w, out=y_scratch[r0:r1])
+    def dual_update(views, w):
+        """y's part of z ← w·(2T(z) − z) + (1 − w)·z₀ on a block of rows."""
+        _, yb, ytb, *_, y0b, ysb = views
+        yb *= -w
+        yb += np.multiply(ytb, 2.0 * w, out=ysb)
+        if anchored:
+            yb += np.multiply(y0b, 1.0 - w, out=ysb)
 
-    pairs_of_blocks = list(itertools.zip_longest(row_blocks, col_blocks))
     pool = ThreadPoolExecutor(parts) if parts > 1 else None
 
-    def each(fn, items):
-        """fn(*item) for every item: side by side in the pool, else in turn."""
+    def each(fn, views, *args):
+        """fn(block's views, *args) for every block: side by side in the pool, else in turn."""
         if pool is None:
-            for item in items:
-                fn(*item)
+            for v in views:
+                fn(v, *args)
         else:
-            for _ in pool.map(lambda item: fn(*item), items):
+            for _ in pool.map(lambda v: fn(v, *args), views):
                 pass
 
     first = None  # fixed-point residual |T(z) − z| after the last restart
     k = steps = 0
+    w_x = None  # the Halpern weight x's update still owes (made with the next x̃)
     try:
         for steps in range(1, iterations + 1):  # noqa: B007 (returned) a loop over whole-array steps
+            # T: x̃ = clip(x − τ(c − Aᵀy)); ỹ = max(0, y + σ(b − A(2x̃ − x))), in place (np.clip
+            # with array bounds costs several of these passes)
             check = first is None or steps % _HALPERN_CHECK == 0
-            each(primal, [(blk, check, steps == 1) for blk in col_blocks])
-            each(dual, [(blk, check) for blk in row_blocks])
+            each(primal, col_views, w_x, check, steps > 1)
+            w = (k + 1.0) / (k + 2.0)
+            each(dual, row_views, w, check)  # without a check, no restart: y's update too
             residual = None
             if check:
                 # by ufuncs (a BLAS dot wakes its threads, which costs far more than the
@@ -1272,18 +1285,17 @@ def _solve_pdhg(rows: _Rows, act, c, r, gap, delta, lo_dr, hi_dr, weight, iterat
                 residual = math.sqrt(float(res_x.sum()) + float(res_y.sum()))
                 if first is None:
                     first = residual
-            if residual is not None and residual <= _HALPERN_RESTART * first:
-                # restart from T(z): the iteration then converges linearly on a program
-                # like this one, as PDHG with restarts does
-                x[:], y[:] = xt, yt
-                anchor[:] = xt.copy(), yt.copy()
-                first, k = None, 0
+                if residual <= _HALPERN_RESTART * first:
+                    # restart from T(z): the iteration then converges linearly on a
+                    # program like this one, as PDHG with restarts does
+                    x[:], y[:] = xt, yt
+                    x0[:], y0[:], anchored = xt, yt, True
+                    first, k, w_x = None, 0, None
+                else:
+                    each(dual_update, row_views, w)
+                    k, w_x = k + 1, w
             else:
-                w = (k + 1.0) / (k + 2.0)
-                each(halpern, [(rb, cb, w) for rb, cb in pairs_of_blocks])
-                k += 1
-            if at is None:
-                _product(a, y, aty, transpose=True)
+                k, w_x = k + 1, w
             # a fixed point of T is the program's optimum: stop when T(z) = z and x̃ meets
             # the rows (small programs; large ones use every step)
             if (
