@@ -1144,11 +1144,167 @@ def _block_product(kernel, m, block, v, out):
     kernel(r1 - r0, m.shape[1], indptr, m.indices[e0:e1], m.data[e0:e1], v, part)
 
 
+class _HalpernPdhg:
+    """The state of :func:`_solve_pdhg`'s iteration on one program ``A x >= b``: the
+    iterates, the anchor, the step buffers and, for a large program, its blocks of rows
+    and of columns (each block's views of the arrays made once: a slice per step and
+    array would cost the interpreter more than a block's arithmetic) and the threads that
+    work them side by side."""
+
+    def __init__(self, a, b, bounds, steps, threads):
+        lo, hi, cost = bounds
+        tau, sigma = steps
+        ncol, m = a.shape[1], a.shape[0]
+        self.a, self.b = a, b
+        self.x, self.y = np.zeros(ncol), np.zeros(m)
+        # the anchor z₀ = (x0, y0): the start (0) until the first restart
+        self.x0, self.y0, self.anchored = np.zeros(ncol), np.zeros(m), False
+        # every step works in these buffers: a fresh array per step would be fresh memory
+        # from the system each time (page faults cost about as much as the arithmetic)
+        self.xt, self.z, scratch, self.res_x, self.aty = (np.zeros(ncol) for _ in range(5))
+        self.yt, y_scratch, self.res_y = np.empty(m), np.empty(m), np.empty(m)
+        self.kernels = _csr_matvec()
+        nnz = len(a.data)
+        parts = 1 if self.kernels is None else max(1, min(threads, nnz // _PDHG_BLOCK_ENTRIES))
+        if parts > 1:
+            # Aᵀy by the rows of Aᵀ (CSR, entries in A's row order): each sum in the order
+            # of _product's scatter, so the same numbers, and a block of columns per thread
+            self.at = a.T.tocsr()
+            row_blocks, col_blocks = _blocks(a.indptr, parts), _blocks(self.at.indptr, parts)
+        else:
+            self.at, row_blocks, col_blocks = None, [(0, m)], [(0, ncol)]
+        x_side = (
+            self.x,
+            self.xt,
+            self.z,
+            self.aty,
+            cost,
+            tau,
+            lo,
+            hi,
+            self.res_x,
+            1.0 / tau,
+            self.x0,
+            scratch,
+        )
+        self.col_views = [(blk, *(v[blk[0] : blk[1]] for v in x_side)) for blk in col_blocks]
+        y_side = (self.y, self.yt, b, sigma, np.zeros(m), self.res_y, 1.0 / sigma, self.y0, y_scratch)
+        self.row_views = [(blk, *(v[blk[0] : blk[1]] for v in y_side)) for blk in row_blocks]
+        self.pool = ThreadPoolExecutor(parts) if parts > 1 else None
+
+    def each(self, fn, views, *args):
+        """fn(block's views, *args) for every block: side by side in the pool, else in turn."""
+        if self.pool is None:
+            for v in views:
+                fn(v, *args)
+        else:
+            for _ in self.pool.map(lambda v: fn(v, *args), views):
+                pass
+
+    def primal(self, views, w, check, product):
+        """On a block of columns: x's Halpern update from last step's z (``w``; None
+        after a restart or at the start), Aᵀy (``product``), then x̃ = clip(x − τ(c −
+        Aᵀy)) in place (np.clip with array bounds costs several of these passes),
+        z = 2x̃ − x and, if ``check``, the residual's terms (T's own norm: 1/τ, 1/σ)."""
+        blk, xb, xtb, zb, atyb, costb, taub, lob, hib, rxb, itb, x0b, sb = views
+        if w is not None:  # z ← w·(2T(z) − z) + (1 − w)·z₀, x's part (z = 2x̃ − x)
+            np.multiply(zb, w, out=xb)
+            if self.anchored:
+                xb += np.multiply(x0b, 1.0 - w, out=sb)
+        if product:
+            if self.at is not None:
+                _block_product(self.kernels[0], self.at, blk, self.y, self.aty)
+            else:
+                _product(self.a, self.y, self.aty, transpose=True)
+        np.subtract(atyb, costb, out=xtb)
+        xtb *= taub
+        xtb += xb
+        np.maximum(xtb, lob, out=xtb)  # np.clip's order: lo, then hi (lo <= hi)
+        np.minimum(xtb, hib, out=xtb)
+        np.multiply(xtb, 2.0, out=zb)
+        zb -= xb
+        if check:
+            np.subtract(xtb, xb, out=rxb)
+            np.multiply(rxb, rxb, out=rxb)
+            rxb *= itb
+
+    def dual(self, views, w, check):
+        """On a block of rows: ỹ = max(0, y + σ(b − A z)), then, if ``check``, the
+        residual's terms, else y's Halpern update (``w``)."""
+        blk, yb, ytb, bb, sigb, zero, ryb, isb, _, _ = views
+        if self.at is not None:
+            _block_product(self.kernels[0], self.a, blk, self.z, self.yt)
+        else:
+            _product(self.a, self.z, self.yt)
+        np.subtract(bb, ytb, out=ytb)
+        ytb *= sigb
+        ytb += yb
+        np.maximum(ytb, zero, out=ytb)  # against an array: a scalar 0 is ~4x slower
+        if check:
+            dy = np.subtract(ytb, yb, out=ryb)
+            np.multiply(dy, dy, out=dy)
+            dy *= isb
+        else:
+            self.dual_update(views, w)
+
+    def dual_update(self, views, w):
+        """y's part of z ← w·(2T(z) − z) + (1 − w)·z₀ on a block of rows."""
+        _, yb, ytb, *_, y0b, ysb = views
+        yb *= -w
+        yb += np.multiply(ytb, 2.0 * w, out=ysb)
+        if self.anchored:
+            yb += np.multiply(y0b, 1.0 - w, out=ysb)
+
+    def run(self, iterations):
+        """Up to ``iterations`` steps (fewer when converged); returns x̃ and the steps."""
+        first = None  # fixed-point residual |T(z) − z| after the last restart
+        k = steps = 0
+        w_x = None  # the Halpern weight x's update still owes (made with the next x̃)
+        try:
+            for steps in range(1, iterations + 1):  # noqa: B007 (returned) a loop over whole-array steps
+                check = first is None or steps % _HALPERN_CHECK == 0
+                self.each(self.primal, self.col_views, w_x, check, steps > 1)
+                w = (k + 1.0) / (k + 2.0)
+                self.each(self.dual, self.row_views, w, check)  # no check, no restart: y's update too
+                residual = None
+                if check:
+                    # by ufuncs (a BLAS dot wakes its threads, which costs far more than
+                    # the sum on a busy machine)
+                    residual = math.sqrt(float(self.res_x.sum()) + float(self.res_y.sum()))
+                    if first is None:
+                        first = residual
+                    if residual <= _HALPERN_RESTART * first:
+                        # restart from T(z): the iteration then converges linearly on a
+                        # program like this one, as PDHG with restarts does
+                        self.x[:], self.y[:] = self.xt, self.yt
+                        self.x0[:], self.y0[:], self.anchored = self.xt, self.yt, True
+                        first, k, w_x = None, 0, None
+                    else:
+                        self.each(self.dual_update, self.row_views, w)
+                        k, w_x = k + 1, w
+                else:
+                    k, w_x = k + 1, w
+                # a fixed point of T is the program's optimum: stop when T(z) = z and x̃
+                # meets the rows (small programs; large ones use every step)
+                if (
+                    residual is not None
+                    and residual < _PDHG_STILL
+                    and np.max(self.b - self.a @ self.xt, initial=0.0) < _PDHG_STILL
+                ):
+                    break
+        finally:
+            if self.pool is not None:
+                self.pool.shutdown()
+        return self.xt, steps
+
+
 def _solve_pdhg(rows: _Rows, act, c, r, gap, delta, lo_dr, hi_dr, weight, iterations, step_ratio, threads=1):
     """The round's program (the same as :func:`_solve_lp`'s, untiled) solved
     approximately by ``iterations`` steps of the primal-dual hybrid gradient method
     (Chambolle-Pock, diagonal steps of Pock & Chambolle 2011), all elements at once, in
-    Halpern's reflected form with restarts (r2HPDHG, Lu & Yang 2024; module docstring).
+    Halpern's reflected form with restarts (r2HPDHG, Lu & Yang 2024; module docstring):
+    z ← w·(2·T(z) − z) + (1 − w)·z₀ with w = (k + 1)/(k + 2), z₀ the anchor (the start,
+    x = 0, y = 0, until a restart); the answer is the last T(z), which keeps the bounds.
 
     Starts from x = 0, y = 0 (last round's duals, mapped by pair, were measured no
     better).  Returns Δc (N, 2), Δr (N,), the largest row violation left and the steps
@@ -1164,150 +1320,14 @@ def _solve_pdhg(rows: _Rows, act, c, r, gap, delta, lo_dr, hi_dr, weight, iterat
     a, b, lo, hi, cost, (index, value, start) = _pdhg_program(
         rows, act, c, r, gap, delta, lo_dr, hi_dr, weight
     )
-    ncol, npair, nseg = a.shape[1], len(rows.i), len(rows.e)
+    ncol = a.shape[1]
     # diagonal steps: 1 / (row or column sum of |A|), balanced by step_ratio
     absval = np.abs(value)
     col_sum = np.bincount(index, weights=absval, minlength=ncol)
     row_sum = np.add.reduceat(absval, start[:-1]) if len(absval) else np.zeros(0)
     tau = step_ratio / np.maximum(col_sum, 1e-12)
     sigma = 1.0 / (step_ratio * np.maximum(row_sum, 1e-12))
-    # Halpern's iteration on the reflected PDHG step T (r2HPDHG, Lu & Yang 2024):
-    # z ← w·(2·T(z) − z) + (1 − w)·z₀ with w = (k + 1)/(k + 2), z₀ the anchor (the start,
-    # x = 0, y = 0, until a restart); the answer is the last T(z), which keeps the bounds
-    m = npair + nseg
-    x, y, no_rows = np.zeros(ncol), np.zeros(m), np.zeros(m)
-    # the anchor z₀ = (x0, y0): the start (0) until the first restart
-    x0, y0, anchored = np.zeros(ncol), np.zeros(m), False
-    # every step works in these buffers: a fresh array per step would be fresh memory
-    # from the system each time (page faults cost about as much as the arithmetic)
-    xt, z, scratch, res_x, aty = (np.zeros(ncol) for _ in range(5))  # aty: Aᵀy, y = 0
-    yt, y_scratch, res_y = np.empty(m), np.empty(m), np.empty(m)
-    inv_tau, inv_sigma = 1.0 / tau, 1.0 / sigma
-    kernels = _csr_matvec()
-    parts = 1 if kernels is None else max(1, min(threads, len(value) // _PDHG_BLOCK_ENTRIES))
-    if parts > 1:
-        # Aᵀy by the rows of Aᵀ (CSR, entries in A's row order): each sum in the order of
-        # _product's scatter, so the same numbers, and a block of columns per thread
-        at = a.T.tocsr()
-        row_blocks, col_blocks = _blocks(a.indptr, parts), _blocks(at.indptr, parts)
-    else:
-        at, row_blocks, col_blocks = None, [(0, m)], [(0, ncol)]
-    # each block's views of the arrays, made once (a slice per step and array would cost
-    # the interpreter more than the block's arithmetic)
-    col_views = [
-        (blk, *(v[blk[0] : blk[1]] for v in (x, xt, z, aty, cost, tau, lo, hi, res_x, inv_tau, x0, scratch)))
-        for blk in col_blocks
-    ]
-    row_views = [
-        (blk, *(v[blk[0] : blk[1]] for v in (y, yt, b, sigma, no_rows, res_y, inv_sigma, y0, y_scratch)))
-        for blk in row_blocks
-    ]
-
-    def primal(views, w, check, product):
-        """On a block of columns: x's Halpern update from last step's z (``w``, None
-        after a restart or at the start), Aᵀy (``product``), then x̃ = clip(x − τ(c −
-        Aᵀy)), z = 2x̃ − x and, if ``check``, the residual's terms."""
-        blk, xb, xtb, zb, atyb, costb, taub, lob, hib, rxb, itb, x0b, sb = views
-        if w is not None:  # z ← w·(2T(z) − z) + (1 − w)·z₀, x's part (z = 2x̃ − x)
-            np.multiply(zb, w, out=xb)
-            if anchored:
-                xb += np.multiply(x0b, 1.0 - w, out=sb)
-        if product:
-            if at is not None:
-                _block_product(kernels[0], at, blk, y, aty)
-            else:
-                _product(a, y, aty, transpose=True)
-        np.subtract(atyb, costb, out=xtb)
-        xtb *= taub
-        xtb += xb
-        np.maximum(xtb, lob, out=xtb)  # np.clip's order: lo, then hi (lo <= hi)
-        np.minimum(xtb, hib, out=xtb)
-        np.multiply(xtb, 2.0, out=zb)
-        zb -= xb
-        if check:  # the residual in T's own norm (1/τ, 1/σ)
-            np.subtract(xtb, xb, out=rxb)
-            np.multiply(rxb, rxb, out=rxb)
-            rxb *= itb
-
-    def dual(views, w, check):
-        """On a block of rows: ỹ = max(0, y + σ(b − A z)), then, if ``check``, the
-        residual's terms, else y's Halpern update (``w``)."""
-        blk, yb, ytb, bb, sigb, zero, ryb, isb, y0b, ysb = views
-        if at is not None:
-            _block_product(kernels[0], a, blk, z, yt)
-        else:
-            _product(a, z, yt)
-        np.subtract(bb, ytb, out=ytb)
-        ytb *= sigb
-        ytb += yb
-        np.maximum(ytb, zero, out=ytb)  # against an array: a scalar 0 is ~4x slower
-        if check:
-            dy = np.subtract(ytb, yb, out=ryb)
-            np.multiply(dy, dy, out=dy)
-            dy *= isb
-        else:
-            dual_update(views, w)
-
-    def dual_update(views, w):
-        """y's part of z ← w·(2T(z) − z) + (1 − w)·z₀ on a block of rows."""
-        _, yb, ytb, *_, y0b, ysb = views
-        yb *= -w
-        yb += np.multiply(ytb, 2.0 * w, out=ysb)
-        if anchored:
-            yb += np.multiply(y0b, 1.0 - w, out=ysb)
-
-    pool = ThreadPoolExecutor(parts) if parts > 1 else None
-
-    def each(fn, views, *args):
-        """fn(block's views, *args) for every block: side by side in the pool, else in turn."""
-        if pool is None:
-            for v in views:
-                fn(v, *args)
-        else:
-            for _ in pool.map(lambda v: fn(v, *args), views):
-                pass
-
-    first = None  # fixed-point residual |T(z) − z| after the last restart
-    k = steps = 0
-    w_x = None  # the Halpern weight x's update still owes (made with the next x̃)
-    try:
-        for steps in range(1, iterations + 1):  # noqa: B007 (returned) a loop over whole-array steps
-            # T: x̃ = clip(x − τ(c − Aᵀy)); ỹ = max(0, y + σ(b − A(2x̃ − x))), in place (np.clip
-            # with array bounds costs several of these passes)
-            check = first is None or steps % _HALPERN_CHECK == 0
-            each(primal, col_views, w_x, check, steps > 1)
-            w = (k + 1.0) / (k + 2.0)
-            each(dual, row_views, w, check)  # without a check, no restart: y's update too
-            residual = None
-            if check:
-                # by ufuncs (a BLAS dot wakes its threads, which costs far more than the
-                # sum on a busy machine)
-                residual = math.sqrt(float(res_x.sum()) + float(res_y.sum()))
-                if first is None:
-                    first = residual
-                if residual <= _HALPERN_RESTART * first:
-                    # restart from T(z): the iteration then converges linearly on a
-                    # program like this one, as PDHG with restarts does
-                    x[:], y[:] = xt, yt
-                    x0[:], y0[:], anchored = xt, yt, True
-                    first, k, w_x = None, 0, None
-                else:
-                    each(dual_update, row_views, w)
-                    k, w_x = k + 1, w
-            else:
-                k, w_x = k + 1, w
-            # a fixed point of T is the program's optimum: stop when T(z) = z and x̃ meets
-            # the rows (small programs; large ones use every step)
-            if (
-                residual is not None
-                and residual < _PDHG_STILL
-                and np.max(b - a @ xt, initial=0.0) < _PDHG_STILL
-            ):
-                break
-    finally:
-        if pool is not None:
-            pool.shutdown()
-    x = xt
+    x, steps = _HalpernPdhg(a, b, (lo, hi, cost), (tau, sigma), threads).run(iterations)
     dc = np.zeros((n, 2))
     dr = np.zeros(n)
     dc[act, 0], dc[act, 1], dr[act] = x[0::3], x[1::3], x[2::3]
