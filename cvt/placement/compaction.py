@@ -459,11 +459,12 @@ def _segment_trees(segs: np.ndarray) -> list:
     return out
 
 
-def _pairs_within(point_trees, count, extra):
+def _pairs_within(point_trees, count, extra, ordered=True):
     """Index pairs (a, b), a < b, of the ``count`` points with |points[a] − points[b]| <=
-    reach[a] + reach[b] + extra (and some farther ones), ordered by a then b: class by
-    class of reach (``point_trees``: :func:`_point_trees`), so one large element does
-    not widen the query of every small one."""
+    reach[a] + reach[b] + extra (and some farther ones), ordered by a then b (unless
+    ``ordered`` is False: in the kd-trees' order): class by class of reach
+    (``point_trees``: :func:`_point_trees`), so one large element does not widen the
+    query of every small one."""
     classes, trees, tops = zip(*point_trees, strict=True)
     a_s, b_s = [], []
     for x, (cx, tx) in enumerate(zip(classes, trees, strict=True)):
@@ -475,6 +476,8 @@ def _pairs_within(point_trees, count, extra):
             a_s.append(cx[found["i"]])
             b_s.append(classes[y][found["j"]])
     a, b = np.concatenate(a_s), np.concatenate(b_s)
+    if not ordered:
+        return np.minimum(a, b), np.maximum(a, b)
     return _sorted_pairs(np.minimum(a, b), np.maximum(a, b), count)
 
 
@@ -482,11 +485,13 @@ def _near_pairs(unit, c, r, cos, sin, budget, gap, prev, act, point_trees, threa
     """Pairs whose gap could close to < gap this round; their n and current gap
     (``act``: the elements with a size, ``point_trees``: their centres by class of reach
     ρ·r + budget, :func:`_point_trees`).  The candidate pairs are worked in pieces by up
-    to ``threads`` threads (:func:`_in_pieces`): the same pairs, in the same order."""
+    to ``threads`` threads (:func:`_in_pieces`), and the pairs kept ordered by i then j
+    (each row's figures do not depend on the others: sorting the few kept instead of
+    the many candidates gives the same rows in the same order)."""
     if len(act) < 2:
         e = np.zeros(0)
         return np.zeros(0, np.int64), np.zeros(0, np.int64), e, e, e
-    a, b = _pairs_within(point_trees, len(act), gap + _SELECT)
+    a, b = _pairs_within(point_trees, len(act), gap + _SELECT, ordered=False)
 
     def kept(a, b):
         """The candidates (a, b) (positions in act) that make rows, with their n and gap."""
@@ -507,7 +512,9 @@ def _near_pairs(unit, c, r, cos, sin, budget, gap, prev, act, point_trees, threa
         keep = g < enough
         return _select(keep, i, j, nx, ny, g)
 
-    return _in_pieces(kept, threads, a, b)
+    i, j, nx, ny, g = _in_pieces(kept, threads, a, b)
+    at = np.argsort(i * len(r) + j)  # keys unique (a < b): any sort gives this order
+    return tuple(v.take(at) for v in (i, j, nx, ny, g))
 
 
 def _in_pieces(fn, threads, *arrays) -> tuple:
