@@ -92,8 +92,10 @@ log2(area / target)) was 1.12-1.25x ours' on ellipses, triangles and circles (Ta
 density and combined scenes, 512², N = 1000, seeds 0-4).  With p = 2 it is 0.70-0.95x
 on every shape of both scenes and of two others (two Gaussian blobs of contrast 5, a
 linear ramp of contrast 4), with coverage within −0.52 to +0.14 points; p = 1 left
-circles at 1.09x, p = 3 lost up to 0.95 points of coverage.  Without caps the weights
-are r_i, as before.  ``max_growth`` (off by default) caps every size at
+circles at 1.09x, p = 1.5 triangles and circles at 1.02-1.04x (the least margin on a
+density not seen), p = 3 lost up to 0.95 points of coverage.  Triangles that point
+either way (``alternate``): 1.60x / 1.38x → 1.14x / 0.92x (density / combined, seeds
+0-2), for 1.1-1.3 points of coverage.  Without caps the weights are r_i, as before.  ``max_growth`` (off by default) caps every size at
 (1 + max_growth) × its placed size; ``move_cost`` > 0 puts a price on moves (columns
 Δc⁺, Δc⁻), which keeps regular lattices from drifting (a lattice of circles then reaches
 its optimum π/4 exactly) but measured up to 0.4 points lower and 30-60 % slower on CVTs.
