@@ -643,64 +643,76 @@ def _closest_on_segment(px, py, qx, qy, x, y):
     return px + t * ex, py + t * ey
 
 
-def _near_segments(unit, c, r, cos, sin, budget, half, segs, seg_trees, prev, act, point_trees):
+def _near_segments(unit, c, r, cos, sin, budget, half, segs, seg_trees, prev, act, point_trees, threads=1):
+    """(Element, piece) rows whose gap could close to < ``half`` this round; their n and
+    current gap, the candidates worked in pieces by up to ``threads`` threads
+    (:func:`_in_pieces`: the same rows in the same order)."""
     empty = np.zeros(0)
     if len(act) == 0 or len(segs) == 0:
         return np.zeros(0, np.int64), np.zeros(0, np.int64), empty, empty, empty
     k, s = _near_items(point_trees, seg_trees, half + _SELECT)
-    e = act[k]
-    px, py, qx, qy = segs[s, 0], segs[s, 1], segs[s, 2], segs[s, 3]
-    x, y = c[e, 0], c[e, 1]
-    kx, ky = _closest_on_segment(px, py, qx, qy, x, y)
-    d = np.hypot(kx - x, ky - y)
-    keep = d < unit.circumradius * r[e] + budget[e] + half + _SELECT
-    e, s, px, py, qx, qy, x, y, kx, ky, d = _select(keep, e, s, px, py, qx, qy, x, y, kx, ky, d)
-    prev_n = _lookup(prev, e * len(segs) + s)
-    with np.errstate(invalid="ignore", divide="ignore"):
-        tx, ty = np.where(d > 0, (kx - x) / d, 1.0), np.where(d > 0, (ky - y) / d, 0.0)
-    # the piece's normal, turned towards the element's outside
-    sx, sy = -(qy - py), qx - px
-    sl = np.hypot(sx, sy)
-    with np.errstate(invalid="ignore", divide="ignore"):
-        sx, sy = sx / sl, sy / sl  # NaN for a point piece (a lone wall pixel): never chosen
-    flip = np.where(sx * (kx - x) + sy * (ky - y) < 0, -1.0, 1.0)
-    # in order of preference: the piece's own normal, the element's faces, last round's
-    # n, the direction of the nearest point (beside a reflex corner of the region)
-    # (the candidates' gaps written into one array, their directions built only for the
-    # one chosen)
-    nsx, nsy = sx * flip, sy * flip
-    args = tuple(v[:, None] for v in (px, py, qx, qy, x, y, r[e], cos[e], sin[e]))
-    gap_for = _gaps_of_rows(_seg_gap, unit, args)
-    gap_of = gap_for(slice(None))
-    faces = len(unit.faces.normals) if not unit.curved else 0
-    g = np.empty((len(e), faces + 3))
-    g[:, 0] = gap_of(nsx[:, None], nsy[:, None])[:, 0]
-    if faces:  # worked face by face along the rows, as in _face_gaps
-        fx, fy = unit.face_normals(cos[e], sin[e], faces_first=True)
-        # along its own faces the element reaches out by the shape's offsets
-        p_, q_ = fx * px + fy * py, fx * qx + fy * qy
-        g[:, 1 : 1 + faces].T[:] = np.minimum(p_, q_) - fx * x - fy * y - r[e] * unit.faces.offsets[:, None]
-    # last round's n: new rows have none (NaN, never chosen)
-    known = np.flatnonzero(np.isfinite(prev_n[:, 0]))
-    g[:, -2] = np.nan
-    g[known, -2] = gap_for(known)(prev_n[known, 0:1], prev_n[known, 1:2])[:, 0]
-    g[:, -1] = gap_of(tx[:, None], ty[:, None])[:, 0]
 
-    def direction_of(k):
-        """The direction of candidate k of each row: the piece's normal, a face normal,
-        last round's n or the nearest point's."""
-        bx = np.where(k == 0, nsx, np.where(k == faces + 2, tx, prev_n[:, 0]))
-        by = np.where(k == 0, nsy, np.where(k == faces + 2, ty, prev_n[:, 1]))
-        on_face = np.flatnonzero((k >= 1) & (k <= faces))
-        if len(on_face):
-            bx[on_face], by[on_face] = unit.face_normal(k[on_face] - 1, cos[e[on_face]], sin[e[on_face]])
-        return bx, by
+    def kept(k, s):
+        """The candidates (k, s) (position in act, piece) that make rows, with n and gap."""
+        e = act[k]
+        px, py, qx, qy = segs[s, 0], segs[s, 1], segs[s, 2], segs[s, 3]
+        x, y = c[e, 0], c[e, 1]
+        kx, ky = _closest_on_segment(px, py, qx, qy, x, y)
+        d = np.hypot(kx - x, ky - y)
+        keep = d < unit.circumradius * r[e] + budget[e] + half + _SELECT
+        e, s, px, py, qx, qy, x, y, kx, ky, d = _select(keep, e, s, px, py, qx, qy, x, y, kx, ky, d)
+        prev_n = _lookup(prev, e * len(segs) + s)
+        with np.errstate(invalid="ignore", divide="ignore"):
+            tx, ty = np.where(d > 0, (kx - x) / d, 1.0), np.where(d > 0, (ky - y) / d, 0.0)
+        # the piece's normal, turned towards the element's outside
+        sx, sy = -(qy - py), qx - px
+        sl = np.hypot(sx, sy)
+        with np.errstate(invalid="ignore", divide="ignore"):
+            sx, sy = sx / sl, sy / sl  # NaN for a point piece (a lone wall pixel): never chosen
+        flip = np.where(sx * (kx - x) + sy * (ky - y) < 0, -1.0, 1.0)
+        # in order of preference: the piece's own normal, the element's faces, last round's
+        # n, the direction of the nearest point (beside a reflex corner of the region)
+        # (the candidates' gaps written into one array, their directions built only for the
+        # one chosen)
+        nsx, nsy = sx * flip, sy * flip
+        args = tuple(v[:, None] for v in (px, py, qx, qy, x, y, r[e], cos[e], sin[e]))
+        gap_for = _gaps_of_rows(_seg_gap, unit, args)
+        gap_of = gap_for(slice(None))
+        faces = len(unit.faces.normals) if not unit.curved else 0
+        g = np.empty((len(e), faces + 3))
+        g[:, 0] = gap_of(nsx[:, None], nsy[:, None])[:, 0]
+        if faces:  # worked face by face along the rows, as in _face_gaps
+            fx, fy = unit.face_normals(cos[e], sin[e], faces_first=True)
+            # along its own faces the element reaches out by the shape's offsets
+            p_, q_ = fx * px + fy * py, fx * qx + fy * qy
+            g[:, 1 : 1 + faces].T[:] = (
+                np.minimum(p_, q_) - fx * x - fy * y - r[e] * unit.faces.offsets[:, None]
+            )
+        # last round's n: new rows have none (NaN, never chosen)
+        known = np.flatnonzero(np.isfinite(prev_n[:, 0]))
+        g[:, -2] = np.nan
+        g[known, -2] = gap_for(known)(prev_n[known, 0:1], prev_n[known, 1:2])[:, 0]
+        g[:, -1] = gap_of(tx[:, None], ty[:, None])[:, 0]
 
-    curved = unit.curved and unit.semi_axes[0] != unit.semi_axes[1]  # circles: nearest point
-    enough = half + budget[e] + _SELECT
-    bx, by, best = _best_direction(gap_for, g, direction_of, np.arctan2(ty, tx) if curved else None, enough)
-    keep = best < enough
-    return _select(keep, e, s, bx, by, best)
+        def direction_of(k):
+            """The direction of candidate k of each row: the piece's normal, a face normal,
+            last round's n or the nearest point's."""
+            bx = np.where(k == 0, nsx, np.where(k == faces + 2, tx, prev_n[:, 0]))
+            by = np.where(k == 0, nsy, np.where(k == faces + 2, ty, prev_n[:, 1]))
+            on_face = np.flatnonzero((k >= 1) & (k <= faces))
+            if len(on_face):
+                bx[on_face], by[on_face] = unit.face_normal(k[on_face] - 1, cos[e[on_face]], sin[e[on_face]])
+            return bx, by
+
+        curved = unit.curved and unit.semi_axes[0] != unit.semi_axes[1]  # circles: nearest point
+        enough = half + budget[e] + _SELECT
+        bx, by, best = _best_direction(
+            gap_for, g, direction_of, np.arctan2(ty, tx) if curved else None, enough
+        )
+        keep = best < enough
+        return _select(keep, e, s, bx, by, best)
+
+    return _in_pieces(kept, threads, k, s)
 
 
 # --------------------------------------------------------------------- constraints
@@ -1519,7 +1531,7 @@ def _round_rows(unit, c, r, cos, sin, budget, gap, segs, seg_trees, prev, thread
     trees = _point_trees(c[act], unit.circumradius * r[act] + budget[act]) if len(act) else []
     i, j, px, py, _ = _near_pairs(unit, c, r, cos, sin, budget, gap, prev_p, act, trees, threads)
     e, s, sx, sy, _ = _near_segments(
-        unit, c, r, cos, sin, budget, 0.5 * gap, segs, seg_trees, prev_s, act, trees
+        unit, c, r, cos, sin, budget, 0.5 * gap, segs, seg_trees, prev_s, act, trees, threads
     )
     seg_m = np.minimum(sx * segs[s, 0] + sy * segs[s, 1], sx * segs[s, 2] + sy * segs[s, 3])
     rows = _Rows(
