@@ -529,8 +529,13 @@ def _in_pieces(fn, threads, *arrays) -> tuple:
     if parts == 1:
         return fn(*arrays)
     cuts = np.linspace(0, count, parts + 1).astype(np.int64)
-    with ThreadPoolExecutor(parts) as pool:
-        answers = list(pool.map(lambda k: fn(*(v[cuts[k] : cuts[k + 1]] for v in arrays)), range(parts)))
+
+    def piece(k):
+        return fn(*(v[cuts[k] : cuts[k + 1]] for v in arrays))
+
+    with ThreadPoolExecutor(parts - 1) as pool:
+        waiting = [pool.submit(piece, k) for k in range(1, parts)]
+        answers = [piece(0)] + [job.result() for job in waiting]  # the first on this thread
     return tuple(np.concatenate(column) for column in zip(*answers, strict=True))
 
 
@@ -1211,16 +1216,19 @@ class _HalpernPdhg:
         self.col_views = [(blk, *(v[blk[0] : blk[1]] for v in x_side)) for blk in col_blocks]
         y_side = (self.y, self.yt, b, sigma, np.zeros(m), self.res_y, 1.0 / sigma, self.y0, y_scratch)
         self.row_views = [(blk, *(v[blk[0] : blk[1]] for v in y_side)) for blk in row_blocks]
-        self.pool = ThreadPoolExecutor(parts) if parts > 1 else None
+        self.pool = ThreadPoolExecutor(parts - 1) if parts > 1 else None
 
     def each(self, fn, views, *args):
         """fn(block's views, *args) for every block: side by side in the pool, else in turn."""
         if self.pool is None:
             for v in views:
                 fn(v, *args)
-        else:
-            for _ in self.pool.map(lambda v: fn(v, *args), views):
-                pass
+            return
+        # the first block on this thread, which would otherwise only wait
+        waiting = [self.pool.submit(fn, v, *args) for v in views[1:]]
+        fn(views[0], *args)
+        for job in waiting:
+            job.result()
 
     def primal(self, views, w, check, product):
         """On a block of columns: x's Halpern update from last step's z (``w``; None
