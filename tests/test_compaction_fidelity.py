@@ -30,8 +30,8 @@ CAPS = np.array([10.0, 10.0])
 def test_an_element_at_its_cap_yields_room_to_one_behind(solver):
     """One round's program by hand: Σ w·Δr with ΔrA + ΔrB <= 0 (the corridor is full),
     ΔrA in [−0.05·10, 0] (shrink; at its cap), ΔrB in [−0.05·5, 0.15·5].  Weighed by r
-    (fairness 0: wA = 10 > wB = 5) nothing moves; by r·(cap/r)² (wA = 10 < wB = 20) A
-    gives up all it may (0.5) and B takes it."""
+    (fairness 0: wA = 10 > wB = 5) nothing moves; by r·(cap/r)² (the default: wA = 10
+    < wB = 20) A gives up all it may (0.5) and B takes it."""
     res = compact(
         CENTRES, np.zeros(2), SIZES, "square", 1.0, CORRIDOR, rounds=1, max_sizes=CAPS, solver=solver
     )
@@ -75,8 +75,8 @@ def _ramp_problem(shape: str, seed: int) -> Problem:
 @pytest.mark.parametrize("shape", ["circle", "triangle"])
 def test_compaction_keeps_the_density_sizes(shape):
     """ours-compact's size error (RMS log2(area / target), target ∝ 1/density) at most
-    1.1x ours', mean of seeds 0-1 (measured: triangles 0.92x, circles 0.74x; 1.22x and
-    1.04x before elements short of their caps came first)."""
+    1.1x ours', mean of seeds 0-1 (measured: triangles 0.94x, circles 0.79x; 1.25x and
+    1.09x with ``fairness`` 0, growth weighed by size alone)."""
     backend = NumpyBackend()
     ratios = []
     for seed in (0, 1):

@@ -89,13 +89,14 @@ logarithm weighted by its target area), so that an element already at its cap yi
 room to a neighbour that lags behind its own.  Weighed by r_i alone, 30-35 % of the
 elements ended below 0.97 of their caps (1 % below 0.6), and the size error (RMS of
 log2(area / target)) was 1.12-1.25x ours' on ellipses, triangles and circles (Table 3's
-density and combined scenes, 512², N = 1000, seeds 0-4).  With p = 2 it is 0.70-0.95x
-on every shape of both scenes and of two others (two Gaussian blobs of contrast 5, a
-linear ramp of contrast 4), with coverage within −0.52 to +0.14 points; p = 1 left
-circles at 1.09x, p = 1.5 triangles and circles at 1.02-1.04x (the least margin on a
-density not seen), p = 3 lost up to 0.95 points of coverage.  Triangles that point
-either way (``alternate``): 1.60x / 1.38x → 1.14x / 0.92x (density / combined, seeds
-0-2), for 1.1-1.3 points of coverage.  Without caps the weights are r_i, as before.  ``max_growth`` (off by default) caps every size at
+density and combined scenes, 512², N = 1000, seeds 0-4).  With p = 2 (and ours-compact's
+caps 3 % above the density's sizes instead of 2 %) it is 0.72-0.99x on every shape of
+both scenes, coverage −0.23 to +0.44 points; 0.71-1.01x, +0.04 to +0.49 points, on two
+densities no scene uses (two Gaussian blobs of contrast 5, a linear ramp of contrast 4).
+With the 2 % caps: p = 1 left circles at 1.09x, p = 1.5 triangles at 1.04x (1.14x in
+Table 3's quick set), p = 2 cost up to 0.52 points, p = 3 up to 0.95; caps 5 % above
+gained 0.3-1.3 points but left circles at 1.09x.  Without caps the weights are r_i, as
+before.  ``max_growth`` (off by default) caps every size at
 (1 + max_growth) × its placed size; ``move_cost`` > 0 puts a price on moves (columns
 Δc⁺, Δc⁻), which keeps regular lattices from drifting (a lattice of circles then reaches
 its optimum π/4 exactly) but measured up to 0.4 points lower and 30-60 % slower on CVTs.
@@ -1423,7 +1424,8 @@ class CompactionSettings:
     fairness : float
         Where size caps (``max_sizes``) are given, element i's growth is weighed by
         r_i·(cap_i / r_i)^fairness in the objective, so that elements short of their caps
-        come first (0: by r_i alone, as without caps; 2: the gradient of Σ cap_i²·ln r_i).
+        come first (0: by r_i alone, as without caps; 2, the default: the gradient of
+        Σ cap_i²·ln r_i; module docstring, Sizes and density).
     """
 
     gap: float = 0.0
