@@ -173,7 +173,7 @@ from scipy.spatial import cKDTree
 from ..errors import InputError
 from ..problem import Grid
 from ..shapes import check_shape, element_ball
-from ..threads import usable_cores
+from ..threads import side_by_side, usable_cores
 from ..validate import one_of, real_number, whole_number
 from .fit import parse_gap
 
@@ -534,9 +534,7 @@ def _in_pieces(fn, threads, *arrays) -> tuple:
     def piece(k):
         return fn(*(v[cuts[k] : cuts[k + 1]] for v in arrays))
 
-    with ThreadPoolExecutor(parts - 1) as pool:
-        waiting = [pool.submit(piece, k) for k in range(1, parts)]
-        answers = [piece(0)] + [job.result() for job in waiting]  # the first on this thread
+    answers = side_by_side(*(functools.partial(piece, k) for k in range(parts)))
     return tuple(np.concatenate(column) for column in zip(*answers, strict=True))
 
 
@@ -1217,19 +1215,13 @@ class _HalpernPdhg:
         self.col_views = [(blk, *(v[blk[0] : blk[1]] for v in x_side)) for blk in col_blocks]
         y_side = (self.y, self.yt, b, sigma, np.zeros(m), self.res_y, 1.0 / sigma, self.y0, y_scratch)
         self.row_views = [(blk, *(v[blk[0] : blk[1]] for v in y_side)) for blk in row_blocks]
-        self.pool = ThreadPoolExecutor(parts - 1) if parts > 1 else None
 
     def each(self, fn, views, *args):
-        """fn(block's views, *args) for every block: side by side in the pool, else in turn."""
-        if self.pool is None:
-            for v in views:
-                fn(v, *args)
-            return
-        # the first block on this thread, which would otherwise only wait
-        waiting = [self.pool.submit(fn, v, *args) for v in views[1:]]
-        fn(views[0], *args)
-        for job in waiting:
-            job.result()
+        """fn(block's views, *args) for every block, side by side (:func:`cvt.threads.side_by_side`)."""
+        if len(views) == 1:
+            fn(views[0], *args)
+        else:  # the first block on this thread, the others on the process's pool
+            side_by_side(*(functools.partial(fn, v, *args) for v in views))
 
     def primal(self, views, w, check, product):
         """On a block of columns: x's Halpern update from last step's z (``w``; None
@@ -1290,41 +1282,37 @@ class _HalpernPdhg:
         first = None  # fixed-point residual |T(z) − z| after the last restart
         k = steps = 0
         w_x = None  # the Halpern weight x's update still owes (made with the next x̃)
-        try:
-            for steps in range(1, iterations + 1):  # noqa: B007 (returned) a loop over whole-array steps
-                check = first is None or steps % _HALPERN_CHECK == 0
-                self.each(self.primal, self.col_views, w_x, check, steps > 1)
-                w = (k + 1.0) / (k + 2.0)
-                self.each(self.dual, self.row_views, w, check)  # no check, no restart: y's update too
-                residual = None
-                if check:
-                    # by ufuncs (a BLAS dot wakes its threads, which costs far more than
-                    # the sum on a busy machine)
-                    residual = math.sqrt(float(self.res_x.sum()) + float(self.res_y.sum()))
-                    if first is None:
-                        first = residual
-                    if residual <= _HALPERN_RESTART * first:
-                        # restart from T(z): the iteration then converges linearly on a
-                        # program like this one, as PDHG with restarts does
-                        self.x[:], self.y[:] = self.xt, self.yt
-                        self.x0[:], self.y0[:], self.anchored = self.xt, self.yt, True
-                        first, k, w_x = None, 0, None
-                    else:
-                        self.each(self.dual_update, self.row_views, w)
-                        k, w_x = k + 1, w
+        for steps in range(1, iterations + 1):  # noqa: B007 (returned) a loop over whole-array steps
+            check = first is None or steps % _HALPERN_CHECK == 0
+            self.each(self.primal, self.col_views, w_x, check, steps > 1)
+            w = (k + 1.0) / (k + 2.0)
+            self.each(self.dual, self.row_views, w, check)  # no check, no restart: y's update too
+            residual = None
+            if check:
+                # by ufuncs (a BLAS dot wakes its threads, which costs far more than
+                # the sum on a busy machine)
+                residual = math.sqrt(float(self.res_x.sum()) + float(self.res_y.sum()))
+                if first is None:
+                    first = residual
+                if residual <= _HALPERN_RESTART * first:
+                    # restart from T(z): the iteration then converges linearly on a
+                    # program like this one, as PDHG with restarts does
+                    self.x[:], self.y[:] = self.xt, self.yt
+                    self.x0[:], self.y0[:], self.anchored = self.xt, self.yt, True
+                    first, k, w_x = None, 0, None
                 else:
+                    self.each(self.dual_update, self.row_views, w)
                     k, w_x = k + 1, w
-                # a fixed point of T is the program's optimum: stop when T(z) = z and x̃
-                # meets the rows (small programs; large ones use every step)
-                if (
-                    residual is not None
-                    and residual < _PDHG_STILL
-                    and np.max(self.b - self.a @ self.xt, initial=0.0) < _PDHG_STILL
-                ):
-                    break
-        finally:
-            if self.pool is not None:
-                self.pool.shutdown()
+            else:
+                k, w_x = k + 1, w
+            # a fixed point of T is the program's optimum: stop when T(z) = z and x̃
+            # meets the rows (small programs; large ones use every step)
+            if (
+                residual is not None
+                and residual < _PDHG_STILL
+                and np.max(self.b - self.a @ self.xt, initial=0.0) < _PDHG_STILL
+            ):
+                break
         return self.xt, steps
 
 
