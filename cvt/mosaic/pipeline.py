@@ -760,12 +760,30 @@ def _method_and_options(method, method_options):
     return record, given_options, {**record.mosaic_options, **given_options}
 
 
-def _result(dist, problem, fields, picture, edge_map, tiles, measures, settings: dict) -> MosaicResult:
+@dataclass(frozen=True)
+class _Settings:
+    """What :func:`make_mosaic` was asked for and ran with, as its record needs it."""
+
+    metric_name: str
+    element: str
+    gap: float
+    record: object  # the method's record
+    given_options: dict  # the method's options as given
+    contrast: float
+    grout: tuple
+    edge_threshold: float
+    walls: bool
+    backend: object  # the live backend
+    source: str
+    t_start: float  # perf_counter when make_mosaic began
+
+
+def _result(dist, problem, fields, picture, edge_map, tiles, measures, settings: _Settings) -> MosaicResult:
     """The mosaic's record, from the stages' results and :func:`make_mosaic`'s settings."""
     polygons, colours, cut_count = tiles
     ev, straddles, error = measures
     placed = sum(p is not None for p in polygons)
-    backend = settings["backend"]
+    backend = settings.backend
     return MosaicResult(
         sites=dist.sites,
         angles=dist.angles,
@@ -778,16 +796,16 @@ def _result(dist, problem, fields, picture, edge_map, tiles, measures, settings:
         straddling=float(straddles.sum() / placed) if placed else 0.0,
         width=problem.grid.width,
         height=problem.grid.height,
-        metric=settings["metric_name"],
-        element=settings["element"],
+        metric=settings.metric_name,
+        element=settings.element,
         aspect=problem.metric.aspect,
-        gap=settings["gap"],
-        method=dist.method or settings["record"].name,
-        method_options=settings["given_options"],
-        contrast=settings["contrast"],
-        grout=settings["grout"],
-        edge_threshold=settings["edge_threshold"],
-        walls=settings["walls"],
+        gap=settings.gap,
+        method=dist.method or settings.record.name,
+        method_options=settings.given_options,
+        contrast=settings.contrast,
+        grout=settings.grout,
+        edge_threshold=settings.edge_threshold,
+        walls=settings.walls,
         cut_tiles=cut_count,
         picture=picture,
         edges=edge_map,
@@ -798,8 +816,8 @@ def _result(dist, problem, fields, picture, edge_map, tiles, measures, settings:
         evaluation=ev,
         backend=backend.variant,
         device=backend.device(),
-        source=settings["source"],
-        method_seconds=time.perf_counter() - settings["t_start"],
+        source=settings.source,
+        method_seconds=time.perf_counter() - settings.t_start,
     )
 
 
@@ -899,8 +917,22 @@ def make_mosaic(
         elements=polygons,
         extra={**dist.extra, **({"cut_tiles": cut_count} if walls and cut else {}), **stages},
     )
+    settings = _Settings(
+        metric_name=metric_name,
+        element=element,
+        gap=gap,
+        record=record,
+        given_options=given_options,
+        contrast=contrast,
+        grout=grout,
+        edge_threshold=edge_threshold,
+        walls=walls,
+        backend=backend,
+        source=source,
+        t_start=t_start,
+    )
     return _result(
-        dist, problem, fields, picture, edge_map, (polygons, colours, cut_count), measures, locals()
+        dist, problem, fields, picture, edge_map, (polygons, colours, cut_count), measures, settings
     )
 
 
