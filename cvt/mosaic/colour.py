@@ -42,11 +42,14 @@ def srgb_to_lab(rgb) -> np.ndarray:
     -------
     (..., 3) float64 array
     """
-    rgb = np.asarray(rgb, dtype=np.float64)
+    rgb = np.asarray(rgb)
+    if not np.issubdtype(rgb.dtype, np.floating):
+        rgb = rgb.astype(np.float64)
     flat = rgb.reshape(-1, 3)
     lab = np.empty(flat.shape)
     for lo in range(0, len(flat), LAB_BAND):
-        _lab_band(flat[lo : lo + LAB_BAND], lab[lo : lo + LAB_BAND])
+        # float32 pictures are widened a band at a time (exact), never whole
+        _lab_band(flat[lo : lo + LAB_BAND].astype(np.float64, copy=False), lab[lo : lo + LAB_BAND])
     return lab.reshape(rgb.shape)
 
 

@@ -98,15 +98,19 @@ class PictureFields:
 
     density: DensityMap
     field: DirectionField
-    edge_angles: np.ndarray  # tensor edge orientation at every pixel (radians, mod π)
-    strength: np.ndarray  # sqrt(λ₁): local edge strength, intensity units per pixel
+    edge_angles: np.ndarray | None  # tensor edge orientation at every pixel (radians, mod π)
+    strength: np.ndarray | None  # sqrt(λ₁): local edge strength, intensity units per pixel
     edges: np.ndarray  # bool: the pixels the direction field is carried from
-    detail: np.ndarray  # smoothed gradient magnitude, 0..1 after normalisation
+    detail: np.ndarray | None  # smoothed gradient magnitude, 0..1 after normalisation
+    # (edge_angles, strength and detail are None where picture_fields was asked for no details)
 
 
 def as_channels(picture: np.ndarray) -> np.ndarray:
-    """(H, W, C) float64 from a (H, W) grey or (H, W, C) colour array."""
-    arr = np.asarray(picture, dtype=np.float64)
+    """(H, W, C) float from a (H, W) grey or (H, W, C) colour array: float32 stays float32
+    (the filters widen a channel at a time, exactly), anything else is float64."""
+    arr = np.asarray(picture)
+    if arr.dtype != np.float32:
+        arr = arr.astype(np.float64, copy=False)
     if arr.ndim == 2:
         return arr[..., None]
     if arr.ndim == 3 and arr.shape[2] >= 1:
@@ -124,13 +128,17 @@ def structure_tensor(picture: np.ndarray, sigma: float = 1.0, window: float = 2.
     jxx = np.zeros(chans.shape[:2])
     jxy = np.zeros_like(jxx)
     jyy = np.zeros_like(jxx)
+    tmp = np.empty_like(jxx)
     for c in range(chans.shape[2]):
         ch = chans[..., c]
         gx = gaussian_filter(ch, sigma, order=(0, 1))
         gy = gaussian_filter(ch, sigma, order=(1, 0))
-        jxx += gx * gx
-        jxy += gx * gy
-        jyy += gy * gy
+        # the products in place: one picture-sized temporary for all of them
+        jxy += np.multiply(gx, gy, out=tmp)
+        jxx += np.multiply(gx, gx, out=gx)
+        jyy += np.multiply(gy, gy, out=gy)
+        del gx, gy
+    del tmp
     if window > 0:
         jxx = gaussian_filter(jxx, window)
         jxy = gaussian_filter(jxy, window)
@@ -172,20 +180,25 @@ def _filter_columns(image: np.ndarray, sigma: float, order: int) -> np.ndarray:
     """``ndimage.gaussian_filter1d(image, sigma, axis=0, order=order, mode="nearest")``,
     bit for bit: the same weights summed in the same order (ndimage folds a symmetric or
     antisymmetric kernel about its centre), but over whole rows at a time, where ndimage
-    copies the picture column by column (strided reads)."""
+    copies the picture column by column (strided reads).  Each band of rows is read
+    (widened to float64, its border rows repeated) as it is filtered: no padded copy of
+    the picture."""
     weights = gaussian_weights(sigma, order)[::-1]  # ndimage correlates with the reversed kernel
     r = len(weights) // 2
     h = image.shape[0]
-    padded = np.concatenate([np.repeat(image[:1], r, axis=0), image, np.repeat(image[-1:], r, axis=0)])
     fold = np.add if order == 0 else np.subtract
     out = np.empty(image.shape)
     tmp = np.empty((min(ROW_BAND, h),) + image.shape[1:])
     for lo in range(0, h, ROW_BAND):
         n = min(ROW_BAND, h - lo)
-        o, t, c = out[lo : lo + n], tmp[:n], lo + r
-        np.multiply(padded[c : c + n], weights[r], out=o)
+        if lo >= r and lo + n + r <= h and image.dtype == np.float64:
+            src = image[lo - r : lo + n + r]
+        else:  # rows beyond the border repeat the edge row ("nearest")
+            src = image[np.clip(np.arange(lo - r, lo + n + r), 0, h - 1)].astype(np.float64, copy=False)
+        o, t = out[lo : lo + n], tmp[:n]
+        np.multiply(src[r : r + n], weights[r], out=o)
         for j in range(r, 0, -1):
-            fold(padded[c - j : c - j + n], padded[c + j : c + j + n], out=t)
+            fold(src[r - j : r - j + n], src[r + j : r + j + n], out=t)
             t *= weights[r - j]
             o += t
     return out
@@ -196,11 +209,12 @@ def gaussian_filter(image: np.ndarray, sigma: float, order: tuple[int, int] = (0
     bit for bit, several times faster on a large picture.
 
     The pass down the columns (ndimage's slow one: it reads each column with a stride)
-    is :func:`_filter_columns`, the pass along the rows is ndimage's own.
+    is :func:`_filter_columns`, the pass along the rows is ndimage's own, in place.
 
     Parameters
     ----------
     image : (H, W) float array
+        float32 is widened a band of rows at a time (exactly).
     sigma : float
         Standard deviation in pixels, the same along both axes (0: no filtering).
     order : (int, int)
@@ -210,27 +224,34 @@ def gaussian_filter(image: np.ndarray, sigma: float, order: tuple[int, int] = (0
     -------
     (H, W) float64 array
     """
-    image = np.asarray(image, dtype=np.float64)
+    image = np.asarray(image)
+    if image.dtype != np.float32:
+        image = image.astype(np.float64, copy=False)
     if image.ndim != 2:
         raise InputError(f"gaussian_filter takes a 2-D array, got shape {image.shape}")
     if sigma <= 1e-15:  # ndimage leaves an axis with no width alone, whatever its order
-        return image.copy()
+        return image.astype(np.float64)
     down = _filter_columns(image, sigma, order[0])
-    return ndimage.gaussian_filter1d(down, sigma, axis=1, order=order[1], mode="nearest")
+    return ndimage.gaussian_filter1d(down, sigma, axis=1, order=order[1], mode="nearest", output=down)
 
 
-def edge_orientation(jxx, jxy, jyy) -> tuple[np.ndarray, np.ndarray]:
-    """(edge angle in radians modulo π, strength sqrt(λ₁)) from the tensor."""
-    # in place where it can (picture-sized temporaries)
-    diff = jxx - jyy
-    along = np.arctan2(2.0 * jxy, diff)
+def edge_orientation(jxx, jxy, jyy, overwrite: bool = False) -> tuple[np.ndarray, np.ndarray]:
+    """(edge angle in radians modulo π, strength sqrt(λ₁)) from the tensor.
+
+    ``overwrite``: ``jxx`` and ``jyy`` may be used as scratch (the strength is returned
+    in ``jyy``'s memory), so that the tensor and its results need one picture-sized
+    array more than the tensor, not three."""
+    half_trace = jxx + jyy
+    half_trace *= 0.5
+    diff = np.subtract(jxx, jyy, out=jxx if overwrite else None)
+    twice_xy = np.multiply(jxy, 2.0, out=jyy if overwrite else None)
+    along = np.arctan2(twice_xy, diff)
+    del twice_xy
     along *= 0.5  # the gradient's line, mod π
     along += 0.5 * math.pi
     diff *= 0.5
-    lam1 = np.hypot(diff, jxy)
+    lam1 = np.hypot(diff, jxy, out=jyy if overwrite else None)
     del diff
-    half_trace = jxx + jyy
-    half_trace *= 0.5
     lam1 += half_trace
     del half_trace
     np.maximum(lam1, 0.0, out=lam1)
@@ -294,6 +315,7 @@ def picture_fields(
     element: str = DEFAULT_ELEMENT,
     contrast: float = DEFAULT_CONTRAST,
     sigma: float = 1.0,
+    details: bool = True,
 ) -> PictureFields:
     """Density map and direction field of ``picture`` ((H, W) or (H, W, C), values 0..1).
 
@@ -301,7 +323,9 @@ def picture_fields(
     smoothed over about one spacing, the field over one and a half (coherent rows of tiles
     pack tighter: measured +1.7 points of compacted coverage on a portrait against half a
     spacing, while the tiles still turn with every edge longer than their rows).  ``element`` picks the
-    symmetry the field is smoothed in (the shape record's ``side_period``)."""
+    symmetry the field is smoothed in (the shape record's ``side_period``).
+    ``details``: also return the tensor's edge angles, its strength and the detail map
+    (False: None, each freed as soon as it is used, as a large mosaic wants)."""
     check_shape(element)
     contrast = real_number(contrast, "contrast", *CONTRAST_RANGE)
     chans = as_channels(picture)
@@ -309,24 +333,46 @@ def picture_fields(
         raise InputError("picture contains NaN or infinite values")
     spacing = max(float(spacing), 1.0)
     jxx, jxy, jyy = structure_tensor(chans, sigma=sigma, window=max(1.0, 2.0 * sigma))
-    edge_angles, strength = edge_orientation(jxx, jxy, jyy)
-
-    # direction: each pixel takes the tensor orientation at its nearest edge pixel
+    trace = jxx + jyy  # the density's gradient energy
+    edge_angles, strength = edge_orientation(jxx, jxy, jyy, overwrite=not details)
+    del jxx, jxy, jyy
     top = float(np.percentile(strength, 99)) if strength.size else 0.0
     edges = strength >= max(EDGE_FRACTION * top, EDGE_FLOOR)
+    if not details:
+        strength = None
+
+    # density: smoothed colour gradient magnitude, 1 .. contrast (before the field, so
+    # that the trace is freed before the field's temporaries are made)
+    magnitude = gaussian_smooth(trace, spacing)
+    del trace
+    np.sqrt(np.maximum(magnitude, 0.0, out=magnitude), out=magnitude)
+    ref = float(np.percentile(magnitude, 99)) if magnitude.size else 0.0
+    if ref > EDGE_FLOOR / 10:
+        detail = np.clip(np.divide(magnitude, ref, out=magnitude), 0.0, 1.0, out=magnitude)
+    else:
+        detail = np.zeros_like(magnitude)
+    del magnitude
+    values = np.multiply(detail, contrast - 1.0, out=None if details else detail)
+    values += 1.0
+    density = DensityMap(values)
+    del values
+    if not details:
+        detail = None
+
+    # direction: each pixel takes the tensor orientation at its nearest edge pixel
     if edges.any():
         ii, jj = ndimage.distance_transform_edt(~edges, return_distances=False, return_indices=True)
         carried = edge_angles[ii, jj]
+        del ii, jj
+        if not details:
+            edge_angles = None
         angles = smooth_angles(carried, FIELD_SMOOTHING * spacing, shape_record(element).side_period)
+        del carried
     else:
-        angles = np.zeros(strength.shape)
+        angles = np.zeros(edges.shape)
+        if not details:
+            edge_angles = None
     field = DirectionField.from_angles(angles, spec="picture")
-
-    # density: smoothed colour gradient magnitude, 1 .. contrast
-    magnitude = np.sqrt(np.maximum(gaussian_smooth(jxx + jyy, spacing), 0.0))
-    ref = float(np.percentile(magnitude, 99)) if magnitude.size else 0.0
-    detail = np.clip(magnitude / ref, 0.0, 1.0) if ref > EDGE_FLOOR / 10 else np.zeros_like(magnitude)
-    density = DensityMap(1.0 + (contrast - 1.0) * detail)
     return PictureFields(density, field, edge_angles, strength, edges, detail)
 
 
@@ -348,8 +394,11 @@ def edge_contrast(lab: np.ndarray, sigma: float = 1.0) -> tuple[np.ndarray, np.n
     picture (H, W, 3); see the module docstring."""
     window = max(1.0, 2.0 * sigma)
     jxx, jxy, jyy = structure_tensor(lab, sigma=sigma, window=window)
-    along, strength = edge_orientation(jxx, jxy, jyy)
-    return strength / step_response(sigma, window), along - 0.5 * math.pi
+    along, strength = edge_orientation(jxx, jxy, jyy, overwrite=True)
+    del jxx, jxy, jyy
+    strength /= step_response(sigma, window)
+    along -= 0.5 * math.pi
+    return strength, along
 
 
 # neighbour offsets (row, column) along the direction across the edge, per 45° sector
@@ -364,7 +413,9 @@ def strong_edges(
     ``threshold`` in ΔE*ab (see the module docstring), ``min_length`` in pixels."""
     contrast, across = edge_contrast(lab, sigma)
     h, w = contrast.shape
-    sector = np.round(across / (0.25 * math.pi)).astype(np.int64) % 4
+    across /= 0.25 * math.pi
+    sector = np.round(across, out=across).astype(np.int8) % 4  # -4 .. 4 before the modulo
+    del across
     pad = np.pad(contrast, 1)
     ridge = np.zeros((h, w), dtype=bool)
     for k, (di, dj) in enumerate(_ACROSS):

@@ -80,7 +80,8 @@ EDGE_MIN_LENGTH = 2.0
 def picture_array(
     image, at_least: tuple[int, int] | None = None, memory_limit=None, name: str = "image"
 ) -> tuple[np.ndarray, str]:
-    """(H, W, 3) float64 RGB in 0..1 and a short description of where it came from.
+    """(H, W, 3) RGB in 0..1 and a short description of where it came from: float32 for a
+    float32 array (a picture :func:`resample` made), float64 otherwise.
 
     A file is read by :func:`cvt.images.read_picture` (EXIF orientation applied, bombs
     refused, decoded at a reduced size no smaller than ``at_least`` when that is smaller
@@ -105,7 +106,9 @@ def picture_array(
             raise InputError(f"{name}: an integer picture must not hold negative values")
         arr = arr.astype(np.float64) / float(info.max)
     elif np.issubdtype(arr.dtype, np.floating):
-        arr = arr.astype(np.float64)
+        # float32 stays float32 (each value exact in float64, at half the memory: a
+        # resampled picture is float32); no copy of a float64 array
+        arr = arr.astype(np.float32 if arr.dtype == np.float32 else np.float64, copy=False)
         if not np.isfinite(arr).all():
             raise InputError(f"{name} contains NaN or infinite values")
         if arr.min() < 0 or arr.max() > 1:
@@ -115,7 +118,7 @@ def picture_array(
     if arr.ndim == 2:
         arr = arr[..., None]
     if arr.shape[2] == 4:
-        alpha = arr[..., 3:4]
+        alpha = arr[..., 3:4].astype(np.float64)
         arr = arr[..., :3] * alpha + (1.0 - alpha)  # composite on white
     if arr.shape[2] == 1:
         arr = np.repeat(arr, 3, axis=2)
@@ -144,16 +147,19 @@ def raster_size(width: int, height: int, size=None, name: str = "size") -> tuple
 
 
 def resample(rgb: np.ndarray, width: int, height: int) -> np.ndarray:
-    """The picture at (height, width): Lanczos (antialiased when shrinking), clipped to 0..1."""
+    """The picture at (height, width): Lanczos (antialiased when shrinking), clipped to 0..1.
+
+    Resampled, it is float32: Pillow resamples in float32, so that holds every value
+    exactly at half the memory of float64; at its own size, ``rgb`` itself."""
     if rgb.shape[:2] == (height, width):
         return rgb
     from PIL import Image
 
-    out = np.empty((height, width, 3))
+    out = np.empty((height, width, 3), dtype=np.float32)
     for c in range(3):
         img = Image.fromarray(np.ascontiguousarray(rgb[..., c], dtype=np.float32), mode="F")
         out[..., c] = np.asarray(img.resize((width, height), Image.Resampling.LANCZOS))
-    return np.clip(out, 0.0, 1.0)
+    return np.clip(out, 0.0, 1.0, out=out)
 
 
 # --------------------------------------------------------------------------- walls
