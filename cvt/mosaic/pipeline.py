@@ -364,22 +364,138 @@ def tile_colours(lab: np.ndarray, polygons, sites, tiles: np.ndarray, pixels: np
     worse on it on six photographs).  Read from the final polygons, so it holds wherever the method put the
     tile.  A tile too thin to hold a pixel centre takes the pixel under a point inside
     it; a site without a tile the pixel under the site (its colour is listed but never
-    drawn)."""
+    drawn).
+
+    Parameters
+    ----------
+    lab : (H, W, 3) float array
+        The picture in CIELAB.
+    polygons : sequence of shapely geometries or None
+        The tiles.
+    sites : (N, 2) array
+        The sites, pixel units.
+    tiles, pixels : (P,) int arrays
+        :func:`cvt.evaluate.pixels_under` of ``polygons``.
+
+    Returns
+    -------
+    rgb : (N, 3) float64 array
+        The fills in sRGB, 8-bit values.
+    lab : (N, 3) float64 array
+        The same in CIELAB.
+    """
+    fill = geometric_median(lab.reshape(-1, 3), tiles, None, index=pixels, groups=len(polygons))
+    _fill_thin(
+        fill,
+        np.bincount(tiles, minlength=len(polygons)) > 0,
+        lab.reshape(-1, 3),
+        None,
+        polygons,
+        sites,
+        lab.shape[:2],
+    )
+    rgb = quantised(lab_to_srgb(fill))
+    return rgb, srgb_to_lab(rgb)
+
+
+def _fill_thin(fill, held, flat, convert, polygons, sites, shape) -> None:
+    """``fill`` of the tiles that hold no pixel centre (``~held``), in place: the pixel
+    under a point inside the tile, or under the site where it has none."""
     import shapely
 
-    h, w = lab.shape[:2]
-    n = len(polygons)
-    held = np.bincount(tiles, minlength=n) > 0
-    # from each tile's mean; the pixels read from the picture a block of tiles at a time
-    fill = geometric_median(lab.reshape(-1, 3), tiles, None, index=pixels, groups=n)
+    if held.all():
+        return
+    h, w = shape
     points = np.array(sites, dtype=np.float64).reshape(-1, 2).copy()
     thin = [k for k in np.flatnonzero(~held) if polygons[k] is not None and not polygons[k].is_empty]
     if thin:
         points[thin] = shapely.get_coordinates(shapely.point_on_surface([polygons[k] for k in thin]))
-    if (~held).any():
-        fill[~held] = lab[pixel_index(points[~held], w, h)]
+    under = flat[pixel_index(points[~held], w, h)]
+    fill[~held] = under if convert is None else convert(under)
+
+
+# (tile, pixel) pairs that mosaic_fills holds at once: the tiles are taken in runs of
+# about this many pixels, each run's pairs found, filled and measured before the next
+FILL_PAIRS = 1 << 22
+
+
+def tile_runs(polygons, pairs: int = FILL_PAIRS) -> np.ndarray:
+    """Bounds of consecutive runs of ``polygons`` that each cover about ``pairs`` pixels.
+
+    Parameters
+    ----------
+    polygons : sequence of shapely geometries or None
+        The tiles.
+    pairs : int
+        The pixels a run should hold, about (by the tiles' areas).
+
+    Returns
+    -------
+    (R + 1,) int64 array
+        Run r is ``polygons[bounds[r]:bounds[r + 1]]``.
+    """
+    import shapely
+
+    area = shapely.area(np.array([shapely.Polygon() if p is None else p for p in polygons], dtype=object))
+    ends = np.searchsorted(np.cumsum(area), np.arange(pairs, area.sum(), pairs)) + 1
+    return np.unique(np.concatenate([[0], np.minimum(ends, len(polygons)), [len(polygons)]]))
+
+
+def mosaic_fills(picture: np.ndarray, polygons, sites, bounds=None) -> tuple[np.ndarray, np.ndarray, float]:
+    """:func:`tile_colours` and the colour error, read from the sRGB picture.
+
+    The picture's CIELAB is never held whole: the tiles are taken in runs
+    (:func:`tile_runs`), each run's pixels found (:func:`cvt.evaluate.pixels_under`)
+    and read in blocks, each block converted to CIELAB as it is read, its tiles'
+    medians found and the colour error (:func:`cvt.evaluate.colour_error`) of its
+    pixels summed.  The fills are those :func:`tile_colours` gives from the whole
+    picture's CIELAB, bit for bit (each pixel's CIELAB is its own, each tile's median
+    its own pixels').
+
+    Parameters
+    ----------
+    picture : (H, W, 3) float array
+        sRGB in 0..1.
+    polygons : sequence of shapely geometries or None
+        The tiles.
+    sites : (N, 2) array
+        The sites, pixel units.
+    bounds : (R + 1,) int array, optional
+        The runs of tiles (default :func:`tile_runs`).
+
+    Returns
+    -------
+    rgb : (N, 3) float64 array
+        The fills in sRGB, 8-bit values.
+    lab : (N, 3) float64 array
+        The same in CIELAB.
+    colour_error : float
+        Mean ΔE*ab over the (tile, pixel) pairs; NaN where no tile holds a pixel.
+    """
+    h, w = picture.shape[:2]
+    n = len(polygons)
+    flat = picture.reshape(-1, 3)
+    bounds = tile_runs(polygons) if bounds is None else bounds
+    fill = np.zeros((n, 3))
+    held = np.zeros(n, dtype=bool)
+    total = [0.0, 0]
+
+    def measure(block, sizes, pts, median):
+        fills = srgb_to_lab(quantised(lab_to_srgb(median)))
+        local = np.repeat(np.arange(len(block)), sizes)
+        total[0] += colour_error(pts, fills, local, np.arange(len(pts))) * len(pts)
+        total[1] += len(pts)
+
+    for lo, hi in zip(bounds[:-1], bounds[1:], strict=True):
+        tiles, pixels = pixels_under(polygons[lo:hi], w, h)
+        held[lo:hi] = np.bincount(tiles, minlength=hi - lo) > 0
+        fill[lo:hi] = geometric_median(
+            flat, tiles, None, index=pixels, groups=hi - lo, convert=srgb_to_lab, on_block=measure
+        )
+        del tiles, pixels
+    _fill_thin(fill, held, flat, srgb_to_lab, polygons, sites, (h, w))
     rgb = quantised(lab_to_srgb(fill))
-    return rgb, srgb_to_lab(rgb)
+    return rgb, srgb_to_lab(rgb), total[0] / total[1] if total[1] else float("nan")
 
 
 # points per block of groups in geometric_median: a block's arrays stay in the
@@ -395,6 +511,8 @@ def geometric_median(
     steps: int = 16,
     index: np.ndarray | None = None,
     groups: int | None = None,
+    convert=None,
+    on_block=None,
 ) -> np.ndarray:
     """Per group, the point with the least mean Euclidean distance to the group's points.
 
@@ -418,13 +536,19 @@ def geometric_median(
         The points are ``points[index]``, read a block at a time (no copy of them all).
     groups : int, optional
         G, where ``start`` is None.
+    convert : callable, optional
+        Applied to each block's points as they are read (e.g. sRGB to CIELAB): the
+        medians are those of the converted points, which are never held all at once.
+    on_block : callable, optional
+        ``on_block(groups, sizes, points, medians)`` after each block: its groups (in
+        0..G-1), their sizes, its (converted) points in group order, their medians.
 
     Returns
     -------
     (G, D) float array
         The medians; ``start`` (0 where it is None) for a group without points.
     """
-    points = np.asarray(points, dtype=np.float64)
+    points = np.asarray(points) if convert is not None else np.asarray(points, dtype=np.float64)
     group = np.asarray(group)
     if start is None:
         m = np.zeros((int(groups), points.shape[1]))
@@ -449,6 +573,8 @@ def geometric_median(
         first = ends[a - 1] if a else 0
         block = held[a:b]
         pts = points[first : ends[b - 1]] if index is None else points[index[first : ends[b - 1]]]
+        if convert is not None:
+            pts = convert(pts)
         if start is None:  # each group's sum in its points' order, as one bincount of all
             local = np.repeat(np.arange(len(block)), counts[block])
             sums = np.stack(
@@ -457,6 +583,8 @@ def geometric_median(
             )
             m[block] = sums / counts[block].astype(np.float64)[:, None]
         m[block] = _weiszfeld(pts, counts[block], m[block], steps)
+        if on_block is not None:
+            on_block(block, counts[block], pts, m[block])
     return m
 
 
@@ -715,22 +843,29 @@ def _raster_picture(image, size, n_elements, backend, element, memory_limit):
     return picture, source
 
 
+# up to this many pixels the picture's fields and its edge map are made side by side (on
+# two cores); above it one after the other, as each holds a structure tensor and its
+# temporaries (about 50 bytes a pixel) while it works
+SIDE_BY_SIDE_PIXELS = 1 << 23
+
+
 def _picture_analysis(picture, spacing, element, contrast, edge_threshold):
-    """The picture's fields (density, direction), its CIELAB and its strong edges."""
+    """The picture's fields (density, direction) and its strong edges (read in CIELAB,
+    which is not kept: the fills read it again a block at a time)."""
 
-    # the fields and the edge map read the picture apart (the edges in CIELAB): side by
-    # side on two cores.  The edge map is made in any case: the straddling measure reads it
-    def lab_and_edges():
-        lab = srgb_to_lab(picture)
-        return lab, strong_edges(lab, edge_threshold, min_length=EDGE_MIN_LENGTH * spacing)
+    def fields():
+        return picture_fields(picture, spacing, element, contrast=contrast, details=False)
 
-    fields, (lab, edge_map) = side_by_side(
-        lambda: picture_fields(picture, spacing, element, contrast=contrast), lab_and_edges
-    )
-    return fields, lab, edge_map
+    # the edge map is made in any case: the straddling measure reads it
+    def edges():
+        return strong_edges(srgb_to_lab(picture), edge_threshold, min_length=EDGE_MIN_LENGTH * spacing)
+
+    if picture.shape[0] * picture.shape[1] <= SIDE_BY_SIDE_PIXELS:
+        return side_by_side(fields, edges)
+    return fields(), edges()
 
 
-def _after_the_method(dist, lab, edge_map, cut, gap, spacing):
+def _after_the_method(dist, picture, edge_map, cut, gap, spacing):
     """The stages after the method: tiles cut to the walls (``cut``), their colours and
     the measures (coverage and overlap, straddling, colour error), each timed."""
     polygons = [None if p is None or p.is_empty else p for p in dist.elements]
@@ -740,13 +875,18 @@ def _after_the_method(dist, lab, edge_map, cut, gap, spacing):
     if cut:
         polygons, cut_count = cut_to_walls(polygons, edge_map, gap, spacing)
     t1 = time.perf_counter()
-    h, w = edge_map.shape
-    tiles, pixels = pixels_under(polygons, w, h)
-    colours, fills_lab = tile_colours(lab, polygons, dist.sites, tiles, pixels)
+    bounds = tile_runs(polygons)
+    colours, _, error = mosaic_fills(picture, polygons, dist.sites, bounds)
     t2 = time.perf_counter()
-    ev = evaluate(polygons, Grid(w, h))  # the whole picture: walls are grout
-    straddles = straddling_tiles(polygons, edge_map)
-    error = colour_error(lab, fills_lab, tiles, pixels)
+    ev = evaluate(polygons, Grid(*edge_map.shape[::-1]))  # the whole picture: walls are grout
+    # a run of tiles at a time, as the fills: each tile's answer is its own
+    straddles = np.concatenate(
+        [np.zeros(0, dtype=bool)]
+        + [
+            straddling_tiles(polygons[lo:hi], edge_map)
+            for lo, hi in zip(bounds[:-1], bounds[1:], strict=True)
+        ]
+    )
     t3 = time.perf_counter()
     stages = {
         "cutting_seconds": t1 - t0,
@@ -891,7 +1031,7 @@ def make_mosaic(
     spacing = math.sqrt(w * h / n_elements)
     gap = AUTO_GAP * spacing if gap is None else parse_gap(gap)
 
-    fields, lab, edge_map = _picture_analysis(picture, spacing, element, contrast, edge_threshold)
+    fields, edge_map = _picture_analysis(picture, spacing, element, contrast, edge_threshold)
     picture_seconds = time.perf_counter() - t_picture
     walls = bool(edges) and bool(edge_map.any())
     problem = Problem(
@@ -915,7 +1055,7 @@ def make_mosaic(
     )
     cut = record.tight if cut is None else bool(cut)
     polygons, colours, cut_count, measures, stages = _after_the_method(
-        dist, lab, edge_map, walls and cut, gap, spacing
+        dist, picture, edge_map, walls and cut, gap, spacing
     )
     stages = {"picture_seconds": picture_seconds, **stages}  # Lab, density, field and edges
     dist = dataclasses.replace(
@@ -951,6 +1091,10 @@ __all__ = [
     "resolve_shapes",
     "resolve_method",
     "tile_colours",
+    "mosaic_fills",
+    "tile_runs",
+    "FILL_PAIRS",
+    "SIDE_BY_SIDE_PIXELS",
     "DEFAULT_METHOD",
     "ELEMENT_SHAPES",
 ]
