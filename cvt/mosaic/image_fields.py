@@ -146,6 +146,55 @@ def structure_tensor(picture: np.ndarray, sigma: float = 1.0, window: float = 2.
     return jxx, jxy, jyy
 
 
+# rows of the structure tensor made at once by tensor_by_rows: a band and its halo hold
+# the tensor's temporaries (about 100 bytes a pixel), never the whole picture
+SLAB_ROWS = 256
+
+
+def _reach(sigma: float) -> int:
+    """Rows on either side a Gaussian filter of ``sigma`` reads (ndimage's truncation)."""
+    return int(4.0 * float(sigma) + 0.5) if sigma > 1e-15 else 0
+
+
+def tensor_by_rows(source, height: int, use, sigma: float = 1.0, window: float = 2.0, rows: int = SLAB_ROWS):
+    """The structure tensor a band of rows at a time, bit for bit the whole picture's.
+
+    Each band is computed from its rows and a halo of the rows its filters reach (the
+    derivative's and the window's), read by ``source``; the rows the halo leaves
+    uncertain (those a cut band's repeated border reaches) are never used.  Two bands are
+    computed at a time, side by side.
+
+    Parameters
+    ----------
+    source : callable
+        ``source(a, b)``: the (b - a, W[, C]) channels of rows a..b-1 (e.g. a slice of
+        the picture, or the slice converted to CIELAB).
+    height : int
+        H, the picture's rows.
+    use : callable
+        ``use(lo, hi, jxx, jxy, jyy)`` for each band of rows lo..hi-1 with its tensor
+        (views of the band's own arrays, which ``use`` may overwrite); bands may come
+        in any order, two at once.
+    sigma, window : float
+        As for :func:`structure_tensor`.
+    rows : int
+        Rows per band.
+    """
+    from ..threads import side_by_side
+
+    halo = _reach(sigma) + (_reach(window) if window > 0 else 0)
+
+    def band(lo: int) -> None:
+        hi = min(lo + rows, height)
+        a, b = max(0, lo - halo), min(height, hi + halo)
+        jxx, jxy, jyy = structure_tensor(source(a, b), sigma, window)
+        use(lo, hi, jxx[lo - a : hi - a], jxy[lo - a : hi - a], jyy[lo - a : hi - a])
+
+    starts = range(0, height, rows)
+    for k in range(0, len(starts), 2):
+        side_by_side(*(lambda lo=lo: band(lo) for lo in starts[k : k + 2]))
+
+
 def gaussian_weights(sigma: float, order: int = 0) -> np.ndarray:
     """The Gaussian kernel (``order`` 0) or its derivative (1) of ``ndimage.gaussian_filter1d``,
     sampled at -r .. r with r = round(4 sigma), computed as it computes it.
@@ -332,10 +381,16 @@ def picture_fields(
     if not np.isfinite(chans).all():
         raise InputError("picture contains NaN or infinite values")
     spacing = max(float(spacing), 1.0)
-    jxx, jxy, jyy = structure_tensor(chans, sigma=sigma, window=max(1.0, 2.0 * sigma))
-    trace = jxx + jyy  # the density's gradient energy
-    edge_angles, strength = edge_orientation(jxx, jxy, jyy, overwrite=not details)
-    del jxx, jxy, jyy
+    h, w = chans.shape[:2]
+    trace = np.empty((h, w))  # the density's gradient energy
+    edge_angles = np.empty((h, w))
+    strength = np.empty((h, w))
+
+    def use(lo, hi, jxx, jxy, jyy):
+        np.add(jxx, jyy, out=trace[lo:hi])
+        edge_angles[lo:hi], strength[lo:hi] = edge_orientation(jxx, jxy, jyy, overwrite=True)
+
+    tensor_by_rows(lambda a, b: chans[a:b], h, use, sigma=sigma, window=max(1.0, 2.0 * sigma))
     top = float(np.percentile(strength, 99)) if strength.size else 0.0
     edges = strength >= max(EDGE_FRACTION * top, EDGE_FLOOR)
     if not details:
@@ -344,7 +399,7 @@ def picture_fields(
     # density: smoothed colour gradient magnitude, 1 .. contrast (before the field, so
     # that the trace is freed before the field's temporaries are made)
     magnitude = gaussian_smooth(trace, spacing)
-    del trace
+    trace = None
     np.sqrt(np.maximum(magnitude, 0.0, out=magnitude), out=magnitude)
     ref = float(np.percentile(magnitude, 99)) if magnitude.size else 0.0
     if ref > EDGE_FLOOR / 10:
@@ -389,16 +444,37 @@ def step_response(sigma: float = 1.0, window: float = 2.0) -> float:
     return float(strength.max())
 
 
-def edge_contrast(lab: np.ndarray, sigma: float = 1.0) -> tuple[np.ndarray, np.ndarray]:
+def edge_contrast(lab: np.ndarray, sigma: float = 1.0, srgb: bool = False) -> tuple[np.ndarray, np.ndarray]:
     """(contrast in ΔE*ab, direction across the edge in radians mod π) of a CIELAB
-    picture (H, W, 3); see the module docstring."""
+    picture (H, W, 3); see the module docstring.  ``srgb``: the picture is sRGB in 0..1,
+    converted to CIELAB a band of rows at a time (never whole)."""
+    h, w = lab.shape[:2]
+    contrast = np.empty((h, w))
+    across = np.empty((h, w))
+    _contrast_rows(lab, sigma, srgb, contrast, across)
+    return contrast, across
+
+
+def _contrast_rows(picture, sigma: float, srgb: bool, contrast, across=None, sector=None) -> None:
+    """:func:`edge_contrast` into ``contrast`` and ``across``, or the 45° sector of the
+    direction across (0..3, int8) into ``sector``, a band of rows at a time."""
+    from .colour import srgb_to_lab
+
     window = max(1.0, 2.0 * sigma)
-    jxx, jxy, jyy = structure_tensor(lab, sigma=sigma, window=window)
-    along, strength = edge_orientation(jxx, jxy, jyy, overwrite=True)
-    del jxx, jxy, jyy
-    strength /= step_response(sigma, window)
-    along -= 0.5 * math.pi
-    return strength, along
+    step = step_response(sigma, window)
+
+    def use(lo, hi, jxx, jxy, jyy):
+        along, strength = edge_orientation(jxx, jxy, jyy, overwrite=True)
+        np.divide(strength, step, out=contrast[lo:hi])
+        along -= 0.5 * math.pi
+        if across is not None:
+            across[lo:hi] = along
+        if sector is not None:
+            along /= 0.25 * math.pi
+            sector[lo:hi] = np.round(along, out=along).astype(np.int8) % 4  # -2 .. 2 before
+
+    source = (lambda a, b: srgb_to_lab(picture[a:b])) if srgb else (lambda a, b: picture[a:b])
+    tensor_by_rows(source, picture.shape[0], use, sigma=sigma, window=window)
 
 
 # neighbour offsets (row, column) along the direction across the edge, per 45° sector
@@ -406,16 +482,20 @@ _ACROSS = ((0, 1), (1, 1), (1, 0), (1, -1))
 
 
 def strong_edges(
-    lab: np.ndarray, threshold: float = DEFAULT_EDGE_THRESHOLD, min_length: float = 0.0, sigma: float = 1.0
+    lab: np.ndarray,
+    threshold: float = DEFAULT_EDGE_THRESHOLD,
+    min_length: float = 0.0,
+    sigma: float = 1.0,
+    srgb: bool = False,
 ) -> np.ndarray:
     """(H, W) bool: the strong edges of a CIELAB picture as thin 4-connected lines.
 
-    ``threshold`` in ΔE*ab (see the module docstring), ``min_length`` in pixels."""
-    contrast, across = edge_contrast(lab, sigma)
-    h, w = contrast.shape
-    across /= 0.25 * math.pi
-    sector = np.round(across, out=across).astype(np.int8) % 4  # -4 .. 4 before the modulo
-    del across
+    ``threshold`` in ΔE*ab (see the module docstring), ``min_length`` in pixels.
+    ``srgb``: ``lab`` is the sRGB picture (0..1), read in CIELAB a band of rows at a time."""
+    h, w = lab.shape[:2]
+    contrast = np.empty((h, w))
+    sector = np.empty((h, w), dtype=np.int8)
+    _contrast_rows(lab, sigma, srgb, contrast, sector=sector)
     pad = np.pad(contrast, 1)
     ridge = np.zeros((h, w), dtype=bool)
     for k, (di, dj) in enumerate(_ACROSS):
@@ -459,6 +539,8 @@ __all__ = [
     "PictureFields",
     "as_channels",
     "structure_tensor",
+    "SLAB_ROWS",
+    "tensor_by_rows",
     "gaussian_weights",
     "ROW_BAND",
     "gaussian_filter",

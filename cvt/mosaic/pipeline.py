@@ -385,32 +385,24 @@ def tile_colours(lab: np.ndarray, polygons, sites, tiles: np.ndarray, pixels: np
         The same in CIELAB.
     """
     fill = geometric_median(lab.reshape(-1, 3), tiles, None, index=pixels, groups=len(polygons))
-    _fill_thin(
-        fill,
-        np.bincount(tiles, minlength=len(polygons)) > 0,
-        lab.reshape(-1, 3),
-        None,
-        polygons,
-        sites,
-        lab.shape[:2],
-    )
+    _fill_thin(fill, np.bincount(tiles, minlength=len(polygons)) > 0, lab, None, polygons, sites)
     rgb = quantised(lab_to_srgb(fill))
     return rgb, srgb_to_lab(rgb)
 
 
-def _fill_thin(fill, held, flat, convert, polygons, sites, shape) -> None:
+def _fill_thin(fill, held, image, convert, polygons, sites) -> None:
     """``fill`` of the tiles that hold no pixel centre (``~held``), in place: the pixel
     under a point inside the tile, or under the site where it has none."""
     import shapely
 
     if held.all():
         return
-    h, w = shape
+    h, w = image.shape[:2]
     points = np.array(sites, dtype=np.float64).reshape(-1, 2).copy()
     thin = [k for k in np.flatnonzero(~held) if polygons[k] is not None and not polygons[k].is_empty]
     if thin:
         points[thin] = shapely.get_coordinates(shapely.point_on_surface([polygons[k] for k in thin]))
-    under = flat[pixel_index(points[~held], w, h)]
+    under = image[pixel_index(points[~held], w, h)]
     fill[~held] = under if convert is None else convert(under)
 
 
@@ -493,7 +485,7 @@ def mosaic_fills(picture: np.ndarray, polygons, sites, bounds=None) -> tuple[np.
             flat, tiles, None, index=pixels, groups=hi - lo, convert=srgb_to_lab, on_block=measure
         )
         del tiles, pixels
-    _fill_thin(fill, held, flat, srgb_to_lab, polygons, sites, (h, w))
+    _fill_thin(fill, held, picture, srgb_to_lab, polygons, sites)
     rgb = quantised(lab_to_srgb(fill))
     return rgb, srgb_to_lab(rgb), total[0] / total[1] if total[1] else float("nan")
 
@@ -858,7 +850,7 @@ def _picture_analysis(picture, spacing, element, contrast, edge_threshold):
 
     # the edge map is made in any case: the straddling measure reads it
     def edges():
-        return strong_edges(srgb_to_lab(picture), edge_threshold, min_length=EDGE_MIN_LENGTH * spacing)
+        return strong_edges(picture, edge_threshold, min_length=EDGE_MIN_LENGTH * spacing, srgb=True)
 
     if picture.shape[0] * picture.shape[1] <= SIDE_BY_SIDE_PIXELS:
         return side_by_side(fields, edges)
