@@ -312,12 +312,21 @@ def edge_orientation(jxx, jxy, jyy, overwrite: bool = False) -> tuple[np.ndarray
 FFT_SIGMA = 8.0
 
 
+# rows (and spectrum columns) gaussian_smooth transforms at once
+FFT_BAND = 256
+
+
 def gaussian_smooth(image: np.ndarray, sigma: float) -> np.ndarray:
     """``ndimage.gaussian_filter(image, sigma, mode="nearest")`` of a 2-D array.
 
     The same kernel (truncated at 4 sigma) and border (the edge pixels repeated); from
-    :data:`FFT_SIGMA` on it is applied through the FFT (the padded picture's), which agrees
-    with the direct filter to rounding (about 1e-15 of the values).
+    :data:`FFT_SIGMA` on it is applied through the FFT of the picture padded by twice the
+    kernel's reach, which agrees with the direct filter to rounding (about 1e-15 of the
+    values).  The transform is ``scipy.fft.rfft2`` / ``irfft2``'s, bit for bit, taken one
+    axis at a time: the rows' transforms once per distinct row (the repeated border
+    rows share theirs), the columns' a band of columns at a time, and only the rows
+    that are kept transformed back, so that it holds one complex array of the picture's
+    size (not the padded picture, its spectrum and the padded result at once).
 
     Parameters
     ----------
@@ -333,19 +342,44 @@ def gaussian_smooth(image: np.ndarray, sigma: float) -> np.ndarray:
         return gaussian_filter(image, sigma)
     from scipy import fft
 
-    radius = int(4.0 * sigma + 0.5)  # ndimage's truncation
-    x = np.arange(-radius, radius + 1, dtype=np.float64)
+    r = int(4.0 * sigma + 0.5)  # ndimage's truncation
+    x = np.arange(-r, r + 1, dtype=np.float64)
     kernel = np.exp(-0.5 / (sigma * sigma) * x * x)
     kernel /= kernel.sum()
     h, w = image.shape
-    size = (fft.next_fast_len(h + 4 * radius, real=True), fft.next_fast_len(w + 4 * radius, real=True))
-    # the transforms of the rows (then the columns) are independent: on every core, with
-    # the same result to the last bit
-    spectrum = fft.rfft2(np.pad(np.asarray(image, dtype=np.float64), radius, mode="edge"), size, workers=-1)
-    spectrum *= fft.fft(kernel, size[0])[:, None]
-    spectrum *= fft.rfft(kernel, size[1])[None, :]
-    out = fft.irfft2(spectrum, size, workers=-1)[2 * radius : 2 * radius + h, 2 * radius : 2 * radius + w]
-    return np.ascontiguousarray(out)
+    size_y, size_x = fft.next_fast_len(h + 4 * r, real=True), fft.next_fast_len(w + 4 * r, real=True)
+    cols = size_x // 2 + 1
+    # along the rows: each row padded by r repeated edge pixels (then zeros to size_x)
+    spectrum = np.empty((h, cols), dtype=np.complex128)
+    for lo in range(0, h, FFT_BAND):
+        rows = np.pad(np.asarray(image[lo : lo + FFT_BAND], dtype=np.float64), ((0, 0), (r, r)), mode="edge")
+        spectrum[lo : lo + len(rows)] = fft.rfft(rows, size_x, axis=1, workers=-1)
+    zero_row = fft.rfft(np.zeros((1, size_x)), size_x, axis=1)[0]
+    along_y = fft.fft(kernel, size_y)[:, None]
+    along_x = fft.rfft(kernel, size_x)[None, :]
+    # down the columns: the padded column (r copies of the first and last row, zeros to
+    # size_y), filtered, transformed back (unscaled, as irfft2's first pass) and cut to h
+    block = np.empty((size_y, min(FFT_BAND, cols)), dtype=np.complex128)
+    for c0 in range(0, cols, FFT_BAND):
+        c1 = min(c0 + FFT_BAND, cols)
+        b = block[:, : c1 - c0]
+        b[:r] = spectrum[0, c0:c1]
+        b[r : r + h] = spectrum[:, c0:c1]
+        b[r + h : h + 2 * r] = spectrum[h - 1, c0:c1]
+        b[h + 2 * r :] = zero_row[c0:c1]
+        b = fft.fft(b, size_y, axis=0, workers=-1)
+        b *= along_y
+        b *= along_x[:, c0:c1]
+        spectrum[:, c0:c1] = fft.ifft(b, size_y, axis=0, norm="forward", workers=-1)[2 * r : 2 * r + h]
+        del b
+    # back along the rows, scaled as pocketfft scales irfft2 (1 / N in long double)
+    scale = np.float64(np.longdouble(1) / np.longdouble(size_y * size_x))
+    out = np.empty((h, w))
+    for lo in range(0, h, FFT_BAND):
+        rows = fft.irfft(spectrum[lo : lo + FFT_BAND], size_x, axis=1, norm="forward", workers=-1)
+        rows *= scale
+        out[lo : lo + len(rows)] = rows[:, 2 * r : 2 * r + w]
+    return out
 
 
 def smooth_angles(angles: np.ndarray, sigma: float, period: float) -> np.ndarray:
@@ -546,6 +580,7 @@ __all__ = [
     "gaussian_filter",
     "edge_orientation",
     "FFT_SIGMA",
+    "FFT_BAND",
     "gaussian_smooth",
     "smooth_angles",
     "picture_fields",
