@@ -831,8 +831,22 @@ def _raster_picture(image, size, n_elements, backend, element, memory_limit):
     if rgb is None:
         rgb, source = picture_array(image, at_least=(w, h), memory_limit=memory_limit)
     picture = resample(rgb, w, h)
-    del rgb
-    return picture, source
+    # a picture enlarged to the raster can be made again from the smaller one, the same
+    # to the last bit, so it need not be held while the method runs
+    remake = (lambda: resample(rgb, w, h)) if rgb.nbytes < picture.nbytes else None
+    return picture, source, remake
+
+
+def _return_free_memory() -> None:
+    """Hand the C heap's free pages back to the system (glibc's ``malloc_trim``; nothing
+    elsewhere): freed bands and temporaries otherwise stay in the process's memory, and
+    the next stage's large arrays come on top of them."""
+    import ctypes
+
+    try:
+        ctypes.CDLL(None).malloc_trim(0)
+    except (OSError, AttributeError, TypeError):
+        pass
 
 
 # up to this many pixels the picture's fields and its edge map are made side by side (on
@@ -1017,7 +1031,7 @@ def make_mosaic(
     record, given_options, method_options = _method_and_options(method, method_options)
     metric_name, element = resolve_shapes(metric, element)
     metric_obj = make_metric(metric_name, aspect)
-    picture, source = _raster_picture(image, size, n_elements, backend, element, memory_limit)
+    picture, source, remake = _raster_picture(image, size, n_elements, backend, element, memory_limit)
     h, w = picture.shape[:2]
     t_picture = time.perf_counter()
     spacing = math.sqrt(w * h / n_elements)
@@ -1036,6 +1050,9 @@ def make_mosaic(
         walls=edge_map if walls else None,
     )
 
+    if remake is not None:
+        picture = None  # made again after the method (the fills read it)
+    _return_free_memory()
     dist = record(
         problem,
         WalledBackend(backend) if walls else backend,
@@ -1046,6 +1063,9 @@ def make_mosaic(
         **method_options,
     )
     cut = record.tight if cut is None else bool(cut)
+    _return_free_memory()
+    if picture is None:
+        picture = remake()
     polygons, colours, cut_count, measures, stages = _after_the_method(
         dist, picture, edge_map, walls and cut, gap, spacing
     )
