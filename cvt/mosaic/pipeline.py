@@ -408,7 +408,7 @@ def _fill_thin(fill, held, image, convert, polygons, sites) -> None:
 
 # (tile, pixel) pairs that mosaic_fills holds at once: the tiles are taken in runs of
 # about this many pixels, each run's pairs found, filled and measured before the next
-FILL_PAIRS = 1 << 22
+FILL_PAIRS = 1 << 20
 
 
 def tile_runs(polygons, pairs: int = FILL_PAIRS) -> np.ndarray:
