@@ -428,7 +428,9 @@ def tile_runs(polygons, pairs: int = FILL_PAIRS) -> np.ndarray:
     """
     import shapely
 
-    area = shapely.area(np.array([shapely.Polygon() if p is None else p for p in polygons], dtype=object))
+    geoms = np.empty(len(polygons), dtype=object)
+    geoms[:] = list(polygons)
+    area = np.nan_to_num(shapely.area(geoms))  # None: NaN, no pixels
     ends = np.searchsorted(np.cumsum(area), np.arange(pairs, area.sum(), pairs)) + 1
     return np.unique(np.concatenate([[0], np.minimum(ends, len(polygons)), [len(polygons)]]))
 
@@ -856,8 +858,8 @@ SIDE_BY_SIDE_PIXELS = 1 << 23
 
 
 def _picture_analysis(picture, spacing, element, contrast, edge_threshold):
-    """The picture's fields (density, direction) and its strong edges (read in CIELAB,
-    which is not kept: the fills read it again a block at a time)."""
+    """The picture's fields (density, direction), its strong edges (read in CIELAB,
+    which is not kept: the fills read it again a block at a time) and the seconds taken."""
 
     def fields():
         return picture_fields(picture, spacing, element, contrast=contrast, details=False)
@@ -866,14 +868,33 @@ def _picture_analysis(picture, spacing, element, contrast, edge_threshold):
     def edges():
         return strong_edges(picture, edge_threshold, min_length=EDGE_MIN_LENGTH * spacing, srgb=True)
 
+    t0 = time.perf_counter()
     if picture.shape[0] * picture.shape[1] <= SIDE_BY_SIDE_PIXELS:
-        return side_by_side(fields, edges)
-    return fields(), edges()
+        made = side_by_side(fields, edges)
+    else:
+        made = [fields(), edges()]
+    return made[0], made[1], time.perf_counter() - t0
 
 
-def _after_the_method(dist, picture, edge_map, cut, gap, spacing):
+def _mosaic_problem(edge_map, walls: bool, n_elements, metric, density, field, seed) -> Problem:
+    """The problem the method solves: the raster of ``edge_map`` less its edges where
+    they are ``walls``, else all of it."""
+    h, w = edge_map.shape
+    return Problem(
+        Grid(w, h, ~edge_map if walls else None),
+        n_elements,
+        metric,
+        density=density,
+        field=field,
+        seed=seed,
+        walls=edge_map if walls else None,
+    )
+
+
+def _after_the_method(dist, picture, edge_map, cut, gap, spacing, picture_seconds):
     """The stages after the method: tiles cut to the walls (``cut``), their colours and
-    the measures (coverage and overlap, straddling, colour error), each timed."""
+    the measures (coverage and overlap, straddling, colour error), each timed; the
+    method's distribution with the final tiles and every stage's time."""
     polygons = [None if p is None or p.is_empty else p for p in dist.elements]
     cut_count = 0
     # the stages after the method are timed too (result.json's stage_seconds)
@@ -895,11 +916,14 @@ def _after_the_method(dist, picture, edge_map, cut, gap, spacing):
     )
     t3 = time.perf_counter()
     stages = {
+        "picture_seconds": picture_seconds,  # Lab, density, field and edges
         "cutting_seconds": t1 - t0,
         "fills_seconds": t2 - t1,
         "evaluation_seconds": t3 - t2,
     }
-    return polygons, colours, cut_count, (ev, straddles, error), stages
+    extra = {**dist.extra, **({"cut_tiles": cut_count} if cut else {}), **stages}
+    dist = dataclasses.replace(dist, elements=polygons, extra=extra)
+    return dist, polygons, colours, cut_count, (ev, straddles, error)
 
 
 def _method_and_options(method, method_options):
@@ -1032,26 +1056,13 @@ def make_mosaic(
     metric_name, element = resolve_shapes(metric, element)
     metric_obj = make_metric(metric_name, aspect)
     picture, source, remake = _raster_picture(image, size, n_elements, backend, element, memory_limit)
-    h, w = picture.shape[:2]
-    t_picture = time.perf_counter()
-    spacing = math.sqrt(w * h / n_elements)
+    spacing = math.sqrt(picture.shape[0] * picture.shape[1] / n_elements)
     gap = AUTO_GAP * spacing if gap is None else parse_gap(gap)
-
-    fields, edge_map = _picture_analysis(picture, spacing, element, contrast, edge_threshold)
-    picture_seconds = time.perf_counter() - t_picture
+    fields, edge_map, picture_seconds = _picture_analysis(picture, spacing, element, contrast, edge_threshold)
     walls = bool(edges) and bool(edge_map.any())
-    problem = Problem(
-        Grid(w, h, ~edge_map if walls else None),
-        n_elements,
-        metric_obj,
-        density=fields.density if use_density else None,
-        field=fields.field if use_field else None,
-        seed=seed,
-        walls=edge_map if walls else None,
-    )
-
-    if remake is not None:
-        picture = None  # made again after the method (the fills read it)
+    density, field_ = fields.density if use_density else None, fields.field if use_field else None
+    problem = _mosaic_problem(edge_map, walls, n_elements, metric_obj, density, field_, seed)
+    picture = None if remake is not None else picture  # made again after the method (the fills read it)
     _return_free_memory()
     dist = record(
         problem,
@@ -1062,32 +1073,25 @@ def make_mosaic(
         gap=gap,
         **method_options,
     )
-    cut = record.tight if cut is None else bool(cut)
+    cut = walls and (record.tight if cut is None else bool(cut))
     _return_free_memory()
-    if picture is None:
-        picture = remake()
-    polygons, colours, cut_count, measures, stages = _after_the_method(
-        dist, picture, edge_map, walls and cut, gap, spacing
-    )
-    stages = {"picture_seconds": picture_seconds, **stages}  # Lab, density, field and edges
-    dist = dataclasses.replace(
-        dist,
-        elements=polygons,
-        extra={**dist.extra, **({"cut_tiles": cut_count} if walls and cut else {}), **stages},
+    picture = remake() if picture is None else picture
+    dist, polygons, colours, cut_count, measures = _after_the_method(
+        dist, picture, edge_map, cut, gap, spacing, picture_seconds
     )
     settings = _Settings(
-        metric_name=metric_name,
-        element=element,
-        gap=gap,
-        record=record,
-        given_options=given_options,
-        contrast=contrast,
-        grout=grout,
-        edge_threshold=edge_threshold,
-        walls=walls,
-        backend=backend,
-        source=source,
-        t_start=t_start,
+        metric_name,
+        element,
+        gap,
+        record,
+        given_options,
+        contrast,
+        grout,
+        edge_threshold,
+        walls,
+        backend,
+        source,
+        t_start,
     )
     return _result(
         dist, problem, fields, picture, edge_map, (polygons, colours, cut_count), measures, settings
