@@ -39,9 +39,6 @@ from compact_distributions.cvt.shapes import (
     check_shape,
     element_ball,
     element_polygons,
-    rotational_symmetry,
-    shape_record,
-    unit_outline,
 )
 from compact_distributions.cvt.validate import real_number
 
@@ -90,87 +87,22 @@ def baseline(
     )
 
 
-@dataclass(frozen=True)
-class TileShape:
-    """One element shape: its unit ball (for inside tests and inscribed sizes) and area."""
-
-    name: str
-    aspect: float
-    ball: Metric
-    unit_area: float  # area of the outline at size 1
-
-    @property
-    def symmetry(self) -> float:
-        """The turn (radians) that maps the outline onto itself (its record's symmetry)."""
-        k = shape_record(self.name).symmetry
-        return 2 * math.pi / k if k else 2 * math.pi
-
-    @property
-    def turns_freely(self) -> bool:
-        """Whether every turn maps the outline onto itself (a circle)."""
-        return rotational_symmetry(self.name, self.aspect) == 0
-
-    def gauge(self, vx, vy, theta) -> np.ndarray:
-        """Gauge of world offsets (vx, vy) in the frame of a tile turned by ``theta``:
-        a point is inside the tile of size s iff gauge <= s."""
-        return self.gauge_turned(vx, vy, np.cos(theta), np.sin(theta))
-
-    def gauge_turned(self, vx, vy, c, s) -> np.ndarray:
-        """``gauge`` with the turn given by its cosine ``c`` and sine ``s``, for callers
-        that test many points per tile and gather one cosine per tile."""
-        ux = c * vx + s * vy  # R(-θ) v
-        uy = c * vy - s * vx
-        if self.ball.curved:
-            a, b = self.ball.semi_axes
-            return np.hypot(ux / a, uy / b)
-        n, h = self.ball.normals, self.ball.offsets
-        out = (n[0, 0] * ux + n[0, 1] * uy) / h[0]
-        for k in range(1, len(h)):
-            out = np.maximum(out, (n[k, 0] * ux + n[k, 1] * uy) / h[k])
-        return out
-
-    def reach(self, vx, vy, theta, gap: float) -> np.ndarray:
-        """Largest size whose tile keeps ``gap/2`` clear of the point at offset v (the
-        grout rule of ``cvt.placement``: mitred offset for polygons, first order for
-        ellipses)."""
-        g = self.gauge(vx, vy, theta)
-        if gap <= 0:
-            return g
-        if not self.ball.curved:
-            c, s = np.cos(theta), np.sin(theta)
-            ux, uy = c * vx + s * vy, c * vy - s * vx
-            n, h = self.ball.normals, self.ball.offsets
-            out = None
-            for k in range(len(h)):
-                f = (n[k, 0] * ux + n[k, 1] * uy - 0.5 * gap) / h[k]
-                out = f if out is None else np.maximum(out, f)
-            return out
-        a, b = self.ball.semi_axes
-        return g - 0.5 * gap / min(a, b)
-
-    def size_for_area(self, area: float) -> float:
-        return math.sqrt(area / self.unit_area)
-
-
-def tile_shape(problem: Problem, element: str | None, default: str | None = None) -> TileShape:
-    """The element shape: ``element``, else the method's ``default``, else the problem's,
-    else the metric's own shape."""
+def tile_shape(problem: Problem, element: str | None, default: str | None = None) -> Metric:
+    """The element's unit ball (the one unit-element record: gauge, reach, area,
+    symmetry): ``element``, else the method's ``default``, else the problem's, else the
+    metric's own shape."""
     name = check_shape(element or default or problem.element or problem.metric.natural_element)
-    aspect = problem.metric.aspect
-    outline = unit_outline(name, aspect)
-    x, y = outline[:, 0], outline[:, 1]
-    area = 0.5 * abs(float(np.dot(x, np.roll(y, -1)) - np.dot(y, np.roll(x, -1))))
-    return TileShape(name, aspect, element_ball(name, aspect), area)
+    return element_ball(name, problem.metric.aspect)
 
 
-def budget_size(shape: TileShape, grid: Grid, n: int, delta: float = BUDGET_DELTA) -> float:
+def budget_size(shape: Metric, grid: Grid, n: int, delta: float = BUDGET_DELTA) -> float:
     """Element size whose area is that of a square of side δ·sqrt(area/N)."""
     return shape.size_for_area(delta * delta * grid.pixel_count / n)
 
 
 # ------------------------------------------------------------------ tiles on the raster
 def rasterize_tiles(
-    shape: TileShape, centres, angles, sizes, grid: Grid, budget_entries: int = 2_000_000
+    shape: Metric, centres, angles, sizes, grid: Grid, budget_entries: int = 2_000_000
 ) -> np.ndarray:
     """(H, W) int32: the tile whose outline contains each pixel centre, -1 for none.
     Where tiles overlap the lower index keeps the pixel.  Tiles of size <= 0 are absent."""
@@ -182,7 +114,7 @@ def rasterize_tiles(
     best = np.full(h * w, n, dtype=np.int64)
     ok = np.flatnonzero(np.isfinite(sizes) & (sizes > 0) & np.isfinite(centres).all(axis=1))
     if len(ok):
-        reach = np.ceil(sizes[ok] * shape.ball.circumradius + 1.0).astype(np.int64)
+        reach = np.ceil(sizes[ok] * shape.circumradius + 1.0).astype(np.int64)
         order = ok[np.argsort(reach, kind="stable")]
         reach = np.sort(reach, kind="stable")
         start = 0
@@ -199,12 +131,12 @@ def rasterize_tiles(
     return best.reshape(h, w).astype(np.int32)
 
 
-def tile_pixels(shape: TileShape, centre, angle: float, size: float, grid: Grid):
+def tile_pixels(shape: Metric, centre, angle: float, size: float, grid: Grid):
     """(rows, columns) of the pixels whose centres one tile's outline contains: the
     pixels ``rasterize_tiles`` gives that tile when it is alone."""
     if not (math.isfinite(size) and size > 0):
         return np.empty(0, np.int64), np.empty(0, np.int64)
-    r = int(math.ceil(size * shape.ball.circumradius + 1.0))
+    r = int(math.ceil(size * shape.circumradius + 1.0))
     flat, _ = _window_hits(
         shape,
         np.asarray(centre, np.float64).reshape(1, 2),
@@ -216,7 +148,7 @@ def tile_pixels(shape: TileShape, centre, angle: float, size: float, grid: Grid)
     return np.divmod(flat, grid.shape[1])
 
 
-def _window_hits(shape: TileShape, centres, angles, sizes, r: int, h: int, w: int):
+def _window_hits(shape: Metric, centres, angles, sizes, r: int, h: int, w: int):
     """Flat raster indices of the pixel centres inside each tile, within the (2r+1)²
     window around it, and the tile's position in the arguments for each index."""
     offs = np.arange(-r, r + 1)
@@ -226,7 +158,7 @@ def _window_hits(shape: TileShape, centres, angles, sizes, r: int, h: int, w: in
     jj = cj[:, None, None] + offs[None, None, :]
     vx = jj + 0.5 - centres[:, 0][:, None, None]
     vy = ii + 0.5 - centres[:, 1][:, None, None]
-    g = shape.gauge(vx, vy, angles[:, None, None])
+    g = shape.gauge_turned(vx, vy, np.cos(angles)[:, None, None], np.sin(angles)[:, None, None])
     hit = (g <= sizes[:, None, None]) & (ii >= 0) & (ii < h) & (jj >= 0) & (jj < w)
     flat = (ii * w + jj)[hit]
     who = np.broadcast_to(np.arange(len(centres))[:, None, None], hit.shape)[hit]
@@ -318,7 +250,7 @@ class Contours:
         owner, x, y = contour_samples(labels)
         return cls(owner, x, y, labels)
 
-    def fit(self, shape: TileShape, centres, angles, gap: float = 0.0) -> np.ndarray:
+    def fit(self, shape: Metric, centres, angles, gap: float = 0.0) -> np.ndarray:
         """Largest size of each tile, at the given centre and angle, that stays inside
         its own cell; 0 where the centre's pixel is not in the cell."""
         n = len(centres)
@@ -331,7 +263,7 @@ class Contours:
 
 
 # ------------------------------------------------------------------ output
-def make_elements(shape: TileShape, centres, angles, sizes, grid: Grid, region=None):
+def make_elements(shape: Metric, centres, angles, sizes, grid: Grid, region=None):
     """Shapely polygons of the tiles, clipped to the region (None for absent tiles), and
     the area cut off by the clipping as a fraction of the region's area."""
     centres = np.asarray(centres, dtype=np.float64).reshape(-1, 2)
@@ -343,7 +275,7 @@ def make_elements(shape: TileShape, centres, angles, sizes, grid: Grid, region=N
     placed = np.flatnonzero(np.isfinite(sizes) & (sizes > 0))
     if len(placed) == 0:
         return out, 0.0
-    polys = element_polygons(shape.name, shape.aspect, centres[placed], angles[placed], sizes[placed])
+    polys = element_polygons(shape.element, shape.aspect, centres[placed], angles[placed], sizes[placed])
     shapely.prepare(region)
     inside = shapely.contains(region, polys)
     clipped_area = 0.0
@@ -360,18 +292,18 @@ def make_elements(shape: TileShape, centres, angles, sizes, grid: Grid, region=N
 
 
 # ------------------------------------------------------------------ Lloyd over tiles
-def fixed_sizes(problem: Problem, shape: TileShape, base: float, centres, gap: float) -> np.ndarray:
+def fixed_sizes(problem: Problem, shape: Metric, base: float, centres, gap: float) -> np.ndarray:
     """Fixed tile sizes: the budget size times the density's size factor at the tile,
     less the grout (gap/2 along each edge normal)."""
     sizes = base * problem.scales_at(centres)
     if gap > 0:
-        sizes = np.maximum(sizes - 0.5 * gap / shape.ball.inradius, 0.0)
+        sizes = np.maximum(sizes - 0.5 * gap / shape.inradius, 0.0)
     return sizes
 
 
 def tile_lloyd(
     problem: Problem,
-    shape: TileShape,
+    shape: Metric,
     base_size: float,
     iterations: int,
     turn,
@@ -449,7 +381,7 @@ def run_fixed_tiles(
         labels=labels,
         extra={
             **extra,
-            "element": shape.name,
+            "element": shape.element,
             "delta": delta,
             "tile_size": base,
             "scales": "tile size / budget tile size",
@@ -466,7 +398,6 @@ __all__ = [
     "DELTA_OPTION",
     "SMALLER_BUDGET_VARIANTS",
     "baseline",
-    "TileShape",
     "tile_shape",
     "budget_size",
     "rasterize_tiles",

@@ -60,7 +60,7 @@ def principal_axis_turn(problem: Problem, shape):
             target = problem.angles_at(centres)
         else:
             target = mom.principal_angles()
-        new = nearest_equivalent(target, angles, shape.symmetry)
+        new = nearest_equivalent(target, angles, shape.symmetry_turn)
         return np.where(mom.empty, angles, new)
 
     return turn

@@ -147,7 +147,7 @@ def run(
         labels=labels,
         extra={
             "paper": METHOD.paper,
-            "element": shape.name,
+            "element": shape.element,
             "delta": delta,
             "tile_size": size,
             "tile_side_px": tile_side,
@@ -163,7 +163,7 @@ def run(
 
 def _gap_factor(shape) -> float:
     """Size units per pixel of offset along an edge normal (1/inradius of the unit ball)."""
-    return 1.0 / shape.ball.inradius
+    return 1.0 / shape.inradius
 
 
 METHOD = baseline(

@@ -155,7 +155,7 @@ def _fit_in_hole(
 ) -> tuple[float, float]:
     """Largest size (and its angle, among ``angles``) of a tile centred at (x, y) whose
     outline stays half a pixel clear of every blocked pixel centre."""
-    r = int(math.ceil(radius * shape.ball.circumradius / shape.ball.inradius)) + 2
+    r = int(math.ceil(radius * shape.circumradius / shape.inradius)) + 2
     r = min(r, pad - 1)
     ci, cj = int(math.floor(y)), int(math.floor(x))
     win = blocked_pad[ci + pad - r : ci + pad + r + 1, cj + pad - r : cj + pad + r + 1]
@@ -164,7 +164,7 @@ def _fit_in_hole(
         return 0.0, float(angles[0])
     vx = (bj - r + cj + 0.5 - x)[None, :]
     vy = (bi - r + ci + 0.5 - y)[None, :]
-    reach = shape.reach(vx, vy, angles[:, None], gap).min(axis=1) - 0.5 / shape.ball.inradius
+    reach = shape.reach(vx, vy, angles[:, None], gap).min(axis=1) - 0.5 / shape.inradius
     k = int(np.argmax(reach))
     return max(float(reach[k]), 0.0), float(angles[k])
 
@@ -199,7 +199,7 @@ def combinatorial_step(
     holes = _hole_candidates(free, moves)
     if not holes:
         return centres, angles, sizes, info
-    pad = int(math.ceil(max(r for _, _, r in holes) * shape.ball.circumradius / shape.ball.inradius)) + 4
+    pad = int(math.ceil(max(r for _, _, r in holes) * shape.circumradius / shape.inradius)) + 4
     h, w = free.shape
     blocked = np.ones((h + 2 * pad, w + 2 * pad), dtype=bool)
     blocked[pad : pad + h, pad : pad + w] = ~free
@@ -207,7 +207,7 @@ def combinatorial_step(
     geoms = np.full(n, None, dtype=object)
     live = np.flatnonzero(sizes > 0)
     geoms[live] = shapely.intersection(
-        element_polygons(shape.name, shape.aspect, centres[live], angles[live], sizes[live]), region
+        element_polygons(shape.element, shape.aspect, centres[live], angles[live], sizes[live]), region
     )
     present = ~shapely.is_missing(geoms) & ~shapely.is_empty(geoms)
     tree_ids = np.flatnonzero(present)
@@ -227,13 +227,13 @@ def combinatorial_step(
     for (x, y, r), k in zip(holes, order[: len(holes)], strict=True):
         info["tried"] += 1
         # candidate angles: the tile's own, and a sweep over the shape's symmetry period
-        sweep = np.arange(0.0, shape.symmetry, math.radians(7.5))[:12]
+        sweep = np.arange(0.0, shape.symmetry_turn, math.radians(7.5))[:12]
         cand = np.concatenate([[angles[k]], angles[k] + sweep[1:]])
         size, ang = _fit_in_hole(shape, blocked, pad, x, y, r, cand, gap)
         if size <= sizes[k] or size <= 0:
             continue
         new_poly = shapely.intersection(
-            element_polygons(shape.name, shape.aspect, (x, y), ang, size)[0], region
+            element_polygons(shape.element, shape.aspect, (x, y), ang, size)[0], region
         )
         delta = exclusive(new_poly, k) - exclusive(geoms[k] if present[k] else None, k)
         if delta <= 1e-9:
@@ -316,7 +316,7 @@ def run(
         labels=labels,
         extra={
             "paper": METHOD.paper,
-            "element": shape.name,
+            "element": shape.element,
             "delta": delta,
             "budget_tile_size": base,
             "scales": "tile size / budget tile size (free per tile)",

@@ -64,8 +64,8 @@ def region_ring(shape, labels: np.ndarray, centres, sizes):
     vy = (pixels // w + 0.5) - centres[own, 1]
     limit = sizes[own]
     dist = np.hypot(vx, vy)
-    always = dist < limit * shape.ball.inradius * (1.0 - 1e-9)
-    ring = ~always & (dist <= limit * shape.ball.circumradius * (1.0 + 1e-9))
+    always = dist < limit * shape.inradius * (1.0 - 1e-9)
+    ring = ~always & (dist <= limit * shape.circumradius * (1.0 + 1e-9))
     base = np.bincount(own[always], minlength=n)
     return own[ring], vx[ring], vy[ring], limit[ring], base
 
@@ -96,7 +96,7 @@ def best_fit_turn(shape):
         cl = np.clip(
             centres, [0.0, 0.0], [w - 1e-9, h - 1e-9]
         )  # a centre off the raster is measured from its edge
-        period = shape.symmetry
+        period = shape.symmetry_turn
         if shape.turns_freely:
             return angles  # a circle has no orientation
         half = period / 2

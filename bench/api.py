@@ -7,6 +7,7 @@ from __future__ import annotations
 import contextlib
 import numbers
 import os
+import warnings
 from collections.abc import Callable, Iterator, Mapping
 from dataclasses import dataclass
 from typing import TYPE_CHECKING, Any
@@ -152,6 +153,7 @@ def problem(
     seed: int = 0,
     density: DensityMap | None = None,
     field: DirectionField | None = None,
+    region: np.ndarray | None = None,
     mask: np.ndarray | None = None,
 ) -> Problem:
     """Make a problem: ``n_elements`` elements to place on a raster.
@@ -177,8 +179,11 @@ def problem(
         Size from a density image: denser means smaller elements.
     field : DirectionField or None, optional
         Direction of each element from a field.
+    region : numpy.ndarray or None, optional
+        The region, an (H, W) bool array (its mask), True inside; None: the whole raster.
+        The command line's ``--region``.
     mask : numpy.ndarray or None, optional
-        The region, an (H, W) bool array, True inside; None: the whole raster.
+        Deprecated name of ``region`` (a DeprecationWarning; removed in the next release).
 
     Returns
     -------
@@ -198,6 +203,11 @@ def problem(
     ((96, 128), 100, 'l2-axial')
     """
     check_types(n_elements=n_elements, seed=seed, element=element, metric=metric, aspect=aspect)
+    if mask is not None:
+        if region is not None:
+            raise InputError("give the region once: region= (mask= is its deprecated name)")
+        warnings.warn("cd.problem(mask=...) is now cd.problem(region=...)", DeprecationWarning, stacklevel=2)
+        region = mask
     if isinstance(size, bool) or not isinstance(size, (numbers.Integral, str, tuple, list)):
         raise InputError(f"size must be W, (W, H) or 'WxH', got {size!r}")
     if isinstance(size, (tuple, list)) and len(size) == 2:
@@ -208,7 +218,7 @@ def problem(
     n_elements = whole_number(n_elements, "n_elements", minimum=1, maximum=width * height)
     metric_name, element_name = resolve_shapes(metric, element)
     return Problem(
-        Grid(width, height, mask),
+        Grid(width, height, region),
         n_elements,
         make_metric(metric_name, aspect),
         density,

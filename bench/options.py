@@ -132,6 +132,45 @@ def given_method_options(args) -> dict:
     }
 
 
+def options_for(record, given: dict | None) -> dict:
+    """The options of ``given`` (name -> value, as a sweep's command line sets them for
+    every method) that ``record`` declares, parsed (``--NAME`` in messages).
+
+    Parameters
+    ----------
+    record : Method
+        The method's record.
+    given : dict or None
+        Option name -> value.
+
+    Returns
+    -------
+    dict
+        Option name -> parsed value, for the options the method declares.
+    """
+    return record.parse_options({k: v for k, v in (given or {}).items() if record.option(k)}, flags=True)
+
+
+def check_method_options(given: dict, methods: list[str]) -> None:
+    """InputError where an option of a sweep's command line is declared by none of the
+    methods it runs (it would change nothing).
+
+    Parameters
+    ----------
+    given : dict
+        Option name -> value, as set on the command line.
+    methods : list of str
+        The methods the sweep runs.
+    """
+    from compact_distributions.cvt.registry import get_method
+
+    for name in given:
+        if not any(get_method(m).option(name) for m in methods):
+            raise InputError(
+                f"--{name.replace('_', '-')} is an option of none of --methods {','.join(methods)}"
+            )
+
+
 def method_options(args, method=None) -> dict:
     """The method's own keywords from the command line, checked against ``method`` (the
     record, default ``--method``'s): an option it does not declare is refused."""
@@ -321,6 +360,8 @@ __all__ = [
     "add_shape_options",
     "add_method_option",
     "given_method_options",
+    "options_for",
+    "check_method_options",
     "method_options",
     "add_run_options",
     "add_output_options",

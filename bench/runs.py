@@ -163,6 +163,7 @@ class RunSpec:
             "placement_seconds": float(dist.extra.get("placement_seconds", 0.0)),
             "ms_per_iteration": float(np.median(secs) * 1000) if secs else None,
             "final_energy": float(dist.energy[-1]) if dist.energy else None,
+            "sites_sha1": sites_digest(dist.sites),  # which replay of its Lloyd it is (bench.converged)
         }
         if self.curve:
             curve = coverage_overlap_curve(dist.elements, problem.grid, region=region)
@@ -173,7 +174,7 @@ class RunSpec:
             row["n_elements"] = problem.n_elements
         record = {
             "row": row,
-            "sites_sha1": sites_digest(dist.sites),
+            "sites_sha1": row["sites_sha1"],
             "energy": dist.energy,
             "seconds": secs,
             "empty_cells_per_iteration": list(dist.empty),

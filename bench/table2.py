@@ -36,7 +36,6 @@ import numpy as np
 
 from compact_distributions.backends import REFERENCE as REFERENCE_BACKEND
 from compact_distributions.backends import fall_back, variant_metrics, variant_names, variant_status
-from compact_distributions.cvt.errors import InputError
 from compact_distributions.cvt.metrics import REFERENCE_SHAPE
 from compact_distributions.cvt.registry import get_method, method_names
 from compact_distributions.cvt.shapes import PAPER_SHAPES
@@ -44,8 +43,6 @@ from compact_distributions.cvt.validate import name_list, one_of
 
 from . import options
 from .runs import RunSpec
-
-ELEMENTS = list(PAPER_SHAPES)  # the default; --shapes may name any shape (hexagon, octagon, ...)
 
 FULL = {"size": 1024, "n_elements": 4000, "iterations": 20, "seeds": 5}
 QUICK = {"size": 256, "n_elements": 250, "iterations": 20, "seeds": 2}
@@ -72,6 +69,8 @@ COLUMNS = [
     "placed_mean",
     "empty_cells_mean",
     "coverage_at_1pct_overlap",
+    "energy_gap_mean",
+    "energy_gap_note",
     "paper_coverage",
     "paper_time",
     "status",
@@ -87,23 +86,46 @@ def problem_set(
     seeds: int | None,
     methods: list[str],
     backends: list[str],
-    elements: list[str] | None = None,
+    shapes: list[str] | None = None,
     variant_backend: str = REFERENCE_BACKEND,
     method_options: dict | None = None,
 ) -> list[RunSpec]:
     """The runs of Table 2 (see the module docstring), as each method's record asks:
     on the shapes it is compared on, on every variant of ``backends`` (available or not:
     unavailable ones become skipped rows), on ``variant_backend`` (the fastest) or on the
-    reference, and again with each of its sweep variants.  ``method_options`` (name ->
-    value, as given on the command line) go to every method that declares them.  Seed 0
-    of each row group also measures the coverage-overlap curve."""
+    reference, and again with each of its sweep variants.  Seed 0 of each row group also
+    measures the coverage-overlap curve.
+
+    Parameters
+    ----------
+    quick : bool
+        The quick set (:data:`QUICK`) instead of the full one (:data:`FULL`).
+    seeds : int or None
+        Seeds 0..seeds-1 (None: the set's default).
+    methods : list of str
+        The methods, by name.
+    backends : list of str
+        The backend variants of the methods swept over every backend.
+    shapes : list of str or None, optional
+        The element shapes (None: the paper's five, and the shapes beyond them that a
+        method's record names in ``beyond_paper``, for that method only).
+    variant_backend : str, optional
+        The backend of the methods swept on the fastest one.
+    method_options : dict or None, optional
+        Option name -> value, as given on the command line, for every method that
+        declares the option.
+
+    Returns
+    -------
+    list of RunSpec
+    """
     cfg = QUICK if quick else FULL
     k = cfg["seeds"] if seeds is None else seeds
     suite = "table2-quick" if quick else "table2"
     records = [get_method(m) for m in methods]
-    chosen = elements is not None
+    chosen = shapes is not None
     if not chosen:  # the paper's shapes, then those some method is also compared on
-        elements = list(dict.fromkeys([*ELEMENTS, *(s for rec in records for s in rec.beyond_paper)]))
+        shapes = list(dict.fromkeys([*PAPER_SHAPES, *(s for rec in records for s in rec.beyond_paper)]))
     specs = []
 
     def add(method, backend, element, picture_first, options, curve=True):
@@ -125,17 +147,15 @@ def problem_set(
                 )
             )
 
-    for element in elements:
+    for element in shapes:
         for rec in records:
             if (
                 (rec.compared_on is not None and element not in rec.compared_on)
                 or (rec.elements is not None and element not in rec.elements)
-                or (not chosen and element not in ELEMENTS and element not in rec.beyond_paper)
+                or (not chosen and element not in PAPER_SHAPES and element not in rec.beyond_paper)
             ):
                 continue
-            given = rec.parse_options(
-                {k: v for k, v in (method_options or {}).items() if rec.option(k)}, flags=True
-            )
+            given = options.options_for(rec, method_options)
             if rec.sweep_backends == "every":
                 for b in backends:
                     first = b == backends[0]
@@ -159,6 +179,7 @@ def aggregate(rows: list[dict]):
     """One line per (method, backend, element): mean ± sd over the seeds that ran."""
     import pandas as pd
 
+    from .converged import gap_columns
     from .report import fail_closed, group_status, host_slots_of, sample_sd, with_columns
 
     df = pd.DataFrame(rows)
@@ -208,19 +229,30 @@ def aggregate(rows: list[dict]):
                     else np.nan
                 ),
                 host_slots=host_slots_of(ok),
+                **gap_columns(ok),
             )
         rec.update(group_status(g, ok))
         out.append(rec)
     return with_columns(pd.DataFrame(out), COLUMNS)
 
 
-def _record(label: str):
-    """The method record of a report row (its label is the name, then its options)."""
+def label_record(label: str):
+    """The method record of a report row (its label is the name, then its options).
+
+    Parameters
+    ----------
+    label : str
+        A row's method, as :attr:`.runs.RunSpec.label` names it.
+
+    Returns
+    -------
+    Method
+    """
     return get_method(str(label).split(" ")[0])
 
 
 def _every_backend(label: str) -> bool:
-    return _record(label).sweep_backends == "every"
+    return label_record(label).sweep_backends == "every"
 
 
 def _equal_overlap_ranking(sq) -> list[str]:
@@ -262,8 +294,8 @@ def discussion(table) -> str:
         for _, r in sq.iterrows()
         if not _every_backend(r["method"]) or r["backend"] == REFERENCE_BACKEND
     }
-    role = {m: _record(m).role for m in cov}
-    paper_method = next((m for m in cov if role[m] == "paper" and m == _record(m).name), None)
+    role = {m: label_record(m).role for m in cov}
+    paper_method = next((m for m in cov if role[m] == "paper" and m == label_record(m).name), None)
     if paper_method is None:
         return ""
 
@@ -275,11 +307,11 @@ def discussion(table) -> str:
             else "not run"
         )
 
-    plain = [m for m in cov if m == _record(m).name]  # each method with its default options
+    plain = [m for m in cov if m == label_record(m).name]  # each method with its default options
     lines = ["", "## How this compares with the paper", ""]
     in_paper = sorted(
-        (m for m in plain if role[m] in ("paper", "baseline") and _record(m).paper_table2),
-        key=lambda m: _record(m).paper_table2[0],
+        (m for m in plain if role[m] in ("paper", "baseline") and label_record(m).paper_table2),
+        key=lambda m: label_record(m).paper_table2[0],
     )
     measured = sorted(in_paper, key=lambda m: cov[m]["coverage_mean"])
     same = measured == in_paper
@@ -287,7 +319,7 @@ def discussion(table) -> str:
     baselines = [m for m in plain if role[m] not in ("paper", "extension")]
     lines.append(
         "- The paper's order ("
-        + " < ".join(f"{m} {fmt_pct(_record(m).paper_table2[0])}" for m in in_paper)
+        + " < ".join(f"{m} {fmt_pct(label_record(m).paper_table2[0])}" for m in in_paper)
         + ") is "
         + ("reproduced" if same else "**not** reproduced")
         + f" by the paper's own placement: "
@@ -304,18 +336,22 @@ def discussion(table) -> str:
         if len(beaten) < len(baseline_rows) or rc["overlap_mean"] >= 1e-4:
             continue  # said only of an extension that beats every baseline row at no overlap
         lines.append(
-            f"- {m} ({_record(m).summary}) covers {c(m)}, more than every baseline row, and none of its "
+            f"- {m} ({label_record(m).summary}) covers {c(m)}, more than every baseline row, and none of its "
             "elements overlap; the paper's "
-            + fmt_pct(_record(paper_method).paper_table2[0])
+            + fmt_pct(label_record(paper_method).paper_table2[0])
             + " "
             + (
                 "is passed"
-                if rc["coverage_mean"] > _record(paper_method).paper_table2[0]
+                if rc["coverage_mean"] > label_record(paper_method).paper_table2[0]
                 else "is not reached"
             )
             + "."
         )
-    smaller = [f"{name} {c(name)}" for name in cov if name != _record(name).name and _record(name).fixed_size]
+    smaller = [
+        f"{name} {c(name)}"
+        for name in cov
+        if name != label_record(name).name and label_record(name).fixed_size
+    ]
     if smaller:
         lines.append(
             "- The fixed-size baselines' coverage at their default tile budget is bought with overlap, which "
@@ -333,7 +369,7 @@ def discussion(table) -> str:
         lines.append(
             f"- Time for the 20 iterations of {paper_method} (mean over seeds): "
             + ", ".join(fast)
-            + f"; the paper reports {_record(paper_method).paper_table2[1]} on a GPU (N not stated)."
+            + f"; the paper reports {label_record(paper_method).paper_table2[1]} on a GPU (N not stated)."
         )
     return "\n".join(lines) + "\n"
 
@@ -388,6 +424,7 @@ def _table_rows(table, shared, by_host: bool) -> list[list]:
                 fmt_seconds(r["method_seconds_mean"]) + (" ‡" if shared[k] else ""),
                 fmt_seconds(r["lloyd_seconds_mean"]),
                 f"{r['ms_per_iteration']:.3g}",
+                fmt_pct(r["energy_gap_mean"], digits=2),
                 f"{r['runs']}/{r['seeds']}",
                 fmt_pct(r["paper_coverage"]) if r["paper_time"] else "",
                 r["paper_time"] or "",
@@ -410,6 +447,7 @@ def render_markdown(
     pictured: bool = True,
     methods: list[str] | None = None,
 ) -> str:
+    from .converged import gap_notes
     from .report import fmt_seconds, header_markdown, markdown_table, several_hosts
 
     title = "Table 2, regenerated" + (
@@ -430,6 +468,7 @@ def render_markdown(
         "ms/it: median per Lloyd iteration",
         "paper: Table 2 of Chen, Yang & Yang 2019 (C++/OpenGL on a GPU; N and raster not stated); "
         "shown on the square rows",
+        *gap_notes(table, ["method", "backend"]),
         f"this command took {fmt_seconds(elapsed)}; {cached} of {total} runs were read back from "
         "raw/ (run with --force to redo them)",
     ]
@@ -446,6 +485,7 @@ def render_markdown(
         "time",
         "Lloyd",
         "ms/it",
+        "energy above converged",
         "runs",
         "paper coverage",
         "paper time",
@@ -529,7 +569,7 @@ def render_coverage_overlap(curves, path: Path) -> bool:
     colours = plt.get_cmap("tab20").colors
     for k, ((method, _backend), g) in enumerate(sq.groupby(["method", "backend"], sort=False)):
         g = g.sort_values("factor")
-        record = _record(method)
+        record = label_record(method)
         ours = record.role in ("paper", "extension")
         ax.plot(
             100 * g["overlap"],
@@ -663,21 +703,25 @@ def prepare(req: Table2Request) -> dict:
     methods = [m for m in all_methods if m in chosen]  # the registry's order
     backends, unavailable = sweep_backends(req.backends)
     shapes = options.shape_names(req.shapes) if req.shapes else None
-    for name in req.method_options:  # an option is for the methods that declare it: one of them must run
-        if not any(get_method(m).option(name) for m in methods):
-            raise InputError(
-                f"--{name.replace('_', '-')} is an option of none of --methods {','.join(methods)}"
-            )
+    options.check_method_options(req.method_options, methods)
     specs = problem_set(
         req.quick, seeds, methods, backends, shapes, variant_backend(unavailable), req.method_options
     )
     check_memory(specs, req.memory_limit, lower="run the --quick set, or fewer --methods or --shapes")
-    return {"out": req.out, "cfg": cfg, "seeds": seeds, "specs": specs, "unavailable": unavailable}
+    return {
+        "out": req.out,
+        "cfg": cfg,
+        "seeds": seeds,
+        "specs": specs,
+        "unavailable": unavailable,
+        "variant": variant_backend(unavailable),
+    }
 
 
 def table2(req: Table2Request) -> int:
     """Run Table 2's sweep and write its report (what ``cvtbench table2`` does)."""
     from .cluster import executor_for
+    from .converged import run_converged
     from .outputs import report_folder
     from .report import provenance, write_csv, write_markdown, written_files
     from .sweep import check_runs, run_sweep
@@ -688,14 +732,10 @@ def table2(req: Table2Request) -> int:
     cmd = req.command or "cvtbench table2" + (" --quick" if req.quick else "")
     with report_folder(out, command=cmd):
         with executor_for(req, exclusive=req.exclusive) as executor:
-            rows = run_sweep(
-                specs,
-                out,
-                force=req.force,
-                quiet=req.quiet,
-                unavailable=plan["unavailable"],
-                executor=executor,
-            )
+            sweep = dict(force=req.force, quiet=req.quiet, unavailable=plan["unavailable"], executor=executor)
+            rows = run_sweep(specs, out, **sweep)
+            suite = f"{specs[0].suite}-converged" if specs else ""
+            converged = run_converged(specs, rows, out, plan["variant"], suite, **sweep)
         table = aggregate(rows)
         elapsed = time.perf_counter() - t0
         cached = sum(1 for r in rows if r.get("cached"))
@@ -727,7 +767,9 @@ def table2(req: Table2Request) -> int:
             out, ["table2.md", "table2.csv", "table2.png", "coverage_overlap.csv", "coverage_overlap.png"]
         )
     _print_summary(table, out, written)
-    check_runs(specs, rows, "table2")  # the report is written; a failed run still fails the command
+    # the report is written; a failed run (or converged run) still fails the command
+    check_runs(specs, rows, "table2")
+    check_runs(*converged, "table2's converged runs")
     return 0
 
 
@@ -749,4 +791,4 @@ def _print_summary(table, out: Path, written: list[str]) -> None:
     print(f"wrote {out}/{', '.join(written)}", file=sys.stderr)
 
 
-__all__ = ["Table2Request", "table2", "problem_set", "aggregate", "prepare", "discussion"]
+__all__ = ["Table2Request", "table2", "problem_set", "aggregate", "prepare", "discussion", "label_record"]

@@ -28,7 +28,7 @@ from __future__ import annotations
 import math
 import sys
 import time
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from pathlib import Path
 from types import SimpleNamespace
 
@@ -42,6 +42,7 @@ from compact_distributions.cvt.validate import name_list, one_of
 from . import options
 from .runs import RunSpec
 from .scenes import SCENE_TEXT, SCENES
+from .table2 import label_record
 
 FULL = {"size": 512, "n_elements": 1000, "iterations": 20, "seeds": 5}
 QUICK = {"size": 192, "n_elements": 150, "iterations": 20, "seeds": 2}
@@ -63,19 +64,49 @@ COLUMNS = (
         "runs",
     ]
     + MEASURE_COLUMNS
-    + ["method_seconds_mean", "status", "reason", "device", "hosts"]
+    + ["energy_gap_mean", "energy_gap_note", "method_seconds_mean", "status", "reason", "device", "hosts"]
 )
 
 
 def problem_set(
-    quick: bool, seeds: int, methods: list[str], shapes: list[str], scenes: list[str], variant_backend: str
+    quick: bool,
+    seeds: int,
+    methods: list[str],
+    shapes: list[str],
+    scenes: list[str],
+    variant_backend: str,
+    method_options: dict | None = None,
 ) -> list[RunSpec]:
     """The runs of Table 3 (module docstring), scene by scene: each method on the shapes
     its record says it is compared on, on the fast variant backend unless its record
-    keeps it on the reference."""
+    keeps it on the reference.
+
+    Parameters
+    ----------
+    quick : bool
+        The quick set (:data:`QUICK`) instead of the full one (:data:`FULL`).
+    seeds : int
+        Seeds 0..seeds-1.
+    methods : list of str
+        The methods, by name.
+    shapes : list of str
+        The element shapes.
+    scenes : list of str
+        The scenes of :mod:`.scenes`.
+    variant_backend : str
+        The backend of the methods not kept on the reference.
+    method_options : dict or None, optional
+        Option name -> value, as given on the command line (``--tolerance``,
+        ``--accelerate``, ...), for every method that declares the option.
+
+    Returns
+    -------
+    list of RunSpec
+    """
     cfg = QUICK if quick else FULL
     specs = []
     records = {m: get_method(m) for m in methods}
+    given = {m: options.options_for(rec, method_options) for m, rec in records.items()}
     for scene in scenes:
         for element in shapes:
             for method in methods:
@@ -99,6 +130,7 @@ def problem_set(
                         curve=True,
                         scene=scene,
                         measures=True,
+                        options=given[method],
                     )
                     for s in range(seeds)
                 ]
@@ -110,9 +142,12 @@ def aggregate(rows: list[dict]):
     seeds that ran."""
     import pandas as pd
 
+    from .converged import gap_columns
     from .report import fail_closed, group_status, sample_sd, with_columns
 
     df = fail_closed(pd.DataFrame(rows), ("coverage", "overlap"))
+    if "label" in df:  # a run with options (--accelerate, ...) is a line of its own
+        df["method"] = df["label"].fillna(df["method"])
     out = []
     for (scene, method, backend, element), g in df.groupby(
         ["scene", "method", "backend", "element"], sort=False
@@ -139,6 +174,7 @@ def aggregate(rows: list[dict]):
             rec.update(
                 n_elements=int(ok["n_elements"].iloc[0]),
                 method_seconds_mean=float(ok["method_seconds"].mean()),
+                **gap_columns(ok),
             )
         rec.update(group_status(g, ok))
         out.append(rec)
@@ -173,7 +209,7 @@ def discussion(table) -> str:
     ok = table[table["status"].isin(["ok", "partial"])]
     sq = ok[ok["element"] == REFERENCE_SHAPE]
     row = {(r["scene"], r["method"]): r for _, r in sq.iterrows()}
-    role = {m: get_method(m).role for m in dict.fromkeys(sq["method"])}
+    role = {m: label_record(m).role for m in dict.fromkeys(sq["method"])}
     paper = next((m for m, r in role.items() if r == "paper"), None)
     extensions = [m for m, r in role.items() if r == "extension"]
     for scene in dict.fromkeys(sq["scene"]):
@@ -212,7 +248,7 @@ def discussion(table) -> str:
             + ", ".join(f"{m} {v:.2f}°" for m, v in sorted(turned, key=lambda x: x[1]))
             + "."
         )
-    tight = [m for m in dict.fromkeys(ok["method"]) if get_method(m).tight]
+    tight = [m for m in dict.fromkeys(ok["method"]) if label_record(m).tight]
     for name in tight:
         dirs = ok[(ok["method"] == name) & ok["direction_fidelity_mean"].notna()]
         if len(dirs):
@@ -241,7 +277,8 @@ def render_markdown(
     total: int,
     pictured: bool,
 ) -> str:
-    from .report import fmt_seconds, header_markdown, markdown_table
+    from .converged import gap_notes
+    from .report import fmt_pct, fmt_seconds, header_markdown, markdown_table
 
     title = "Table 3: density, direction and region" + (" (QUICK: small raster, 2 seeds)" if quick else "")
     notes = [f"scene `{s}`: {SCENE_TEXT[s]}" for s in dict.fromkeys(table["scene"])]
@@ -253,6 +290,7 @@ def render_markdown(
         "available (else NumPy)",
         "measures (cvt.evaluate, formulas on the documentation's measures page, docs/guide/measures.md): "
         + "; ".join(f"{m}: {text}" for m, (text, _) in MEASURES.items()),
+        *gap_notes(table, ["method", "backend"]),
         f"this command took {fmt_seconds(elapsed)}; {cached} of {total} runs were read back from raw/ "
         "(run with --force to redo them)",
     ]
@@ -265,13 +303,14 @@ def render_markdown(
         "direction error",
         "grout mean (px)",
         "grout CV",
+        "energy above converged",
     ]
     for scene in dict.fromkeys(table["scene"]):
         part = table[table["scene"] == scene]
         body = [
             [r["method"], r["element"]]
             + [_fmt(m, r[f"{m}_mean"], r[f"{m}_sd"]) for m in MEASURES]
-            + [f"{r['runs']}/{r['seeds']}"]
+            + [fmt_pct(r["energy_gap_mean"], digits=2), f"{r['runs']}/{r['seeds']}"]
             for _, r in part.iterrows()
             if r["status"] in ("ok", "partial")
         ]
@@ -363,6 +402,7 @@ def prepare(args) -> dict:
         "scheduler": args.scheduler,
         "workers": args.workers,
         "memory_limit": args.memory_limit,
+        "method_options": options.given_method_options(args),
     }
     chosen(args)
     plan(
@@ -373,12 +413,21 @@ def prepare(args) -> dict:
         shapes=kwargs["shapes"],
         scenes=kwargs["scenes"],
         memory_limit=args.memory_limit,
+        method_options=kwargs["method_options"],
     )
     return kwargs
 
 
 def plan(
-    out, *, quick: bool = False, seeds=None, methods=None, shapes=None, scenes=None, memory_limit=None
+    out,
+    *,
+    quick: bool = False,
+    seeds=None,
+    methods=None,
+    shapes=None,
+    scenes=None,
+    memory_limit=None,
+    method_options: dict | None = None,
 ) -> dict:
     """Every argument checked, the report folder and each run's memory too, before
     anything runs or is written: the runs of Table 3 and what they need."""
@@ -391,11 +440,13 @@ def plan(
     methods = [one_of(m, "--methods", method_names()) for m in (methods or method_names())]
     shapes = options.shape_names(shapes or PAPER_SHAPES)
     scenes = [one_of(s, "--scenes", list(SCENES)) for s in (scenes or SCENES)]
+    options.check_method_options(method_options or {}, methods)
     check_folder(out)
     _, unavailable = sweep_backends(None)
-    specs = problem_set(quick, k, methods, shapes, scenes, variant_backend(unavailable))
+    variant = variant_backend(unavailable)
+    specs = problem_set(quick, k, methods, shapes, scenes, variant, method_options)
     check_memory(specs, memory_limit, lower="run the --quick set, or fewer --methods, --shapes or --scenes")
-    return {"cfg": cfg, "seeds": k, "specs": specs, "unavailable": unavailable}
+    return {"cfg": cfg, "seeds": k, "specs": specs, "unavailable": unavailable, "variant": variant}
 
 
 def run_table3(
@@ -412,6 +463,7 @@ def run_table3(
     workers: int | str | None = None,
     memory_limit=None,
     command: str | None = None,
+    method_options: dict | None = None,
 ):
     """Run Table 3 into the folder ``out`` and return its table (a DataFrame); where a run
     failed, the report is written and :class:`.sweep.RunsFailed` raised naming it.
@@ -419,9 +471,12 @@ def run_table3(
     ``quick``: the small set; ``seeds``: K (seeds 0..K-1; default 5, quick 2);
     ``methods``, ``shapes``, ``scenes``: subsets (default all); ``force``: re-run stored
     runs; ``scheduler`` / ``workers``: a Dask cluster's address, or N local worker
-    processes; ``memory_limit``: as ``--memory-limit``.  Bad arguments raise InputError
-    before anything is written."""
+    processes; ``memory_limit``: as ``--memory-limit``; ``method_options``: option name ->
+    value for every method that declares it (``--tolerance``, ``--accelerate``, as
+    ``cvtbench table2`` takes them).  Bad arguments raise InputError before anything is
+    written."""
     from .cluster import chosen, executor_for
+    from .converged import run_converged
     from .outputs import report_folder
     from .report import provenance, write_csv, write_markdown, written_files
     from .sweep import check_runs, run_sweep
@@ -438,12 +493,15 @@ def run_table3(
         shapes=shapes,
         scenes=scenes,
         memory_limit=memory_limit,
+        method_options=method_options,
     )
     command = command or "cvtbench table3" + (" --quick" if quick else "")
     with report_folder(out, command=command):
         with executor_for(cluster) as executor:
-            rows = run_sweep(
-                p["specs"], out, force=force, quiet=quiet, unavailable=p["unavailable"], executor=executor
+            sweep = dict(force=force, quiet=quiet, unavailable=p["unavailable"], executor=executor)
+            rows = run_sweep(p["specs"], out, **sweep)
+            converged = run_converged(
+                p["specs"], rows, out, p["variant"], f"{SUITE[quick]}-converged", **sweep
             )
         table = aggregate(rows)
         elapsed = time.perf_counter() - t0
@@ -457,19 +515,23 @@ def run_table3(
         written = written_files(out, ["table3.md", "table3.csv", "table3_tradeoff.png"])
     if not quiet:
         print(f"wrote {out}/{', '.join(written)} in {time.perf_counter() - t0:.0f} s", file=sys.stderr)
-    check_runs(p["specs"], rows, "table3")  # the report is written; a failed run still fails the command
+    # the report is written; a failed run (or converged run) still fails the command
+    check_runs(p["specs"], rows, "table3")
+    check_runs(*converged, "table3's converged runs")
     return table
 
 
 @dataclass(frozen=True)
 class Table3Request(options.SweepRequest):
-    """``cvtbench table3``, typed (what ``reproduce`` hands it): seeds, and the methods,
-    shapes and scenes to run (None: all)."""
+    """``cvtbench table3``, typed (what ``reproduce`` hands it): seeds, the methods,
+    shapes and scenes to run (None: all), and method options (name -> value, for every
+    method that declares them)."""
 
     seeds: int | None = None
     methods: tuple[str, ...] | None = None
     shapes: tuple[str, ...] | None = None
     scenes: tuple[str, ...] | None = None
+    method_options: dict = field(default_factory=dict)
 
 
 def check(req: Table3Request) -> dict:
@@ -482,6 +544,7 @@ def check(req: Table3Request) -> dict:
         shapes=req.shapes,
         scenes=req.scenes,
         memory_limit=req.memory_limit,
+        method_options=req.method_options,
     )
 
 
@@ -500,6 +563,7 @@ def table3(req: Table3Request) -> int:
         workers=req.workers,
         memory_limit=req.memory_limit,
         command=req.command,
+        method_options=req.method_options,
     )
     return 0
 

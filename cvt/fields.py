@@ -52,7 +52,9 @@ class DensityMap:
         v = v / v.max()  # only ratios matter; huge values must not overflow the mean
         self.values = v
         floor = DENSITY_FLOOR * v.max()
-        self._clipped = np.maximum(v, floor)
+        # the values themselves where none is below the floor (a picture's density): the
+        # same numbers, without a second picture-sized array
+        self._clipped = v if v.min() >= floor else np.maximum(v, floor)
         self._mean = float(self._clipped.mean())
 
     @property

@@ -43,6 +43,7 @@ DEFAULT_ASPECT = 0.5  # the paper's examples use β = 1/2
 # β beyond this range makes elements thinner than 1/10000 of their length: no raster
 # resolves them, and 1/β overflows long before β reaches the limits of a float
 ASPECT_RANGE = (0.01, 100.0)
+CURVE_SEGMENTS = 128  # a curved element is drawn as this inscribed polygon: area within 0.04 %
 
 
 def _regular_normals(angles_deg) -> np.ndarray:
@@ -202,6 +203,7 @@ class Shape:
             name=name,
             aspect=beta,
             element=self.name,
+            symmetry=self.unit_aspect_symmetry if self.axial and np.isclose(beta, 1.0) else self.symmetry,
             turn=math.radians(turn),
             minkowski_p=self.minkowski_p if (turn, scale) == (0.0, 1.0) else None,
         )
@@ -347,6 +349,17 @@ class Metric:
         The turn (radians) of that element in its cells (the l1 ball's square: π/4).
     minkowski_p : float or None
         The p of the Minkowski norm it is, or None.
+    symmetry : int
+        The ball's rotational symmetry at this aspect: turning it by 360°/k maps it onto
+        itself (0: every turn; an axial shape at β = 1 has its record's
+        ``unit_aspect_symmetry``).
+
+    Notes
+    -----
+    The same record is the unit element: the element of size s turned by θ is
+    ``s·R(θ)·B``.  Its gauge, support function, faces, area and symmetry (what the fit,
+    compaction, the baselines and the writers need) are methods of the ball, so an
+    element shape is implemented once.
     """
 
     name: str
@@ -357,6 +370,7 @@ class Metric:
     element: str = ""
     turn: float = 0.0
     minkowski_p: float | None = None
+    symmetry: int = 1
 
     @property
     def curved(self) -> bool:
@@ -381,14 +395,14 @@ class Metric:
             return np.stack([a * np.cos(t), b * np.sin(t)], axis=1)
         return _polygon_from_halfplanes(self.normals, self.offsets)
 
-    @property
+    @cached_property
     def circumradius(self) -> float:
         """max |v| over the unit ball: gauge(v) >= |v| / circumradius."""
         if self.curved:
             return float(max(self.semi_axes))
         return float(np.max(np.hypot(*self.outline().T)))
 
-    @property
+    @cached_property
     def inradius(self) -> float:
         """min over directions of the ball's extent: gauge(v) <= |v| / inradius."""
         if self.curved:
@@ -399,6 +413,119 @@ class Metric:
     def natural_element(self) -> str:
         """The element shape its cells hold."""
         return self.element or self.name
+
+    # ------------------------------------------------ the element, turned and sized
+    @property
+    def symmetry_turn(self) -> float:
+        """The smallest turn (radians) that maps the ball onto itself (2π for a ball of
+        symmetry 0 or 1: a turn that is read modulo it is then read whole)."""
+        return 2 * math.pi / self.symmetry if self.symmetry else 2 * math.pi
+
+    @property
+    def turns_freely(self) -> bool:
+        """Whether every turn maps the ball onto itself (a circle)."""
+        return self.symmetry == 0
+
+    @cached_property
+    def unit_area(self) -> float:
+        """The area of the element of size 1 as it is drawn (curved outlines as the
+        :data:`CURVE_SEGMENTS`-gon)."""
+        x, y = self.outline(CURVE_SEGMENTS).T
+        return 0.5 * abs(float(np.dot(x, np.roll(y, -1)) - np.dot(y, np.roll(x, -1))))
+
+    def size_for_area(self, area: float) -> float:
+        """The size whose element has ``area``."""
+        return math.sqrt(area / self.unit_area)
+
+    @cached_property
+    def faces(self) -> Faces:
+        """A polygonal ball's outline and its faces as drawn (see :class:`Faces`)."""
+        if self.curved:
+            raise ValueError(f"{self.name}: an elliptic ball has no faces")
+        verts = self.outline()
+        normals = self.normals / np.hypot(*self.normals.T)[:, None]
+        k = len(verts)
+        return Faces(
+            vertices=verts,
+            normals=normals,
+            offsets=(verts @ normals.T).max(axis=0),
+            symmetric=bool(
+                k % 2 == 0
+                and np.allclose(verts[k // 2 :], -verts[: k // 2], rtol=0, atol=1e-12)
+                and np.allclose(normals[k // 2 :], -normals[: k // 2], rtol=0, atol=1e-12)
+            ),
+        )
+
+    def support(self, nx, ny, cos, sin) -> np.ndarray:
+        """h(n) = max over the ball of v·n, for the ball turned by θ (``cos``, ``sin``
+        broadcast against the directions ``nx``, ``ny``)."""
+        ux = cos * nx + sin * ny  # R(−θ) n: n in the ball's own frame
+        uy = cos * ny - sin * nx
+        if self.curved:
+            a, b = self.semi_axes
+            ux *= a
+            uy *= b
+            return np.sqrt(ux * ux + uy * uy)  # |diag(a, b) u|; faster than np.hypot
+        faces = self.faces
+        v = faces.vertices
+        if faces.symmetric:  # max(a, −a, b, −b, ...) = max(|a|, |b|, ...) exactly
+            out = np.abs(v[0, 0] * ux + v[0, 1] * uy)
+            for k in range(1, len(v) // 2):
+                np.maximum(out, np.abs(v[k, 0] * ux + v[k, 1] * uy), out=out)
+            return out
+        out = v[0, 0] * ux + v[0, 1] * uy
+        for k in range(1, len(v)):
+            np.maximum(out, v[k, 0] * ux + v[k, 1] * uy, out=out)
+        return out
+
+    def face_normal(self, m, cos, sin) -> tuple[np.ndarray, np.ndarray]:
+        """x and y of face normal ``m[k]`` of ball k turned by θ_k (``cos``, ``sin``):
+        the numbers of :meth:`face_normals`, one per ball."""
+        normals = self.faces.normals
+        nx, ny = normals[m, 0], normals[m, 1]
+        return cos * nx - sin * ny, sin * nx + cos * ny
+
+    def face_normals(self, cos, sin, count=None, faces_first=False) -> tuple[np.ndarray, np.ndarray]:
+        """(..., K) x and y of the outward face normals, turned by θ (``count``: the
+        first ``count`` of them only; ``faces_first``: (K, ...) instead, the same
+        numbers)."""
+        normals = self.faces.normals
+        nx, ny = normals[:count, 0], normals[:count, 1]
+        if faces_first:
+            nx, ny = (v.reshape(-1, *([1] * np.ndim(cos))) for v in (nx, ny))
+            return cos * nx - sin * ny, sin * nx + cos * ny
+        c, s = cos[..., None], sin[..., None]
+        return c * nx - s * ny, s * nx + c * ny
+
+    def gauge_turned(self, vx, vy, cos, sin) -> np.ndarray:
+        """Gauge of world offsets (``vx``, ``vy``) from the centre of a ball turned by θ
+        (``cos``, ``sin``): a point is inside the element of size s iff gauge <= s."""
+        ux = cos * vx + sin * vy  # R(-θ) v
+        uy = cos * vy - sin * vx
+        if self.curved:
+            a, b = self.semi_axes
+            return np.hypot(ux / a, uy / b)
+        n, h = self.normals, self.offsets
+        out = (n[0, 0] * ux + n[0, 1] * uy) / h[0]
+        for k in range(1, len(h)):
+            out = np.maximum(out, (n[k, 0] * ux + n[k, 1] * uy) / h[k])
+        return out
+
+    def reach(self, vx, vy, theta, gap: float) -> np.ndarray:
+        """The largest size whose element turned by ``theta`` keeps ``gap/2`` clear of
+        the point at offset (``vx``, ``vy``) from its centre: the grout rule of the
+        placement (a mitred offset for polygons, first order for ellipses)."""
+        cos, sin = np.cos(theta), np.sin(theta)
+        if gap <= 0:
+            return self.gauge_turned(vx, vy, cos, sin)
+        if self.curved:
+            return self.gauge_turned(vx, vy, cos, sin) - 0.5 * gap / min(self.semi_axes)
+        ux, uy = cos * vx + sin * vy, cos * vy - sin * vx
+        n, h = self.normals, self.offsets
+        out = (n[0, 0] * ux + n[0, 1] * uy - 0.5 * gap) / h[0]
+        for k in range(1, len(h)):
+            out = np.maximum(out, (n[k, 0] * ux + n[k, 1] * uy - 0.5 * gap) / h[k])
+        return out
 
     def cone(self, height: float) -> dict:
         """Paper Table 1: the cone or pyramid whose height over a base point equals the
@@ -422,6 +549,29 @@ class Metric:
                 depth=float(np.ptp(base[:, 1])),
             )
         return geom
+
+
+@dataclass(frozen=True)
+class Faces:
+    """A polygonal ball's outline and faces as drawn.
+
+    Attributes
+    ----------
+    vertices : numpy.ndarray
+        (K, 2) the outline's vertices, counter-clockwise.
+    normals : numpy.ndarray
+        (K, 2) the faces' outward unit normals.
+    offsets : numpy.ndarray
+        (K,) the outline's support along each of its own face normals.
+    symmetric : bool
+        Whether vertices and normals come in opposite pairs k, k + K/2 (a centrally
+        symmetric polygon: h(−n) = h(n), so half the vertices give the support).
+    """
+
+    vertices: np.ndarray
+    normals: np.ndarray
+    offsets: np.ndarray
+    symmetric: bool
 
 
 def _polygon_from_halfplanes(normals: np.ndarray, offsets: np.ndarray) -> np.ndarray:
@@ -704,6 +854,8 @@ __all__ = [
     "ELEMENT_METRIC",
     "NATURAL_ELEMENT",
     "Metric",
+    "Faces",
+    "CURVE_SEGMENTS",
     "make_metric",
     "polygon_metric",
     "shape_vertices",

@@ -93,14 +93,14 @@ class Grid:
             try:
                 m = np.ascontiguousarray(self.mask, dtype=bool)
             except (ValueError, TypeError) as exc:
-                raise InputError(f"mask is not an array of booleans: {exc}") from None
+                raise InputError(f"region (its mask) is not an array of booleans: {exc}") from None
             if m.shape != (self.height, self.width):
                 raise InputError(
-                    f"mask (the region) has shape {m.shape}, the raster is {self.width}x{self.height}: "
+                    f"region (its mask) has shape {m.shape}, the raster is {self.width}x{self.height}: "
                     f"it must be ({self.height}, {self.width})"
                 )
             if not m.any():
-                raise InputError("mask (the region) is empty: no pixel is inside the region")
+                raise InputError("region (its mask) is empty: no pixel is inside it")
             object.__setattr__(self, "mask", m)
 
     @property

@@ -42,8 +42,10 @@ PER_PIXEL = {
     "placement": 24,  # mosaics: contour samples and their reach, the region, the evaluation
     "pictures": 12,  # cells.png's colour per pixel, elements.png drawn in bands
     "labels": 48,  # a backend that does not say: labels and moments on the host
-    "picture": 200,  # a mosaic's picture at raster size, its structure tensor and fields
-    "colours": 60,  # each element's mean colour: a distance per pixel
+    # a mosaic's picture at raster size (float32), its fields, and while they are made the
+    # tensor's results and one complex spectrum (the tensor itself a band of rows at a time)
+    "picture": 64,
+    "colours": 16,  # the tiles' fills: their pixels found and read a run of tiles at a time
 }
 # ... and per site (coefficients, the placed polygon, its outline in result.json)
 PER_SITE = {"polygon": 1_000, "curved": 4_000}  # a 128-gon outline costs ~2.5 kB in GEOS

@@ -14,6 +14,7 @@ import numpy as np
 import shapely
 
 from .metrics import (
+    CURVE_SEGMENTS,
     DEFAULT_ELEMENT,
     METRIC_NAMES,
     NATURAL_ELEMENT,
@@ -28,7 +29,6 @@ from .metrics import (
 from .validate import one_of
 
 ELEMENT_SHAPES = tuple(SHAPES)  # the built-in shapes; the user's polygon is "polygon:FILE"
-CURVE_SEGMENTS = 128  # inscribed 128-gon: area within 0.04 % of the ellipse
 
 
 def shape_record(shape, name: str = "element") -> Shape:
@@ -48,11 +48,8 @@ def packing_density(shape: str) -> float:
 
 def rotational_symmetry(shape: str, aspect: float = 0.5) -> int:
     """k such that turning the element by 360°/k maps it onto itself (0 for a circle, or
-    an ellipse of β = 1: an axial shape of β = 1 has the record's ``unit_aspect_symmetry``)."""
-    record = shape_record(shape)
-    if record.axial and aspect is not None and np.isclose(aspect, 1.0):
-        return record.unit_aspect_symmetry
-    return record.symmetry
+    an ellipse of β = 1: the ball's :attr:`~.metrics.Metric.symmetry`)."""
+    return element_ball(shape, aspect).symmetry
 
 
 def unit_outline(shape: str, aspect: float = 0.5) -> np.ndarray:

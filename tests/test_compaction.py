@@ -26,7 +26,6 @@ from compact_distributions.cvt.placement.alternate import (
 )
 from compact_distributions.cvt.placement.compaction import (
     _best_pair_directions,
-    _Unit,
     boundary_segments,
     compact,
 )
@@ -262,6 +261,23 @@ def test_pdhg_rounds_are_reproducible_and_cover_at_least_what_tiles_do():
     assert_separated("square", runs[0].centres, angles, runs[0].sizes, grid, 0.0)
 
 
+@pytest.mark.parametrize("shape", ["square", "ellipse", "triangle"])
+def test_threads_split_the_work_not_the_result(shape, monkeypatch):
+    """With pieces small enough that every thread gets some (the near pairs' candidates
+    and the PDHG's blocks of rows and columns), a round's elements are those of one
+    thread bit for bit: each number is computed by the same operations in the same order."""
+    from compact_distributions.cvt.placement import compaction
+
+    grid, sites, angles, sizes = random_layout(shape, 4, 150, "L")
+    one = compact(sites, angles, sizes, shape, 0.5, grid, rounds=3, threads=1)
+    monkeypatch.setattr(compaction, "_PIECE_ROWS", 50)
+    monkeypatch.setattr(compaction, "_PDHG_BLOCK_ENTRIES", 300)
+    for t in (2, 3):
+        split = compact(sites, angles, sizes, shape, 0.5, grid, rounds=3, threads=t)
+        assert np.array_equal(one.centres, split.centres) and np.array_equal(one.sizes, split.sizes)
+    assert_separated(shape, one.centres, angles, one.sizes, grid, 0.0)
+
+
 def test_rows_no_shrinking_can_meet_put_their_elements_back():
     """An approximate solution that brings two centres closer than the gap (or a centre
     onto the border) would cost an element: both are put back where the round started,
@@ -478,7 +494,7 @@ def test_pair_gaps_along_face_normals_match_the_outlines(shape):
     r = rng.uniform(1, 4, n)
     i, j = np.arange(0, n, 2), np.arange(1, n, 2)
     th[j[::2]] = th[i[::2]]
-    unit = _Unit(shape, 0.5)
+    unit = element_ball(shape, 0.5)
     prev = np.full((len(i), 2), np.nan)
     nx, ny, g = _best_pair_directions(unit, c, r, np.cos(th), np.sin(th), i, j, prev)
     xy = [np.asarray(shapely.get_coordinates(p)).reshape(-1, 2) for p in polygons(shape, c, th, r)]

@@ -334,3 +334,175 @@ def test_converge_command_writes_its_report(tmp_path, monkeypatch):
     text = (out / "converge.md").read_text()
     assert "Table 2's problems: accelerated Lloyd reaches" in text and "density picture scene.jpg" in text
     assert (out / "converge.png").stat().st_size > 0
+
+
+# ------------------------------------------------------------------ the tables' energy column
+def _run(method="ours", seed=0, element="square", options=(), iterations=20):
+    from compact_distributions.bench.runs import RunSpec
+
+    return RunSpec("t", method, "numpy", element, 96, 96, 40, iterations, seed, options=options)
+
+
+def _reference(end, converged, digest_="abc", status="ok"):
+    return {
+        "status": status,
+        "reason": "boom" if status != "ok" else "",
+        "backend": "numpy",
+        "replay_sites_sha1": digest_,
+        "end_energy": end,
+        "converged_energy": converged,
+    }
+
+
+def test_energy_gap_by_hand():
+    """A run whose digest its problem's replay repeats: (end / converged - 1), computed
+    here by hand; every other case (another method, other sites, a NaN, a missing or a
+    zero energy, a failed reference) has no gap and says why."""
+    from compact_distributions.bench.converged import NO_LLOYD, gap_of
+
+    ok = {"status": "ok", "sites_sha1": "abc"}
+    assert gap_of(_run(), ok, _reference(110.0, 100.0)) == (pytest.approx(0.1, abs=1e-15), "")
+    assert gap_of(_run(), ok, _reference(99.0, 100.0))[0] == pytest.approx(-0.01, abs=1e-15)
+    assert gap_of(_run("hu2016"), ok, _reference(110.0, 100.0)) == (
+        pytest.approx(np.nan, nan_ok=True),
+        NO_LLOYD,
+    )
+    for reference, why in [
+        (_reference(110.0, 100.0, digest_="other"), "not those of Lloyd"),
+        (_reference(float("nan"), 100.0), "not finite"),
+        (_reference(110.0, float("nan")), "not finite"),
+        (_reference(None, 100.0), "not finite"),
+        (_reference(110.0, 0.0), "not finite"),
+        (_reference(110.0, float("inf")), "not finite"),
+        (_reference(110.0, 100.0, status="failed"), "boom"),
+        (None, "not measured"),
+    ]:
+        gap, note = gap_of(_run(), ok, reference)
+        assert np.isnan(gap) and why in note, (reference, note)
+    assert np.isnan(gap_of(_run(), {"status": "failed"}, _reference(110.0, 100.0))[0])
+
+
+def test_one_converged_run_per_problem_and_lloyd_options():
+    """Runs of one problem share one converged run whatever their method or backend;
+    Lloyd options make another, and so do seeds where more than seed 0 are measured;
+    methods without a Lloyd energy make none."""
+    from compact_distributions.bench.converged import converged_specs, problem_key
+
+    specs = [
+        _run(),
+        _run("ours-compact"),
+        _run("ours-compact", options={"alternate": True}),
+        _run(seed=1),
+        _run(options={"accelerate": True}),
+        _run("hu2016", seed=2),
+    ]
+    made = converged_specs(specs, "numpy", "t-converged")
+    assert [c.problem_key for c in made] == [problem_key(specs[k]) for k in (0, 4)]
+    assert made[1].lloyd == (("accelerate", True),) and made[0].lloyd == ()
+    more = converged_specs(specs, "numpy", "t-converged", seeds=3)
+    assert [c.problem_key for c in more] == [problem_key(specs[k]) for k in (0, 3, 4)]
+    assert len({c.key for c in more}) == 3
+
+
+def _gap_by_definition(problem, backend, iterations):
+    """The gap written out from cvt.lloyd's parts: the run's final sites and their
+    energy, then the run continued, accelerated, to the tight tolerance."""
+    from compact_distributions.cvt.lloyd import TIGHT_CAP, TIGHT_TOLERANCE
+
+    run = lloyd(problem, backend, iterations)
+    end = final_energy(backend, LloydSetup.of(problem), run.sites)
+    more = lloyd(problem, backend, TIGHT_CAP, sites=run.sites, tolerance=TIGHT_TOLERANCE, accelerate=True)
+    return run, end, min(end, *more.energy)
+
+
+def test_a_converged_run_measures_the_run_continued_to_convergence(reference):
+    """The stored replay and continuation give the gap of its definition, the replay's
+    digest is that of the method's own run of the problem (so the table attaches the gap
+    to it), fewer iterations leave a larger gap, and convergence_gap (which starts again
+    from the seeding) agrees within a fraction of a percent."""
+    from compact_distributions.bench.converged import ConvergedSpec, attach_gaps
+
+    spec = _run()
+    row = spec.execute(reference)["row"]
+    conv = ConvergedSpec("t-converged", "numpy", spec).execute(reference)["row"]
+    run, end, converged = _gap_by_definition(spec.problem(), reference, spec.iterations)
+    assert (conv["end_energy"], conv["converged_energy"]) == (end, converged)
+    assert conv["replay_sites_sha1"] == row["sites_sha1"] == digest(run.sites)
+    rows = [row, {"status": "ok", "sites_sha1": row["sites_sha1"]}]
+    attach_gaps([spec, _run(seed=1)], rows, [conv])
+    assert rows[0]["energy_gap"] == pytest.approx(end / converged - 1, rel=1e-12)
+    assert 0.001 < rows[0]["energy_gap"] < 0.2 and np.isnan(rows[1]["energy_gap"])
+    early_row = ConvergedSpec("t-converged", "numpy", _run(iterations=3)).execute(reference)["row"]
+    assert early_row["end_energy"] / early_row["converged_energy"] - 1 > rows[0]["energy_gap"]
+    truth = convergence_gap(spec.problem(), reference, spec.iterations)
+    assert truth["energy"] == end and abs(truth["excess"] - rows[0]["energy_gap"]) < 0.005
+
+
+def test_tables_aggregate_the_gap_by_hand():
+    """Table 2 and Table 3 average the gaps of a row's seeds; a row without one shows —
+    and its reason in the notes."""
+    from compact_distributions.bench import table2, table3
+    from compact_distributions.bench.converged import gap_notes
+    from compact_distributions.cvt.evaluate import MEASURES
+
+    def rows(method, gaps, note="", **extra):
+        return [
+            {
+                **_run(method, seed).params(),
+                "key": _run(method, seed).key,
+                "status": "ok",
+                "reason": "",
+                "device": "cpu",
+                "coverage": 0.7,
+                "overlap": 0.0,
+                "method_seconds": 1.0,
+                "lloyd_seconds": 0.5,
+                "ms_per_iteration": 1.0,
+                "placed": 40,
+                "empty_cells": 0,
+                "energy_gap": gap,
+                "energy_gap_note": note,
+                "n_elements": 40,
+                "scene": "density",
+                **{m: 0.5 for m in MEASURES},
+                **extra,
+            }
+            for seed, gap in enumerate(gaps)
+        ]
+
+    hand = rows("ours", [0.01, 0.03]) + rows("hu2016", [np.nan, np.nan], "no Lloyd energy: its own loop")
+    for module in (table2, table3):
+        table = module.aggregate(hand).set_index("method")
+        assert table.loc["ours", "energy_gap_mean"] == pytest.approx(0.02)
+        assert np.isnan(table.loc["hu2016", "energy_gap_mean"])
+        notes = gap_notes(table.reset_index(), ["method", "backend"])
+        assert notes[1] == "energy above converged — for hu2016 numpy: no Lloyd energy: its own loop"
+    # one seed's NaN does not turn the row's mean into NaN, nor pass for a figure
+    part = table2.aggregate(rows("ours", [0.04, np.nan], "sites differ")).iloc[0]
+    assert part["energy_gap_mean"] == pytest.approx(0.04)
+
+
+def test_table2_end_to_end_has_the_gap_of_its_problems(tmp_path, reference):
+    """A small Table 2: ours' figure is convergence_gap's excess of its problem; the
+    baseline's row shows — and the notes say why; the converged runs are stored and read
+    back (not run again) the next time."""
+    import pandas as pd
+
+    argv = ["table2", "--quick", "--methods", "ours,hu2016", "--backends", "numpy", "--shapes", "square"]
+    assert main([*argv, "--seeds", "1", "--out", str(tmp_path), "--quiet"]) == 0
+    table = pd.read_csv(tmp_path / "table2.csv").set_index("method")
+    from compact_distributions.bench.runs import RunSpec
+
+    spec = RunSpec("x", "ours", "numpy", "square", 256, 256, 250, 20, 0)
+    _, end, converged = _gap_by_definition(spec.problem(), reference, 20)
+    assert table.loc["ours", "energy_gap_mean"] == pytest.approx(
+        end / converged - 1, rel=1e-5
+    )  # csv: 6 digits
+    assert np.isnan(table.loc["hu2016", "energy_gap_mean"])
+    text = (tmp_path / "table2.md").read_text()
+    assert "energy above converged — for hu2016 numpy: no Lloyd energy" in text
+    stored = list((tmp_path / "raw" / "table2-quick-converged").glob("*.json"))
+    assert len(stored) == 1
+    before = stored[0].stat().st_mtime_ns
+    assert main([*argv, "--seeds", "1", "--out", str(tmp_path), "--quiet"]) == 0
+    assert stored[0].stat().st_mtime_ns == before

@@ -135,5 +135,17 @@ def test_ragged_and_nan_arrays_are_named():
         make_mosaic([[1, 2], [3]], cd.create_backend("numpy"), n_elements=4)
     with pytest.raises(cd.InputError, match="^image contains NaN"):
         make_mosaic(np.full((4, 4, 3), np.nan), cd.create_backend("numpy"), n_elements=4)
-    with pytest.raises(cd.InputError, match="^mask is not an array"):
-        cd.problem(n_elements=4, size=8, mask=[[1, 2], [3]])
+    with pytest.raises(cd.InputError, match="^region \\(its mask\\) is not an array"):
+        cd.problem(n_elements=4, size=8, region=[[1, 2], [3]])
+
+
+def test_the_region_has_one_name():
+    """``region=`` is the command line's ``--region``; ``mask=`` still works for one
+    release, with a DeprecationWarning, and the same region."""
+    inside = np.zeros((8, 8), bool)
+    inside[2:6, 1:7] = True
+    assert cd.problem(4, 8, region=inside).grid.pixel_count == 24
+    with pytest.warns(DeprecationWarning, match="region="):
+        assert cd.problem(4, 8, mask=inside).grid.pixel_count == 24
+    with pytest.raises(cd.InputError, match="region"):
+        cd.problem(4, 8, region=inside, mask=inside)

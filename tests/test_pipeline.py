@@ -39,7 +39,7 @@ def test_pipeline_report_of_tiny_runs(tmp_path):
     code = main(
         [
             "pipeline",
-            "--kinds",
+            "--workloads",
             "ours-compact",
             "--backends",
             "numpy",

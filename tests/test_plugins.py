@@ -33,64 +33,27 @@ requires-python = ">=3.10"
 
 [project.entry-points."compact_distributions.methods"]
 shrunk = "cvt_plugin_example:METHOD"
-plain-ours = "cvt_plugin_example:plain_ours"
+plain-ours = "cvt_plugin_extra:plain_ours"
 broken = "cvt_plugin_example_missing:METHOD"
 
 [project.entry-points."compact_distributions.backends"]
 brute = "cvt_plugin_example:BruteBackend"
+
+[tool.setuptools]
+py-modules = ["cvt_plugin_example", "cvt_plugin_extra"]
 """
 
-MODULE = '''
-"""A method and a backend of another distribution."""
-import numpy as np
-import shapely
-
-from compact_distributions.backends.base import Backend
-from compact_distributions.cvt.methods import Method, MethodOption
+# The Extending guide's example module, installed as it is documented; the test adds a
+# second module of its own for what the guide only describes (a plain callable)
+EXAMPLE = ROOT / "docs" / "extending" / "cvt_plugin_example.py"
+EXTRA_MODULE = '''
+"""A plain callable of the same distribution, registered as a method."""
 from compact_distributions.cvt.placement.ours import run_ours
-from compact_distributions.cvt.metrics import compile_sites
-from compact_distributions.cvt.validate import real_number
-
-
-def run(problem, backend, *, iterations=20, progress=None, element=None, gap=0.0, shrink=1.0):
-    """Ours, every element then scaled about its centre by ``shrink``."""
-    dist = run_ours(problem, backend, iterations=iterations, progress=progress, element=element, gap=gap)
-    dist.elements = [None if p is None else shapely.affinity.scale(p, shrink, shrink, origin="centroid")
-                     for p in dist.elements]
-    dist.method = "shrunk"
-    return dist
-
-
-METHOD = Method("shrunk", run, summary="ours with every element shrunk",
-                options=(MethodOption("shrink", float, 1.0, "scale of each element (0 to 1)",
-                                      check=lambda v, name: real_number(v, name, above=0.0, maximum=1.0)),))
 
 
 def plain_ours(problem, backend, **options):
     """The paper's method, as a plain callable."""
     return run_ours(problem, backend, **options)
-
-
-class BruteBackend(Backend):
-    """Every pixel against every site, float64 (ties to the lower index)."""
-
-    name = "brute"
-
-    def device(self):
-        return "CPU, brute force (a plug-in)"
-
-    def _label(self, sites, angles, scales, metric, grid):
-        coeff = compile_sites(metric, sites, angles, scales)
-        ys, xs = np.mgrid[0:grid.height, 0:grid.width] + 0.5
-        best = np.full(xs.shape, np.inf)
-        labels = np.full(xs.shape, -1, dtype=np.int32)
-        for i in range(len(sites)):
-            d = coeff.distance(np.full(xs.shape, i), xs, ys)
-            closer = d < best
-            best[closer] = d[closer]
-            labels[closer] = i
-        labels[~grid.inside()] = -1
-        return labels
 '''
 
 
@@ -99,7 +62,8 @@ def plugin_env(tmp_path_factory):
     """Environment variables under which the example distribution is installed."""
     src = tmp_path_factory.mktemp("plugin-src")
     (src / "pyproject.toml").write_text(textwrap.dedent(PYPROJECT))
-    (src / "cvt_plugin_example.py").write_text(textwrap.dedent(MODULE))
+    (src / "cvt_plugin_example.py").write_text(EXAMPLE.read_text())
+    (src / "cvt_plugin_extra.py").write_text(textwrap.dedent(EXTRA_MODULE))
     target = tmp_path_factory.mktemp("plugin-site")
     done = subprocess.run(
         [sys.executable, "-m", "pip", "install", "-q", "--no-deps", "--target", str(target), str(src)],

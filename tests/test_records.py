@@ -133,3 +133,79 @@ def test_a_users_polygon_is_not_added_to_the_table(tmp_path):
     before = dict(SHAPES)
     ball = make_metric(f"polygon:{path}")
     assert len(ball.normals) == 3 and SHAPES == before
+
+
+def test_one_unit_element_type():
+    """The unit ball is the one unit-element record: no other class of the suite defines
+    a support function, a gauge or an area of its own (the fit's evaluator of compiled
+    per-site balls reads :func:`compile_sites`' coefficients, not a shape)."""
+    geometry = {"support", "gauge", "gauge_turned", "face_normals", "unit_area", "size_for_area"}
+    owners = []
+    for path in suite_modules():
+        for node in ast.walk(ast.parse(path.read_text())):
+            if isinstance(node, ast.ClassDef):
+                defined = {f.name for f in node.body if isinstance(f, ast.FunctionDef)}
+                if defined & geometry:
+                    owners.append(f"{path.relative_to(ROOT)}:{node.name}")
+    assert owners == ["cvt/metrics.py:Metric"]
+
+
+def _turned_outlines(ball, theta, size=1.0):
+    from compact_distributions.cvt.metrics import CURVE_SEGMENTS
+
+    c, s = np.cos(theta), np.sin(theta)
+    v = ball.outline(4 * CURVE_SEGMENTS) * size
+    return np.stack([c * v[:, 0] - s * v[:, 1], s * v[:, 0] + c * v[:, 1]], axis=1)
+
+
+def _boundary_point(outline, rng):
+    """A random point on a closed outline's edges (its vertices for a curved one)."""
+    k = rng.integers(len(outline))
+    t = rng.uniform()
+    return (1 - t) * outline[k] + t * outline[(k + 1) % len(outline)] if len(outline) < 64 else outline[k]
+
+
+@pytest.mark.parametrize("shape", ["square", "rectangle", "triangle", "circle", "ellipse", "hexagon"])
+def test_the_unit_element_against_its_own_outline(shape):
+    """Support, gauge, reach, area and symmetry of the element record, each against the
+    outline it draws (brute force over its vertices, shapely's area, a turned copy)."""
+    import shapely
+
+    from compact_distributions.cvt.shapes import element_ball
+
+    ball = element_ball(shape, 0.5)
+    rng = np.random.default_rng(7)
+    theta = rng.uniform(0, 2 * np.pi, 50)
+    phi = rng.uniform(0, 2 * np.pi, 50)
+    nx, ny = np.cos(phi), np.sin(phi)
+    brute = np.array(
+        [(_turned_outlines(ball, t) @ [x, y]).max() for t, x, y in zip(theta, nx, ny, strict=True)]
+    )
+    np.testing.assert_allclose(ball.support(nx, ny, np.cos(theta), np.sin(theta)), brute, rtol=2e-4)
+    # a point on the boundary of the element of size 3 turned by θ has gauge 3
+    on = np.array([_boundary_point(_turned_outlines(ball, t, 3.0), rng) for t in theta])
+    g = ball.gauge_turned(on[:, 0], on[:, 1], np.cos(theta), np.sin(theta))
+    np.testing.assert_allclose(g, 3.0, rtol=1e-9)
+    np.testing.assert_array_equal(ball.reach(on[:, 0], on[:, 1], theta, 0.0), g)
+    # with a gap G the element of size reach keeps G/2 off the point, and not much more
+    # (shapely's distance to the drawn element)
+    far = on * 1.5
+    size = ball.reach(far[:, 0], far[:, 1], theta, 0.4)
+    gaps = np.array(
+        [
+            shapely.Polygon(_turned_outlines(ball, t, r)).distance(shapely.Point(p))
+            for t, r, p in zip(theta, size, far, strict=True)
+        ]
+    )
+    assert np.all(gaps >= 0.2 - 1e-6) and np.median(gaps) < 0.5
+    assert ball.unit_area == pytest.approx(shapely.area(shapely.Polygon(ball.outline(128))), rel=1e-12)
+    assert ball.size_for_area(4 * ball.unit_area) == pytest.approx(2.0)
+    # turned by its symmetry turn the outline maps onto itself; by half of it, not
+    if ball.turns_freely:
+        assert shape == "circle"
+        return
+    a = shapely.Polygon(_turned_outlines(ball, 0.0))
+    b = shapely.Polygon(_turned_outlines(ball, ball.symmetry_turn))
+    half = shapely.Polygon(_turned_outlines(ball, ball.symmetry_turn / 2))
+    assert a.symmetric_difference(b).area < 1e-3 * a.area
+    assert a.symmetric_difference(half).area > 1e-2 * a.area

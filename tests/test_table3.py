@@ -101,6 +101,9 @@ def test_a_small_table3_end_to_end(tmp_path):
     assert field.loc["ours-compact", "direction_fidelity_mean"] < 2.0
     dens = csv[csv.scene == "density"].set_index("method")
     assert dens.loc["ours-compact", "coverage_mean"] > dens.loc["ours", "coverage_mean"]
+    # one Lloyd, so one gap: ours-compact's sites before placement are ours'
+    assert 0 < dens.loc["ours", "energy_gap_mean"] == dens.loc["ours-compact", "energy_gap_mean"] < 0.2
+    assert "energy above converged" in text
 
 
 def test_committed_table3_holds_every_run_and_the_compaction_targets():
@@ -135,6 +138,8 @@ def test_committed_table3_holds_every_run_and_the_compaction_targets():
         (["--scenes", ","], "--scenes"),
         (["--memory-limit", "1K"], "memory"),
         (["--workers", "0"], "--workers"),
+        (["--tolerance", "2"], "--tolerance"),
+        (["--methods", "hu2016", "--accelerate"], "--accelerate is an option of none of --methods hu2016"),
     ],
 )
 def test_bad_input_is_one_line_and_writes_nothing(argv, text, capsys, tmp_path):
@@ -172,3 +177,32 @@ def test_a_dask_sweep_gives_the_same_table(tmp_path):
     cols = [f"{m}_mean" for m in MEASURES]
     pd.testing.assert_frame_equal(here[cols], there[cols])
     assert (tmp_path / "there" / "table3.md").exists()
+
+
+def test_table3_takes_the_lloyd_options_as_table2_does(tmp_path):
+    """--tolerance and --accelerate go to the methods that declare them (their runs are
+    keyed and labelled by them), not to the others; the command line offers them."""
+    from compact_distributions.bench.commands.cli import build_parser
+    from compact_distributions.bench.options import given_method_options
+    from compact_distributions.bench.table3 import Table3Request, check
+
+    args = build_parser().parse_args(["table3", "--quick", "--tolerance", "1e-4", "--accelerate"])
+    assert given_method_options(args) == {"tolerance": "1e-4", "accelerate": True}
+    plan = check(
+        Table3Request(
+            out=tmp_path,
+            quick=True,
+            seeds=1,
+            methods=("ours", "hu2016"),
+            shapes=("square",),
+            scenes=("density",),
+            method_options={"tolerance": "1e-4", "accelerate": True},
+        )
+    )
+    by_method = {s.method: s for s in plan["specs"]}
+    assert by_method["ours"].options == (("accelerate", True), ("tolerance", 1e-4))
+    assert by_method["ours"].label == "ours tol=0.0001 accelerated"
+    assert by_method["ours"].key.endswith("__tol0.0001__acc")
+    assert by_method["hu2016"].options == ()
+    plain = problem_set(True, 1, ["ours"], ["square"], ["density"], "numpy")
+    assert plain[0].options == () and plain[0].key != by_method["ours"].key

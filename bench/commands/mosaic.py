@@ -226,7 +226,6 @@ def run(args) -> int:
         make_mosaic,
         picture_array,
         raster_size,
-        resample,
         resolve_shapes,
     )
     from compact_distributions.cvt.resources import mosaic_estimate
@@ -258,24 +257,24 @@ def run(args) -> int:
     ).check(args.memory_limit, lower="use a smaller --size, fewer --elements or a smaller --png-scale")
     opts["size"] = (w, h)
     with OutputFolder(args.out, "--out", COMMAND_OUTPUTS) as tmp:
+        # make_mosaic resamples the picture to the raster (opts["size"]) itself: an
+        # enlarged picture need not then be held while the method runs
         rgb, _ = picture_array(args.image, at_least=(w, h), memory_limit=args.memory_limit, name="IMAGE")
-        picture = resample(rgb, w, h)
         _say(
             args.quiet, f"read {args.image}: {pw}x{ph} px, as {w}x{h} (read at {rgb.shape[1]}x{rgb.shape[0]})"
         )
-        del rgb
         with options.open_backend(args) as backend:
             _say(
                 args.quiet,
                 f"mosaic of {opts['n_elements']} elements, {opts['iterations']} iterations "
                 f"on {backend.variant}",
             )
-            m = make_mosaic(picture, backend, **opts)
+            m = make_mosaic(rgb, backend, **opts)
             m.source = args.image
             comparison = None
             if args.compare:
                 _say(args.quiet, f"comparison runs for --compare {args.compare}")
-                comparison = compare_figure(picture, backend, dict(opts, progress=None), args.compare, m)
+                comparison = compare_figure(rgb, backend, dict(opts, progress=None), args.compare, m)
             _say(
                 args.quiet,
                 f"{m.method}: placed {m.placed} of {len(m.sites)} tiles, coverage {m.coverage:.3f}, "

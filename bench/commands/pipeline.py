@@ -35,7 +35,8 @@ from compact_distributions.cvt.validate import name_list, one_of, whole_number
 
 from .. import options
 
-KINDS = ("ours-compact", "mosaic")
+# what a row runs: `cvtbench run --method ours-compact`, or `cvtbench mosaic`
+WORKLOADS = ("ours-compact", "mosaic")
 FULL_ELEMENTS = (1000, 4000, 16000, 64000)
 QUICK_ELEMENTS = (1000, 4000)
 DEFAULT_BACKENDS = ("opencl",)
@@ -43,7 +44,7 @@ MAX_ELEMENTS = 1_000_000
 # the stages drawn, in pipeline order (result.json's stage_seconds keys)
 STAGES = ("picture", "lloyd", "final_label", "fit", "compaction", "cutting", "fills", "evaluation", "writing")
 COLUMNS = [
-    "kind",
+    "workload",
     "backend",
     "n_elements",
     "size",
@@ -110,30 +111,35 @@ def run_measured(python_args: list[str]) -> tuple[int, str, float, int]:
 
 @dataclass(frozen=True)
 class PipelineSpec:
-    """One configuration: a command of ``kind`` with ``n_elements`` on ``backend``."""
+    """One configuration: a ``workload`` with ``n_elements`` on ``backend``."""
 
     suite: str
-    kind: str
+    workload: str
     backend: str
     n_elements: int
     size: int
 
     @property
     def key(self) -> str:
-        return f"{self.kind}__{self.backend}__n{self.n_elements}__{self.size}"
+        return f"{self.workload}__{self.backend}__n{self.n_elements}__{self.size}"
 
     def describe(self) -> str:
-        return f"{self.kind} {self.backend} N={self.n_elements} {self.size}²"
+        return f"{self.workload} {self.backend} N={self.n_elements} {self.size}²"
 
     def params(self) -> dict:
-        return {"kind": self.kind, "backend": self.backend, "n_elements": self.n_elements, "size": self.size}
+        return {
+            "workload": self.workload,
+            "backend": self.backend,
+            "n_elements": self.n_elements,
+            "size": self.size,
+        }
 
     def memory_estimate(self):
         from compact_distributions.cvt.resources import mosaic_estimate, run_estimate
 
         from ..sweep import memory_class
 
-        if self.kind == "mosaic":
+        if self.workload == "mosaic":
             return mosaic_estimate(
                 self.size, self.size, self.n_elements, memory_class(self.backend), element=REFERENCE_SHAPE
             )
@@ -145,18 +151,27 @@ class PipelineSpec:
             self.n_elements,
             memory_class(self.backend),
             element=REFERENCE_SHAPE,
-            method=get_method(self.kind),
+            method=get_method(self.workload),
             what=f"the run {self.describe()}",
         )
 
     def argv(self, out: Path) -> list[str]:
         """The command line of this configuration, writing into ``out``."""
         common = ["--elements", str(self.n_elements), "--backend", self.backend, "--quiet", "--out", str(out)]
-        if self.kind == "mosaic":
+        if self.workload == "mosaic":
             from .mosaic import SAMPLES_DIR
 
             return ["mosaic", str(SAMPLES_DIR / SAMPLE), "--size", str(self.size), *common]
-        return ["run", "--method", self.kind, "--element", REFERENCE_SHAPE, "--size", str(self.size), *common]
+        return [
+            "run",
+            "--method",
+            self.workload,
+            "--element",
+            REFERENCE_SHAPE,
+            "--size",
+            str(self.size),
+            *common,
+        ]
 
     def execute(self, backend) -> dict:
         """Run the command in a process of its own (its peak memory is its own)."""
@@ -198,10 +213,10 @@ class PipelineSpec:
 
 @dataclass(frozen=True)
 class PipelineRequest(options.SweepRequest):
-    """``cvtbench pipeline``, typed: the kinds of command, backend variants and element
-    counts to run (None: the defaults)."""
+    """``cvtbench pipeline``, typed: the workloads, backend variants and element counts
+    to run (None: the defaults)."""
 
-    kinds: tuple[str, ...] | None = None
+    workloads: tuple[str, ...] | None = None
     backends: tuple[str, ...] | None = None
     elements: tuple[int, ...] | None = None
     extra: dict = field(default_factory=dict)
@@ -211,7 +226,7 @@ class PipelineRequest(options.SweepRequest):
         counts = name_list(args.elements, "--elements")
         return cls(
             **cls.common(args),
-            kinds=options.as_tuple(name_list(args.kinds, "--kinds", KINDS)),
+            workloads=options.as_tuple(name_list(args.workloads, "--workloads", WORKLOADS)),
             backends=options.as_tuple(name_list(args.backends, "--backends", variant_names())),
             elements=None
             if counts is None
@@ -227,7 +242,9 @@ def add_parser(sub):
         formatter_class=argparse.RawDescriptionHelpFormatter,
     )
     options.add_sweep_options(p, f"N in {', '.join(map(str, QUICK_ELEMENTS))} only")
-    p.add_argument("--kinds", default=None, help=f"comma list of {', '.join(KINDS)} (default both)")
+    p.add_argument("--workloads", default=None, help=f"comma list of {', '.join(WORKLOADS)} (default both)")
+    # the option's name before 0.2; kept for one release
+    p.add_argument("--kinds", dest="workloads", default=None, help=argparse.SUPPRESS)
     p.add_argument(
         "--backends",
         default=None,
@@ -249,12 +266,14 @@ def prepare(req: PipelineRequest) -> dict:
 
     check_folder(req.out)
     status = variant_status()
-    kinds = [one_of(k, "--kinds", KINDS) for k in req.kinds or KINDS]
+    workloads = [one_of(w, "--workloads", WORKLOADS) for w in req.workloads or WORKLOADS]
     default = req.backends or [first_available(DEFAULT_BACKENDS, status)]
     backends = [one_of(b, "--backends", variant_names()) for b in default]
     counts = list(req.elements or (QUICK_ELEMENTS if req.quick else FULL_ELEMENTS))
     suite = "pipeline-quick" if req.quick else "pipeline"
-    specs = [PipelineSpec(suite, k, b, n, raster_side(n)) for k in kinds for b in backends for n in counts]
+    specs = [
+        PipelineSpec(suite, k, b, n, raster_side(n)) for k in workloads for b in backends for n in counts
+    ]
     check_memory(specs, req.memory_limit, lower="leave it out (fewer or smaller --elements)")
     return {"specs": specs, "unavailable": {v: text for v, (ok, text) in status.items() if not ok}}
 
@@ -317,10 +336,10 @@ def render_markdown(table, prov: dict, command: str, elapsed: float, plotted: bo
     ]
     text = header_markdown("Pipeline: the whole method, stage by stage", prov, command, notes)
     ok = table[table["status"] == "ok"]
-    cols = ["kind", "backend", "N", "raster", "whole", "peak", "B/px", *STAGES, "coverage"]
+    cols = ["workload", "backend", "N", "raster", "whole", "peak", "B/px", *STAGES, "coverage"]
     body = [
         [
-            r["kind"],
+            r["workload"],
             r["backend"],
             int(r["n_elements"]),
             f"{int(r['size'])}²",
@@ -334,23 +353,26 @@ def render_markdown(table, prov: dict, command: str, elapsed: float, plotted: bo
     ]
     text += "\n" + markdown_table(cols, body)
     growth = []
-    for (kind, backend), g in ok.groupby(["kind", "backend"], sort=False):
+    for (workload, backend), g in ok.groupby(["workload", "backend"], sort=False):
         parts = [f"whole {growth_exponent(g['n_elements'], g['whole_seconds']):.2f}"]
         parts += [
             f"{s} {e:.2f}"
             for s in STAGES
             if np.isfinite(e := growth_exponent(g["n_elements"], g[f"{s}_seconds"]))
         ]
-        growth.append([kind, backend, ", ".join(parts)])
+        growth.append([workload, backend, ", ".join(parts)])
     if growth:
         text += "\n## How each stage grows with N\n\n" + markdown_table(
-            ["kind", "backend", "exponent"], growth
+            ["workload", "backend", "exponent"], growth
         )
     bad = table[table["status"] != "ok"]
     if len(bad):
         text += "\n## Not run or failed\n\n" + markdown_table(
-            ["kind", "backend", "N", "status", "reason"],
-            [[r["kind"], r["backend"], r["n_elements"], r["status"], r["reason"]] for _, r in bad.iterrows()],
+            ["workload", "backend", "N", "status", "reason"],
+            [
+                [r["workload"], r["backend"], r["n_elements"], r["status"], r["reason"]]
+                for _, r in bad.iterrows()
+            ],
         )
     if plotted:
         text += "\n![seconds and peak memory against N](pipeline.png)\n"
@@ -358,7 +380,7 @@ def render_markdown(table, prov: dict, command: str, elapsed: float, plotted: bo
 
 
 def render_plot(table, path: Path) -> bool:
-    """Log-log: per kind and backend, seconds against N for each stage and the whole
+    """Log-log: per workload and backend, seconds against N for each stage and the whole
     command; and peak memory against N."""
     import matplotlib
 
@@ -368,7 +390,7 @@ def render_plot(table, path: Path) -> bool:
     from ..report import save_figure
 
     ok = table[table["status"] == "ok"]
-    groups = list(ok.groupby(["kind", "backend"], sort=False))
+    groups = list(ok.groupby(["workload", "backend"], sort=False))
     if not groups:
         path.unlink(missing_ok=True)
         return False
@@ -380,7 +402,7 @@ def render_plot(table, path: Path) -> bool:
         layout="constrained",
         squeeze=False,
     )
-    for ax, ((kind, backend), g) in zip(axes[0], groups, strict=False):
+    for ax, ((workload, backend), g) in zip(axes[0], groups, strict=False):
         g = g.sort_values("n_elements")
         ax.plot(g["n_elements"], g["whole_seconds"], "k-o", lw=2, label="whole command")
         for s in STAGES:
@@ -388,14 +410,18 @@ def render_plot(table, path: Path) -> bool:
             if np.isfinite(y).any():
                 ax.plot(g["n_elements"], y, "-o", ms=3, label=s)
         ax.set(
-            xscale="log", yscale="log", xlabel="N (elements)", ylabel="seconds", title=f"{kind}, {backend}"
+            xscale="log",
+            yscale="log",
+            xlabel="N (elements)",
+            ylabel="seconds",
+            title=f"{workload}, {backend}",
         )
         ax.grid(True, which="both", alpha=0.3)
         ax.legend(fontsize=7)
     mem = axes[0][-1]
-    for (kind, backend), g in groups:
+    for (workload, backend), g in groups:
         g = g.sort_values("n_elements")
-        mem.plot(g["n_elements"], g["peak_mb"], "-o", label=f"{kind}, {backend}")
+        mem.plot(g["n_elements"], g["peak_mb"], "-o", label=f"{workload}, {backend}")
     mem.set(xscale="log", yscale="log", xlabel="N (elements)", ylabel="peak memory (MB)", title="peak memory")
     mem.grid(True, which="both", alpha=0.3)
     mem.legend(fontsize=7)

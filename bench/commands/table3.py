@@ -20,6 +20,7 @@ def add_parser(sub):
     options.add_sweep_options(p, "small version (192² px, N=150, 2 seeds)")
     options.add_seeds_option(p)
     options.add_list_options(p, "methods", "shapes")
+    options.add_method_option(p, several=True)
     p.add_argument("--scenes", default=None, help=f"comma list of scenes (default all: {', '.join(SCENES)})")
     options.add_cluster_options(p)
     options.add_memory_option(p)

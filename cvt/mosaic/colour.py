@@ -31,7 +31,8 @@ LAB_BAND = 1 << 15
 
 
 def srgb_to_lab(rgb) -> np.ndarray:
-    """(..., 3) sRGB in 0..1 -> (..., 3) CIELAB (L* 0..100).
+    """(..., 3) sRGB in 0..1 -> (..., 3) CIELAB (L* 0..100), each pixel's the same whatever
+    else is converted with it (a block of a picture gives the picture's values).
 
     Parameters
     ----------
@@ -42,16 +43,24 @@ def srgb_to_lab(rgb) -> np.ndarray:
     -------
     (..., 3) float64 array
     """
-    rgb = np.asarray(rgb, dtype=np.float64)
+    rgb = np.asarray(rgb)
+    if not np.issubdtype(rgb.dtype, np.floating):
+        rgb = rgb.astype(np.float64)
     flat = rgb.reshape(-1, 3)
     lab = np.empty(flat.shape)
     for lo in range(0, len(flat), LAB_BAND):
-        _lab_band(flat[lo : lo + LAB_BAND], lab[lo : lo + LAB_BAND])
+        # float32 pictures are widened a band at a time (exact), never whole
+        _lab_band(flat[lo : lo + LAB_BAND].astype(np.float64, copy=False), lab[lo : lo + LAB_BAND])
     return lab.reshape(rgb.shape)
 
 
 def _lab_band(rgb: np.ndarray, lab: np.ndarray) -> None:
     """:func:`srgb_to_lab` of (n, 3) ``rgb`` into ``lab``."""
+    if len(rgb) == 1:  # one row would take BLAS's vector product, a bit off the matrix one
+        two = np.empty((2, 3))
+        _lab_band(np.repeat(rgb, 2, axis=0), two)
+        lab[:] = two[:1]
+        return
     lin = rgb + 0.055
     lin /= 1.055
     np.power(lin, 2.4, out=lin)
@@ -74,6 +83,8 @@ def lab_to_srgb(lab) -> np.ndarray:
     """(..., 3) CIELAB -> (..., 3) sRGB in 0..1 (colours outside the sRGB gamut are
     clipped per channel)."""
     lab = np.asarray(lab, dtype=np.float64)
+    if lab.shape[:-1] == (1,):  # as in _lab_band: every row as the matrix product gives it
+        return lab_to_srgb(np.repeat(lab, 2, axis=0))[:1]
     fy = (lab[..., 0] + 16.0) / 116.0
     f = np.stack([fy + lab[..., 1] / 500.0, fy, fy - lab[..., 2] / 200.0], axis=-1)
     xyz = np.where(f > _D, f**3, 3 * _D * _D * (f - 4.0 / 29.0)) * _WHITE

@@ -98,15 +98,19 @@ class PictureFields:
 
     density: DensityMap
     field: DirectionField
-    edge_angles: np.ndarray  # tensor edge orientation at every pixel (radians, mod π)
-    strength: np.ndarray  # sqrt(λ₁): local edge strength, intensity units per pixel
+    edge_angles: np.ndarray | None  # tensor edge orientation at every pixel (radians, mod π)
+    strength: np.ndarray | None  # sqrt(λ₁): local edge strength, intensity units per pixel
     edges: np.ndarray  # bool: the pixels the direction field is carried from
-    detail: np.ndarray  # smoothed gradient magnitude, 0..1 after normalisation
+    detail: np.ndarray | None  # smoothed gradient magnitude, 0..1 after normalisation
+    # (edge_angles, strength and detail are None where picture_fields was asked for no details)
 
 
 def as_channels(picture: np.ndarray) -> np.ndarray:
-    """(H, W, C) float64 from a (H, W) grey or (H, W, C) colour array."""
-    arr = np.asarray(picture, dtype=np.float64)
+    """(H, W, C) float from a (H, W) grey or (H, W, C) colour array: float32 stays float32
+    (the filters widen a channel at a time, exactly), anything else is float64."""
+    arr = np.asarray(picture)
+    if arr.dtype != np.float32:
+        arr = arr.astype(np.float64, copy=False)
     if arr.ndim == 2:
         return arr[..., None]
     if arr.ndim == 3 and arr.shape[2] >= 1:
@@ -124,18 +128,71 @@ def structure_tensor(picture: np.ndarray, sigma: float = 1.0, window: float = 2.
     jxx = np.zeros(chans.shape[:2])
     jxy = np.zeros_like(jxx)
     jyy = np.zeros_like(jxx)
+    tmp = np.empty_like(jxx)
     for c in range(chans.shape[2]):
         ch = chans[..., c]
         gx = gaussian_filter(ch, sigma, order=(0, 1))
         gy = gaussian_filter(ch, sigma, order=(1, 0))
-        jxx += gx * gx
-        jxy += gx * gy
-        jyy += gy * gy
+        # the products in place: one picture-sized temporary for all of them
+        jxy += np.multiply(gx, gy, out=tmp)
+        jxx += np.multiply(gx, gx, out=gx)
+        jyy += np.multiply(gy, gy, out=gy)
+        del gx, gy
+    del tmp
     if window > 0:
         jxx = gaussian_filter(jxx, window)
         jxy = gaussian_filter(jxy, window)
         jyy = gaussian_filter(jyy, window)
     return jxx, jxy, jyy
+
+
+# rows of the structure tensor made at once by tensor_by_rows: a band and its halo hold
+# the tensor's temporaries (about 100 bytes a pixel), never the whole picture
+SLAB_ROWS = 256
+
+
+def _reach(sigma: float) -> int:
+    """Rows on either side a Gaussian filter of ``sigma`` reads (ndimage's truncation)."""
+    return int(4.0 * float(sigma) + 0.5) if sigma > 1e-15 else 0
+
+
+def tensor_by_rows(source, height: int, use, sigma: float = 1.0, window: float = 2.0, rows: int = SLAB_ROWS):
+    """The structure tensor a band of rows at a time, bit for bit the whole picture's.
+
+    Each band is computed from its rows and a halo of the rows its filters reach (the
+    derivative's and the window's), read by ``source``; the rows the halo leaves
+    uncertain (those a cut band's repeated border reaches) are never used.  Two bands are
+    computed at a time, side by side.
+
+    Parameters
+    ----------
+    source : callable
+        ``source(a, b)``: the (b - a, W[, C]) channels of rows a..b-1 (e.g. a slice of
+        the picture, or the slice converted to CIELAB).
+    height : int
+        H, the picture's rows.
+    use : callable
+        ``use(lo, hi, jxx, jxy, jyy)`` for each band of rows lo..hi-1 with its tensor
+        (views of the band's own arrays, which ``use`` may overwrite); bands may come
+        in any order, two at once.
+    sigma, window : float
+        As for :func:`structure_tensor`.
+    rows : int
+        Rows per band.
+    """
+    from ..threads import side_by_side
+
+    halo = _reach(sigma) + (_reach(window) if window > 0 else 0)
+
+    def band(lo: int) -> None:
+        hi = min(lo + rows, height)
+        a, b = max(0, lo - halo), min(height, hi + halo)
+        jxx, jxy, jyy = structure_tensor(source(a, b), sigma, window)
+        use(lo, hi, jxx[lo - a : hi - a], jxy[lo - a : hi - a], jyy[lo - a : hi - a])
+
+    starts = range(0, height, rows)
+    for k in range(0, len(starts), 2):
+        side_by_side(*(lambda lo=lo: band(lo) for lo in starts[k : k + 2]))
 
 
 def gaussian_weights(sigma: float, order: int = 0) -> np.ndarray:
@@ -172,20 +229,25 @@ def _filter_columns(image: np.ndarray, sigma: float, order: int) -> np.ndarray:
     """``ndimage.gaussian_filter1d(image, sigma, axis=0, order=order, mode="nearest")``,
     bit for bit: the same weights summed in the same order (ndimage folds a symmetric or
     antisymmetric kernel about its centre), but over whole rows at a time, where ndimage
-    copies the picture column by column (strided reads)."""
+    copies the picture column by column (strided reads).  Each band of rows is read
+    (widened to float64, its border rows repeated) as it is filtered: no padded copy of
+    the picture."""
     weights = gaussian_weights(sigma, order)[::-1]  # ndimage correlates with the reversed kernel
     r = len(weights) // 2
     h = image.shape[0]
-    padded = np.concatenate([np.repeat(image[:1], r, axis=0), image, np.repeat(image[-1:], r, axis=0)])
     fold = np.add if order == 0 else np.subtract
     out = np.empty(image.shape)
     tmp = np.empty((min(ROW_BAND, h),) + image.shape[1:])
     for lo in range(0, h, ROW_BAND):
         n = min(ROW_BAND, h - lo)
-        o, t, c = out[lo : lo + n], tmp[:n], lo + r
-        np.multiply(padded[c : c + n], weights[r], out=o)
+        if lo >= r and lo + n + r <= h and image.dtype == np.float64:
+            src = image[lo - r : lo + n + r]
+        else:  # rows beyond the border repeat the edge row ("nearest")
+            src = image[np.clip(np.arange(lo - r, lo + n + r), 0, h - 1)].astype(np.float64, copy=False)
+        o, t = out[lo : lo + n], tmp[:n]
+        np.multiply(src[r : r + n], weights[r], out=o)
         for j in range(r, 0, -1):
-            fold(padded[c - j : c - j + n], padded[c + j : c + j + n], out=t)
+            fold(src[r - j : r - j + n], src[r + j : r + j + n], out=t)
             t *= weights[r - j]
             o += t
     return out
@@ -196,11 +258,12 @@ def gaussian_filter(image: np.ndarray, sigma: float, order: tuple[int, int] = (0
     bit for bit, several times faster on a large picture.
 
     The pass down the columns (ndimage's slow one: it reads each column with a stride)
-    is :func:`_filter_columns`, the pass along the rows is ndimage's own.
+    is :func:`_filter_columns`, the pass along the rows is ndimage's own, in place.
 
     Parameters
     ----------
     image : (H, W) float array
+        float32 is widened a band of rows at a time (exactly).
     sigma : float
         Standard deviation in pixels, the same along both axes (0: no filtering).
     order : (int, int)
@@ -210,27 +273,34 @@ def gaussian_filter(image: np.ndarray, sigma: float, order: tuple[int, int] = (0
     -------
     (H, W) float64 array
     """
-    image = np.asarray(image, dtype=np.float64)
+    image = np.asarray(image)
+    if image.dtype != np.float32:
+        image = image.astype(np.float64, copy=False)
     if image.ndim != 2:
         raise InputError(f"gaussian_filter takes a 2-D array, got shape {image.shape}")
     if sigma <= 1e-15:  # ndimage leaves an axis with no width alone, whatever its order
-        return image.copy()
+        return image.astype(np.float64)
     down = _filter_columns(image, sigma, order[0])
-    return ndimage.gaussian_filter1d(down, sigma, axis=1, order=order[1], mode="nearest")
+    return ndimage.gaussian_filter1d(down, sigma, axis=1, order=order[1], mode="nearest", output=down)
 
 
-def edge_orientation(jxx, jxy, jyy) -> tuple[np.ndarray, np.ndarray]:
-    """(edge angle in radians modulo π, strength sqrt(λ₁)) from the tensor."""
-    # in place where it can (picture-sized temporaries)
-    diff = jxx - jyy
-    along = np.arctan2(2.0 * jxy, diff)
+def edge_orientation(jxx, jxy, jyy, overwrite: bool = False) -> tuple[np.ndarray, np.ndarray]:
+    """(edge angle in radians modulo π, strength sqrt(λ₁)) from the tensor.
+
+    ``overwrite``: ``jxx`` and ``jyy`` may be used as scratch (the strength is returned
+    in ``jyy``'s memory), so that the tensor and its results need one picture-sized
+    array more than the tensor, not three."""
+    half_trace = jxx + jyy
+    half_trace *= 0.5
+    diff = np.subtract(jxx, jyy, out=jxx if overwrite else None)
+    twice_xy = np.multiply(jxy, 2.0, out=jyy if overwrite else None)
+    along = np.arctan2(twice_xy, diff)
+    del twice_xy
     along *= 0.5  # the gradient's line, mod π
     along += 0.5 * math.pi
     diff *= 0.5
-    lam1 = np.hypot(diff, jxy)
+    lam1 = np.hypot(diff, jxy, out=jyy if overwrite else None)
     del diff
-    half_trace = jxx + jyy
-    half_trace *= 0.5
     lam1 += half_trace
     del half_trace
     np.maximum(lam1, 0.0, out=lam1)
@@ -242,12 +312,21 @@ def edge_orientation(jxx, jxy, jyy) -> tuple[np.ndarray, np.ndarray]:
 FFT_SIGMA = 8.0
 
 
+# rows (and spectrum columns) gaussian_smooth transforms at once
+FFT_BAND = 256
+
+
 def gaussian_smooth(image: np.ndarray, sigma: float) -> np.ndarray:
     """``ndimage.gaussian_filter(image, sigma, mode="nearest")`` of a 2-D array.
 
     The same kernel (truncated at 4 sigma) and border (the edge pixels repeated); from
-    :data:`FFT_SIGMA` on it is applied through the FFT (the padded picture's), which agrees
-    with the direct filter to rounding (about 1e-15 of the values).
+    :data:`FFT_SIGMA` on it is applied through the FFT of the picture padded by twice the
+    kernel's reach, which agrees with the direct filter to rounding (about 1e-15 of the
+    values).  The transform is ``scipy.fft.rfft2`` / ``irfft2``'s, bit for bit, taken one
+    axis at a time: the rows' transforms once per distinct row (the repeated border
+    rows share theirs), the columns' a band of columns at a time, and only the rows
+    that are kept transformed back, so that it holds one complex array of the picture's
+    size (not the padded picture, its spectrum and the padded result at once).
 
     Parameters
     ----------
@@ -263,19 +342,44 @@ def gaussian_smooth(image: np.ndarray, sigma: float) -> np.ndarray:
         return gaussian_filter(image, sigma)
     from scipy import fft
 
-    radius = int(4.0 * sigma + 0.5)  # ndimage's truncation
-    x = np.arange(-radius, radius + 1, dtype=np.float64)
+    r = int(4.0 * sigma + 0.5)  # ndimage's truncation
+    x = np.arange(-r, r + 1, dtype=np.float64)
     kernel = np.exp(-0.5 / (sigma * sigma) * x * x)
     kernel /= kernel.sum()
     h, w = image.shape
-    size = (fft.next_fast_len(h + 4 * radius, real=True), fft.next_fast_len(w + 4 * radius, real=True))
-    # the transforms of the rows (then the columns) are independent: on every core, with
-    # the same result to the last bit
-    spectrum = fft.rfft2(np.pad(np.asarray(image, dtype=np.float64), radius, mode="edge"), size, workers=-1)
-    spectrum *= fft.fft(kernel, size[0])[:, None]
-    spectrum *= fft.rfft(kernel, size[1])[None, :]
-    out = fft.irfft2(spectrum, size, workers=-1)[2 * radius : 2 * radius + h, 2 * radius : 2 * radius + w]
-    return np.ascontiguousarray(out)
+    size_y, size_x = fft.next_fast_len(h + 4 * r, real=True), fft.next_fast_len(w + 4 * r, real=True)
+    cols = size_x // 2 + 1
+    # along the rows: each row padded by r repeated edge pixels (then zeros to size_x)
+    spectrum = np.empty((h, cols), dtype=np.complex128)
+    for lo in range(0, h, FFT_BAND):
+        rows = np.pad(np.asarray(image[lo : lo + FFT_BAND], dtype=np.float64), ((0, 0), (r, r)), mode="edge")
+        spectrum[lo : lo + len(rows)] = fft.rfft(rows, size_x, axis=1, workers=-1)
+    zero_row = fft.rfft(np.zeros((1, size_x)), size_x, axis=1)[0]
+    along_y = fft.fft(kernel, size_y)[:, None]
+    along_x = fft.rfft(kernel, size_x)[None, :]
+    # down the columns: the padded column (r copies of the first and last row, zeros to
+    # size_y), filtered, transformed back (unscaled, as irfft2's first pass) and cut to h
+    block = np.empty((size_y, min(FFT_BAND, cols)), dtype=np.complex128)
+    for c0 in range(0, cols, FFT_BAND):
+        c1 = min(c0 + FFT_BAND, cols)
+        b = block[:, : c1 - c0]
+        b[:r] = spectrum[0, c0:c1]
+        b[r : r + h] = spectrum[:, c0:c1]
+        b[r + h : h + 2 * r] = spectrum[h - 1, c0:c1]
+        b[h + 2 * r :] = zero_row[c0:c1]
+        b = fft.fft(b, size_y, axis=0, workers=-1)
+        b *= along_y
+        b *= along_x[:, c0:c1]
+        spectrum[:, c0:c1] = fft.ifft(b, size_y, axis=0, norm="forward", workers=-1)[2 * r : 2 * r + h]
+        del b
+    # back along the rows, scaled as pocketfft scales irfft2 (1 / N in long double)
+    scale = np.float64(np.longdouble(1) / np.longdouble(size_y * size_x))
+    out = np.empty((h, w))
+    for lo in range(0, h, FFT_BAND):
+        rows = fft.irfft(spectrum[lo : lo + FFT_BAND], size_x, axis=1, norm="forward", workers=-1)
+        rows *= scale
+        out[lo : lo + len(rows)] = rows[:, 2 * r : 2 * r + w]
+    return out
 
 
 def smooth_angles(angles: np.ndarray, sigma: float, period: float) -> np.ndarray:
@@ -294,6 +398,7 @@ def picture_fields(
     element: str = DEFAULT_ELEMENT,
     contrast: float = DEFAULT_CONTRAST,
     sigma: float = 1.0,
+    details: bool = True,
 ) -> PictureFields:
     """Density map and direction field of ``picture`` ((H, W) or (H, W, C), values 0..1).
 
@@ -301,32 +406,62 @@ def picture_fields(
     smoothed over about one spacing, the field over one and a half (coherent rows of tiles
     pack tighter: measured +1.7 points of compacted coverage on a portrait against half a
     spacing, while the tiles still turn with every edge longer than their rows).  ``element`` picks the
-    symmetry the field is smoothed in (the shape record's ``side_period``)."""
+    symmetry the field is smoothed in (the shape record's ``side_period``).
+    ``details``: also return the tensor's edge angles, its strength and the detail map
+    (False: None, each freed as soon as it is used, as a large mosaic wants)."""
     check_shape(element)
     contrast = real_number(contrast, "contrast", *CONTRAST_RANGE)
     chans = as_channels(picture)
     if not np.isfinite(chans).all():
         raise InputError("picture contains NaN or infinite values")
     spacing = max(float(spacing), 1.0)
-    jxx, jxy, jyy = structure_tensor(chans, sigma=sigma, window=max(1.0, 2.0 * sigma))
-    edge_angles, strength = edge_orientation(jxx, jxy, jyy)
+    h, w = chans.shape[:2]
+    trace = np.empty((h, w))  # the density's gradient energy
+    edge_angles = np.empty((h, w))
+    strength = np.empty((h, w))
 
-    # direction: each pixel takes the tensor orientation at its nearest edge pixel
+    def use(lo, hi, jxx, jxy, jyy):
+        np.add(jxx, jyy, out=trace[lo:hi])
+        edge_angles[lo:hi], strength[lo:hi] = edge_orientation(jxx, jxy, jyy, overwrite=True)
+
+    tensor_by_rows(lambda a, b: chans[a:b], h, use, sigma=sigma, window=max(1.0, 2.0 * sigma))
     top = float(np.percentile(strength, 99)) if strength.size else 0.0
     edges = strength >= max(EDGE_FRACTION * top, EDGE_FLOOR)
+    if not details:
+        strength = None
+
+    # density: smoothed colour gradient magnitude, 1 .. contrast (before the field, so
+    # that the trace is freed before the field's temporaries are made)
+    magnitude = gaussian_smooth(trace, spacing)
+    trace = None
+    np.sqrt(np.maximum(magnitude, 0.0, out=magnitude), out=magnitude)
+    ref = float(np.percentile(magnitude, 99)) if magnitude.size else 0.0
+    if ref > EDGE_FLOOR / 10:
+        detail = np.clip(np.divide(magnitude, ref, out=magnitude), 0.0, 1.0, out=magnitude)
+    else:
+        detail = np.zeros_like(magnitude)
+    del magnitude
+    values = np.multiply(detail, contrast - 1.0, out=None if details else detail)
+    values += 1.0
+    density = DensityMap(values)
+    del values
+    if not details:
+        detail = None
+
+    # direction: each pixel takes the tensor orientation at its nearest edge pixel
     if edges.any():
         ii, jj = ndimage.distance_transform_edt(~edges, return_distances=False, return_indices=True)
         carried = edge_angles[ii, jj]
+        del ii, jj
+        if not details:
+            edge_angles = None
         angles = smooth_angles(carried, FIELD_SMOOTHING * spacing, shape_record(element).side_period)
+        del carried
     else:
-        angles = np.zeros(strength.shape)
+        angles = np.zeros(edges.shape)
+        if not details:
+            edge_angles = None
     field = DirectionField.from_angles(angles, spec="picture")
-
-    # density: smoothed colour gradient magnitude, 1 .. contrast
-    magnitude = np.sqrt(np.maximum(gaussian_smooth(jxx + jyy, spacing), 0.0))
-    ref = float(np.percentile(magnitude, 99)) if magnitude.size else 0.0
-    detail = np.clip(magnitude / ref, 0.0, 1.0) if ref > EDGE_FLOOR / 10 else np.zeros_like(magnitude)
-    density = DensityMap(1.0 + (contrast - 1.0) * detail)
     return PictureFields(density, field, edge_angles, strength, edges, detail)
 
 
@@ -343,13 +478,37 @@ def step_response(sigma: float = 1.0, window: float = 2.0) -> float:
     return float(strength.max())
 
 
-def edge_contrast(lab: np.ndarray, sigma: float = 1.0) -> tuple[np.ndarray, np.ndarray]:
+def edge_contrast(lab: np.ndarray, sigma: float = 1.0, srgb: bool = False) -> tuple[np.ndarray, np.ndarray]:
     """(contrast in ΔE*ab, direction across the edge in radians mod π) of a CIELAB
-    picture (H, W, 3); see the module docstring."""
+    picture (H, W, 3); see the module docstring.  ``srgb``: the picture is sRGB in 0..1,
+    converted to CIELAB a band of rows at a time (never whole)."""
+    h, w = lab.shape[:2]
+    contrast = np.empty((h, w))
+    across = np.empty((h, w))
+    _contrast_rows(lab, sigma, srgb, contrast, across)
+    return contrast, across
+
+
+def _contrast_rows(picture, sigma: float, srgb: bool, contrast, across=None, sector=None) -> None:
+    """:func:`edge_contrast` into ``contrast`` and ``across``, or the 45° sector of the
+    direction across (0..3, int8) into ``sector``, a band of rows at a time."""
+    from .colour import srgb_to_lab
+
     window = max(1.0, 2.0 * sigma)
-    jxx, jxy, jyy = structure_tensor(lab, sigma=sigma, window=window)
-    along, strength = edge_orientation(jxx, jxy, jyy)
-    return strength / step_response(sigma, window), along - 0.5 * math.pi
+    step = step_response(sigma, window)
+
+    def use(lo, hi, jxx, jxy, jyy):
+        along, strength = edge_orientation(jxx, jxy, jyy, overwrite=True)
+        np.divide(strength, step, out=contrast[lo:hi])
+        along -= 0.5 * math.pi
+        if across is not None:
+            across[lo:hi] = along
+        if sector is not None:
+            along /= 0.25 * math.pi
+            sector[lo:hi] = np.round(along, out=along).astype(np.int8) % 4  # -2 .. 2 before
+
+    source = (lambda a, b: srgb_to_lab(picture[a:b])) if srgb else (lambda a, b: picture[a:b])
+    tensor_by_rows(source, picture.shape[0], use, sigma=sigma, window=window)
 
 
 # neighbour offsets (row, column) along the direction across the edge, per 45° sector
@@ -357,14 +516,20 @@ _ACROSS = ((0, 1), (1, 1), (1, 0), (1, -1))
 
 
 def strong_edges(
-    lab: np.ndarray, threshold: float = DEFAULT_EDGE_THRESHOLD, min_length: float = 0.0, sigma: float = 1.0
+    lab: np.ndarray,
+    threshold: float = DEFAULT_EDGE_THRESHOLD,
+    min_length: float = 0.0,
+    sigma: float = 1.0,
+    srgb: bool = False,
 ) -> np.ndarray:
     """(H, W) bool: the strong edges of a CIELAB picture as thin 4-connected lines.
 
-    ``threshold`` in ΔE*ab (see the module docstring), ``min_length`` in pixels."""
-    contrast, across = edge_contrast(lab, sigma)
-    h, w = contrast.shape
-    sector = np.round(across / (0.25 * math.pi)).astype(np.int64) % 4
+    ``threshold`` in ΔE*ab (see the module docstring), ``min_length`` in pixels.
+    ``srgb``: ``lab`` is the sRGB picture (0..1), read in CIELAB a band of rows at a time."""
+    h, w = lab.shape[:2]
+    contrast = np.empty((h, w))
+    sector = np.empty((h, w), dtype=np.int8)
+    _contrast_rows(lab, sigma, srgb, contrast, sector=sector)
     pad = np.pad(contrast, 1)
     ridge = np.zeros((h, w), dtype=bool)
     for k, (di, dj) in enumerate(_ACROSS):
@@ -408,11 +573,14 @@ __all__ = [
     "PictureFields",
     "as_channels",
     "structure_tensor",
+    "SLAB_ROWS",
+    "tensor_by_rows",
     "gaussian_weights",
     "ROW_BAND",
     "gaussian_filter",
     "edge_orientation",
     "FFT_SIGMA",
+    "FFT_BAND",
     "gaussian_smooth",
     "smooth_angles",
     "picture_fields",

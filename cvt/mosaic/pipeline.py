@@ -80,7 +80,8 @@ EDGE_MIN_LENGTH = 2.0
 def picture_array(
     image, at_least: tuple[int, int] | None = None, memory_limit=None, name: str = "image"
 ) -> tuple[np.ndarray, str]:
-    """(H, W, 3) float64 RGB in 0..1 and a short description of where it came from.
+    """(H, W, 3) RGB in 0..1 and a short description of where it came from: float32 for a
+    float32 array (a picture :func:`resample` made), float64 otherwise.
 
     A file is read by :func:`cvt.images.read_picture` (EXIF orientation applied, bombs
     refused, decoded at a reduced size no smaller than ``at_least`` when that is smaller
@@ -105,7 +106,9 @@ def picture_array(
             raise InputError(f"{name}: an integer picture must not hold negative values")
         arr = arr.astype(np.float64) / float(info.max)
     elif np.issubdtype(arr.dtype, np.floating):
-        arr = arr.astype(np.float64)
+        # float32 stays float32 (each value exact in float64, at half the memory: a
+        # resampled picture is float32); no copy of a float64 array
+        arr = arr.astype(np.float32 if arr.dtype == np.float32 else np.float64, copy=False)
         if not np.isfinite(arr).all():
             raise InputError(f"{name} contains NaN or infinite values")
         if arr.min() < 0 or arr.max() > 1:
@@ -115,7 +118,7 @@ def picture_array(
     if arr.ndim == 2:
         arr = arr[..., None]
     if arr.shape[2] == 4:
-        alpha = arr[..., 3:4]
+        alpha = arr[..., 3:4].astype(np.float64)
         arr = arr[..., :3] * alpha + (1.0 - alpha)  # composite on white
     if arr.shape[2] == 1:
         arr = np.repeat(arr, 3, axis=2)
@@ -144,16 +147,19 @@ def raster_size(width: int, height: int, size=None, name: str = "size") -> tuple
 
 
 def resample(rgb: np.ndarray, width: int, height: int) -> np.ndarray:
-    """The picture at (height, width): Lanczos (antialiased when shrinking), clipped to 0..1."""
+    """The picture at (height, width): Lanczos (antialiased when shrinking), clipped to 0..1.
+
+    Resampled, it is float32: Pillow resamples in float32, so that holds every value
+    exactly at half the memory of float64; at its own size, ``rgb`` itself."""
     if rgb.shape[:2] == (height, width):
         return rgb
     from PIL import Image
 
-    out = np.empty((height, width, 3))
+    out = np.empty((height, width, 3), dtype=np.float32)
     for c in range(3):
         img = Image.fromarray(np.ascontiguousarray(rgb[..., c], dtype=np.float32), mode="F")
         out[..., c] = np.asarray(img.resize((width, height), Image.Resampling.LANCZOS))
-    return np.clip(out, 0.0, 1.0)
+    return np.clip(out, 0.0, 1.0, out=out)
 
 
 # --------------------------------------------------------------------------- walls
@@ -358,22 +364,132 @@ def tile_colours(lab: np.ndarray, polygons, sites, tiles: np.ndarray, pixels: np
     worse on it on six photographs).  Read from the final polygons, so it holds wherever the method put the
     tile.  A tile too thin to hold a pixel centre takes the pixel under a point inside
     it; a site without a tile the pixel under the site (its colour is listed but never
-    drawn)."""
+    drawn).
+
+    Parameters
+    ----------
+    lab : (H, W, 3) float array
+        The picture in CIELAB.
+    polygons : sequence of shapely geometries or None
+        The tiles.
+    sites : (N, 2) array
+        The sites, pixel units.
+    tiles, pixels : (P,) int arrays
+        :func:`cvt.evaluate.pixels_under` of ``polygons``.
+
+    Returns
+    -------
+    rgb : (N, 3) float64 array
+        The fills in sRGB, 8-bit values.
+    lab : (N, 3) float64 array
+        The same in CIELAB.
+    """
+    fill = geometric_median(lab.reshape(-1, 3), tiles, None, index=pixels, groups=len(polygons))
+    _fill_thin(fill, np.bincount(tiles, minlength=len(polygons)) > 0, lab, None, polygons, sites)
+    rgb = quantised(lab_to_srgb(fill))
+    return rgb, srgb_to_lab(rgb)
+
+
+def _fill_thin(fill, held, image, convert, polygons, sites) -> None:
+    """``fill`` of the tiles that hold no pixel centre (``~held``), in place: the pixel
+    under a point inside the tile, or under the site where it has none."""
     import shapely
 
-    h, w = lab.shape[:2]
-    n = len(polygons)
-    held = np.bincount(tiles, minlength=n) > 0
-    # from each tile's mean; the pixels read from the picture a block of tiles at a time
-    fill = geometric_median(lab.reshape(-1, 3), tiles, None, index=pixels, groups=n)
+    if held.all():
+        return
+    h, w = image.shape[:2]
     points = np.array(sites, dtype=np.float64).reshape(-1, 2).copy()
     thin = [k for k in np.flatnonzero(~held) if polygons[k] is not None and not polygons[k].is_empty]
     if thin:
         points[thin] = shapely.get_coordinates(shapely.point_on_surface([polygons[k] for k in thin]))
-    if (~held).any():
-        fill[~held] = lab[pixel_index(points[~held], w, h)]
+    under = image[pixel_index(points[~held], w, h)]
+    fill[~held] = under if convert is None else convert(under)
+
+
+# (tile, pixel) pairs that mosaic_fills holds at once: the tiles are taken in runs of
+# about this many pixels, each run's pairs found, filled and measured before the next
+FILL_PAIRS = 1 << 20
+
+
+def tile_runs(polygons, pairs: int = FILL_PAIRS) -> np.ndarray:
+    """Bounds of consecutive runs of ``polygons`` that each cover about ``pairs`` pixels.
+
+    Parameters
+    ----------
+    polygons : sequence of shapely geometries or None
+        The tiles.
+    pairs : int
+        The pixels a run should hold, about (by the tiles' areas).
+
+    Returns
+    -------
+    (R + 1,) int64 array
+        Run r is ``polygons[bounds[r]:bounds[r + 1]]``.
+    """
+    import shapely
+
+    geoms = np.empty(len(polygons), dtype=object)
+    geoms[:] = list(polygons)
+    area = np.nan_to_num(shapely.area(geoms))  # None: NaN, no pixels
+    ends = np.searchsorted(np.cumsum(area), np.arange(pairs, area.sum(), pairs)) + 1
+    return np.unique(np.concatenate([[0], np.minimum(ends, len(polygons)), [len(polygons)]]))
+
+
+def mosaic_fills(picture: np.ndarray, polygons, sites, bounds=None) -> tuple[np.ndarray, np.ndarray, float]:
+    """:func:`tile_colours` and the colour error, read from the sRGB picture.
+
+    The picture's CIELAB is never held whole: the tiles are taken in runs
+    (:func:`tile_runs`), each run's pixels found (:func:`cvt.evaluate.pixels_under`)
+    and read in blocks, each block converted to CIELAB as it is read, its tiles'
+    medians found and the colour error (:func:`cvt.evaluate.colour_error`) of its
+    pixels summed.  The fills are those :func:`tile_colours` gives from the whole
+    picture's CIELAB, bit for bit (each pixel's CIELAB is its own, each tile's median
+    its own pixels').
+
+    Parameters
+    ----------
+    picture : (H, W, 3) float array
+        sRGB in 0..1.
+    polygons : sequence of shapely geometries or None
+        The tiles.
+    sites : (N, 2) array
+        The sites, pixel units.
+    bounds : (R + 1,) int array, optional
+        The runs of tiles (default :func:`tile_runs`).
+
+    Returns
+    -------
+    rgb : (N, 3) float64 array
+        The fills in sRGB, 8-bit values.
+    lab : (N, 3) float64 array
+        The same in CIELAB.
+    colour_error : float
+        Mean ΔE*ab over the (tile, pixel) pairs; NaN where no tile holds a pixel.
+    """
+    h, w = picture.shape[:2]
+    n = len(polygons)
+    flat = picture.reshape(-1, 3)
+    bounds = tile_runs(polygons) if bounds is None else bounds
+    fill = np.zeros((n, 3))
+    held = np.zeros(n, dtype=bool)
+    total = [0.0, 0]
+
+    def measure(block, sizes, pts, median):
+        fills = srgb_to_lab(quantised(lab_to_srgb(median)))
+        local = np.repeat(np.arange(len(block)), sizes)
+        total[0] += colour_error(pts, fills, local, np.arange(len(pts))) * len(pts)
+        total[1] += len(pts)
+
+    for lo, hi in zip(bounds[:-1], bounds[1:], strict=True):
+        tiles, pixels = pixels_under(polygons[lo:hi], w, h)
+        held[lo:hi] = np.bincount(tiles, minlength=hi - lo) > 0
+        fill[lo:hi] = geometric_median(
+            flat, tiles, None, index=pixels, groups=hi - lo, convert=srgb_to_lab, on_block=measure
+        )
+        del tiles, pixels
+    _fill_thin(fill, held, picture, srgb_to_lab, polygons, sites)
     rgb = quantised(lab_to_srgb(fill))
-    return rgb, srgb_to_lab(rgb)
+    return rgb, srgb_to_lab(rgb), total[0] / total[1] if total[1] else float("nan")
 
 
 # points per block of groups in geometric_median: a block's arrays stay in the
@@ -389,6 +505,8 @@ def geometric_median(
     steps: int = 16,
     index: np.ndarray | None = None,
     groups: int | None = None,
+    convert=None,
+    on_block=None,
 ) -> np.ndarray:
     """Per group, the point with the least mean Euclidean distance to the group's points.
 
@@ -412,13 +530,19 @@ def geometric_median(
         The points are ``points[index]``, read a block at a time (no copy of them all).
     groups : int, optional
         G, where ``start`` is None.
+    convert : callable, optional
+        Applied to each block's points as they are read (e.g. sRGB to CIELAB): the
+        medians are those of the converted points, which are never held all at once.
+    on_block : callable, optional
+        ``on_block(groups, sizes, points, medians)`` after each block: its groups (in
+        0..G-1), their sizes, its (converted) points in group order, their medians.
 
     Returns
     -------
     (G, D) float array
         The medians; ``start`` (0 where it is None) for a group without points.
     """
-    points = np.asarray(points, dtype=np.float64)
+    points = np.asarray(points) if convert is not None else np.asarray(points, dtype=np.float64)
     group = np.asarray(group)
     if start is None:
         m = np.zeros((int(groups), points.shape[1]))
@@ -443,6 +567,8 @@ def geometric_median(
         first = ends[a - 1] if a else 0
         block = held[a:b]
         pts = points[first : ends[b - 1]] if index is None else points[index[first : ends[b - 1]]]
+        if convert is not None:
+            pts = convert(pts)
         if start is None:  # each group's sum in its points' order, as one bincount of all
             local = np.repeat(np.arange(len(block)), counts[block])
             sums = np.stack(
@@ -451,6 +577,8 @@ def geometric_median(
             )
             m[block] = sums / counts[block].astype(np.float64)[:, None]
         m[block] = _weiszfeld(pts, counts[block], m[block], steps)
+        if on_block is not None:
+            on_block(block, counts[block], pts, m[block])
     return m
 
 
@@ -705,28 +833,68 @@ def _raster_picture(image, size, n_elements, backend, element, memory_limit):
     if rgb is None:
         rgb, source = picture_array(image, at_least=(w, h), memory_limit=memory_limit)
     picture = resample(rgb, w, h)
-    del rgb
-    return picture, source
+    # a picture enlarged to the raster can be made again from the smaller one, the same
+    # to the last bit, so it need not be held while the method runs
+    remake = (lambda: resample(rgb, w, h)) if rgb.nbytes < picture.nbytes else None
+    return picture, source, remake
+
+
+def _return_free_memory() -> None:
+    """Hand the C heap's free pages back to the system (glibc's ``malloc_trim``; nothing
+    elsewhere): freed bands and temporaries otherwise stay in the process's memory, and
+    the next stage's large arrays come on top of them."""
+    import ctypes
+
+    try:
+        ctypes.CDLL(None).malloc_trim(0)
+    except (OSError, AttributeError, TypeError):
+        pass
+
+
+# up to this many pixels the picture's fields and its edge map are made side by side (on
+# two cores); above it one after the other, as each holds a structure tensor and its
+# temporaries (about 50 bytes a pixel) while it works
+SIDE_BY_SIDE_PIXELS = 1 << 23
 
 
 def _picture_analysis(picture, spacing, element, contrast, edge_threshold):
-    """The picture's fields (density, direction), its CIELAB and its strong edges."""
+    """The picture's fields (density, direction), its strong edges (read in CIELAB,
+    which is not kept: the fills read it again a block at a time) and the seconds taken."""
 
-    # the fields and the edge map read the picture apart (the edges in CIELAB): side by
-    # side on two cores.  The edge map is made in any case: the straddling measure reads it
-    def lab_and_edges():
-        lab = srgb_to_lab(picture)
-        return lab, strong_edges(lab, edge_threshold, min_length=EDGE_MIN_LENGTH * spacing)
+    def fields():
+        return picture_fields(picture, spacing, element, contrast=contrast, details=False)
 
-    fields, (lab, edge_map) = side_by_side(
-        lambda: picture_fields(picture, spacing, element, contrast=contrast), lab_and_edges
+    # the edge map is made in any case: the straddling measure reads it
+    def edges():
+        return strong_edges(picture, edge_threshold, min_length=EDGE_MIN_LENGTH * spacing, srgb=True)
+
+    t0 = time.perf_counter()
+    if picture.shape[0] * picture.shape[1] <= SIDE_BY_SIDE_PIXELS:
+        made = side_by_side(fields, edges)
+    else:
+        made = [fields(), edges()]
+    return made[0], made[1], time.perf_counter() - t0
+
+
+def _mosaic_problem(edge_map, walls: bool, n_elements, metric, density, field, seed) -> Problem:
+    """The problem the method solves: the raster of ``edge_map`` less its edges where
+    they are ``walls``, else all of it."""
+    h, w = edge_map.shape
+    return Problem(
+        Grid(w, h, ~edge_map if walls else None),
+        n_elements,
+        metric,
+        density=density,
+        field=field,
+        seed=seed,
+        walls=edge_map if walls else None,
     )
-    return fields, lab, edge_map
 
 
-def _after_the_method(dist, lab, edge_map, cut, gap, spacing):
+def _after_the_method(dist, picture, edge_map, cut, gap, spacing, picture_seconds):
     """The stages after the method: tiles cut to the walls (``cut``), their colours and
-    the measures (coverage and overlap, straddling, colour error), each timed."""
+    the measures (coverage and overlap, straddling, colour error), each timed; the
+    method's distribution with the final tiles and every stage's time."""
     polygons = [None if p is None or p.is_empty else p for p in dist.elements]
     cut_count = 0
     # the stages after the method are timed too (result.json's stage_seconds)
@@ -734,20 +902,28 @@ def _after_the_method(dist, lab, edge_map, cut, gap, spacing):
     if cut:
         polygons, cut_count = cut_to_walls(polygons, edge_map, gap, spacing)
     t1 = time.perf_counter()
-    h, w = edge_map.shape
-    tiles, pixels = pixels_under(polygons, w, h)
-    colours, fills_lab = tile_colours(lab, polygons, dist.sites, tiles, pixels)
+    bounds = tile_runs(polygons)
+    colours, _, error = mosaic_fills(picture, polygons, dist.sites, bounds)
     t2 = time.perf_counter()
-    ev = evaluate(polygons, Grid(w, h))  # the whole picture: walls are grout
-    straddles = straddling_tiles(polygons, edge_map)
-    error = colour_error(lab, fills_lab, tiles, pixels)
+    ev = evaluate(polygons, Grid(*edge_map.shape[::-1]))  # the whole picture: walls are grout
+    # a run of tiles at a time, as the fills: each tile's answer is its own
+    straddles = np.concatenate(
+        [np.zeros(0, dtype=bool)]
+        + [
+            straddling_tiles(polygons[lo:hi], edge_map)
+            for lo, hi in zip(bounds[:-1], bounds[1:], strict=True)
+        ]
+    )
     t3 = time.perf_counter()
     stages = {
+        "picture_seconds": picture_seconds,  # Lab, density, field and edges
         "cutting_seconds": t1 - t0,
         "fills_seconds": t2 - t1,
         "evaluation_seconds": t3 - t2,
     }
-    return polygons, colours, cut_count, (ev, straddles, error), stages
+    extra = {**dist.extra, **({"cut_tiles": cut_count} if cut else {}), **stages}
+    dist = dataclasses.replace(dist, elements=polygons, extra=extra)
+    return dist, polygons, colours, cut_count, (ev, straddles, error)
 
 
 def _method_and_options(method, method_options):
@@ -760,12 +936,30 @@ def _method_and_options(method, method_options):
     return record, given_options, {**record.mosaic_options, **given_options}
 
 
-def _result(dist, problem, fields, picture, edge_map, tiles, measures, settings: dict) -> MosaicResult:
+@dataclass(frozen=True)
+class _Settings:
+    """What :func:`make_mosaic` was asked for and ran with, as its record needs it."""
+
+    metric_name: str
+    element: str
+    gap: float
+    record: object  # the method's record
+    given_options: dict  # the method's options as given
+    contrast: float
+    grout: tuple
+    edge_threshold: float
+    walls: bool
+    backend: object  # the live backend
+    source: str
+    t_start: float  # perf_counter when make_mosaic began
+
+
+def _result(dist, problem, fields, picture, edge_map, tiles, measures, settings: _Settings) -> MosaicResult:
     """The mosaic's record, from the stages' results and :func:`make_mosaic`'s settings."""
     polygons, colours, cut_count = tiles
     ev, straddles, error = measures
     placed = sum(p is not None for p in polygons)
-    backend = settings["backend"]
+    backend = settings.backend
     return MosaicResult(
         sites=dist.sites,
         angles=dist.angles,
@@ -778,16 +972,16 @@ def _result(dist, problem, fields, picture, edge_map, tiles, measures, settings:
         straddling=float(straddles.sum() / placed) if placed else 0.0,
         width=problem.grid.width,
         height=problem.grid.height,
-        metric=settings["metric_name"],
-        element=settings["element"],
+        metric=settings.metric_name,
+        element=settings.element,
         aspect=problem.metric.aspect,
-        gap=settings["gap"],
-        method=dist.method or settings["record"].name,
-        method_options=settings["given_options"],
-        contrast=settings["contrast"],
-        grout=settings["grout"],
-        edge_threshold=settings["edge_threshold"],
-        walls=settings["walls"],
+        gap=settings.gap,
+        method=dist.method or settings.record.name,
+        method_options=settings.given_options,
+        contrast=settings.contrast,
+        grout=settings.grout,
+        edge_threshold=settings.edge_threshold,
+        walls=settings.walls,
         cut_tiles=cut_count,
         picture=picture,
         edges=edge_map,
@@ -798,8 +992,8 @@ def _result(dist, problem, fields, picture, edge_map, tiles, measures, settings:
         evaluation=ev,
         backend=backend.variant,
         device=backend.device(),
-        source=settings["source"],
-        method_seconds=time.perf_counter() - settings["t_start"],
+        source=settings.source,
+        method_seconds=time.perf_counter() - settings.t_start,
     )
 
 
@@ -861,25 +1055,15 @@ def make_mosaic(
     record, given_options, method_options = _method_and_options(method, method_options)
     metric_name, element = resolve_shapes(metric, element)
     metric_obj = make_metric(metric_name, aspect)
-    picture, source = _raster_picture(image, size, n_elements, backend, element, memory_limit)
-    h, w = picture.shape[:2]
-    t_picture = time.perf_counter()
-    spacing = math.sqrt(w * h / n_elements)
+    picture, source, remake = _raster_picture(image, size, n_elements, backend, element, memory_limit)
+    spacing = math.sqrt(picture.shape[0] * picture.shape[1] / n_elements)
     gap = AUTO_GAP * spacing if gap is None else parse_gap(gap)
-
-    fields, lab, edge_map = _picture_analysis(picture, spacing, element, contrast, edge_threshold)
-    picture_seconds = time.perf_counter() - t_picture
+    fields, edge_map, picture_seconds = _picture_analysis(picture, spacing, element, contrast, edge_threshold)
     walls = bool(edges) and bool(edge_map.any())
-    problem = Problem(
-        Grid(w, h, ~edge_map if walls else None),
-        n_elements,
-        metric_obj,
-        density=fields.density if use_density else None,
-        field=fields.field if use_field else None,
-        seed=seed,
-        walls=edge_map if walls else None,
-    )
-
+    density, field_ = fields.density if use_density else None, fields.field if use_field else None
+    problem = _mosaic_problem(edge_map, walls, n_elements, metric_obj, density, field_, seed)
+    picture = None if remake is not None else picture  # made again after the method (the fills read it)
+    _return_free_memory()
     dist = record(
         problem,
         WalledBackend(backend) if walls else backend,
@@ -889,18 +1073,28 @@ def make_mosaic(
         gap=gap,
         **method_options,
     )
-    cut = record.tight if cut is None else bool(cut)
-    polygons, colours, cut_count, measures, stages = _after_the_method(
-        dist, lab, edge_map, walls and cut, gap, spacing
+    cut = walls and (record.tight if cut is None else bool(cut))
+    _return_free_memory()
+    picture = remake() if picture is None else picture
+    dist, polygons, colours, cut_count, measures = _after_the_method(
+        dist, picture, edge_map, cut, gap, spacing, picture_seconds
     )
-    stages = {"picture_seconds": picture_seconds, **stages}  # Lab, density, field and edges
-    dist = dataclasses.replace(
-        dist,
-        elements=polygons,
-        extra={**dist.extra, **({"cut_tiles": cut_count} if walls and cut else {}), **stages},
+    settings = _Settings(
+        metric_name,
+        element,
+        gap,
+        record,
+        given_options,
+        contrast,
+        grout,
+        edge_threshold,
+        walls,
+        backend,
+        source,
+        t_start,
     )
     return _result(
-        dist, problem, fields, picture, edge_map, (polygons, colours, cut_count), measures, locals()
+        dist, problem, fields, picture, edge_map, (polygons, colours, cut_count), measures, settings
     )
 
 
@@ -913,6 +1107,10 @@ __all__ = [
     "resolve_shapes",
     "resolve_method",
     "tile_colours",
+    "mosaic_fills",
+    "tile_runs",
+    "FILL_PAIRS",
+    "SIDE_BY_SIDE_PIXELS",
     "DEFAULT_METHOD",
     "ELEMENT_SHAPES",
 ]

@@ -80,7 +80,23 @@ shrinking per round are capped relative to its own size, so a field of sizes kee
 contrast: with a density 4:1 between two halves (sizes 2:1) the median size ratio went
 from 2.02 to 2.00 (squares, 1024², N = 4000) while coverage rose from 0.78 to 0.97.
 Uniform weights (Σ Δr_i) and relative ones (Σ Δr_i·r0_i²/r_i) were measured 0.15-0.5
-points lower on every shape.  ``max_growth`` (off by default) caps every size at
+points lower on every shape.
+
+Under size caps (``max_sizes``: ours-compact's density caps, the size that follows the
+density) elements short of their caps come first: element i's growth is weighed by
+r_i·(cap_i / r_i)^p (``fairness`` p = 2: the gradient of Σ cap_i²·ln r_i, each size's
+logarithm weighted by its target area), so that an element already at its cap yields
+room to a neighbour that lags behind its own.  Weighed by r_i alone, 30-35 % of the
+elements ended below 0.97 of their caps (1 % below 0.6), and the size error (RMS of
+log2(area / target)) was 1.12-1.25x ours' on ellipses, triangles and circles (Table 3's
+density and combined scenes, 512², N = 1000, seeds 0-4).  With p = 2 (and ours-compact's
+caps 3 % above the density's sizes instead of 2 %) it is 0.72-0.99x on every shape of
+both scenes, coverage −0.23 to +0.44 points; 0.71-1.01x, +0.04 to +0.49 points, on two
+densities no scene uses (two Gaussian blobs of contrast 5, a linear ramp of contrast 4).
+With the 2 % caps: p = 1 left circles at 1.09x, p = 1.5 triangles at 1.04x (1.14x in
+Table 3's quick set), p = 2 cost up to 0.52 points, p = 3 up to 0.95; caps 5 % above
+gained 0.3-1.3 points but left circles at 1.09x.  Without caps the weights are r_i, as
+before.  ``max_growth`` (off by default) caps every size at
 (1 + max_growth) × its placed size; ``move_cost`` > 0 puts a price on moves (columns
 Δc⁺, Δc⁻), which keeps regular lattices from drifting (a lattice of circles then reaches
 its optimum π/4 exactly) but measured up to 0.4 points lower and 30-60 % slower on CVTs.
@@ -123,8 +139,13 @@ included).  Anchored at the start it nears each round's optimum more closely; fr
 an exact lattice that optimum is to stay, where plain PDHG's inexact steps broke the
 symmetry (a lattice shaken by 0.1 px grows as before).
 Steps stop early only when converged (T(z) = z and no row short by more than 1e-10 px:
-small programs, which then meet HiGHS' optimum).  PDHG is plain single-threaded NumPy
-and scipy.sparse: the result does not depend on ``threads``.
+small programs, which then meet HiGHS' optimum).  PDHG is plain NumPy and
+scipy.sparse's CSR kernels; on a large program (over ``_PDHG_BLOCK_ENTRIES`` entries per
+thread) each step's products and updates are split into blocks of rows and of columns
+(Aᵀy by the rows of Aᵀ, whose sums run in the order of the CSC scatter) worked by
+``threads`` threads, and the near pairs' candidates likewise into pieces: each number is
+computed by the same operations in the same order however the work is split, so the
+result does not depend on ``threads`` (bit for bit, tested).
 
 Choices in the formulation
 --------------------------
@@ -152,7 +173,7 @@ from scipy.spatial import cKDTree
 from ..errors import InputError
 from ..problem import Grid
 from ..shapes import check_shape, element_ball
-from ..threads import usable_cores
+from ..threads import side_by_side, usable_cores
 from ..validate import one_of, real_number, whole_number
 from .fit import parse_gap
 
@@ -170,6 +191,9 @@ _PDHG_STILL = 1e-10  # px: PDHG has converged when T(z) = z to this and no row i
 _STEP_RATIO = 4.0  # PDHG: primal steps this much longer (dual ones shorter) than balanced
 _HALPERN_RESTART = 0.2  # PDHG: new anchor once the fixed-point residual falls by this factor
 _HALPERN_CHECK = 4  # PDHG: steps between evaluations of that residual
+_PIECE_ROWS = 100_000  # candidate pairs per thread at least (fewer: fewer threads)
+_PDHG_BLOCK_ENTRIES = 200_000  # PDHG: entries of A per thread at least (fewer: fewer threads)
+_FAIRNESS = 2.0  # under size caps: growth weighed by r·(cap / r)^this (Sizes and density)
 
 
 @dataclass
@@ -190,70 +214,6 @@ class CompactionResult:
             "compaction_lp_seconds": self.lp_seconds,
             "compaction_dropped": self.dropped,
         }
-
-
-# --------------------------------------------------------------------- unit element
-class _Unit:
-    """The unit element of a shape: support function, face normals, radii."""
-
-    def __init__(self, shape: str, aspect):
-        m = element_ball(shape, aspect)
-        self.curved = m.curved
-        self.rho = m.circumradius
-        self.inr = m.inradius
-        if not m.curved:
-            self.verts = m.outline()
-            self.normals = m.normals / np.hypot(*m.normals.T)[:, None]
-            # h along each of its own face normals: a constant of the shape
-            self.offsets = (self.verts @ self.normals.T).max(axis=0)
-            k = len(self.verts)
-            # centrally symmetric (squares, rectangles, hexagons, octagons): vertices and
-            # normals come in opposite pairs k, k + K/2, so h(n) = max over half the
-            # vertices of |v·n| and h(−n) = h(n): half the work, the same values
-            self.symmetric = bool(
-                k % 2 == 0
-                and np.allclose(self.verts[k // 2 :], -self.verts[: k // 2], rtol=0, atol=1e-12)
-                and np.allclose(self.normals[k // 2 :], -self.normals[: k // 2], rtol=0, atol=1e-12)
-            )
-        else:
-            self.axes = m.semi_axes
-
-    def support(self, nx, ny, cos, sin):
-        """h(n) of elements turned by θ (cos, sin broadcast against nx, ny)."""
-        ux = cos * nx + sin * ny  # R(−θ) n: n in the element's own frame
-        uy = cos * ny - sin * nx
-        if self.curved:
-            a, b = self.axes
-            ux *= a
-            uy *= b
-            return np.sqrt(ux * ux + uy * uy)  # |diag(a, b) u|; faster than np.hypot
-        v = self.verts
-        if self.symmetric:  # max(a, −a, b, −b, ...) = max(|a|, |b|, ...) exactly
-            out = np.abs(v[0, 0] * ux + v[0, 1] * uy)
-            for k in range(1, len(v) // 2):
-                np.maximum(out, np.abs(v[k, 0] * ux + v[k, 1] * uy), out=out)
-            return out
-        out = v[0, 0] * ux + v[0, 1] * uy
-        for k in range(1, len(v)):
-            np.maximum(out, v[k, 0] * ux + v[k, 1] * uy, out=out)
-        return out
-
-    def face_normal(self, m, cos, sin):
-        """x and y of face normal ``m[k]`` of element k turned by θ_k (``cos``, ``sin``):
-        the numbers of :meth:`face_normals`, one per element."""
-        nx, ny = self.normals[m, 0], self.normals[m, 1]
-        return cos * nx - sin * ny, sin * nx + cos * ny
-
-    def face_normals(self, cos, sin, count=None, faces_first=False):
-        """(..., K) x and y of the outward face normals, turned by θ (``count``: the
-        first ``count`` of them only; ``faces_first``: (K, ...) instead, the same
-        numbers)."""
-        nx, ny = self.normals[:count, 0], self.normals[:count, 1]
-        if faces_first:
-            nx, ny = (v.reshape(-1, *([1] * np.ndim(cos))) for v in (nx, ny))
-            return cos * nx - sin * ny, sin * nx + cos * ny
-        c, s = cos[..., None], sin[..., None]
-        return c * nx - s * ny, s * nx + c * ny
 
 
 def _argmax_rows(g, tie=_TIE):
@@ -358,9 +318,9 @@ def _best_pair_directions(unit, c, r, cos, sin, i, j, prev_n, enough=None, along
     gap_of = gap_for(slice(None))
     # the candidates' gaps in order of preference, written into one array: faces (walls
     # to slide along; i's, then j's), last round's n, centre line
-    faces = len(unit.normals) if not unit.curved else 0
+    faces = len(unit.faces.normals) if not unit.curved else 0
     other = np.arange(len(i))
-    if faces and unit.symmetric:
+    if faces and unit.faces.symmetric:
         # j's faces seen from j: the gap along −g is the gap along g from j to i.  Where j
         # is turned as i is and the shape is centrally symmetric, j's faces are i's (its
         # opposite normals), later in the order of preference and of the same gap (to
@@ -404,7 +364,7 @@ def _best_pair_directions(unit, c, r, cos, sin, i, j, prev_n, enough=None, along
             bx[on_face], by[on_face] = sign * fx, sign * fy
         return bx, by
 
-    curved = unit.curved and unit.axes[0] != unit.axes[1]  # circles: centre line
+    curved = unit.curved and unit.semi_axes[0] != unit.semi_axes[1]  # circles: centre line
     return _best_direction(gap_for, g, direction_of, np.arctan2(cly, clx) if curved else None, enough)
 
 
@@ -415,10 +375,10 @@ def _face_gaps(unit, dx, dy, ra, rb, ca, sa, cb, sb, out=None):
     shape the opposite normal's gap needs no new support.  Worked face by face along
     the rows (a row's few faces as numpy's inner loop cost several times more)."""
     if out is None:
-        out = np.empty((len(ra), len(unit.normals)))
+        out = np.empty((len(ra), len(unit.faces.normals)))
     by_face = out.T
-    offsets = unit.offsets[:, None]
-    if unit.symmetric:
+    offsets = unit.faces.offsets[:, None]
+    if unit.faces.symmetric:
         h = len(by_face) // 2
         fx, fy = unit.face_normals(ca, sa, h, faces_first=True)
         nd = fx * dx + fy * dy
@@ -502,11 +462,12 @@ def _segment_trees(segs: np.ndarray) -> list:
     return out
 
 
-def _pairs_within(point_trees, count, extra):
+def _pairs_within(point_trees, count, extra, ordered=True):
     """Index pairs (a, b), a < b, of the ``count`` points with |points[a] − points[b]| <=
-    reach[a] + reach[b] + extra (and some farther ones), ordered by a then b: class by
-    class of reach (``point_trees``: :func:`_point_trees`), so one large element does
-    not widen the query of every small one."""
+    reach[a] + reach[b] + extra (and some farther ones), ordered by a then b (unless
+    ``ordered`` is False: in the kd-trees' order): class by class of reach
+    (``point_trees``: :func:`_point_trees`), so one large element does not widen the
+    query of every small one."""
     classes, trees, tops = zip(*point_trees, strict=True)
     a_s, b_s = [], []
     for x, (cx, tx) in enumerate(zip(classes, trees, strict=True)):
@@ -518,33 +479,63 @@ def _pairs_within(point_trees, count, extra):
             a_s.append(cx[found["i"]])
             b_s.append(classes[y][found["j"]])
     a, b = np.concatenate(a_s), np.concatenate(b_s)
+    if not ordered:
+        return np.minimum(a, b), np.maximum(a, b)
     return _sorted_pairs(np.minimum(a, b), np.maximum(a, b), count)
 
 
-def _near_pairs(unit, c, r, cos, sin, budget, gap, prev, act, point_trees):
+def _near_pairs(unit, c, r, cos, sin, budget, gap, prev, act, point_trees, threads=1):
     """Pairs whose gap could close to < gap this round; their n and current gap
     (``act``: the elements with a size, ``point_trees``: their centres by class of reach
-    ρ·r + budget, :func:`_point_trees`)."""
+    ρ·r + budget, :func:`_point_trees`).  The candidate pairs are worked in pieces by up
+    to ``threads`` threads (:func:`_in_pieces`), and the pairs kept ordered by i then j
+    (each row's figures do not depend on the others: sorting the few kept instead of
+    the many candidates gives the same rows in the same order)."""
     if len(act) < 2:
         e = np.zeros(0)
         return np.zeros(0, np.int64), np.zeros(0, np.int64), e, e, e
-    a, b = _pairs_within(point_trees, len(act), gap + _SELECT)
-    i, j = act[a], act[b]
-    dx, dy = c[j, 0] - c[i, 0], c[j, 1] - c[i, 1]
-    d = np.hypot(dx, dy)
-    enough = gap + budget[i] + budget[j] + _SELECT
-    keep = d < unit.rho * (r[i] + r[j]) + enough
-    i, j, dx, dy, d, enough = _select(keep, i, j, dx, dy, d, enough)
-    # the centre line is one of the candidates and the one chosen is within _TIE of the
-    # best: pairs already far enough apart along it are left out without the others
-    with np.errstate(invalid="ignore", divide="ignore"):
-        along = _pair_gap(unit, dx, dy, r[i], r[j], cos[i], sin[i], cos[j], sin[j], dx / d, dy / d)
-    keep = ~(along >= enough + _TIE)  # coincident centres (NaN) stay
-    i, j, enough, along, dx, dy, d = _select(keep, i, j, enough, along, dx, dy, d)
-    prev_n = _lookup(prev, i * len(r) + j)
-    nx, ny, g = _best_pair_directions(unit, c, r, cos, sin, i, j, prev_n, enough, along, (dx, dy, d))
-    keep = g < enough
-    return _select(keep, i, j, nx, ny, g)
+    a, b = _pairs_within(point_trees, len(act), gap + _SELECT, ordered=False)
+
+    def kept(a, b):
+        """The candidates (a, b) (positions in act) that make rows, with their n and gap."""
+        i, j = act[a], act[b]
+        dx, dy = c[j, 0] - c[i, 0], c[j, 1] - c[i, 1]
+        d = np.hypot(dx, dy)
+        enough = gap + budget[i] + budget[j] + _SELECT
+        keep = d < unit.circumradius * (r[i] + r[j]) + enough
+        i, j, dx, dy, d, enough = _select(keep, i, j, dx, dy, d, enough)
+        # the centre line is one of the candidates and the one chosen is within _TIE of
+        # the best: pairs already far enough apart along it are left out without the others
+        with np.errstate(invalid="ignore", divide="ignore"):
+            along = _pair_gap(unit, dx, dy, r[i], r[j], cos[i], sin[i], cos[j], sin[j], dx / d, dy / d)
+        keep = ~(along >= enough + _TIE)  # coincident centres (NaN) stay
+        i, j, enough, along, dx, dy, d = _select(keep, i, j, enough, along, dx, dy, d)
+        prev_n = _lookup(prev, i * len(r) + j)
+        nx, ny, g = _best_pair_directions(unit, c, r, cos, sin, i, j, prev_n, enough, along, (dx, dy, d))
+        keep = g < enough
+        return _select(keep, i, j, nx, ny, g)
+
+    i, j, nx, ny, g = _in_pieces(kept, threads, a, b)
+    at = np.argsort(i * len(r) + j)  # keys unique (a < b): any sort gives this order
+    return tuple(v.take(at) for v in (i, j, nx, ny, g))
+
+
+def _in_pieces(fn, threads, *arrays) -> tuple:
+    """fn(*arrays) for a ``fn`` that works row by row and returns a tuple of 1-D arrays:
+    run on consecutive pieces of the rows (at least ``_PIECE_ROWS`` each) by up to
+    ``threads`` threads (numpy lets go of the interpreter), the pieces' answers joined
+    in order: the same arrays as one call."""
+    count = len(arrays[0])
+    parts = max(1, min(threads, count // _PIECE_ROWS))
+    if parts == 1:
+        return fn(*arrays)
+    cuts = np.linspace(0, count, parts + 1).astype(np.int64)
+
+    def piece(k):
+        return fn(*(v[cuts[k] : cuts[k + 1]] for v in arrays))
+
+    answers = side_by_side(*(functools.partial(piece, k) for k in range(parts)))
+    return tuple(np.concatenate(column) for column in zip(*answers, strict=True))
 
 
 def _select(keep, *arrays) -> tuple:
@@ -656,64 +647,76 @@ def _closest_on_segment(px, py, qx, qy, x, y):
     return px + t * ex, py + t * ey
 
 
-def _near_segments(unit, c, r, cos, sin, budget, half, segs, seg_trees, prev, act, point_trees):
+def _near_segments(unit, c, r, cos, sin, budget, half, segs, seg_trees, prev, act, point_trees, threads=1):
+    """(Element, piece) rows whose gap could close to < ``half`` this round; their n and
+    current gap, the candidates worked in pieces by up to ``threads`` threads
+    (:func:`_in_pieces`: the same rows in the same order)."""
     empty = np.zeros(0)
     if len(act) == 0 or len(segs) == 0:
         return np.zeros(0, np.int64), np.zeros(0, np.int64), empty, empty, empty
     k, s = _near_items(point_trees, seg_trees, half + _SELECT)
-    e = act[k]
-    px, py, qx, qy = segs[s, 0], segs[s, 1], segs[s, 2], segs[s, 3]
-    x, y = c[e, 0], c[e, 1]
-    kx, ky = _closest_on_segment(px, py, qx, qy, x, y)
-    d = np.hypot(kx - x, ky - y)
-    keep = d < unit.rho * r[e] + budget[e] + half + _SELECT
-    e, s, px, py, qx, qy, x, y, kx, ky, d = _select(keep, e, s, px, py, qx, qy, x, y, kx, ky, d)
-    prev_n = _lookup(prev, e * len(segs) + s)
-    with np.errstate(invalid="ignore", divide="ignore"):
-        tx, ty = np.where(d > 0, (kx - x) / d, 1.0), np.where(d > 0, (ky - y) / d, 0.0)
-    # the piece's normal, turned towards the element's outside
-    sx, sy = -(qy - py), qx - px
-    sl = np.hypot(sx, sy)
-    with np.errstate(invalid="ignore", divide="ignore"):
-        sx, sy = sx / sl, sy / sl  # NaN for a point piece (a lone wall pixel): never chosen
-    flip = np.where(sx * (kx - x) + sy * (ky - y) < 0, -1.0, 1.0)
-    # in order of preference: the piece's own normal, the element's faces, last round's
-    # n, the direction of the nearest point (beside a reflex corner of the region)
-    # (the candidates' gaps written into one array, their directions built only for the
-    # one chosen)
-    nsx, nsy = sx * flip, sy * flip
-    args = tuple(v[:, None] for v in (px, py, qx, qy, x, y, r[e], cos[e], sin[e]))
-    gap_for = _gaps_of_rows(_seg_gap, unit, args)
-    gap_of = gap_for(slice(None))
-    faces = len(unit.normals) if not unit.curved else 0
-    g = np.empty((len(e), faces + 3))
-    g[:, 0] = gap_of(nsx[:, None], nsy[:, None])[:, 0]
-    if faces:  # worked face by face along the rows, as in _face_gaps
-        fx, fy = unit.face_normals(cos[e], sin[e], faces_first=True)
-        # along its own faces the element reaches out by the shape's offsets
-        p_, q_ = fx * px + fy * py, fx * qx + fy * qy
-        g[:, 1 : 1 + faces].T[:] = np.minimum(p_, q_) - fx * x - fy * y - r[e] * unit.offsets[:, None]
-    # last round's n: new rows have none (NaN, never chosen)
-    known = np.flatnonzero(np.isfinite(prev_n[:, 0]))
-    g[:, -2] = np.nan
-    g[known, -2] = gap_for(known)(prev_n[known, 0:1], prev_n[known, 1:2])[:, 0]
-    g[:, -1] = gap_of(tx[:, None], ty[:, None])[:, 0]
 
-    def direction_of(k):
-        """The direction of candidate k of each row: the piece's normal, a face normal,
-        last round's n or the nearest point's."""
-        bx = np.where(k == 0, nsx, np.where(k == faces + 2, tx, prev_n[:, 0]))
-        by = np.where(k == 0, nsy, np.where(k == faces + 2, ty, prev_n[:, 1]))
-        on_face = np.flatnonzero((k >= 1) & (k <= faces))
-        if len(on_face):
-            bx[on_face], by[on_face] = unit.face_normal(k[on_face] - 1, cos[e[on_face]], sin[e[on_face]])
-        return bx, by
+    def kept(k, s):
+        """The candidates (k, s) (position in act, piece) that make rows, with n and gap."""
+        e = act[k]
+        px, py, qx, qy = segs[s, 0], segs[s, 1], segs[s, 2], segs[s, 3]
+        x, y = c[e, 0], c[e, 1]
+        kx, ky = _closest_on_segment(px, py, qx, qy, x, y)
+        d = np.hypot(kx - x, ky - y)
+        keep = d < unit.circumradius * r[e] + budget[e] + half + _SELECT
+        e, s, px, py, qx, qy, x, y, kx, ky, d = _select(keep, e, s, px, py, qx, qy, x, y, kx, ky, d)
+        prev_n = _lookup(prev, e * len(segs) + s)
+        with np.errstate(invalid="ignore", divide="ignore"):
+            tx, ty = np.where(d > 0, (kx - x) / d, 1.0), np.where(d > 0, (ky - y) / d, 0.0)
+        # the piece's normal, turned towards the element's outside
+        sx, sy = -(qy - py), qx - px
+        sl = np.hypot(sx, sy)
+        with np.errstate(invalid="ignore", divide="ignore"):
+            sx, sy = sx / sl, sy / sl  # NaN for a point piece (a lone wall pixel): never chosen
+        flip = np.where(sx * (kx - x) + sy * (ky - y) < 0, -1.0, 1.0)
+        # in order of preference: the piece's own normal, the element's faces, last round's
+        # n, the direction of the nearest point (beside a reflex corner of the region)
+        # (the candidates' gaps written into one array, their directions built only for the
+        # one chosen)
+        nsx, nsy = sx * flip, sy * flip
+        args = tuple(v[:, None] for v in (px, py, qx, qy, x, y, r[e], cos[e], sin[e]))
+        gap_for = _gaps_of_rows(_seg_gap, unit, args)
+        gap_of = gap_for(slice(None))
+        faces = len(unit.faces.normals) if not unit.curved else 0
+        g = np.empty((len(e), faces + 3))
+        g[:, 0] = gap_of(nsx[:, None], nsy[:, None])[:, 0]
+        if faces:  # worked face by face along the rows, as in _face_gaps
+            fx, fy = unit.face_normals(cos[e], sin[e], faces_first=True)
+            # along its own faces the element reaches out by the shape's offsets
+            p_, q_ = fx * px + fy * py, fx * qx + fy * qy
+            g[:, 1 : 1 + faces].T[:] = (
+                np.minimum(p_, q_) - fx * x - fy * y - r[e] * unit.faces.offsets[:, None]
+            )
+        # last round's n: new rows have none (NaN, never chosen)
+        known = np.flatnonzero(np.isfinite(prev_n[:, 0]))
+        g[:, -2] = np.nan
+        g[known, -2] = gap_for(known)(prev_n[known, 0:1], prev_n[known, 1:2])[:, 0]
+        g[:, -1] = gap_of(tx[:, None], ty[:, None])[:, 0]
 
-    curved = unit.curved and unit.axes[0] != unit.axes[1]  # circles: nearest point
-    enough = half + budget[e] + _SELECT
-    bx, by, best = _best_direction(gap_for, g, direction_of, np.arctan2(ty, tx) if curved else None, enough)
-    keep = best < enough
-    return _select(keep, e, s, bx, by, best)
+        def direction_of(k):
+            """The direction of candidate k of each row: the piece's normal, a face normal,
+            last round's n or the nearest point's."""
+            bx = np.where(k == 0, nsx, np.where(k == faces + 2, tx, prev_n[:, 0]))
+            by = np.where(k == 0, nsy, np.where(k == faces + 2, ty, prev_n[:, 1]))
+            on_face = np.flatnonzero((k >= 1) & (k <= faces))
+            if len(on_face):
+                bx[on_face], by[on_face] = unit.face_normal(k[on_face] - 1, cos[e[on_face]], sin[e[on_face]])
+            return bx, by
+
+        curved = unit.curved and unit.semi_axes[0] != unit.semi_axes[1]  # circles: nearest point
+        enough = half + budget[e] + _SELECT
+        bx, by, best = _best_direction(
+            gap_for, g, direction_of, np.arctan2(ty, tx) if curved else None, enough
+        )
+        keep = best < enough
+        return _select(keep, e, s, bx, by, best)
+
+    return _in_pieces(kept, threads, k, s)
 
 
 # --------------------------------------------------------------------- constraints
@@ -1143,90 +1146,206 @@ def _pdhg_program(rows: _Rows, act, c, r, gap, delta, lo_dr, hi_dr, weight):
     return a, b, lo, hi, cost, (index, value, start)
 
 
-def _solve_pdhg(rows: _Rows, act, c, r, gap, delta, lo_dr, hi_dr, weight, iterations, step_ratio):
+def _blocks(indptr, parts):
+    """``parts`` (at most) ranges of rows of a CSR matrix (``indptr``: its row starts)
+    holding about equal numbers of entries: [(first row, end row, first entry, end entry,
+    the block's own row starts)]."""
+    rows = len(indptr) - 1
+    cuts = np.searchsorted(indptr, np.linspace(0, indptr[-1], parts + 1)[1:-1])
+    bounds = np.unique(np.concatenate([[0], np.minimum(cuts, rows), [rows]]))
+    out = []
+    for r0, r1 in zip(bounds[:-1], bounds[1:], strict=True):  # a loop over a few blocks
+        e0, e1 = int(indptr[r0]), int(indptr[r1])
+        out.append((int(r0), int(r1), e0, e1, (indptr[r0 : r1 + 1] - e0).astype(indptr.dtype)))
+    return out
+
+
+def _block_product(kernel, m, block, v, out):
+    """``out[r0:r1]`` = the rows r0..r1 of the CSR matrix ``m`` times ``v`` (``block``:
+    one of :func:`_blocks`), by scipy's CSR kernel: each row's sum as in ``m @ v``."""
+    r0, r1, e0, e1, indptr = block
+    part = out[r0:r1]
+    part.fill(0.0)  # the kernel adds to out
+    kernel(r1 - r0, m.shape[1], indptr, m.indices[e0:e1], m.data[e0:e1], v, part)
+
+
+class _HalpernPdhg:
+    """The state of :func:`_solve_pdhg`'s iteration on one program ``A x >= b``: the
+    iterates, the anchor, the step buffers and, for a large program, its blocks of rows
+    and of columns (each block's views of the arrays made once: a slice per step and
+    array would cost the interpreter more than a block's arithmetic) and the threads that
+    work them side by side."""
+
+    def __init__(self, a, b, bounds, steps, threads):
+        lo, hi, cost = bounds
+        tau, sigma = steps
+        ncol, m = a.shape[1], a.shape[0]
+        self.a, self.b = a, b
+        self.x, self.y = np.zeros(ncol), np.zeros(m)
+        # the anchor z₀ = (x0, y0): the start (0) until the first restart
+        self.x0, self.y0, self.anchored = np.zeros(ncol), np.zeros(m), False
+        # every step works in these buffers: a fresh array per step would be fresh memory
+        # from the system each time (page faults cost about as much as the arithmetic)
+        self.xt, self.z, scratch, self.res_x, self.aty = (np.zeros(ncol) for _ in range(5))
+        self.yt, y_scratch, self.res_y = np.empty(m), np.empty(m), np.empty(m)
+        self.kernels = _csr_matvec()
+        nnz = len(a.data)
+        parts = 1 if self.kernels is None else max(1, min(threads, nnz // _PDHG_BLOCK_ENTRIES))
+        if parts > 1:
+            # Aᵀy by the rows of Aᵀ (CSR, entries in A's row order): each sum in the order
+            # of _product's scatter, so the same numbers, and a block of columns per thread
+            self.at = a.T.tocsr()
+            row_blocks, col_blocks = _blocks(a.indptr, parts), _blocks(self.at.indptr, parts)
+        else:
+            self.at, row_blocks, col_blocks = None, [(0, m)], [(0, ncol)]
+        x_side = (
+            self.x,
+            self.xt,
+            self.z,
+            self.aty,
+            cost,
+            tau,
+            lo,
+            hi,
+            self.res_x,
+            1.0 / tau,
+            self.x0,
+            scratch,
+        )
+        self.col_views = [(blk, *(v[blk[0] : blk[1]] for v in x_side)) for blk in col_blocks]
+        y_side = (self.y, self.yt, b, sigma, np.zeros(m), self.res_y, 1.0 / sigma, self.y0, y_scratch)
+        self.row_views = [(blk, *(v[blk[0] : blk[1]] for v in y_side)) for blk in row_blocks]
+
+    def each(self, fn, views, *args):
+        """fn(block's views, *args) for every block, side by side (:func:`cvt.threads.side_by_side`)."""
+        if len(views) == 1:
+            fn(views[0], *args)
+        else:  # the first block on this thread, the others on the process's pool
+            side_by_side(*(functools.partial(fn, v, *args) for v in views))
+
+    def primal(self, views, w, check, product):
+        """On a block of columns: x's Halpern update from last step's z (``w``; None
+        after a restart or at the start), Aᵀy (``product``), then x̃ = clip(x − τ(c −
+        Aᵀy)) in place (np.clip with array bounds costs several of these passes),
+        z = 2x̃ − x and, if ``check``, the residual's terms (T's own norm: 1/τ, 1/σ)."""
+        blk, xb, xtb, zb, atyb, costb, taub, lob, hib, rxb, itb, x0b, sb = views
+        if w is not None:  # z ← w·(2T(z) − z) + (1 − w)·z₀, x's part (z = 2x̃ − x)
+            np.multiply(zb, w, out=xb)
+            if self.anchored:
+                xb += np.multiply(x0b, 1.0 - w, out=sb)
+        if product:
+            if self.at is not None:
+                _block_product(self.kernels[0], self.at, blk, self.y, self.aty)
+            else:
+                _product(self.a, self.y, self.aty, transpose=True)
+        np.subtract(atyb, costb, out=xtb)
+        xtb *= taub
+        xtb += xb
+        np.maximum(xtb, lob, out=xtb)  # np.clip's order: lo, then hi (lo <= hi)
+        np.minimum(xtb, hib, out=xtb)
+        np.multiply(xtb, 2.0, out=zb)
+        zb -= xb
+        if check:
+            np.subtract(xtb, xb, out=rxb)
+            np.multiply(rxb, rxb, out=rxb)
+            rxb *= itb
+
+    def dual(self, views, w, check):
+        """On a block of rows: ỹ = max(0, y + σ(b − A z)), then, if ``check``, the
+        residual's terms, else y's Halpern update (``w``)."""
+        blk, yb, ytb, bb, sigb, zero, ryb, isb, _, _ = views
+        if self.at is not None:
+            _block_product(self.kernels[0], self.a, blk, self.z, self.yt)
+        else:
+            _product(self.a, self.z, self.yt)
+        np.subtract(bb, ytb, out=ytb)
+        ytb *= sigb
+        ytb += yb
+        np.maximum(ytb, zero, out=ytb)  # against an array: a scalar 0 is ~4x slower
+        if check:
+            dy = np.subtract(ytb, yb, out=ryb)
+            np.multiply(dy, dy, out=dy)
+            dy *= isb
+        else:
+            self.dual_update(views, w)
+
+    def dual_update(self, views, w):
+        """y's part of z ← w·(2T(z) − z) + (1 − w)·z₀ on a block of rows."""
+        _, yb, ytb, *_, y0b, ysb = views
+        yb *= -w
+        yb += np.multiply(ytb, 2.0 * w, out=ysb)
+        if self.anchored:
+            yb += np.multiply(y0b, 1.0 - w, out=ysb)
+
+    def run(self, iterations):
+        """Up to ``iterations`` steps (fewer when converged); returns x̃ and the steps."""
+        first = None  # fixed-point residual |T(z) − z| after the last restart
+        k = steps = 0
+        w_x = None  # the Halpern weight x's update still owes (made with the next x̃)
+        for steps in range(1, iterations + 1):  # noqa: B007 (returned) a loop over whole-array steps
+            check = first is None or steps % _HALPERN_CHECK == 0
+            self.each(self.primal, self.col_views, w_x, check, steps > 1)
+            w = (k + 1.0) / (k + 2.0)
+            self.each(self.dual, self.row_views, w, check)  # no check, no restart: y's update too
+            residual = None
+            if check:
+                # by ufuncs (a BLAS dot wakes its threads, which costs far more than
+                # the sum on a busy machine)
+                residual = math.sqrt(float(self.res_x.sum()) + float(self.res_y.sum()))
+                if first is None:
+                    first = residual
+                if residual <= _HALPERN_RESTART * first:
+                    # restart from T(z): the iteration then converges linearly on a
+                    # program like this one, as PDHG with restarts does
+                    self.x[:], self.y[:] = self.xt, self.yt
+                    self.x0[:], self.y0[:], self.anchored = self.xt, self.yt, True
+                    first, k, w_x = None, 0, None
+                else:
+                    self.each(self.dual_update, self.row_views, w)
+                    k, w_x = k + 1, w
+            else:
+                k, w_x = k + 1, w
+            # a fixed point of T is the program's optimum: stop when T(z) = z and x̃
+            # meets the rows (small programs; large ones use every step)
+            if (
+                residual is not None
+                and residual < _PDHG_STILL
+                and np.max(self.b - self.a @ self.xt, initial=0.0) < _PDHG_STILL
+            ):
+                break
+        return self.xt, steps
+
+
+def _solve_pdhg(rows: _Rows, act, c, r, gap, delta, lo_dr, hi_dr, weight, iterations, step_ratio, threads=1):
     """The round's program (the same as :func:`_solve_lp`'s, untiled) solved
     approximately by ``iterations`` steps of the primal-dual hybrid gradient method
     (Chambolle-Pock, diagonal steps of Pock & Chambolle 2011), all elements at once, in
-    Halpern's reflected form with restarts (r2HPDHG, Lu & Yang 2024; module docstring).
+    Halpern's reflected form with restarts (r2HPDHG, Lu & Yang 2024; module docstring):
+    z ← w·(2·T(z) − z) + (1 − w)·z₀ with w = (k + 1)/(k + 2), z₀ the anchor (the start,
+    x = 0, y = 0, until a restart); the answer is the last T(z), which keeps the bounds.
 
     Starts from x = 0, y = 0 (last round's duals, mapped by pair, were measured no
     better).  Returns Δc (N, 2), Δr (N,), the largest row violation left and the steps
     taken (fewer than ``iterations`` when converged).  The moves and growths always keep
     their bounds (each step is clipped to them); the rows hold only approximately, which
-    the caller's float64 check and shrinking make exact."""
+    the caller's float64 check and shrinking make exact.
+
+    A large program's step is split into blocks of rows and of columns worked by up to
+    ``threads`` threads (numpy and scipy's kernels let go of the interpreter): every
+    entry is computed by the same operations in the same order whatever the split, so
+    the result does not depend on ``threads``."""
     n = len(r)
     a, b, lo, hi, cost, (index, value, start) = _pdhg_program(
         rows, act, c, r, gap, delta, lo_dr, hi_dr, weight
     )
-    ncol, npair, nseg = a.shape[1], len(rows.i), len(rows.e)
+    ncol = a.shape[1]
     # diagonal steps: 1 / (row or column sum of |A|), balanced by step_ratio
     absval = np.abs(value)
     col_sum = np.bincount(index, weights=absval, minlength=ncol)
     row_sum = np.add.reduceat(absval, start[:-1]) if len(absval) else np.zeros(0)
     tau = step_ratio / np.maximum(col_sum, 1e-12)
     sigma = 1.0 / (step_ratio * np.maximum(row_sum, 1e-12))
-    # Halpern's iteration on the reflected PDHG step T (r2HPDHG, Lu & Yang 2024):
-    # z ← w·(2·T(z) − z) + (1 − w)·z₀ with w = (k + 1)/(k + 2), z₀ the anchor (the start,
-    # x = 0, y = 0, until a restart); the answer is the last T(z), which keeps the bounds
-    x, y, no_rows = np.zeros(ncol), np.zeros(npair + nseg), np.zeros(npair + nseg)
-    x0 = y0 = None  # the anchor: the start (0) until the first restart
-    # every step works in these buffers: a fresh array per step would be fresh memory
-    # from the system each time (page faults cost about as much as the arithmetic)
-    xt, z, scratch = np.empty(ncol), np.empty(ncol), np.empty(ncol)
-    yt, y_scratch = np.empty(npair + nseg), np.empty(npair + nseg)
-    aty = np.zeros(ncol)  # Aᵀy, y = 0
-    inv_tau, inv_sigma = 1.0 / tau, 1.0 / sigma
-    first = None  # fixed-point residual |T(z) − z| after the last restart
-    k = steps = 0
-    for steps in range(1, iterations + 1):  # noqa: B007 (returned) a loop over whole-array steps
-        # T: x̃ = clip(x − τ(c − Aᵀy)); ỹ = max(0, y + σ(b − A(2x̃ − x))), in place (np.clip
-        # with array bounds costs several of these passes)
-        np.subtract(aty, cost, out=xt)
-        xt *= tau
-        xt += x
-        np.maximum(xt, lo, out=xt)  # np.clip's order: lo, then hi (lo <= hi)
-        np.minimum(xt, hi, out=xt)
-        np.multiply(xt, 2.0, out=z)
-        z -= x
-        yt = _product(a, z, yt)
-        np.subtract(b, yt, out=yt)
-        yt *= sigma
-        yt += y
-        np.maximum(yt, no_rows, out=yt)  # against an array: a scalar 0 is ~4x slower
-        residual = None
-        if first is None or steps % _HALPERN_CHECK == 0:
-            # the residual in T's own norm (1/τ, 1/σ), by ufuncs (a BLAS dot wakes its
-            # threads, which costs far more than the sum on a busy machine)
-            np.subtract(xt, x, out=scratch)
-            np.multiply(scratch, scratch, out=scratch)
-            scratch *= inv_tau
-            dy = np.subtract(yt, y, out=y_scratch)
-            np.multiply(dy, dy, out=dy)
-            dy *= inv_sigma
-            residual = math.sqrt(float(scratch.sum()) + float(dy.sum()))
-            if first is None:
-                first = residual
-        if residual is not None and residual <= _HALPERN_RESTART * first:
-            # restart from T(z): the iteration then converges linearly on a program like
-            # this one, as PDHG with restarts does
-            x[:], y[:] = xt, yt
-            x0, y0 = xt.copy(), yt.copy()
-            first, k = None, 0
-        else:
-            w = (k + 1.0) / (k + 2.0)
-            np.multiply(z, w, out=x)  # z = 2x̃ − x
-            y *= -w
-            y += np.multiply(yt, 2.0 * w, out=y_scratch)
-            if x0 is not None:
-                x += np.multiply(x0, 1.0 - w, out=scratch)
-                y += np.multiply(y0, 1.0 - w, out=y_scratch)
-            k += 1
-        _product(a, y, aty, transpose=True)
-        # a fixed point of T is the program's optimum: stop when T(z) = z and x̃ meets
-        # the rows (small programs; large ones use every step)
-        if residual is not None and residual < _PDHG_STILL and np.max(b - a @ xt, initial=0.0) < _PDHG_STILL:
-            break
-    x = xt
+    x, steps = _HalpernPdhg(a, b, (lo, hi, cost), (tau, sigma), threads).run(iterations)
     dc = np.zeros((n, 2))
     dr = np.zeros(n)
     dc[act, 0], dc[act, 1], dr[act] = x[0::3], x[1::3], x[2::3]
@@ -1282,13 +1401,19 @@ class CompactionSettings:
     lp_options : dict, optional
         Extra HiGHS options.
     threads : int, optional
-        Threads that solve the tiles side by side (None: the cores this process may use);
-        the result does not depend on it.
+        Threads that solve the tiles side by side, or work a large PDHG program's blocks
+        and the near pairs' pieces (None: the cores this process may use); the result
+        does not depend on it.
     solver : str
         "pdhg" (each round's whole program by ``iterations`` PDHG steps at most) or "highs"
         (HiGHS' dual simplex per tile); either way every round is checked exactly.
     iterations : int
         PDHG steps per round at most.
+    fairness : float
+        Where size caps (``max_sizes``) are given, element i's growth is weighed by
+        r_i·(cap_i / r_i)^fairness in the objective, so that elements short of their caps
+        come first (0: by r_i alone, as without caps; 2, the default: the gradient of
+        Σ cap_i²·ln r_i; module docstring, Sizes and density).
     """
 
     gap: float = 0.0
@@ -1304,6 +1429,7 @@ class CompactionSettings:
     threads: int | None = None
     solver: str = "pdhg"
     iterations: int = _PDHG_ITERATIONS
+    fairness: float = _FAIRNESS
 
     def checked(self) -> CompactionSettings:
         """The same settings, each checked (InputError naming it) and normalised."""
@@ -1328,6 +1454,7 @@ class CompactionSettings:
             # |Δc| in the objective: split columns, HiGHS only
             solver="highs" if move_cost > 0 else solver,
             iterations=whole_number(self.iterations, "iterations", minimum=1),
+            fairness=real_number(self.fairness, "fairness", minimum=0.0),
         )
 
 
@@ -1374,7 +1501,7 @@ def _check_start(unit, c, r, gap, mask) -> None:
     placed = np.flatnonzero(r > 0)
     if not len(placed):
         return
-    widest = 2 * unit.inr * r[placed].max()
+    widest = 2 * unit.inradius * r[placed].max()
     if gap >= widest:
         raise InputError(
             f"gap {gap:g} px is not smaller than the largest element "
@@ -1392,17 +1519,17 @@ def _check_start(unit, c, r, gap, mask) -> None:
         )
 
 
-def _round_rows(unit, c, r, cos, sin, budget, gap, segs, seg_trees, prev):
+def _round_rows(unit, c, r, cos, sin, budget, gap, segs, seg_trees, prev, threads=1):
     """The round's rows (near pairs and near boundary pieces, the tightest piece of each),
     and the directions to start the next round's search from."""
     prev_p, prev_s = prev
     n = len(r)
     act = np.flatnonzero(r > 0)
     # one kd-tree of the centres (per class of reach) for the pairs and the pieces
-    trees = _point_trees(c[act], unit.rho * r[act] + budget[act]) if len(act) else []
-    i, j, px, py, _ = _near_pairs(unit, c, r, cos, sin, budget, gap, prev_p, act, trees)
+    trees = _point_trees(c[act], unit.circumradius * r[act] + budget[act]) if len(act) else []
+    i, j, px, py, _ = _near_pairs(unit, c, r, cos, sin, budget, gap, prev_p, act, trees, threads)
     e, s, sx, sy, _ = _near_segments(
-        unit, c, r, cos, sin, budget, 0.5 * gap, segs, seg_trees, prev_s, act, trees
+        unit, c, r, cos, sin, budget, 0.5 * gap, segs, seg_trees, prev_s, act, trees, threads
     )
     seg_m = np.minimum(sx * segs[s, 0] + sy * segs[s, 1], sx * segs[s, 2] + sy * segs[s, 3])
     rows = _Rows(
@@ -1428,13 +1555,35 @@ def _round_rows(unit, c, r, cos, sin, budget, gap, segs, seg_trees, prev):
     return rows.tightest_pieces(), (prev_p, prev_s), (len(i), len(e))
 
 
+def _objective_weights(r, act, max_sizes, fairness):
+    """Each element's weight in the round's objective Σ w_i·Δr_i, mean 1 over ``act``:
+    r_i (the covered area, d(r²)/2), times (cap_i / r_i)^``fairness`` where size caps
+    are given (module docstring, Sizes and density)."""
+    weight = r.copy()
+    if max_sizes is not None and fairness:
+        # r > 0 on act; elsewhere the weight is unused
+        weight[act] *= (max_sizes[act] / r[act]) ** fairness
+    return weight / weight[act].mean()
+
+
 def _solve_round(settings, rows, act, c, r, bounds, mask, k):
     """Δc, Δr of one round by the settings' solver; also its steps, failed tiles and
     the largest row violation left (PDHG)."""
     gap, delta, lo_dr, hi_dr, weight = bounds
     if settings.solver == "pdhg":
         dc, dr, violation, iters = _solve_pdhg(
-            rows, act, c, r, gap, delta, lo_dr, hi_dr, weight, settings.iterations, _STEP_RATIO
+            rows,
+            act,
+            c,
+            r,
+            gap,
+            delta,
+            lo_dr,
+            hi_dr,
+            weight,
+            settings.iterations,
+            _STEP_RATIO,
+            settings.threads,
         )
         return dc, dr, iters, 0, violation
     tile = _tiles(c, act, mask, settings.tile_elements, k)
@@ -1477,7 +1626,7 @@ def compact(
     gap, rounds = settings.gap, settings.rounds
     mask, walls = _region_and_walls(region, walls)
     c, r, th, max_sizes = _checked_elements(centres, angles, sizes, max_sizes)
-    unit = _Unit(shape, aspect)
+    unit = element_ball(shape, aspect)
     _check_start(unit, c, r, gap, mask)
     t0 = time.perf_counter()
     cos, sin = np.cos(th), np.sin(th)
@@ -1489,15 +1638,15 @@ def compact(
     prev = (None, None)
     result = CompactionResult(c, r, th, 0, 0.0)
     for k in range(max(rounds, 1)):
-        delta = settings.move * unit.inr * r
+        delta = settings.move * unit.inradius * r
         up = settings.growth * r
         if settings.max_growth is not None:
             up = np.clip(r0 * (1 + settings.max_growth) - r, 0.0, up)
         if max_sizes is not None:
             up = np.clip(max_sizes - r, 0.0, up)
-        budget = math.sqrt(2) * delta + unit.rho * up
+        budget = math.sqrt(2) * delta + unit.circumradius * up
         rows, prev, (n_pairs, n_pieces) = _round_rows(
-            unit, c, r, cos, sin, budget, gap, segs, seg_trees, prev
+            unit, c, r, cos, sin, budget, gap, segs, seg_trees, prev, settings.threads
         )
         # the start must meet every row (placement may cross a contour by half a pixel)
         r, dropped = _shrink_to_fit(rows, c, r, gap, SLACK)
@@ -1510,7 +1659,7 @@ def compact(
         if len(act) == 0:
             break
         area0 = float(np.sum(r * r))
-        weight = r / r[act].mean()  # d(area) = 2·r·dr
+        weight = _objective_weights(r, act, max_sizes, settings.fairness)
         tl = time.perf_counter()
         tcpu = time.process_time()
         bounds = (gap, delta, -settings.shrink * r, np.maximum(up, 0.0), weight)

@@ -1,5 +1,6 @@
 """A method and a backend of another distribution: the complete plug-in example of the
-Extending guide (tests/test_docs.py runs it through the registry, the gallery draws it)."""
+Extending guide (tests/test_docs.py runs it through the registry, tests/test_plugins.py
+installs it with pip, the gallery draws it)."""
 
 import numpy as np
 import shapely

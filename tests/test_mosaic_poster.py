@@ -1,0 +1,83 @@
+"""Mosaics at poster scale: the memory-lean paths give the whole-array results bit for bit."""
+
+import numpy as np
+import pytest
+import shapely
+
+from compact_distributions.cvt.evaluate import colour_error, pixels_under
+from compact_distributions.cvt.mosaic import image_fields as F
+from compact_distributions.cvt.mosaic.colour import lab_to_srgb, srgb_to_lab
+from compact_distributions.cvt.mosaic.pipeline import mosaic_fills, resample, tile_colours, tile_runs
+
+
+@pytest.mark.parametrize("height", [1, 3, 13, 30, 300])
+def test_tensor_by_rows_is_the_whole_tensor(height):
+    rng = np.random.default_rng(height)
+    picture = rng.random((height, 37, 3))
+    want = F.structure_tensor(picture)
+    got = [np.full((height, 37), np.nan) for _ in range(3)]
+
+    def use(lo, hi, jxx, jxy, jyy):
+        for out, part in zip(got, (jxx, jxy, jyy), strict=True):
+            out[lo:hi] = part
+
+    F.tensor_by_rows(lambda a, b: picture[a:b], height, use, rows=7)
+    for w, g in zip(want, got, strict=True):
+        assert np.array_equal(w, g)
+
+
+def test_edge_orientation_in_place_gives_the_same():
+    rng = np.random.default_rng(1)
+    j = [rng.normal(size=(20, 30)) for _ in range(3)]
+    want = F.edge_orientation(*j)
+    got = F.edge_orientation(*[a.copy() for a in j], overwrite=True)
+    assert all(np.array_equal(w, g) for w, g in zip(want, got, strict=True))
+
+
+def test_strong_edges_from_srgb_by_rows():
+    rng = np.random.default_rng(2)
+    picture = resample(rng.random((40, 50, 3)), 300, 240)  # float32, as a mosaic reads it
+    assert picture.dtype == np.float32
+    want = F.strong_edges(srgb_to_lab(picture.astype(np.float64)), 11.0, min_length=5.0)
+    got = F.strong_edges(picture, 11.0, min_length=5.0, srgb=True)
+    assert want.any() and np.array_equal(want, got)
+
+
+def test_picture_fields_without_details_are_the_same_fields():
+    rng = np.random.default_rng(4)
+    picture = resample(rng.random((30, 40, 3)), 260, 200)
+    full = F.picture_fields(picture, 8.0, "square")
+    lean = F.picture_fields(picture, 8.0, "square", details=False)
+    assert np.array_equal(full.density.values, lean.density.values)
+    assert np.array_equal(
+        full.field.angles_at(np.argwhere(np.ones((200, 260)))[:, ::-1] + 0.5),
+        lean.field.angles_at(np.argwhere(np.ones((200, 260)))[:, ::-1] + 0.5),
+    )
+    assert lean.strength is None and lean.detail is None and full.strength is not None
+
+
+def test_lab_of_one_pixel_is_its_lab_in_the_picture():
+    rng = np.random.default_rng(5)
+    flat = rng.random((5000, 3))
+    lab = srgb_to_lab(flat)
+    for k in (0, 17, 4999):
+        assert np.array_equal(srgb_to_lab(flat[k : k + 1]), lab[k : k + 1])
+        assert np.array_equal(lab_to_srgb(lab[k : k + 1]), lab_to_srgb(lab)[k : k + 1])
+
+
+def test_mosaic_fills_are_tile_colours_and_colour_error():
+    rng = np.random.default_rng(6)
+    picture = resample(rng.random((20, 30, 3)), 120, 90)
+    centres = rng.uniform([5, 5], [115, 85], size=(60, 2))
+    polygons = list(shapely.buffer(shapely.points(centres), rng.uniform(0.2, 6.0, 60), quad_segs=2))
+    polygons[3] = None
+    polygons[7] = shapely.box(10.1, 10.1, 10.3, 10.3)  # holds no pixel centre
+    lab = srgb_to_lab(picture)
+    tiles, pixels = pixels_under(polygons, 120, 90)
+    want_rgb, want_lab = tile_colours(lab, polygons, centres, tiles, pixels)
+    want_error = colour_error(lab, want_lab, tiles, pixels)
+    bounds = tile_runs(polygons, pairs=500)  # several runs
+    assert len(bounds) > 3
+    rgb, fills_lab, error = mosaic_fills(picture, polygons, centres, bounds)
+    assert np.array_equal(rgb, want_rgb) and np.array_equal(fills_lab, want_lab)
+    assert error == pytest.approx(want_error, rel=1e-12)
