@@ -615,8 +615,10 @@ def png_chunks(image, level: int = PNG_LEVEL):
 
     Parameters
     ----------
-    image : PIL.Image.Image or numpy.ndarray
-        An RGB picture, or an (H, W, 3) uint8 array.
+    image : PIL.Image.Image, numpy.ndarray or row source
+        An RGB picture, an (H, W, 3) uint8 array, or an object with ``size`` (W, H)
+        and ``rows(lo, hi)`` giving rows lo .. hi - 1 as (hi - lo, W, 3) uint8
+        (``cvt.mosaic.render.CellRows``: the picture never whole in memory).
     level : int, optional
         zlib's compression level, 0 to 9.
 
@@ -625,7 +627,12 @@ def png_chunks(image, level: int = PNG_LEVEL):
     bytes
         The signature, the header, the compressed rows and the end, in file order.
     """
-    if isinstance(image, np.ndarray):
+    if hasattr(image, "rows") and hasattr(image, "size"):  # a source of bands of rows
+        width, height = image.size
+
+        def rows(lo: int, hi: int) -> np.ndarray:
+            return np.ascontiguousarray(image.rows(lo, hi)).reshape(hi - lo, 3 * width)
+    elif isinstance(image, np.ndarray):
         pixels = np.asarray(image, dtype=np.uint8)
         if pixels.ndim != 3 or pixels.shape[2] != 3:
             raise ValueError(f"a PNG needs an (H, W, 3) array, got shape {pixels.shape}")
@@ -660,8 +667,8 @@ def png_chunks(image, level: int = PNG_LEVEL):
 
 
 def write_png(path, image, level: int = PNG_LEVEL) -> None:
-    """Write ``image`` (a PIL RGB picture or an (H, W, 3) uint8 array) as a PNG file
-    (:func:`png_chunks`)."""
+    """Write ``image`` (a PIL RGB picture, an (H, W, 3) uint8 array or a row source) as a
+    PNG file (:func:`png_chunks`)."""
     with open(path, "wb") as fh:
         for chunk in png_chunks(image, level):
             fh.write(chunk)

@@ -247,3 +247,24 @@ def test_outline_texts_are_the_templates():
         assert ring_texts(xy, count, 3, style) == want
     assert ring_texts(xy[:1], np.array([1]), 3, "svg") is None
     assert ring_texts(np.zeros((0, 2)), np.zeros(0, dtype=int), 3, "json") == []
+
+
+@pytest.mark.parametrize("band", [1 << 22, 500])
+def test_cells_png_written_by_bands_is_the_cells_picture(tmp_path, monkeypatch, band):
+    """cells.png streamed a band of rows at a time (render.CellRows) holds the pixels of
+    cells_image: each label's colour, outside labels (-1 and below) black, sites dark on
+    whichever band they fall."""
+    from PIL import Image
+
+    monkeypatch.setattr(outputs, "PNG_BAND", band)
+    rng = np.random.default_rng(6)
+    labels = rng.integers(-3, 40, (H, W)).astype(np.int32)
+    sites = np.vstack([rng.uniform(0, [W, H], (40, 2)), [[0.2, 0.3], [W - 0.5, H - 0.5]]])
+    write_png(tmp_path / "cells.png", render.CellRows(labels, 42, sites))
+    with Image.open(tmp_path / "cells.png") as img:
+        got = np.asarray(img)
+    assert np.array_equal(got, np.asarray(cells_image(labels, 42, sites)))
+    want = label_colours(42)[np.where(labels >= 0, labels, 42)]
+    i, j = np.floor(sites[:, 1]).astype(int), np.floor(sites[:, 0]).astype(int)
+    want[i, j] = 20
+    assert np.array_equal(got, want)

@@ -224,12 +224,12 @@ def build_problem(opts: ProblemOptions) -> Problem:
 
 
 def _write_cells(path, labels, sites) -> None:
-    """cells.png: the cells in distinct colours, the sites dark."""
-    from compact_distributions.cvt.mosaic.render import cells_image
+    """cells.png: the cells in distinct colours, the sites dark, a band of rows at a time."""
+    from compact_distributions.cvt.mosaic.render import CellRows
 
     from ..outputs import write_png
 
-    write_png(path, cells_image(labels, len(sites), sites))
+    write_png(path, CellRows(labels, len(sites), sites))
 
 
 class _Beside:

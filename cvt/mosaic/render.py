@@ -219,17 +219,59 @@ def _json_ring(v: int) -> str:
 
 
 # ------------------------------------------------------------------ rasters
+class CellRows:
+    """The pixels of :func:`cells_image` a band of rows at a time, for a writer that
+    streams them (``bench.outputs.write_png``) without the whole picture in memory.
+
+    Parameters
+    ----------
+    labels : (H, W) int array
+        The label raster (-1 outside the region).
+    n_elements : int
+        The number of sites (labels 0 .. N - 1).
+    sites : (N, 2) array or None, optional
+        Drawn as dark dots where given.
+
+    Attributes
+    ----------
+    size : tuple of int
+        (W, H).
+    """
+
+    def __init__(self, labels: np.ndarray, n_elements: int, sites=None):
+        self.labels, self.n_elements = labels, n_elements
+        h, w = labels.shape
+        self.size = (w, h)
+        rgb = label_colours(n_elements).astype("<u4")
+        self._packed = (
+            rgb[:, 0] | rgb[:, 1] << 8 | rgb[:, 2] << 16
+        )  # one 4-byte gather per pixel: R, G, B, pad
+        self._dark = None if sites is None else pixel_index(sites, w, h)
+
+    def packed(self, lo: int, hi: int) -> np.ndarray:
+        """(hi - lo, W) uint32: rows lo .. hi - 1 as R | G << 8 | B << 16."""
+        part = self.labels[lo:hi]
+        # label -1 (outside) takes the last colour by numpy's own negative indexing
+        pixels = self._packed[
+            part if part.min(initial=0) >= -1 else np.where(part >= 0, part, self.n_elements)
+        ]
+        if self._dark is not None:
+            i, j = self._dark
+            at = (i >= lo) & (i < hi)
+            pixels[i[at] - lo, j[at]] = 20 | 20 << 8 | 20 << 16
+        return pixels
+
+    def rows(self, lo: int, hi: int) -> np.ndarray:
+        """(hi - lo, W, 3) uint8: rows lo .. hi - 1 in RGB."""
+        return self.packed(lo, hi).view(np.uint8).reshape(hi - lo, self.size[0], 4)[:, :, :3]
+
+
 def cells_image(labels: np.ndarray, n_elements: int, sites=None):
     """The cells in distinct colours (PIL image); sites drawn as dark dots if given."""
     from PIL import Image
 
     h, w = labels.shape
-    rgb = label_colours(n_elements).astype("<u4")
-    packed = rgb[:, 0] | rgb[:, 1] << 8 | rgb[:, 2] << 16  # one 4-byte gather per pixel: R, G, B, pad
-    # label -1 (outside) takes the last colour by numpy's own negative indexing
-    pixels = packed[labels if labels.min(initial=0) >= -1 else np.where(labels >= 0, labels, n_elements)]
-    if sites is not None:
-        pixels[pixel_index(sites, w, h)] = 20 | 20 << 8 | 20 << 16
+    pixels = CellRows(labels, n_elements, sites).packed(0, h)
     return Image.frombuffer("RGBX", (w, h), np.ascontiguousarray(pixels), "raw", "RGBX", 0, 1).convert("RGB")
 
 
@@ -490,6 +532,7 @@ __all__ = [
     "hex_colour",
     "hex_colours",
     "label_colours",
+    "CellRows",
     "cells_image",
     "draw_elements",
     "svg_document",
