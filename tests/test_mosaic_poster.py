@@ -81,3 +81,31 @@ def test_mosaic_fills_are_tile_colours_and_colour_error():
     rgb, fills_lab, error = mosaic_fills(picture, polygons, centres, bounds)
     assert np.array_equal(rgb, want_rgb) and np.array_equal(fills_lab, want_lab)
     assert error == pytest.approx(want_error, rel=1e-12)
+
+
+@pytest.mark.parametrize("sigma", [0.8, 9.0])  # the direct filter and the FFT
+def test_gaussian_smooth_into_its_own_image(sigma):
+    """Written over its input, the smoothing is the scipy filter's, and the input's
+    buffer holds it (no second picture-sized array)."""
+    from scipy import ndimage
+
+    rng = np.random.default_rng(5)
+    image = rng.random((70, 90))
+    want = ndimage.gaussian_filter(image, sigma, mode="nearest")
+    copy = image.copy()
+    got = F.gaussian_smooth(copy, sigma, out=copy)
+    assert got is copy
+    np.testing.assert_allclose(got, want, rtol=0, atol=1e-12)
+    assert np.array_equal(got, F.gaussian_smooth(image, sigma))
+
+
+def test_smooth_angles_over_its_input_gives_the_same():
+    rng = np.random.default_rng(6)
+    angles = rng.uniform(-np.pi, np.pi, (60, 80))
+    want = F.smooth_angles(angles, 9.0, np.pi / 2)
+    kept = angles.copy()
+    got = F.smooth_angles(angles.copy(), 9.0, np.pi / 2, overwrite=True)
+    assert np.array_equal(got, want) and np.array_equal(angles, kept)
+    # by hand: the mean direction of a constant field is that field (modulo the period)
+    flat = np.full((30, 40), 0.3)
+    np.testing.assert_allclose(F.smooth_angles(flat, 5.0, np.pi / 2, overwrite=True), 0.3, atol=1e-12)

@@ -316,7 +316,7 @@ FFT_SIGMA = 8.0
 FFT_BAND = 256
 
 
-def gaussian_smooth(image: np.ndarray, sigma: float) -> np.ndarray:
+def gaussian_smooth(image: np.ndarray, sigma: float, out: np.ndarray | None = None) -> np.ndarray:
     """``ndimage.gaussian_filter(image, sigma, mode="nearest")`` of a 2-D array.
 
     The same kernel (truncated at 4 sigma) and border (the edge pixels repeated); from
@@ -333,13 +333,20 @@ def gaussian_smooth(image: np.ndarray, sigma: float) -> np.ndarray:
     image : (H, W) float array
     sigma : float
         The Gaussian's standard deviation in pixels, the same along both axes.
+    out : (H, W) float64 array, optional
+        Where to write the result; it may be ``image`` itself (the image is read whole
+        before any of the result is written), which saves a picture-sized array.
 
     Returns
     -------
     (H, W) float64 array
+        ``out`` where given.
     """
     if sigma < FFT_SIGMA:
-        return gaussian_filter(image, sigma)
+        if out is None:
+            return gaussian_filter(image, sigma)
+        out[...] = gaussian_filter(image, sigma)
+        return out
     from scipy import fft
 
     r = int(4.0 * sigma + 0.5)  # ndimage's truncation
@@ -374,7 +381,8 @@ def gaussian_smooth(image: np.ndarray, sigma: float) -> np.ndarray:
         del b
     # back along the rows, scaled as pocketfft scales irfft2 (1 / N in long double)
     scale = np.float64(np.longdouble(1) / np.longdouble(size_y * size_x))
-    out = np.empty((h, w))
+    if out is None:
+        out = np.empty((h, w))
     for lo in range(0, h, FFT_BAND):
         rows = fft.irfft(spectrum[lo : lo + FFT_BAND], size_x, axis=1, norm="forward", workers=-1)
         rows *= scale
@@ -382,14 +390,20 @@ def gaussian_smooth(image: np.ndarray, sigma: float) -> np.ndarray:
     return out
 
 
-def smooth_angles(angles: np.ndarray, sigma: float, period: float) -> np.ndarray:
-    """Gaussian smoothing of an angle field that is defined modulo ``period``."""
+def smooth_angles(angles: np.ndarray, sigma: float, period: float, overwrite: bool = False) -> np.ndarray:
+    """Gaussian smoothing of an angle field that is defined modulo ``period``
+    (``overwrite``: ``angles``, a float64 array of the caller's, may hold the result, so
+    that a large picture's field needs two picture-sized arrays less; the same numbers)."""
     if sigma <= 0:
         return angles
     m = 2.0 * math.pi / period
-    c = gaussian_smooth(np.cos(m * angles), sigma)
-    s = gaussian_smooth(np.sin(m * angles), sigma)
-    return np.arctan2(s, c) / m
+    turned = np.multiply(angles, m, out=angles if overwrite else None)
+    c = np.cos(turned)
+    s = np.sin(turned, out=turned if overwrite else None)
+    del turned
+    c = gaussian_smooth(c, sigma, out=c)
+    s = gaussian_smooth(s, sigma, out=s)
+    return np.divide(np.arctan2(s, c, out=s), m, out=s)
 
 
 def picture_fields(
@@ -432,7 +446,7 @@ def picture_fields(
 
     # density: smoothed colour gradient magnitude, 1 .. contrast (before the field, so
     # that the trace is freed before the field's temporaries are made)
-    magnitude = gaussian_smooth(trace, spacing)
+    magnitude = gaussian_smooth(trace, spacing, out=trace)  # the trace is not needed after
     trace = None
     np.sqrt(np.maximum(magnitude, 0.0, out=magnitude), out=magnitude)
     ref = float(np.percentile(magnitude, 99)) if magnitude.size else 0.0
@@ -455,7 +469,9 @@ def picture_fields(
         del ii, jj
         if not details:
             edge_angles = None
-        angles = smooth_angles(carried, FIELD_SMOOTHING * spacing, shape_record(element).side_period)
+        angles = smooth_angles(
+            carried, FIELD_SMOOTHING * spacing, shape_record(element).side_period, overwrite=True
+        )
         del carried
     else:
         angles = np.zeros(edges.shape)
@@ -527,10 +543,12 @@ def strong_edges(
     ``threshold`` in ΔE*ab (see the module docstring), ``min_length`` in pixels.
     ``srgb``: ``lab`` is the sRGB picture (0..1), read in CIELAB a band of rows at a time."""
     h, w = lab.shape[:2]
-    contrast = np.empty((h, w))
+    # the contrast inside a border of zeros: the neighbours are read from it without a
+    # padded copy of a picture-sized array
+    pad = np.zeros((h + 2, w + 2))
+    contrast = pad[1:-1, 1:-1]
     sector = np.empty((h, w), dtype=np.int8)
     _contrast_rows(lab, sigma, srgb, contrast, sector=sector)
-    pad = np.pad(contrast, 1)
     ridge = np.zeros((h, w), dtype=bool)
     for k, (di, dj) in enumerate(_ACROSS):
         ahead = pad[1 + di : 1 + di + h, 1 + dj : 1 + dj + w]
