@@ -109,3 +109,31 @@ def test_smooth_angles_over_its_input_gives_the_same():
     # by hand: the mean direction of a constant field is that field (modulo the period)
     flat = np.full((30, 40), 0.3)
     np.testing.assert_allclose(F.smooth_angles(flat, 5.0, np.pi / 2, overwrite=True), 0.3, atol=1e-12)
+
+
+def test_elements_as_rows_are_the_picture(tmp_path, monkeypatch):
+    """Drawn as a row source read in the PNG writer's bands, the elements give the same
+    pixels as the picture drawn whole, and the rows come in order only."""
+    from PIL import Image
+
+    from compact_distributions.bench import outputs
+    from compact_distributions.bench.outputs import write_png
+    from compact_distributions.cvt.mosaic import render as R
+
+    monkeypatch.setattr(R, "BAND_BYTES", 3 * 1350 * 24)  # bands of 24 supersampled rows
+    monkeypatch.setattr(outputs, "PNG_BAND", 3 * 450 * 10)  # the writer reads 10 rows at a time
+
+    rng = np.random.default_rng(8)
+    centres = rng.uniform(0, 300, (400, 2))
+    elements = list(shapely.buffer(shapely.points(centres), rng.uniform(2, 9, 400), quad_segs=3))
+    # a window of the whole raster is drawn at once, not in bands
+    want = np.asarray(R.draw_elements(elements, 300, 260, scale=1.5, window=(0, 0, 300, 260)))
+    assert np.array_equal(np.asarray(R.draw_elements(elements, 300, 260, scale=1.5)), want)
+    stream = R.draw_elements(elements, 300, 260, scale=1.5, as_rows=True)
+    assert isinstance(stream, R.RowStream) and stream.size == (450, 390)
+    write_png(tmp_path / "rows.png", stream)
+    assert np.array_equal(np.asarray(Image.open(tmp_path / "rows.png")), want)
+    again = R.draw_elements(elements, 300, 260, scale=1.5, as_rows=True)
+    assert np.array_equal(again.rows(0, 7), want[:7]) and np.array_equal(again.rows(7, 390), want[7:])
+    with pytest.raises(ValueError, match="already passed"):
+        again.rows(3, 9)

@@ -230,7 +230,7 @@ def run(args) -> int:
     )
     from compact_distributions.cvt.resources import mosaic_estimate
 
-    from ..outputs import COMMAND_OUTPUTS, OutputFolder, write_json, write_lines, write_sites_csv
+    from ..outputs import COMMAND_OUTPUTS, OutputFolder, write_json, write_lines, write_png, write_sites_csv
 
     # every option, the picture's header and the memory it all asks for are checked first
     t0 = time.perf_counter()
@@ -283,7 +283,7 @@ def run(args) -> int:
             # the other files first, so that result.json (written last) holds their writing time
             t_write = time.perf_counter()
             write_lines(tmp / "mosaic.svg", m.svg_lines())
-            m.render(scale=png_scale).save(tmp / "mosaic.png")
+            write_png(tmp / "mosaic.png", m.render(scale=png_scale, as_rows=True))  # never whole
             write_sites_csv(tmp / "sites.csv", m.sites, m.angles, m.scales)
             result = mosaic_result_json(args, m, backend, {"writing": time.perf_counter() - t_write})
             write_json(tmp / "result.json", result)

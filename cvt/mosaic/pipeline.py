@@ -787,8 +787,9 @@ class MosaicResult:
             ellipses=ellipse_rows(self.polygons, self.element, self.aspect),
         )
 
-    def render(self, scale: float = 1.0, grout=None, supersample: int = 3):
-        """The mosaic as a PIL RGB image ``scale`` times the raster size (antialiased)."""
+    def render(self, scale: float = 1.0, grout=None, supersample: int = 3, as_rows: bool = False):
+        """The mosaic as a PIL RGB image ``scale`` times the raster size (antialiased;
+        ``as_rows``: a row source drawn band by band as it is read, for a PNG writer)."""
         grout = self.grout if grout is None else parse_colour(grout, "grout")
         return draw_elements(
             self.polygons,
@@ -798,6 +799,7 @@ class MosaicResult:
             background=grout,
             scale=scale,
             supersample=supersample,
+            as_rows=as_rows,
         )
 
     def to_distribution(self) -> Distribution:

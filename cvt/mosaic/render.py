@@ -278,6 +278,71 @@ def cells_image(labels: np.ndarray, n_elements: int, sites=None):
 BAND_BYTES = 8 << 20  # a supersampled picture is drawn in bands of about this size
 
 
+class RowStream:
+    """A row source (``size``, ``rows(lo, hi)``: what :func:`bench.outputs.png_chunks`
+    reads) over bands of rows made in order: rows are asked for in increasing order, and
+    a band is dropped once it is read past, so the picture is never whole in memory.
+
+    Parameters
+    ----------
+    size : tuple of int
+        (W, H) of the picture.
+    bands : iterable
+        (first row, (n, W, 3) uint8 array) pairs, consecutive, from row 0.
+    """
+
+    def __init__(self, size, bands):
+        self.size = tuple(size)
+        self._bands = iter(bands)
+        self._buffer = np.empty((0, self.size[0], 3), dtype=np.uint8)
+        self._start = 0
+
+    def rows(self, lo: int, hi: int) -> np.ndarray:
+        """(hi - lo, W, 3) uint8: rows lo .. hi - 1 (lo never below an earlier call's)."""
+        if lo < self._start:
+            raise ValueError(f"rows {lo}..{hi} were already passed (at {self._start})")
+        self._buffer, self._start = self._buffer[lo - self._start :], lo
+        parts, have = [self._buffer], lo + len(self._buffer)
+        while have < hi:
+            first, band = next(self._bands)
+            if first != have:
+                raise ValueError(f"a band starts at row {first}, not {have}")
+            parts.append(band)
+            have += len(band)
+        if len(parts) > 1:
+            self._buffer = np.concatenate(parts)
+        return self._buffer[: hi - lo]
+
+
+class _Painter:
+    """Draws elements on a band of the supersampled picture: ``paint(img, top, which)``
+    draws elements ``which`` on ``img``, rows top .. top + height of the picture, their
+    vertices read a block of elements at a time (bounded memory)."""
+
+    def __init__(self, elements, fills, origin, k: float, line):
+        self.geoms = _geometries(elements)
+        self.rgb = fill_rows(fills, len(elements))
+        self.origin, self.k, self.line = origin, k, line
+
+    def paint(self, img, top: int, which) -> None:
+        from PIL import ImageDraw
+
+        draw = ImageDraw.Draw(img)
+        # without an outline, ImageDraw.polygon is its core's fill call: made directly
+        core, ink = draw.draw, draw.draw.draw_ink
+        (x0, y0), k, geoms = self.origin, self.k, self.geoms
+        for block in _blocks(geoms, which):
+            xy, element, count = _ring_table(geoms, block)
+            px, py = (xy[:, 0] - x0) * k, (xy[:, 1] - y0) * k - top  # whole-pixel move: exact
+            pts, at = np.stack([px, py], axis=1).ravel().tolist(), 0
+            for colour, n in zip(map(tuple, self.rgb[element].tolist()), count.tolist(), strict=True):
+                if n >= 3 and self.line is None:
+                    core.draw_polygon(pts[at : at + 2 * n], ink(colour), 1)
+                elif n >= 3:
+                    draw.polygon(pts[at : at + 2 * n], fill=colour, outline=self.line)
+                at += 2 * n
+
+
 def draw_elements(
     elements,
     width: int,
@@ -291,8 +356,11 @@ def draw_elements(
     supersample: int = 3,
     window=None,
     outline=None,
+    as_rows: bool = False,
 ):
-    """The elements as a PIL RGB image of ``scale`` times the raster's size.
+    """The elements as a PIL RGB image of ``scale`` times the raster's size (``as_rows``:
+    a :class:`RowStream` of its rows instead, drawn as they are read, where the picture
+    is drawn in bands).
 
     ``fills``: one colour per element (default :func:`label_colours`).  ``background``
     paints everything; where ``region_mask`` ((H, W) bool) is given, its inside is painted
@@ -302,7 +370,7 @@ def draw_elements(
     A supersampled picture of the whole raster is drawn and reduced band by band (rows
     in whole boxes of the reduction, each polygon moved by whole pixels): the same image
     as one drawn at once, in a fixed amount of memory."""
-    from PIL import Image, ImageDraw
+    from PIL import Image
 
     x0, y0, x1, y1 = (0.0, 0.0, float(width), float(height)) if window is None else map(float, window)
     ss = max(1, int(supersample))
@@ -316,30 +384,13 @@ def draw_elements(
     line = rgb8(outline) if outline is not None else None
 
     # the elements that reach the window; their vertical extent in the picture's pixels
-    geoms = _geometries(elements)
-    b = shapely.bounds(geoms)
+    painter = _Painter(elements, fills, (x0, y0), k, line)
+    b = shapely.bounds(painter.geoms)
     with np.errstate(invalid="ignore"):
         shown = np.isfinite(b[:, 0]) & ~((b[:, 0] > x1) | (b[:, 1] > y1) | (b[:, 2] < x0) | (b[:, 3] < y0))
     shown = np.flatnonzero(shown)
     top_y, bottom_y = (b[shown, 1] - y0) * k, (b[shown, 3] - y0) * k
-    rgb = fill_rows(fills, len(elements))
-
-    def paint(img, top: int, which) -> None:
-        """Draw elements ``which`` on ``img``, rows top .. top + height of the picture;
-        their vertices read a block of elements at a time (bounded memory)."""
-        draw = ImageDraw.Draw(img)
-        # without an outline, ImageDraw.polygon is its core's fill call: made directly
-        core, ink = draw.draw, draw.draw.draw_ink
-        for block in _blocks(geoms, which):
-            xy, element, count = _ring_table(geoms, block)
-            px, py = (xy[:, 0] - x0) * k, (xy[:, 1] - y0) * k - top  # whole-pixel move: exact
-            pts, at = np.stack([px, py], axis=1).ravel().tolist(), 0
-            for colour, n in zip(map(tuple, rgb[element].tolist()), count.tolist(), strict=True):
-                if n >= 3 and line is None:
-                    core.draw_polygon(pts[at : at + 2 * n], ink(colour), 1)
-                elif n >= 3:
-                    draw.polygon(pts[at : at + 2 * n], fill=colour, outline=line)
-                at += 2 * n
+    paint = painter.paint
 
     banded = ss > 1 and window is None and big == (small[0] * ss, small[1] * ss)
     if masked:
@@ -360,23 +411,32 @@ def draw_elements(
         return img
     step = int(np.lcm(int(k), ss)) if masked else ss
     rows = max(step, BAND_BYTES // (3 * big[0]) // step * step)
+
+    def bands():
+        # PIL fills a polygon that crosses an image's edge differently from one that
+        # does not: each band is drawn tall enough to hold whole every polygon it shows
+        for top in range(0, big[1], rows):
+            n_rows = min(rows, big[1] - top)
+            near = (bottom_y >= top - 2) & (top_y <= top + n_rows + 2)
+            lo = int(np.floor(min(top, top_y[near].min(initial=top)))) - 2
+            hi = int(np.ceil(max(top + n_rows, bottom_y[near].max(initial=top)))) + 2
+            lo, hi = max(0, lo // step * step), min(big[1], -(-hi // step) * step)
+            if masked:  # the mask's rows, each pixel repeated k times (what NEAREST gives)
+                part = m[lo // int(k) : hi // int(k)].astype(np.uint8)
+                band = Image.fromarray(
+                    np.repeat(np.repeat(colours[part], int(k), axis=0), int(k), axis=1), "RGB"
+                )
+            else:
+                band = Image.new("RGB", (big[0], hi - lo), inside if inside is not None else rgb8(background))
+            paint(band, lo, shown[near])
+            box = (0, top - lo, big[0], top - lo + n_rows)  # the band's own rows, no cropped copy
+            yield top // ss, band.resize((small[0], n_rows // ss), Image.BOX, box=box)
+
+    if as_rows:
+        return RowStream(small, ((first, np.asarray(band)) for first, band in bands()))
     out = Image.new("RGB", small)
-    # PIL fills a polygon that crosses an image's edge differently from one that does
-    # not: each band is drawn tall enough to hold whole every polygon it shows
-    for top in range(0, big[1], rows):
-        n_rows = min(rows, big[1] - top)
-        near = (bottom_y >= top - 2) & (top_y <= top + n_rows + 2)
-        lo = int(np.floor(min(top, top_y[near].min(initial=top)))) - 2
-        hi = int(np.ceil(max(top + n_rows, bottom_y[near].max(initial=top)))) + 2
-        lo, hi = max(0, lo // step * step), min(big[1], -(-hi // step) * step)
-        if masked:  # the mask's rows, each pixel repeated k times (what NEAREST gives)
-            part = m[lo // int(k) : hi // int(k)].astype(np.uint8)
-            band = Image.fromarray(np.repeat(np.repeat(colours[part], int(k), axis=0), int(k), axis=1), "RGB")
-        else:
-            band = Image.new("RGB", (big[0], hi - lo), inside if inside is not None else rgb8(background))
-        paint(band, lo, shown[near])
-        box = (0, top - lo, big[0], top - lo + n_rows)  # the band's own rows, without a cropped copy
-        out.paste(band.resize((small[0], n_rows // ss), Image.BOX, box=box), (0, top // ss))
+    for first, band in bands():
+        out.paste(band, (0, first))
     return out
 
 
@@ -527,6 +587,7 @@ def element_coordinates_json(elements, digits: int = 3) -> list[str]:
 
 
 __all__ = [
+    "RowStream",
     "parse_colour",
     "rgb8",
     "hex_colour",
