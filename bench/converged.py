@@ -306,7 +306,8 @@ def gap_notes(table, group: list[str]) -> list[str]:
     ]
     if "energy_gap_note" not in table:
         return notes
-    missing = table[table["energy_gap_note"].fillna("").astype(str) != ""]
+    note = table["energy_gap_note"]  # float64 NaN where no row has a note
+    missing = table[note.notna() & (note.astype(str) != "")]
     for why, g in missing.groupby("energy_gap_note", sort=False):
         names = list(dict.fromkeys(" ".join(map(str, r)) for r in g[group].itertuples(index=False)))
         notes.append(f"energy above converged — for {', '.join(names)}: {why}")
