@@ -81,6 +81,24 @@ COLUMNS = [
 ]
 
 
+# the columns of Table 2's markdown (the report and the documentation's page)
+MARKDOWN_COLUMNS = (
+    "method",
+    "backend",
+    "element",
+    "coverage",
+    "overlap",
+    "coverage at ≤ 1 % overlap",
+    "time",
+    "Lloyd",
+    "ms/it",
+    "energy above converged",
+    "runs",
+    "paper coverage",
+    "paper time",
+)
+
+
 def problem_set(
     quick: bool,
     seeds: int | None,
@@ -475,21 +493,7 @@ def render_markdown(
     text = header_markdown("Table 2" if not quick else title, prov, command, notes)
     if quick:
         text += f"\n**{title}**\n"
-    cols = [
-        "method",
-        "backend",
-        "element",
-        "coverage",
-        "overlap",
-        "coverage at ≤ 1 % overlap",
-        "time",
-        "Lloyd",
-        "ms/it",
-        "energy above converged",
-        "runs",
-        "paper coverage",
-        "paper time",
-    ]
+    cols = list(MARKDOWN_COLUMNS)
     by_host = several_hosts(table["hosts"])  # rows from several machines say which
     shared = table["host_slots"].fillna(1) > 1  # times taken beside other runs of the sweep
     body = _table_rows(table, shared, by_host)
@@ -791,4 +795,13 @@ def _print_summary(table, out: Path, written: list[str]) -> None:
     print(f"wrote {out}/{', '.join(written)}", file=sys.stderr)
 
 
-__all__ = ["Table2Request", "table2", "problem_set", "aggregate", "prepare", "discussion", "label_record"]
+__all__ = [
+    "MARKDOWN_COLUMNS",
+    "Table2Request",
+    "table2",
+    "problem_set",
+    "aggregate",
+    "prepare",
+    "discussion",
+    "label_record",
+]
