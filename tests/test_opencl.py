@@ -15,14 +15,13 @@ import os
 import numpy as np
 import pytest
 
+from compact_distributions.backends.opencl import OpenCLBackend, choose_device
 from compact_distributions.cvt.errors import BackendUnavailable, InputError
 from compact_distributions.cvt.fields import DensityMap, DirectionField
 from compact_distributions.cvt.lloyd import lloyd
 from compact_distributions.cvt.metrics import METRIC_NAMES, compile_sites, make_metric
 from compact_distributions.cvt.moments import moments_from_labels
 from compact_distributions.cvt.problem import Grid, Problem
-
-from compact_distributions.backends.opencl import OpenCLBackend, choose_device
 
 # each test is collected and skipped with the reason where no device runs the kernels
 # (a module-level skip would leave pytest nothing collected: exit status 5)
