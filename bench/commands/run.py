@@ -232,21 +232,9 @@ def _write_cells(path, labels, sites) -> None:
     write_png(path, CellRows(labels, len(sites), sites))
 
 
-def _write_elements(path, elements, width: int, height: int, mask) -> None:
-    """elements.png: the elements drawn band by band as the PNG writer reads the rows."""
-    from compact_distributions.cvt.mosaic.render import PAPER, draw_elements
-
-    from ..outputs import write_png
-
-    write_png(
-        path, draw_elements(elements, width, height, region_colour=PAPER, region_mask=mask, as_rows=True)
-    )
-
-
 class _Beside:
     """Work run in one thread beside the command's own (the pictures: their gathers,
-    conversions, block means and zlib release the GIL, and the measures' GEOS and Qhull
-    calls release it on the command's side), or at once where the process has one core.
+    conversions and zlib release the GIL), or at once where the process has one core.
     ``wait()`` returns the seconds spent waiting for it and re-raises its error; leaving
     the block waits too, so no file is written after its folder is committed."""
 
@@ -309,7 +297,7 @@ def run(args) -> int:
     from compact_distributions.baselines import get_method
     from compact_distributions.cvt.evaluate import evaluate, region_polygon
     from compact_distributions.cvt.lloyd import MAX_ITERATIONS
-    from compact_distributions.cvt.mosaic.render import svg_lines
+    from compact_distributions.cvt.mosaic.render import PAPER, draw_elements, svg_lines
     from compact_distributions.cvt.placement.fit import parse_gap
     from compact_distributions.cvt.resources import run_estimate
 
@@ -319,6 +307,7 @@ def run(args) -> int:
         command_line,
         write_json,
         write_lines,
+        write_png,
         write_sites_csv,
     )
     from ..results import build_result
@@ -363,16 +352,16 @@ def run(args) -> int:
             evaluation_seconds = time.perf_counter() - t0
             sources = {k: getattr(args, k) for k in ("init", "density", "field", "region")}
         g = problem.grid
-        element = dist.extra.get("element", element)
-        # elements.png drawn and written beside the other files; result.json last, so that
-        # it holds their writing time
+        # the other files first, so that result.json (written last) holds their writing time
         t0 = time.perf_counter()
-        beside.run(_write_elements, tmp / "elements.png", dist.elements, g.width, g.height, g.mask)
         write_sites_csv(tmp / "sites.csv", dist.sites, dist.angles, dist.scales)
         write_lines(
             tmp / "elements.svg",
             svg_lines(dist.elements, g.width, g.height, region=None if g.mask is None else region),
         )
+        picture = draw_elements(dist.elements, g.width, g.height, region_colour=PAPER, region_mask=g.mask)
+        beside.run(write_png, tmp / "elements.png", picture)  # deflated beside the measures
+        del picture
         stages = {"evaluation": evaluation_seconds, "writing": time.perf_counter() - t0}
         result = build_result(
             "run",
@@ -380,7 +369,7 @@ def run(args) -> int:
             dist,
             ev,
             backend,
-            element=element,
+            element=dist.extra.get("element", element),
             gap=gap,
             command=command_line(args.argv),
             sources=sources,
