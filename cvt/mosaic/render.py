@@ -22,6 +22,7 @@ import numpy as np
 import shapely
 
 from ..errors import InputError
+from ..evaluate import exterior_rings
 from ..pixels import index_ranges, pixel_index
 from .numbers import ring_texts
 
@@ -123,7 +124,7 @@ def fill_rows(fills, n: int) -> np.ndarray:
 def _exteriors(polygons: np.ndarray):
     """The exterior rings of shapely ``polygons`` (not closed): their vertices as one
     (P, 2) array and each ring's vertex count."""
-    xy, ring = shapely.get_coordinates(shapely.get_exterior_ring(polygons), return_index=True)
+    xy, ring = shapely.get_coordinates(exterior_rings(polygons), return_index=True)
     counts = np.bincount(ring, minlength=len(polygons))
     closing = np.zeros(len(xy), dtype=bool)
     closing[np.cumsum(counts) - 1] = True  # each ring repeats its first vertex last
