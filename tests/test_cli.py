@@ -226,33 +226,27 @@ def test_console_script_end_to_end(tmp_path):
     assert bad.returncode == 2 and "Traceback" not in bad.stderr and "unknown --metric" in bad.stderr
 
 
-@pytest.mark.parametrize(
-    "argv",
-    [
-        ["--help"],
-        [],
-        ["bogus"],
-        ["run", "--help"],
-        ["mosaic", "--help"],
-        ["info", "--help"],
-        ["run", "--nope"],
-    ],
-)
-def test_one_commands_parser_says_what_every_parser_says(argv):
+def test_one_commands_parser_says_what_every_parser_says():
     """The parser built for ``argv`` alone (only the named command's options; the others
-    by their help) prints what the parser of every command prints."""
+    by their help) prints what the parser of every command prints: the list of commands,
+    each command's help, and the error of an unknown command or option."""
     import contextlib
     import io
 
-    from compact_distributions.bench.commands.cli import build_parser
+    from compact_distributions.bench.commands.cli import SUBCOMMANDS, build_parser
 
-    def said(parser):
+    def said(parser, argv):
         out, err = io.StringIO(), io.StringIO()
         with contextlib.redirect_stdout(out), contextlib.redirect_stderr(err), pytest.raises(SystemExit):
             parser.parse_args(argv)
         return out.getvalue(), err.getvalue()
 
-    assert said(build_parser(argv)) == said(build_parser())
+    every = build_parser()
+    names = [m.rsplit(".", 1)[1] for m in SUBCOMMANDS]
+    cases = [["--help"], [], ["bogus"], ["--version"]]
+    cases += [[name, extra] for name in names for extra in ("--help", "--no-such-option")]
+    for argv in cases:
+        assert said(build_parser(argv), argv) == said(every, argv), argv
 
 
 def test_help_lists_every_command_without_loading_the_methods():
