@@ -313,6 +313,46 @@ def test_large_programs_step_in_float32_within_their_bounds(shape, monkeypatch):
     assert np.array_equal(single.centres, split.centres) and np.array_equal(single.sizes, split.sizes)
 
 
+def test_large_sets_worked_in_z_order_come_back_in_the_callers_order(monkeypatch):
+    """Past _SPATIAL_ORDER_ELEMENTS the elements are worked along a Z-order curve: each
+    result (and each round's state given to on_round) is in the caller's order, the
+    same elements as in the caller's order to rounding (1e-6 px, area 1e-9), apart
+    (shapely), an absent element stays absent, and the angles come back as given."""
+    from compact_distributions.cvt.placement import compaction
+
+    grid, sites, angles, sizes = random_layout("hexagon", 6, 150, "annulus", gap=0.5)
+    sizes = sizes.copy()
+    sizes[7] = 0.0
+
+    def run(states):
+        """Three rounds, each round's sizes kept in ``states``."""
+        return compact(
+            sites,
+            angles,
+            sizes,
+            "hexagon",
+            0.5,
+            grid,
+            gap=0.5,
+            rounds=3,
+            on_round=lambda k, c, s: states.append(s),
+        )
+
+    plain_states, z_states = [], []
+    plain = run(plain_states)
+    monkeypatch.setattr(compaction, "_SPATIAL_ORDER_ELEMENTS", 0)
+    order = compaction._spatial_order(np.asarray(sites, dtype=float))
+    assert sorted(order) == list(range(len(sites))) and not np.array_equal(order, np.arange(len(sites)))
+    z = run(z_states)
+    np.testing.assert_allclose(z.centres, plain.centres, atol=1e-6)
+    np.testing.assert_allclose(z.sizes, plain.sizes, atol=1e-6)
+    assert np.sum(z.sizes**2) == pytest.approx(np.sum(plain.sizes**2), rel=1e-9)
+    for a, b in zip(z_states, plain_states, strict=True):
+        np.testing.assert_allclose(a, b, atol=1e-6)
+    assert z.sizes[7] == 0.0 and np.array_equal(z.angles, angles)
+    assert_separated("hexagon", z.centres, angles, z.sizes, grid, 0.5)
+
+
 def test_rows_no_shrinking_can_meet_put_their_elements_back():
     """An approximate solution that brings two centres closer than the gap (or a centre
     onto the border) would cost an element: both are put back where the round started,

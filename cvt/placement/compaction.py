@@ -122,13 +122,19 @@ time and cover 1.1 % more area (Table 2's ours-compact rows 0.4-1.4 points more)
 Plain PDHG's best primal/dual step ratio was 4 (2 and 8 within 0.3 % of the area).
 Measured no better: starting each round from last round's duals (mapped by pair), steps
 folded into the matrices, float32 products, relaxation 1.5 (~20 % fewer steps for the
-same gain).  Float32 pays only past the processor's cache: a program of at least
-``_PDHG_SINGLE_ENTRIES`` entries (some 35 000 squares without walls) steps in float32
-throughout, in 0.55-0.6x the time at 64 000 squares (1.6-2.1 M entries; A and Aᵀ in float64
-are some 40 MB), the answer within 1e-5 px of float64's (area within 1e-8), and is then
-checked in float64 as always; at 0.7 M entries (a 20 000-tile mosaic) float32 took 1.2x
-float64's time.  Fewer steps cost area in every round: 50 steps per round instead of 70
-covered 0.36 % less area at 64 000 squares, 70 in the first round and 40 after 0.53 %.
+same gain).  Float32 pays only once the program outgrows the processor's cache: one of at
+least ``_PDHG_SINGLE_ENTRIES`` entries (some 20 000 squares without walls) steps in float32
+throughout, the answer within 1e-5 px of float64's (area within 1e-8), then checked in
+float64 as always: the LP in 0.55x the time at 64 000 squares (1.6-2.1 M entries; A and
+Aᵀ in float64 are some 40 MB) and 0.7x on a 20 000-tile mosaic (0.7 M entries, in Z
+order; out of it float32 took 1.2x float64's time there).  Fewer steps cost area in every
+round: 50 steps per round instead of 70 covered 0.36 % less area at 64 000 squares, 70
+in the first round and 40 after 0.53 %.  A set of ``_SPATIAL_ORDER_ELEMENTS`` elements or
+more is worked in Z order (:func:`_spatial_order`; results in the caller's order): from
+the random order of Lloyd's sites, 0.78x the processor time of compaction at 64 000
+squares and 0.83x on the mosaic (the same elements to rounding, which in four rounds
+grew to 0.03 px); smaller sets, in cache anyway, keep the caller's order and their
+results bit for bit.
 Halpern's iteration on the reflected step (z ← w·(2T(z) − z) + (1 − w)·z₀,
 w = (k+1)/(k+2), anchored at the start and restarted from T(z) when the fixed-point
 residual has fallen 5-fold; Lu & Yang's r2HPDHG) costs the same per step and needs
@@ -200,7 +206,8 @@ _HALPERN_RESTART = 0.2  # PDHG: new anchor once the fixed-point residual falls b
 _HALPERN_CHECK = 4  # PDHG: steps between evaluations of that residual
 _PIECE_ROWS = 100_000  # candidate pairs per thread at least (fewer: fewer threads)
 _PDHG_BLOCK_ENTRIES = 200_000  # PDHG: entries of A per thread at least (fewer: fewer threads)
-_PDHG_SINGLE_ENTRIES = 1_000_000  # PDHG: programs with this many entries of A step in float32
+_PDHG_SINGLE_ENTRIES = 500_000  # PDHG: programs with this many entries of A step in float32
+_SPATIAL_ORDER_ELEMENTS = 10_000  # this many elements or more: worked in Z order (_spatial_order)
 _FAIRNESS = 2.0  # under size caps: growth weighed by r·(cap / r)^this (Sizes and density)
 
 
@@ -1357,9 +1364,8 @@ def _solve_pdhg(rows: _Rows, act, c, r, gap, delta, lo_dr, hi_dr, weight, iterat
     program = a, b, (lo, hi, cost), (tau, sigma)
     if a.nnz >= _PDHG_SINGLE_ENTRIES:
         # past the processor's cache (A and Aᵀ in float64: ~40 MB at 64 000 squares) the
-        # steps are bound by memory traffic, which float32 halves: 0.6x the time there,
-        # the answer within a few 1e-6 px (then checked in float64 as any other); a
-        # program of 0.7 M entries took 1.2x as long in float32, so smaller ones keep float64
+        # steps are bound by memory traffic, which float32 halves (module docstring,
+        # Solvers); the answer within a few 1e-6 px, then checked in float64 as any other
         f = np.float32
         program = (
             a.astype(f),
@@ -1378,6 +1384,34 @@ def _solve_pdhg(rows: _Rows, act, c, r, gap, delta, lo_dr, hi_dr, weight, iterat
 
 
 # --------------------------------------------------------------------- driver
+def _spatial_order(c: np.ndarray) -> np.ndarray:
+    """The elements' order along a Z-order (Morton) curve through their centres: worked
+    in this order, near elements have near indices, so the gathers of the near pairs'
+    search and of the program's sparse products stay within the processor's cache."""
+    lo = c.min(axis=0)
+    cell = max(float((c.max(axis=0) - lo).max()) / 65535.0, 1.0)  # 16 bits a coordinate
+    q = np.floor((c - lo) / cell).astype(np.int64)
+
+    def spread(v):
+        """The 16 low bits of v moved to the even bit positions."""
+        v = (v | (v << 8)) & 0x00FF00FF
+        v = (v | (v << 4)) & 0x0F0F0F0F
+        v = (v | (v << 2)) & 0x33333333
+        return (v | (v << 1)) & 0x55555555
+
+    return np.argsort(spread(q[:, 0]) | (spread(q[:, 1]) << 1), kind="stable")
+
+
+def _in_caller_order(order, *arrays) -> tuple:
+    """Copies of ``arrays`` (worked in ``order``, None: the caller's) in the caller's order."""
+    if order is None:
+        return tuple(a.copy() for a in arrays)
+    out = tuple(np.empty_like(a) for a in arrays)
+    for o, a in zip(out, arrays, strict=True):
+        o[order] = a
+    return out
+
+
 def _tiles(c, act, mask, per_tile, k):
     """Tile id per element: squares holding about ``per_tile`` elements each, shifted by
     half a tile on odd rounds so that a pair cut by one tiling is whole in the next."""
@@ -1661,6 +1695,11 @@ def compact(
     seg_trees = _segment_trees(segs)
     prev = (None, None)
     result = CompactionResult(c, r, th, 0, 0.0)
+    # a large set is worked in Z order (cache), each element's result put back in its place
+    order = _spatial_order(c) if len(c) >= _SPATIAL_ORDER_ELEMENTS else None
+    if order is not None:
+        c, r, r0, cos, sin = c[order], r[order], r0[order], cos[order], sin[order]
+        max_sizes = None if max_sizes is None else max_sizes[order]
     for k in range(max(rounds, 1)):
         delta = settings.move * unit.inradius * r
         up = settings.growth * r
@@ -1697,7 +1736,7 @@ def compact(
         result.dropped += dropped
         c, r = new_c, new_r
         if on_round is not None:
-            on_round(k + 1, c.copy(), r.copy())
+            on_round(k + 1, *_in_caller_order(order, c, r))
         area1 = float(np.sum(r * r))
         result.rounds = k + 1
         result.history.append(
@@ -1715,7 +1754,7 @@ def compact(
         )
         if area1 < area0 * (1 + settings.tol):
             break
-    result.centres, result.sizes = c, r
+    result.centres, result.sizes = _in_caller_order(order, c, r)
     result.seconds = time.perf_counter() - t0
     return result
 
