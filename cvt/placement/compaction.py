@@ -1607,12 +1607,9 @@ def _round_rows(unit, c, r, cos, sin, budget, gap, segs, seg_trees, prev, thread
         unit.support(sx, sy, cos[e], sin[e]),
         seg_m,
     )
-    kp = i * n + j
-    order = np.argsort(kp)
-    prev_p = (kp[order], np.stack([px, py], axis=1)[order])
-    ks = e * len(segs) + s
-    order = np.argsort(ks)
-    prev_s = (ks[order], np.stack([sx, sy], axis=1)[order])
+    # the rows come ordered by i then j (e then s): their keys are sorted already
+    prev_p = (i * n + j, np.stack([px, py], axis=1))
+    prev_s = (e * len(segs) + s, np.stack([sx, sy], axis=1))
     return rows.tightest_pieces(), (prev_p, prev_s), (len(i), len(e))
 
 
