@@ -1408,6 +1408,15 @@ def _spatial_order(c: np.ndarray) -> np.ndarray:
     return np.argsort(spread(q[:, 0]) | (spread(q[:, 1]) << 1), kind="stable")
 
 
+def _work_order(c, *arrays) -> tuple:
+    """The order a set is worked in (None: the caller's; a large set: Z order, for the
+    cache) and ``c`` and the ``arrays`` (None stays None) in that order."""
+    if len(c) < _SPATIAL_ORDER_ELEMENTS:
+        return None, (c, *arrays)
+    order = _spatial_order(c)
+    return order, tuple(a if a is None else a[order] for a in (c, *arrays))
+
+
 def _in_caller_order(order, *arrays) -> tuple:
     """Copies of ``arrays`` (worked in ``order``, None: the caller's) in the caller's order."""
     if order is None:
@@ -1690,19 +1699,13 @@ def compact(
     unit = element_ball(shape, aspect)
     _check_start(unit, c, r, gap, mask)
     t0 = time.perf_counter()
-    cos, sin = np.cos(th), np.sin(th)
-    r0 = r.copy()
     segs = boundary_segments(mask)
     if walls is not None and walls.any():
         segs = np.concatenate([segs, wall_segments(walls)])
     seg_trees = _segment_trees(segs)
     prev = (None, None)
     result = CompactionResult(c, r, th, 0, 0.0)
-    # a large set is worked in Z order (cache), each element's result put back in its place
-    order = _spatial_order(c) if len(c) >= _SPATIAL_ORDER_ELEMENTS else None
-    if order is not None:
-        c, r, r0, cos, sin = c[order], r[order], r0[order], cos[order], sin[order]
-        max_sizes = None if max_sizes is None else max_sizes[order]
+    order, (c, r, r0, cos, sin, max_sizes) = _work_order(c, r, r.copy(), np.cos(th), np.sin(th), max_sizes)
     for k in range(max(rounds, 1)):
         delta = settings.move * unit.inradius * r
         up = settings.growth * r
