@@ -193,6 +193,9 @@ _HALPERN_RESTART = 0.2  # PDHG: new anchor once the fixed-point residual falls b
 _HALPERN_CHECK = 4  # PDHG: steps between evaluations of that residual
 _PIECE_ROWS = 100_000  # candidate pairs per thread at least (fewer: fewer threads)
 _PDHG_BLOCK_ENTRIES = 200_000  # PDHG: entries of A per thread at least (fewer: fewer threads)
+EXP_FORCE = False
+EXP_FINAL = False
+EXP_LIMIT = False
 _FAIRNESS = 2.0  # under size caps: growth weighed by r·(cap / r)^this (Sizes and density)
 
 
@@ -1625,7 +1628,8 @@ def compact(
     shape = check_shape(shape)
     gap, rounds = settings.gap, settings.rounds
     mask, walls = _region_and_walls(region, walls)
-    c, r, th, max_sizes = _checked_elements(centres, angles, sizes, max_sizes)
+    caps_at = max_sizes if callable(max_sizes) else None
+    c, r, th, max_sizes = _checked_elements(centres, angles, sizes, None if caps_at else max_sizes)
     unit = element_ball(shape, aspect)
     _check_start(unit, c, r, gap, mask)
     t0 = time.perf_counter()
@@ -1642,9 +1646,16 @@ def compact(
         up = settings.growth * r
         if settings.max_growth is not None:
             up = np.clip(r0 * (1 + settings.max_growth) - r, 0.0, up)
+        if caps_at is not None:
+            max_sizes = _checked_elements(c, None, r, caps_at(c))[3]
+            if EXP_LIMIT:
+                delta = caps_at.limit(c, delta, max_sizes)
         if max_sizes is not None:
             up = np.clip(max_sizes - r, 0.0, up)
-        budget = math.sqrt(2) * delta + unit.circumradius * up
+            if EXP_FORCE:
+                # above its cap (caps that follow the centre): shrink towards it
+                up = np.where(r > max_sizes, np.maximum(max_sizes - r, -settings.shrink * r), up)
+        budget = math.sqrt(2) * delta + unit.circumradius * np.maximum(up, 0.0)
         rows, prev, (n_pairs, n_pieces) = _round_rows(
             unit, c, r, cos, sin, budget, gap, segs, seg_trees, prev, settings.threads
         )
@@ -1662,7 +1673,7 @@ def compact(
         weight = _objective_weights(r, act, max_sizes, settings.fairness)
         tl = time.perf_counter()
         tcpu = time.process_time()
-        bounds = (gap, delta, -settings.shrink * r, np.maximum(up, 0.0), weight)
+        bounds = (gap, delta, -settings.shrink * r, up if EXP_FORCE else np.maximum(up, 0.0), weight)
         dc, dr, iters, failed, violation = _solve_round(settings, rows, act, c, r, bounds, mask, k)
         result.lp_seconds += time.perf_counter() - tl
         tcpu = time.process_time() - tcpu
@@ -1691,6 +1702,8 @@ def compact(
         )
         if area1 < area0 * (1 + settings.tol):
             break
+    if caps_at is not None and EXP_FINAL:
+        r = np.minimum(r, caps_at(c))
     result.centres, result.sizes = c, r
     result.seconds = time.perf_counter() - t0
     return result
