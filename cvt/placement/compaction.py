@@ -193,10 +193,8 @@ _HALPERN_RESTART = 0.2  # PDHG: new anchor once the fixed-point residual falls b
 _HALPERN_CHECK = 4  # PDHG: steps between evaluations of that residual
 _PIECE_ROWS = 100_000  # candidate pairs per thread at least (fewer: fewer threads)
 _PDHG_BLOCK_ENTRIES = 200_000  # PDHG: entries of A per thread at least (fewer: fewer threads)
-EXP_FORCE = False
-EXP_FINAL = False
-EXP_LIMIT = False
 _FAIRNESS = 2.0  # under size caps: growth weighed by r·(cap / r)^this (Sizes and density)
+_STEADY_LEAST = 0.5  # px: under caps that follow the centres, the last round's move bound at least
 
 
 @dataclass
@@ -1558,6 +1556,59 @@ def _round_rows(unit, c, r, cos, sin, budget, gap, segs, seg_trees, prev, thread
     return rows.tightest_pieces(), (prev_p, prev_s), (len(i), len(e))
 
 
+def _growth_bounds(settings, r, r0, max_sizes, follow):
+    """(N,) the most each size may change by this round: ``growth`` of itself, less where
+    ``max_growth`` or a cap binds (never below 0); where caps follow the centres
+    (``follow``), an element above its cap must shrink towards it, by up to ``shrink``
+    of itself (the bound is then negative)."""
+    up = settings.growth * r
+    if settings.max_growth is not None:
+        up = np.clip(r0 * (1 + settings.max_growth) - r, 0.0, up)
+    if max_sizes is None:
+        return up
+    above = r - max_sizes
+    up = np.clip(-above, 0.0, up)
+    if follow:
+        # the cap dropped where the element went: shrink towards it (shrinking keeps
+        # every row, so Δc = 0 with Δr at this bound is still feasible)
+        up = np.where(above > 0, -np.minimum(above, settings.shrink * r), up)
+    return up
+
+
+def _caps_here(caps_at, c, r, delta, steady, last):
+    """Caps that follow the centres: (N,) the caps at the centres ``c`` and the move
+    bounds.  In the ``last`` round (no round after it follows a cap that moved) each
+    element moves only within the widest box of whole-pixel half-width w (up to its
+    ``delta``) in which the cap stays within (1 ± ``steady``) of its own at every pixel,
+    and at least ``_STEADY_LEAST`` px: there its size ends near the cap at its final
+    centre."""
+    caps = _checked_elements(c, None, r, caps_at(c))[3]
+    if not last:
+        return caps, delta
+    lo, hi = caps * (1 - steady), caps * (1 + steady)
+    reach = np.zeros(len(c))
+    live = np.flatnonzero(r > 0)
+    w = 1
+    while len(live):  # one ring of pixels at a time, the elements still steady
+        o = np.arange(-w, w + 1, dtype=np.float64)
+        edge = np.full(2 * w - 1, float(w))
+        ring = np.concatenate(
+            [
+                np.stack([o, np.full(2 * w + 1, -float(w))], axis=1),
+                np.stack([o, np.full(2 * w + 1, float(w))], axis=1),
+                np.stack([-edge, o[1:-1]], axis=1),
+                np.stack([edge, o[1:-1]], axis=1),
+            ]
+        )
+        v = np.asarray(caps_at((c[live, None, :] + ring).reshape(-1, 2)), dtype=np.float64)
+        v = v.reshape(len(live), len(ring))
+        live = live[((v >= lo[live, None]) & (v <= hi[live, None])).all(axis=1)]
+        reach[live] = w
+        w += 1
+        live = live[delta[live] > w - 1]  # the box of half-width w is within reach
+    return caps, np.minimum(delta, np.maximum(reach, _STEADY_LEAST))
+
+
 def _objective_weights(r, act, max_sizes, fairness):
     """Each element's weight in the round's objective Σ w_i·Δr_i, mean 1 over ``act``:
     r_i (the covered area, d(r²)/2), times (cap_i / r_i)^``fairness`` where size caps
@@ -1643,18 +1694,9 @@ def compact(
     result = CompactionResult(c, r, th, 0, 0.0)
     for k in range(max(rounds, 1)):
         delta = settings.move * unit.inradius * r
-        up = settings.growth * r
-        if settings.max_growth is not None:
-            up = np.clip(r0 * (1 + settings.max_growth) - r, 0.0, up)
         if caps_at is not None:
-            max_sizes = _checked_elements(c, None, r, caps_at(c))[3]
-            if EXP_LIMIT:
-                delta = caps_at.limit(c, delta, max_sizes)
-        if max_sizes is not None:
-            up = np.clip(max_sizes - r, 0.0, up)
-            if EXP_FORCE:
-                # above its cap (caps that follow the centre): shrink towards it
-                up = np.where(r > max_sizes, np.maximum(max_sizes - r, -settings.shrink * r), up)
+            max_sizes, delta = _caps_here(caps_at, c, r, delta, settings.growth, k == rounds - 1)
+        up = _growth_bounds(settings, r, r0, max_sizes, follow=caps_at is not None)
         budget = math.sqrt(2) * delta + unit.circumradius * np.maximum(up, 0.0)
         rows, prev, (n_pairs, n_pieces) = _round_rows(
             unit, c, r, cos, sin, budget, gap, segs, seg_trees, prev, settings.threads
@@ -1673,7 +1715,7 @@ def compact(
         weight = _objective_weights(r, act, max_sizes, settings.fairness)
         tl = time.perf_counter()
         tcpu = time.process_time()
-        bounds = (gap, delta, -settings.shrink * r, up if EXP_FORCE else np.maximum(up, 0.0), weight)
+        bounds = (gap, delta, -settings.shrink * r, up, weight)
         dc, dr, iters, failed, violation = _solve_round(settings, rows, act, c, r, bounds, mask, k)
         result.lp_seconds += time.perf_counter() - tl
         tcpu = time.process_time() - tcpu
@@ -1702,8 +1744,6 @@ def compact(
         )
         if area1 < area0 * (1 + settings.tol):
             break
-    if caps_at is not None and EXP_FINAL:
-        r = np.minimum(r, caps_at(c))
     result.centres, result.sizes = c, r
     result.seconds = time.perf_counter() - t0
     return result

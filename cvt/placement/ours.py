@@ -11,6 +11,7 @@ from __future__ import annotations
 
 import math
 import time
+from dataclasses import dataclass
 from types import MappingProxyType
 
 import numpy as np
@@ -93,9 +94,36 @@ def run_ours_fit(problem: Problem, backend, **options) -> Distribution:
 # compaction's fairness (elements short of their caps first) 0.03 measured 0.2-0.5 points
 # more coverage than 0.02 and a size error still at most ours' (Table 3, 512², N = 1000)
 DENSITY_CAP_SLACK = 0.03
-EXP_FOLLOW = False
-EXP_TOL = 0.1
-EXP_MIN = 0.5
+
+
+@dataclass(frozen=True)
+class DensityCaps:
+    """Size caps that follow the density wherever an element stands: ``factor`` × the
+    density's size factor there (``problem.scales_at``).  Compaction reads them at each
+    element's centre every round (``cvt.placement.compact``'s ``max_sizes``)."""
+
+    problem: Problem
+    factor: float
+
+    def __call__(self, points) -> np.ndarray:
+        """(M,) the caps at ``points`` ((M, 2) px)."""
+        return self.factor * self.problem.scales_at(np.asarray(points, dtype=np.float64).reshape(-1, 2))
+
+
+def density_cap_field(
+    problem: Problem, centres, sizes, shape: str, aspect: float, slack: float, packing: float = 1.0
+) -> DensityCaps:
+    """The caps of :func:`density_caps` as a function of position: κ·(1 + ``slack``) × the
+    density's size factor, κ fixed by the elements at ``centres`` (the placed ones)."""
+    import shapely
+
+    from ..shapes import unit_outline
+
+    s = problem.scales_at(centres)
+    unit_area = float(shapely.area(shapely.Polygon(unit_outline(shape, aspect))))
+    weight = float(np.sum(s[np.asarray(sizes) > 0] ** 2)) * unit_area
+    kappa = math.sqrt(packing * problem.grid.pixel_count / weight) if weight > 0 else 1.0
+    return DensityCaps(problem, kappa * (1.0 + slack))
 
 
 def density_caps(
@@ -106,15 +134,7 @@ def density_caps(
     placed ones, ``sizes`` > 0) would together have ``packing`` × the region's area (the
     shape's densest packing, the shape record's ``packing``: caps no element can reach
     would not bind)."""
-    import shapely
-
-    from ..shapes import unit_outline
-
-    s = problem.scales_at(centres)
-    unit_area = float(shapely.area(shapely.Polygon(unit_outline(shape, aspect))))
-    weight = float(np.sum(s[np.asarray(sizes) > 0] ** 2)) * unit_area
-    kappa = math.sqrt(packing * problem.grid.pixel_count / weight) if weight > 0 else 1.0
-    return kappa * s * (1.0 + slack)
+    return density_cap_field(problem, centres, sizes, shape, aspect, slack, packing)(centres)
 
 
 def run_ours_compact(
@@ -232,41 +252,15 @@ def _fit_in_cells(labels, sites, angles, shape, aspect, gap, alternate, backend)
 
 
 def _capped_by_density(problem: Problem, centres, sizes, shape, alternate, density_slack):
-    """The sizes capped by :func:`density_caps` under a density, and the caps (None
-    without a density or with ``density_slack`` None)."""
+    """The sizes capped by :func:`density_caps` under a density, and the caps as a
+    function of position (:class:`DensityCaps`; None without a density or with
+    ``density_slack`` None)."""
     if problem.density is None or density_slack is None:
         return sizes, None
     # triangles that point either way tile the plane; one way, they pack at 2/3
     packing = 1.0 if alternate else packing_density(shape)
-    caps = density_caps(problem, centres, sizes, shape, problem.metric.aspect, density_slack, packing)
-    if EXP_FOLLOW:
-        k = float(caps[0] / problem.scales_at(centres[:1])[0])
-
-        def caps_at(pts):
-            return k * problem.scales_at(pts)
-
-        def limit(c, delta, cap):
-            # largest half-width w <= delta (whole px) with the caps in the box around c within tol
-            wmax = int(np.ceil(delta.max()))
-            h, w = problem.grid.shape
-            ok = np.full(len(c), 0.0)
-            lo = cap.copy(); hi = cap.copy()
-            for wd in range(1, wmax + 1):
-                # ring of offsets at Chebyshev distance wd
-                o = np.arange(-wd, wd + 1)
-                ring = np.concatenate([np.stack([o, np.full_like(o, -wd)], 1), np.stack([o, np.full_like(o, wd)], 1),
-                                       np.stack([np.full_like(o[1:-1], -wd), o[1:-1]], 1), np.stack([np.full_like(o[1:-1], wd), o[1:-1]], 1)])
-                pts = (c[:, None, :] + ring[None, :, :]).reshape(-1, 2)
-                pts[:, 0] = np.clip(pts[:, 0], 0, w - 1e-9); pts[:, 1] = np.clip(pts[:, 1], 0, h - 1e-9)
-                v = caps_at(pts).reshape(len(c), -1)
-                lo = np.minimum(lo, v.min(1)); hi = np.maximum(hi, v.max(1))
-                good = (lo >= cap * (1 - EXP_TOL)) & (hi <= cap * (1 + EXP_TOL)) & (ok == wd - 1)
-                ok[good] = wd
-            return np.minimum(delta, np.maximum(ok, EXP_MIN))
-
-        caps_at.limit = limit
-        return np.minimum(sizes, caps), caps_at
-    return np.minimum(sizes, caps), caps
+    caps = density_cap_field(problem, centres, sizes, shape, problem.metric.aspect, density_slack, packing)
+    return np.minimum(sizes, caps(centres)), caps
 
 
 def _compaction_plan(problem: Problem, element, gap, alternate, rounds):
@@ -425,6 +419,8 @@ __all__ = [
     "run_ours",
     "run_ours_fit",
     "run_ours_compact",
+    "DensityCaps",
+    "density_cap_field",
     "density_caps",
     "MOSAIC_COMPACTION_ROUNDS",
     "COMPACTION_PER_SITE",
