@@ -1692,10 +1692,12 @@ def compact(
     seg_trees = _segment_trees(segs)
     prev = (None, None)
     result = CompactionResult(c, r, th, 0, 0.0)
+    settle = False  # under caps that follow the centres: moves kept steady (_caps_here)
     for k in range(max(rounds, 1)):
+        settle = settle or k == rounds - 1
         delta = settings.move * unit.inradius * r
         if caps_at is not None:
-            max_sizes, delta = _caps_here(caps_at, c, r, delta, settings.growth, k == rounds - 1)
+            max_sizes, delta = _caps_here(caps_at, c, r, delta, settings.growth, settle)
         up = _growth_bounds(settings, r, r0, max_sizes, follow=caps_at is not None)
         budget = math.sqrt(2) * delta + unit.circumradius * np.maximum(up, 0.0)
         rows, prev, (n_pairs, n_pieces) = _round_rows(
@@ -1743,7 +1745,9 @@ def compact(
             }
         )
         if area1 < area0 * (1 + settings.tol):
-            break
+            if caps_at is None or settle:
+                break
+            settle = True  # one more round, the last: its moves kept steady
     result.centres, result.sizes = c, r
     result.seconds = time.perf_counter() - t0
     return result

@@ -94,6 +94,10 @@ def run_ours_fit(problem: Problem, backend, **options) -> Distribution:
 # compaction's fairness (elements short of their caps first) 0.03 measured 0.2-0.5 points
 # more coverage than 0.02 and a size error still at most ours' (Table 3, 512², N = 1000)
 DENSITY_CAP_SLACK = 0.03
+# under density caps compaction's last round settles (each element moves only where the
+# caps stay near its own); by default one round more than the shape's, so that as many
+# rounds as without caps move freely
+DENSITY_SETTLE_ROUNDS = 1
 
 
 @dataclass(frozen=True)
@@ -174,7 +178,11 @@ def run_ours_compact(
     Where the problem has thin walls (``Problem.walls``), elements come up to the walls'
     centre lines (G/2 off them) instead of stopping at their pixels.  ``tolerance`` and
     ``accelerate`` go to :func:`cvt.lloyd.lloyd`."""
+    # under density caps the last round settles (moves kept where the caps are steady):
+    # by default it comes on top of the shape's rounds
+    settle = DENSITY_SETTLE_ROUNDS if rounds is None and _follows_density(problem, density_slack) else 0
     shape, turn, gap, rounds = _compaction_plan(problem, element, gap, alternate, rounds)
+    rounds += settle
     setup = LloydSetup.of(problem)
     if alternate:
         turns = alternating_turns(problem.n_elements, problem.seed)
@@ -251,11 +259,16 @@ def _fit_in_cells(labels, sites, angles, shape, aspect, gap, alternate, backend)
     return angles, centres, sizes
 
 
+def _follows_density(problem: Problem, density_slack) -> bool:
+    """Whether ours-compact caps the sizes by the density (:class:`DensityCaps`)."""
+    return problem.density is not None and density_slack is not None
+
+
 def _capped_by_density(problem: Problem, centres, sizes, shape, alternate, density_slack):
     """The sizes capped by :func:`density_caps` under a density, and the caps as a
     function of position (:class:`DensityCaps`; None without a density or with
     ``density_slack`` None)."""
-    if problem.density is None or density_slack is None:
+    if not _follows_density(problem, density_slack):
         return sizes, None
     # triangles that point either way tile the plane; one way, they pack at 2/3
     packing = 1.0 if alternate else packing_density(shape)
@@ -420,6 +433,7 @@ __all__ = [
     "run_ours_fit",
     "run_ours_compact",
     "DensityCaps",
+    "DENSITY_SETTLE_ROUNDS",
     "density_cap_field",
     "density_caps",
     "MOSAIC_COMPACTION_ROUNDS",
