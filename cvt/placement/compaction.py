@@ -102,24 +102,30 @@ Caps that follow the elements (``max_sizes`` a function of position, ours-compac
 under a density) are read at each element's centre every round, because the target is
 the density where the element ends, not where it started: on a picture as density
 (scikit-image's camera.png, 512², N = 1000) compaction moves centres by 4 px (median;
-11-15 px at the 99th percentile, elements 16 px apart) and one in five crosses to where the
-density asks for a size 7 % or more away; with the caps fixed at the start those
+11-15 px at the 99th percentile, elements 16 px apart) and one in five crosses to where
+the density asks for a size 7 % or more away; with the caps fixed at the start those
 elements held half (triangles) to four fifths (circles) of the size error, which was
-1.06/1.15/1.34x ours' on squares/triangles/circles (seeds 0-1).  Read again each round, a cap that fell below its element
-makes it shrink towards it (by up to ``shrink`` of itself a round; shrinking keeps
-every row) and one that rose lets it grow.  The round that ends compaction is followed
-by none, so in it each element moves only within the widest box (whole pixels, up to
-its move bound, at least ``_STEADY_LEAST``) in which the cap stays within ±``growth``
-(a change one round could follow) of its own at every pixel; where a round's gain falls
-below ``tol`` before the last, one such settling round follows.  Measured (512², N =
-1000, 5 shapes, seeds 0-2, the size error over ours'): camera 0.75-1.00x (was
-0.88-1.33x), and on three pictures not used in choosing this (astronaut, coffee,
-chelsea) 0.65-1.07x (was 0.74-1.29x), coverage −0.58 to +0.61 points, with ours-compact's
-one more round under a density (the settling one); Table 3's density and combined
-scenes (seeds 0-4) 0.71-0.98x (was 0.72-0.99x), +0.10 to +0.55 points.  Limiting every
-round's moves so cost 1.4-3.3 points; the final round's alone, with the shape's rounds,
-0.3-1.0; without the shrinking towards a cap that fell, circles on chelsea stayed at
-1.14x; shrinking every element to its cap after the last round cost 2-4.5 points.
+1.06/1.15/1.34x ours' on squares/triangles/circles (seeds 0-1).  Read again each
+round, a cap that fell below its element makes it shrink towards it (by up to
+``shrink`` of itself a round; shrinking keeps every row) and one that rose lets it
+grow.  And each element moves only within the widest box (whole pixels, up to its move
+bound, at least ``_STEADY_LEAST``) in which the cap stays within ±``growth`` × (the
+rounds left, this one included) of its own at every pixel: a change the rounds left
+could follow, ±``growth`` in the last round, where a smooth density never binds.  Where
+a round's gain falls below ``tol`` before the last, one more round follows, as the
+last.  Measured (512², N = 1000, 5 shapes, seeds 0-2, ours-compact's size error over
+ours', with one more round than the shape's under a density): camera 0.71-0.93x (was
+0.88-1.33x); three pictures not used in choosing this (astronaut, coffee, chelsea)
+0.66-1.05x (was 0.74-1.29x); four tried after (coins, horse, text, moon) 0.62-1.10x
+(was 0.67-1.52x); coverage −0.88 to +1.04 points.  Table 3's density and combined
+scenes (seeds 0-4): 0.71-0.98x (was 0.72-0.99x), +0.10 to +0.55 points.  Measured
+no better: boxes held to ±growth in the last round alone (coins' triangles and circles
+1.14-1.15x), to ±0.1-0.2 in every round (−1.4 to −3.3 points), to twice the rounds
+left (coins 1.11-1.12x), drops held to ``shrink`` × the rounds left (down to −1.26
+points), a least move of 1 px (coins' circles 1.18x), ``fairness`` 3 (down to −1.4
+points), the shape's rounds alone (down to −2 points), no shrinking towards a cap that
+fell (chelsea's circles 1.14x), every element shrunk to its cap after the last round
+(−2 to −4.5 points).
 
 ``max_growth`` (off by default) caps every size at
 (1 + max_growth) × its placed size; ``move_cost`` > 0 puts a price on moves (columns
@@ -1602,33 +1608,34 @@ def _growth_bounds(settings, r, r0, max_sizes, follow):
     return up
 
 
-def _caps_here(caps_at, c, r, delta, steady, last):
-    """Caps that follow the centres: (N,) the caps at the centres ``c`` and the move
-    bounds.  In the ``last`` round (no round after it follows a cap that moved) each
-    element moves only within the widest box of whole-pixel half-width w (up to its
-    ``delta``) in which the cap stays within (1 ± ``steady``) of its own at every pixel,
-    and at least ``_STEADY_LEAST`` px: there its size ends near the cap at its final
-    centre."""
+def _caps_here(caps_at, c, r, delta, steady, shape):
+    """Caps that follow the centres: (N,) the caps at the centres ``c``, and the move
+    bounds: each element moves only within the widest box of whole-pixel half-width w
+    (up to its ``delta``) in which the cap stays within (1 ± ``steady``) of its own at
+    every pixel of the (H, W) raster ``shape``, and at least ``_STEADY_LEAST`` px (module
+    docstring, Sizes and density).  Where ``caps_at`` has an ``image`` (its cap at every
+    pixel) the pixels are read from it, else ``caps_at`` is asked at their centres."""
     caps = _checked_elements(c, None, r, caps_at(c))[3]
-    if not last:
-        return caps, delta
     lo, hi = caps * (1 - steady), caps * (1 + steady)
+    image = getattr(caps_at, "image", None)
+    h, w_ = shape
+    col = np.clip(np.floor(c[:, 0]).astype(np.int64), 0, w_ - 1)
+    row = np.clip(np.floor(c[:, 1]).astype(np.int64), 0, h - 1)
     reach = np.zeros(len(c))
     live = np.flatnonzero(r > 0)
     w = 1
     while len(live):  # one ring of pixels at a time, the elements still steady
-        o = np.arange(-w, w + 1, dtype=np.float64)
-        edge = np.full(2 * w - 1, float(w))
-        ring = np.concatenate(
-            [
-                np.stack([o, np.full(2 * w + 1, -float(w))], axis=1),
-                np.stack([o, np.full(2 * w + 1, float(w))], axis=1),
-                np.stack([-edge, o[1:-1]], axis=1),
-                np.stack([edge, o[1:-1]], axis=1),
-            ]
-        )
-        v = np.asarray(caps_at((c[live, None, :] + ring).reshape(-1, 2)), dtype=np.float64)
-        v = v.reshape(len(live), len(ring))
+        o = np.arange(-w, w + 1)
+        side = np.full(2 * w + 1, w)
+        dx = np.concatenate([o, o, -side[1:-1], side[1:-1]])
+        dy = np.concatenate([-side, side, o[1:-1], o[1:-1]])
+        j = np.clip(col[live, None] + dx, 0, w_ - 1)
+        i = np.clip(row[live, None] + dy, 0, h - 1)
+        if image is not None:
+            v = image[i, j]
+        else:
+            v = np.asarray(caps_at(np.stack([j.ravel() + 0.5, i.ravel() + 0.5], axis=1)), dtype=np.float64)
+            v = v.reshape(i.shape)
         live = live[((v >= lo[live, None]) & (v <= hi[live, None])).all(axis=1)]
         reach[live] = w
         w += 1
@@ -1727,7 +1734,9 @@ def compact(
         settle = settle or k == rounds - 1
         delta = settings.move * unit.inradius * r
         if caps_at is not None:
-            max_sizes, delta = _caps_here(caps_at, c, r, delta, settings.growth, settle)
+            # a cap may change by what the rounds left could follow (module docstring)
+            steady = settings.growth * (1 if settle else rounds - k)
+            max_sizes, delta = _caps_here(caps_at, c, r, delta, steady, mask.shape)
         up = _growth_bounds(settings, r, r0, max_sizes, follow=caps_at is not None)
         budget = math.sqrt(2) * delta + unit.circumradius * np.maximum(up, 0.0)
         rows, prev, (n_pairs, n_pieces) = _round_rows(

@@ -9,6 +9,7 @@ through the ``compact_distributions.methods`` entry point group, like every othe
 
 from __future__ import annotations
 
+import functools
 import math
 import time
 from dataclasses import dataclass
@@ -112,6 +113,14 @@ class DensityCaps:
     def __call__(self, points) -> np.ndarray:
         """(M,) the caps at ``points`` ((M, 2) px)."""
         return self.factor * self.problem.scales_at(np.asarray(points, dtype=np.float64).reshape(-1, 2))
+
+    @functools.cached_property
+    def image(self) -> np.ndarray:
+        """(H, W) float32: the cap at every pixel (compaction reads its steady boxes here)."""
+        density = self.problem.density
+        if density is None:
+            raise InputError("DensityCaps needs a problem with a density")
+        return np.float32(self.factor) * density.scale_image()
 
 
 def density_cap_field(
