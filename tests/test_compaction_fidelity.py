@@ -98,7 +98,9 @@ def _size_error_ratios(problem_of, shape: str) -> list[float]:
 def test_an_element_above_a_cap_that_follows_it_shrinks_towards_it():
     """Caps given as a function of position are read at the centres every round; an
     element above its cap must shrink, by up to ``shrink`` (0.05) of itself a round: by
-    hand 10 -> 9.5, then 9.5 - 0.05·9.5 = 9.025 (the region leaves room to grow)."""
+    hand 10 -> 9.5, then 9.5 - 0.05·9.5 = 9.025 (the region leaves room to grow).  The
+    first round loses area, which ends compaction without such caps; with them one more
+    round follows, as the last."""
 
     def caps_at(points):
         return np.full(len(points), 9.0)

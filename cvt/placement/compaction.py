@@ -1493,7 +1493,11 @@ class CompactionSettings:
 
 
 def _checked_elements(centres, angles, sizes, max_sizes):
-    """Centres (N, 2), sizes (N,), angles (N,) and size caps as float64 copies, checked."""
+    """Centres (N, 2), sizes (N,), angles (N,) and size caps as float64 copies, checked,
+    and the caps as a function of position (None unless ``max_sizes`` is one; then the
+    caps returned are None)."""
+    if callable(max_sizes):
+        return (*_checked_elements(centres, angles, sizes, None)[:4], max_sizes)
     c = np.array(centres, dtype=np.float64).reshape(-1, 2)
     n = len(c)
     r = np.array(sizes, dtype=np.float64).reshape(-1)
@@ -1514,7 +1518,7 @@ def _checked_elements(centres, angles, sizes, max_sizes):
         max_sizes = np.broadcast_to(np.asarray(max_sizes, dtype=np.float64), (n,))
         if not (np.isfinite(max_sizes).all() and (max_sizes > 0).all()):
             raise InputError("max_sizes must be finite and positive")
-    return c, r, th, max_sizes
+    return c, r, th, max_sizes, None
 
 
 def _region_and_walls(region, walls):
@@ -1606,6 +1610,18 @@ def _growth_bounds(settings, r, r0, max_sizes, follow):
         # every row, so Δc = 0 with Δr at this bound is still feasible)
         up = np.where(above > 0, -np.minimum(above, settings.shrink * r), up)
     return up
+
+
+def _round_bounds(settings, unit, c, r, r0, max_sizes, caps):
+    """A round's move bounds, growth bounds (:func:`_growth_bounds`) and caps.  ``caps``
+    is (caps_at, rounds left, raster shape): where caps follow the centres (caps_at not
+    None) they are read at ``c`` and each move is kept where a cap changes by at most
+    ``growth`` × the rounds left, what they could follow (:func:`_caps_here`)."""
+    caps_at, left, shape = caps
+    delta = settings.move * unit.inradius * r
+    if caps_at is not None:
+        max_sizes, delta = _caps_here(caps_at, c, r, delta, settings.growth * left, shape)
+    return delta, _growth_bounds(settings, r, r0, max_sizes, follow=caps_at is not None), max_sizes
 
 
 def _caps_here(caps_at, c, r, delta, steady, shape):
@@ -1705,9 +1721,7 @@ def compact(
     (a :class:`CompactionSettings`; keyword ``overrides`` replace its fields, e.g.
     ``gap=1.5, rounds=8``) say how far elements move and grow per round and when to stop.
     ``max_sizes`` ((N,), optional) caps each size (a size above its cap may only shrink);
-    or a function of positions ((M, 2) px -> (M,)): caps that follow the elements, read at
-    every centre each round (a size above its cap shrinks towards it; the last round's
-    moves stay where the caps are steady: module docstring, Sizes and density).
+    or a function of positions ((M, 2) px -> (M,)): caps that follow the elements.
     ``walls`` ((H, W) bool, outside the region): thin walls whose centre lines
     (:func:`wall_segments`) bound the elements instead of their pixels' sides: each
     element keeps G/2 from a wall's centre line, as from the border.
@@ -1716,8 +1730,7 @@ def compact(
     shape = check_shape(shape)
     gap, rounds = settings.gap, settings.rounds
     mask, walls = _region_and_walls(region, walls)
-    caps_at = max_sizes if callable(max_sizes) else None
-    c, r, th, max_sizes = _checked_elements(centres, angles, sizes, None if caps_at else max_sizes)
+    c, r, th, max_sizes, caps_at = _checked_elements(centres, angles, sizes, max_sizes)
     unit = element_ball(shape, aspect)
     _check_start(unit, c, r, gap, mask)
     t0 = time.perf_counter()
@@ -1729,15 +1742,10 @@ def compact(
     seg_trees = _segment_trees(segs)
     prev = (None, None)
     result = CompactionResult(c, r, th, 0, 0.0)
-    settle = False  # under caps that follow the centres: moves kept steady (_caps_here)
+    left = rounds  # rounds left, this one included (how steady moves under caps_at are)
     for k in range(max(rounds, 1)):
-        settle = settle or k == rounds - 1
-        delta = settings.move * unit.inradius * r
-        if caps_at is not None:
-            # a cap may change by what the rounds left could follow (module docstring)
-            steady = settings.growth * (1 if settle else rounds - k)
-            max_sizes, delta = _caps_here(caps_at, c, r, delta, steady, mask.shape)
-        up = _growth_bounds(settings, r, r0, max_sizes, follow=caps_at is not None)
+        caps = (caps_at, max(left, 1), mask.shape)
+        delta, up, max_sizes = _round_bounds(settings, unit, c, r, r0, max_sizes, caps)
         budget = math.sqrt(2) * delta + unit.circumradius * np.maximum(up, 0.0)
         rows, prev, (n_pairs, n_pieces) = _round_rows(
             unit, c, r, cos, sin, budget, gap, segs, seg_trees, prev, settings.threads
@@ -1783,10 +1791,10 @@ def compact(
                 "seconds": time.perf_counter() - t0,
             }
         )
-        if area1 < area0 * (1 + settings.tol):
-            if caps_at is None or settle:
-                break
-            settle = True  # one more round, the last: its moves kept steady
+        stalled = area1 < area0 * (1 + settings.tol)
+        if stalled and (caps_at is None or left <= 1):
+            break
+        left = 1 if stalled else left - 1  # stalled under caps that follow: one more, the last
     result.centres, result.sizes = c, r
     result.seconds = time.perf_counter() - t0
     return result
