@@ -1632,11 +1632,12 @@ def _caps_here(caps_at, c, r, delta, steady, shape):
     docstring, Sizes and density).  Where ``caps_at`` has an ``image`` (its cap at every
     pixel) the pixels are read from it, else ``caps_at`` is asked at their centres."""
     caps = _checked_elements(c, None, r, caps_at(c))[3]
-    lo, hi = caps * (1 - steady), caps * (1 + steady)
     image = getattr(caps_at, "image", None)
     h, w_ = shape
     col = np.clip(np.floor(c[:, 0]).astype(np.int64), 0, w_ - 1)
     row = np.clip(np.floor(c[:, 1]).astype(np.int64), 0, h - 1)
+    own = caps if image is None else image[row, col]  # the image's own rounding
+    lo, hi = own * (1 - steady), own * (1 + steady)
     reach = np.zeros(len(c))
     live = np.flatnonzero(r > 0)
     w = 1
