@@ -168,3 +168,18 @@ def test_compaction_keeps_the_density_sizes_at_sharp_edges(shape):
     started, 1.17x and 1.20x)."""
     ratios = _size_error_ratios(_sharp_problem, shape)
     assert np.mean(ratios) <= 1.1, ratios
+
+
+def test_density_caps_image_is_the_caps_at_every_pixel():
+    """``DensityCaps.image`` (float32) holds at each pixel what the caps read at the
+    pixel's centre (``problem.scales_at``), floor of the density included."""
+    from compact_distributions.cvt.placement.ours import DensityCaps
+
+    values = np.random.default_rng(3).uniform(0.0, 1.0, (20, 30))
+    values[0, :5] = 0.0  # below the density's floor
+    problem = Problem(Grid(30, 20), 10, make_metric("linf"), density=DensityMap(values))
+    caps = DensityCaps(problem, 2.5)
+    yy, xx = np.mgrid[0:20, 0:30] + 0.5
+    at = caps(np.stack([xx.ravel(), yy.ravel()], axis=1))
+    assert caps.image.dtype == np.float32 and caps.image.shape == (20, 30)
+    np.testing.assert_allclose(caps.image.ravel(), at, rtol=1e-6)
