@@ -30,7 +30,6 @@ from __future__ import annotations
 import numpy as np
 import shapely
 
-from ..evaluate import straddling_tiles
 from ..placement.compaction import wall_segments
 from ..threads import elementwise
 
@@ -137,8 +136,8 @@ def cut_to_walls(
     Parameters
     ----------
     polygons : sequence of shapely Polygon or None
-        The tiles (None where there is none): pairwise at least ``gap`` apart and at least
-        gap/2 from the walls' centre lines and the raster's border.
+        The tiles (None where there is none): convex, pairwise at least ``gap`` apart and
+        at least gap/2 from the walls' centre lines and the raster's border.
     walls : (H, W) bool ndarray
         Thin walls.
     gap : float
@@ -160,64 +159,224 @@ def cut_to_walls(
     out = list(polygons)
     h, w = walls.shape
     lines = wall_lines(walls)
-    geoms_all = np.array([shapely.Polygon() if p is None else p for p in out], dtype=object)
-    present = np.flatnonzero(~shapely.is_empty(geoms_all))
+    geoms = np.array([shapely.Polygon() if p is None else p for p in out], dtype=object)
+    present = np.flatnonzero(~shapely.is_empty(geoms))
     if len(lines) == 0 or len(present) == 0:
         return out, 0
-    geoms = geoms_all[present]
     # the lines query the tiles rather than the other way round: GEOS then prepares each
     # long line once instead of walking it for every tile
-    near = np.unique(shapely.STRtree(geoms).query(lines, predicate="dwithin", distance=reach * spacing)[1])
+    near = present[
+        np.unique(
+            shapely.STRtree(geoms[present]).query(lines, predicate="dwithin", distance=reach * spacing)[1]
+        )
+    ]
     if len(near) == 0:
         return out, 0
+    full = gap + _MARGIN  # kept from every other tile
+    half = 0.5 * gap + _MARGIN  # kept from the walls' centre lines
     grown = _grown(geoms[near], enlarge)
-    # the margin also keeps a hair's width between tiles when the gap is 0 (shapely's
-    # overlay was measured up to 6e-5 px off without it)
-    full = gap + _MARGIN
-    half = 0.5 * gap + _MARGIN
+    # a cut tile lies within its grown outline: each candidate's obstacles are the tiles
+    # whose outline, grown where it is a candidate, comes within G of its grown outline,
+    # and the pieces of the walls' centre lines within G/2 of it
+    outer = geoms.copy()
+    outer[near] = grown
+    ci, oi = shapely.STRtree(outer).query(grown, predicate="dwithin", distance=full)
+    other = oi != near[ci]
+    ci, oi = ci[other], oi[other]
+    pieces = _wall_segments(lines)
+    wi, wc = shapely.STRtree(grown).query(pieces, predicate="dwithin", distance=half)
     # cut in turns: two tiles whose grown outlines come within the gap never share one
-    grown_tree = shapely.STRtree(grown)
-    a, b = grown_tree.query(grown, predicate="dwithin", distance=full)
-    turn = _turns(np.stack([a[a < b], b[a < b]], axis=1), len(near))
-    # a cut tile lies within its grown outline, so only a tile with a later partner in
-    # that graph can reach a later turn's tiles
-    later = np.zeros(len(near), dtype=bool)
-    later[a[turn[b] > turn[a]]] = True
-    wall_margin = _margin_pieces(lines, half)
-    frame = shapely.box(0.5 * gap, 0.5 * gap, w - 0.5 * gap, h - 0.5 * gap)
-    padded = elementwise(
-        shapely.buffer, geoms_all, distance=full, join_style="mitre"
-    )  # each tile's G-wide margin
-    tile_tree = shapely.STRtree(padded)
+    cand = np.flatnonzero(np.isin(oi, near))
+    slot = np.searchsorted(near, oi[cand])
+    turn = _turns(np.stack([ci[cand], slot], axis=1), len(near))
     grew = 0
     for t in range(turn.max() + 1):
-        members = np.flatnonzero(turn == t)
-        tiles = present[near[members]]
-        whole = np.array([out[k] for k in tiles], dtype=object)
-        cand = shapely.intersection(grown[members], frame)
-        # less each other tile near it grown by G (one vectorised difference per neighbour
-        # rank), then the walls near it: taken in this order each difference meets a
-        # simpler outline
-        ci, oi = tile_tree.query(cand, predicate="intersects")
-        other = oi != tiles[ci]
-        _subtract_by_rank(cand, ci[other], padded[oi[other]])
-        # the walls: the pieces of their G/2-wide margin that reach each tile
-        wi, wt = shapely.STRtree(cand).query(wall_margin, predicate="intersects")
-        _subtract_by_rank(cand, wt, wall_margin[wi])
-        cut = _robust(shapely.union, _piece_holding(cand, whole), whole)
-        bigger = shapely.area(cut) > shapely.area(whole) * (1 + 1e-9)
-        bigger &= shapely.get_type_id(cut) == 3  # one polygon (a failed step gives none)
-        keep = np.flatnonzero(bigger)
-        keep = keep[~straddling_tiles(list(cut[keep]), walls)]
-        cut[keep] = _started_as(cut[keep], whole[keep])
-        for k, g in zip(tiles[keep], cut[keep], strict=True):
-            out[k] = g
-        seen = keep[later[members[keep]]]
-        if len(seen):  # a cut tile's margin grows with it
-            padded[tiles[seen]] = elementwise(shapely.buffer, cut[seen], distance=full, join_style="mitre")
-            tile_tree = shapely.STRtree(padded)
-        grew += len(keep)
-    return out, grew
+        members = turn == t
+        tile_pair = members[ci]
+        wall_pair = members[wc]
+        pair_tile = np.concatenate([ci[tile_pair], wc[wall_pair]])
+        obstacle = np.concatenate([geoms[oi[tile_pair]], pieces[wi[wall_pair]]])
+        keep = np.concatenate([np.full(tile_pair.sum(), full), np.full(wall_pair.sum(), half)])
+        rows = np.flatnonzero(members)
+        cut, ok = _cut_convex(geoms[near], grown, rows, pair_tile, obstacle, keep, (w, h), gap)
+        good = rows[ok]
+        geoms[near[good]] = _started_as(cut[ok], geoms[near[good]])
+        grew += len(good)
+    result = np.empty(len(out), dtype=object)
+    result[:] = out
+    result[near] = geoms[near]  # every candidate is a tile (not None)
+    return list(result), grew
+
+
+def _wall_segments(lines: np.ndarray) -> np.ndarray:
+    """The walls' centre lines as their straight segments (and lone points): convex
+    pieces, each of which a half-plane can keep a tile clear of."""
+    is_point = shapely.get_type_id(lines) == 0
+    coords, line = shapely.get_coordinates(lines[~is_point], return_index=True)
+    same = line[1:] == line[:-1]
+    ends = np.stack([coords[:-1][same], coords[1:][same]], axis=1)
+    return np.concatenate([shapely.linestrings(ends), lines[is_point]])
+
+
+def _cut_convex(whole, grown, rows, pair_tile, obstacle, keep, size, gap):
+    """The candidates ``rows`` cut as convex polygons: each one's grown outline within
+    the frame, less a half-plane for each group of obstacles (module docstring).
+
+    ``pair_tile``, ``obstacle``, ``keep``: per (candidate, obstacle) pair, the candidate
+    (an index into ``whole``/``grown``), the obstacle (a convex geometry) and the
+    distance to keep from it.  Returns the cut outlines of ``rows`` and whether each is
+    one that grew and keeps every distance (else the tile stays whole)."""
+    n = len(whole)
+    # the closest points of each pair: the tile's a, the obstacle's b
+    ends = shapely.get_coordinates(elementwise(shapely.shortest_line, whole[pair_tile], obstacle)).reshape(
+        -1, 2, 2
+    )
+    a, b = ends[:, 0], ends[:, 1]
+    d = np.hypot(*(b - a).T)
+    # the most constraining obstacle first: the least room between it and the tile
+    order = np.lexsort((d - keep, pair_tile))
+    pair_tile, obstacle, keep, a, b, d = (x[order] for x in (pair_tile, obstacle, keep, a, b, d))
+    vx, vpair = shapely.get_coordinates(obstacle, return_index=True)
+    planes = _greedy_planes(pair_tile, obstacle, (a, b, d, keep), (vx, vpair), whole)
+    cut = _clip(grown, rows, planes, size, gap)
+    ok = shapely.area(cut) > shapely.area(whole[rows]) * (1 + 1e-9)
+    # the distances checked on the outcome: exact, and rounding kept out of them
+    at = np.searchsorted(rows, pair_tile)
+    held = np.zeros(n, dtype=bool)
+    held[rows] = True
+    gotd = elementwise(shapely.distance, cut[at], obstacle)
+    bad = gotd < np.minimum(keep, d) - 1e-9
+    touching = d <= 1e-9  # touching already: the cut may touch it, not overlap it
+    if touching.any():
+        t = np.flatnonzero(touching)
+        bad[t] |= shapely.relate_pattern(cut[at[t]], obstacle[t], "T********")
+    ok[np.unique(at[bad])] = False
+    return cut, ok
+
+
+def _greedy_planes(pair_tile, obstacle, pairs, vertices, whole):
+    """Half-planes (tile, normal, offset) that keep each tile's obstacles at their
+    distances: the most constraining obstacle left gives a plane at its distance along
+    the line between its closest points, and every obstacle that plane keeps clear of
+    goes; until none are left.  Pairs sorted by tile, most constraining first."""
+    a, b, d, keep = pairs
+    vx, vpair = vertices
+    m = len(pair_tile)
+    left = np.ones(m, dtype=bool)
+    out_t, out_n, out_c = [], [], []
+    centres = shapely.get_coordinates(shapely.centroid(whole))
+    starts = np.searchsorted(vpair, np.arange(m))
+    while left.any():
+        idx = np.flatnonzero(left)
+        first = idx[np.unique(pair_tile[idx], return_index=True)[1]]
+        tile = pair_tile[first]
+        direction = b[first] - a[first]
+        # touching (no gap): the direction between the centres, the plane the tile's own
+        # support line that way (a square's shared side)
+        flat = np.flatnonzero(d[first] <= 1e-9)
+        if len(flat):
+            direction[flat] = (
+                shapely.get_coordinates(shapely.centroid(obstacle[first[flat]])) - centres[tile[flat]]
+            )
+        normal = direction / np.maximum(np.hypot(*direction.T), 1e-300)[:, None]
+        offset = np.einsum("ij,ij->i", normal, b[first]) - np.minimum(keep[first], d[first])
+        if len(flat):
+            tv, ti = shapely.get_coordinates(whole[tile[flat]], return_index=True)
+            support = np.einsum("ij,ij->i", tv, normal[flat][ti])
+            offset[flat] = np.maximum.reduceat(support, np.searchsorted(ti, np.arange(len(flat))))
+        out_t.append(tile)
+        out_n.append(normal)
+        out_c.append(offset)
+        # every obstacle of these tiles that the plane keeps clear of is done
+        row = np.full(len(whole), -1)
+        row[tile] = np.arange(len(tile))
+        r = row[pair_tile[idx]]
+        lo = starts[idx]
+        hi = np.append(starts[1:], len(vpair))[idx]
+        counts = hi - lo
+        vsel = np.repeat(lo - np.cumsum(counts) + counts, counts) + np.arange(counts.sum())
+        proj = np.einsum("ij,ij->i", vx[vsel], normal[np.repeat(r, counts)])
+        least = np.minimum.reduceat(proj, np.cumsum(counts) - counts) if len(proj) else proj
+        clear = least - keep[idx] >= offset[r] - 1e-12
+        left[idx[clear]] = False
+        left[first] = False
+    if not out_t:
+        return np.zeros(0, dtype=np.int64), np.zeros((0, 2)), np.zeros(0)
+    return np.concatenate(out_t), np.concatenate(out_n), np.concatenate(out_c)
+
+
+def _clip(grown, rows, planes, size, gap):
+    """Each of ``grown[rows]`` within the frame and the half-planes ``planes`` (tile,
+    normal, offset: normal·x <= offset), as polygons: Sutherland-Hodgman's clipping, one
+    plane of every tile at a time."""
+    w, h = size
+    coords, index = shapely.get_coordinates(shapely.get_exterior_ring(grown[rows]), return_index=True)
+    begin = np.searchsorted(index, np.arange(len(rows)))
+    count = np.diff(np.append(begin, len(index))) - 1  # less the closing vertex
+    cap = int(count.max())
+    poly = np.zeros((len(rows), cap, 2))
+    pos = np.arange(len(index)) - begin[index]
+    open_ = pos < count[index]
+    poly[index[open_], pos[open_]] = coords[open_]
+    # the frame's four planes first, then each tile's own in the order found
+    frame_n = np.array([[-1.0, 0.0], [0.0, -1.0], [1.0, 0.0], [0.0, 1.0]])
+    frame_c = np.array([-0.5 * gap, -0.5 * gap, w - 0.5 * gap, h - 0.5 * gap])
+    nr = len(rows)
+    slot = np.full(len(grown), -1)
+    slot[rows] = np.arange(nr)
+    tile, normal, offset = planes
+    tile = np.concatenate([np.repeat(np.arange(nr), 4), slot[tile]])
+    normal = np.concatenate([np.tile(frame_n, (nr, 1)), normal])
+    offset = np.concatenate([np.tile(frame_c, nr), offset])
+    order = np.argsort(tile, kind="stable")
+    tile, normal, offset = tile[order], normal[order], offset[order]
+    rank = np.arange(len(tile)) - np.searchsorted(tile, tile)
+    for r in range(rank.max() + 1):
+        at = rank == r
+        sub = tile[at]
+        poly, count = _clip_rows(poly, count, sub, normal[at], offset[at])
+    keep = count >= 3
+    out = np.array([shapely.Polygon()] * nr, dtype=object)
+    if keep.any():
+        k = np.flatnonzero(keep)
+        valid = np.arange(poly.shape[1])[None, :] < count[k, None]
+        ring = np.concatenate([poly[k], poly[k, :1]], axis=1)  # closed
+        closed = np.concatenate([valid, np.ones((len(k), 1), dtype=bool)], axis=1)
+        idx = np.broadcast_to(np.arange(len(k))[:, None], closed.shape)[closed]
+        out[k] = shapely.polygons(shapely.linearrings(ring[closed], indices=idx))
+    return out
+
+
+def _clip_rows(poly, count, sub, normal, offset):
+    """Rows ``sub`` of ``poly`` (each ``count`` vertices) clipped to normal·x <= offset."""
+    p = poly[sub]
+    c = count[sub]
+    v = p.shape[1]
+    j = np.arange(v)[None, :]
+    valid = j < c[:, None]
+    nxt = np.where(j + 1 < c[:, None], j + 1, 0)
+    q = np.take_along_axis(p, nxt[:, :, None], axis=1)
+    s = np.einsum("rvk,rk->rv", p, normal) - offset[:, None]
+    sn = np.take_along_axis(s, nxt, axis=1)
+    inside = valid & (s <= 0)
+    cross = valid & (((s < 0) & (sn > 0)) | ((s > 0) & (sn < 0)))
+    with np.errstate(invalid="ignore", divide="ignore"):
+        t = np.where(cross, s / (s - sn), 0.0)
+    x = p + t[:, :, None] * (q - p)
+    # each edge gives its first vertex where inside, then its crossing where it crosses
+    cand = np.stack([p, x], axis=2).reshape(len(sub), 2 * v, 2)
+    use = np.stack([inside, cross], axis=2).reshape(len(sub), 2 * v)
+    new_count = use.sum(axis=1)
+    width = max(int(new_count.max()) if len(sub) else 0, poly.shape[1])
+    order = np.argsort(~use, axis=1, kind="stable")[:, :width]
+    packed = np.take_along_axis(cand, order[:, :, None], axis=1)
+    if width > poly.shape[1]:
+        poly = np.concatenate([poly, np.zeros((len(poly), width - poly.shape[1], 2))], axis=1)
+    poly[sub] = 0.0
+    poly[sub, : packed.shape[1]] = packed
+    count = count.copy()
+    count[sub] = new_count
+    return poly, count
 
 
 def _robust(operation, a: np.ndarray, b: np.ndarray) -> np.ndarray:
