@@ -225,132 +225,157 @@ def _cut_convex(whole, grown, rows, pair_tile, obstacle, keep, size, gap):
     ``pair_tile``, ``obstacle``, ``keep``: per (candidate, obstacle) pair, the candidate
     (an index into ``whole``/``grown``), the obstacle (a convex geometry) and the
     distance to keep from it.  Returns the cut outlines of ``rows`` and whether each is
-    one that grew and keeps every distance (else the tile stays whole)."""
-    n = len(whole)
+    one polygon that grew and keeps every distance (else the tile stays whole)."""
+    nr = len(rows)
+    slot = np.full(len(whole), -1)
+    slot[rows] = np.arange(nr)
     # the closest points of each pair: the tile's a, the obstacle's b
-    ends = shapely.get_coordinates(elementwise(shapely.shortest_line, whole[pair_tile], obstacle)).reshape(
-        -1, 2, 2
-    )
+    line = elementwise(shapely.shortest_line, whole[pair_tile], obstacle)
+    ends = shapely.get_coordinates(line).reshape(-1, 2, 2)
     a, b = ends[:, 0], ends[:, 1]
     d = np.hypot(*(b - a).T)
     # the most constraining obstacle first: the least room between it and the tile
     order = np.lexsort((d - keep, pair_tile))
     pair_tile, obstacle, keep, a, b, d = (x[order] for x in (pair_tile, obstacle, keep, a, b, d))
-    vx, vpair = shapely.get_coordinates(obstacle, return_index=True)
-    planes = _greedy_planes(pair_tile, obstacle, (a, b, d, keep), (vx, vpair), whole)
-    cut = _clip(grown, rows, planes, size, gap)
+    poly, count = _vertex_arrays(grown[rows])
+    w, h = size
+    frame_n = np.array([[-1.0, 0.0], [0.0, -1.0], [1.0, 0.0], [0.0, 1.0]])
+    frame_c = np.array([-0.5 * gap, -0.5 * gap, w - 0.5 * gap, h - 0.5 * gap])
+    every = np.arange(nr)
+    for k in range(4):
+        poly, count = _clip_rows(poly, count, every, np.tile(frame_n[k], (nr, 1)), np.full(nr, frame_c[k]))
+    tiles = _Ragged(whole[rows])
+    obstacles = _Ragged(obstacle)
+    pt = slot[pair_tile]
+    left = np.ones(len(pt), dtype=bool)
+    while left.any():
+        idx = np.flatnonzero(left)
+        first = idx[np.unique(pt[idx], return_index=True)[1]]
+        r = pt[first]
+        normal, offset = _best_plane(poly, count, r, first, tiles, obstacles, (a, b, d, keep))
+        poly, count = _clip_rows(poly, count, r, normal, offset)
+        # every obstacle of these tiles that the plane keeps clear of is done
+        row = np.full(nr, -1)
+        row[r] = np.arange(len(r))
+        along = row[pt[idx]]
+        least = obstacles.least(idx, normal[along])
+        clear = least - keep[idx] >= offset[along] - 1e-12
+        left[idx[clear]] = False
+        left[first] = False
+    cut = _polygons(poly, count)
     ok = shapely.area(cut) > shapely.area(whole[rows]) * (1 + 1e-9)
-    # the distances checked on the outcome: exact, and rounding kept out of them
-    at = np.searchsorted(rows, pair_tile)
-    held = np.zeros(n, dtype=bool)
-    held[rows] = True
-    gotd = elementwise(shapely.distance, cut[at], obstacle)
-    bad = gotd < np.minimum(keep, d) - 1e-9
-    touching = d <= 1e-9  # touching already: the cut may touch it, not overlap it
-    if touching.any():
-        t = np.flatnonzero(touching)
-        bad[t] |= shapely.relate_pattern(cut[at[t]], obstacle[t], "T********")
-    ok[np.unique(at[bad])] = False
+    # the distances checked on the outcome, exactly: rounding never lets a cut through
+    got = elementwise(shapely.distance, cut[pt], obstacle)
+    bad = got < np.minimum(keep, d) - 1e-9
+    touching = np.flatnonzero(d <= 1e-9)  # touching already: the cut may touch it, not overlap it
+    if len(touching):
+        bad[touching] |= shapely.relate_pattern(cut[pt[touching]], obstacle[touching], "T********")
+    ok[np.unique(pt[bad])] = False
     return cut, ok
 
 
-def _greedy_planes(pair_tile, obstacle, pairs, vertices, whole):
-    """Half-planes (tile, normal, offset) that keep each tile's obstacles at their
-    distances: the most constraining obstacle left gives a plane at its distance along
-    the line between its closest points, and every obstacle that plane keeps clear of
-    goes; until none are left.  Pairs sorted by tile, most constraining first."""
+class _Ragged:
+    """The vertices of an array of geometries, each one's in a run."""
+
+    def __init__(self, geoms):
+        self.geoms = geoms
+        self.xy, of = shapely.get_coordinates(geoms, return_index=True)
+        self.start = np.searchsorted(of, np.arange(len(geoms)))
+        self.count = np.diff(np.append(self.start, len(of)))
+
+    def centre(self, which):
+        """Centroids of geometries ``which``, (k, 2)."""
+        return shapely.get_coordinates(shapely.centroid(self.geoms[which]))
+
+    def least(self, which, normal):
+        """Per geometry ``which[k]``, the least of normal[k]·vertex over its vertices
+        (``normal`` (k, 2), or (k, K, 2): K candidates each)."""
+        counts = self.count[which]
+        at = np.cumsum(counts) - counts
+        sel = np.repeat(self.start[which] - at, counts) + np.arange(counts.sum())
+        proj = np.einsum("vj,v...j->v...", self.xy[sel], np.repeat(normal, counts, axis=0))
+        return np.minimum.reduceat(proj, at, axis=0)
+
+
+# turns of the line between a tile's and an obstacle's closest points tried as the
+# normal of the plane between them (radians)
+_TURNS = np.radians([0.0, -15.0, 15.0, -30.0, 30.0, -45.0, 45.0, -60.0, 60.0])
+
+
+def _best_plane(poly, count, r, first, tiles, obstacles, pairs):
+    """For each tile ``r`` and its most constraining obstacle left (pair ``first``), the
+    plane that keeps the most of the tile's outline so far, among those that hold the
+    whole tile and keep the obstacle at its distance: normal to the line between their
+    closest points, or turned from it by up to 60 degrees."""
     a, b, d, keep = pairs
-    vx, vpair = vertices
-    m = len(pair_tile)
-    left = np.ones(m, dtype=bool)
-    out_t, out_n, out_c = [], [], []
-    centres = shapely.get_coordinates(shapely.centroid(whole))
-    starts = np.searchsorted(vpair, np.arange(m))
-    while left.any():
-        idx = np.flatnonzero(left)
-        first = idx[np.unique(pair_tile[idx], return_index=True)[1]]
-        tile = pair_tile[first]
-        direction = b[first] - a[first]
-        # touching (no gap): the direction between the centres, the plane the tile's own
-        # support line that way (a square's shared side)
-        flat = np.flatnonzero(d[first] <= 1e-9)
-        if len(flat):
-            direction[flat] = (
-                shapely.get_coordinates(shapely.centroid(obstacle[first[flat]])) - centres[tile[flat]]
-            )
-        normal = direction / np.maximum(np.hypot(*direction.T), 1e-300)[:, None]
-        offset = np.einsum("ij,ij->i", normal, b[first]) - np.minimum(keep[first], d[first])
-        if len(flat):
-            tv, ti = shapely.get_coordinates(whole[tile[flat]], return_index=True)
-            support = np.einsum("ij,ij->i", tv, normal[flat][ti])
-            offset[flat] = np.maximum.reduceat(support, np.searchsorted(ti, np.arange(len(flat))))
-        out_t.append(tile)
-        out_n.append(normal)
-        out_c.append(offset)
-        # every obstacle of these tiles that the plane keeps clear of is done
-        row = np.full(len(whole), -1)
-        row[tile] = np.arange(len(tile))
-        r = row[pair_tile[idx]]
-        lo = starts[idx]
-        hi = np.append(starts[1:], len(vpair))[idx]
-        counts = hi - lo
-        vsel = np.repeat(lo - np.cumsum(counts) + counts, counts) + np.arange(counts.sum())
-        proj = np.einsum("ij,ij->i", vx[vsel], normal[np.repeat(r, counts)])
-        least = np.minimum.reduceat(proj, np.cumsum(counts) - counts) if len(proj) else proj
-        clear = least - keep[idx] >= offset[r] - 1e-12
-        left[idx[clear]] = False
-        left[first] = False
-    if not out_t:
-        return np.zeros(0, dtype=np.int64), np.zeros((0, 2)), np.zeros(0)
-    return np.concatenate(out_t), np.concatenate(out_n), np.concatenate(out_c)
+    direction = b[first] - a[first]
+    # touching (no gap): the direction between the centres, the plane the tile's own
+    # support line that way (a square's shared side)
+    flat = d[first] <= 1e-9
+    if flat.any():
+        f = np.flatnonzero(flat)
+        direction[f] = obstacles.centre(first[f]) - tiles.centre(r[f])
+    base = direction / np.maximum(np.hypot(*direction.T), 1e-300)[:, None]
+    c, s = np.cos(_TURNS), np.sin(_TURNS)
+    normal = np.stack(
+        [base[:, None, 0] * c - base[:, None, 1] * s, base[:, None, 0] * s + base[:, None, 1] * c], axis=-1
+    )
+    # each candidate at the obstacle's distance, kept if the whole tile is on its side
+    offset = obstacles.least(first, normal) - keep[first, None]
+    high = -tiles.least(r, -normal)
+    usable = high <= offset + 1e-12
+    # the line between the closest points always holds (at the room there is)
+    offset[:, 0] = np.einsum("ij,ij->i", base, b[first]) - np.minimum(keep[first], d[first])
+    offset[flat, 0] = high[flat, 0]
+    usable[:, 0] = True
+    k = normal.shape[1]
+    rep = np.repeat(r, k)
+    p, n = _clip_arrays(poly[rep], count[rep], normal.reshape(-1, 2), offset.ravel())
+    area = np.where(usable, _area(p, n).reshape(-1, k), -np.inf)
+    best = np.argmax(area, axis=1)
+    pick = np.arange(len(r))
+    return normal[pick, best], offset[pick, best]
 
 
-def _clip(grown, rows, planes, size, gap):
-    """Each of ``grown[rows]`` within the frame and the half-planes ``planes`` (tile,
-    normal, offset: normal·x <= offset), as polygons: Sutherland-Hodgman's clipping, one
-    plane of every tile at a time."""
-    w, h = size
-    coords, index = shapely.get_coordinates(shapely.get_exterior_ring(grown[rows]), return_index=True)
-    begin = np.searchsorted(index, np.arange(len(rows)))
-    count = np.diff(np.append(begin, len(index))) - 1  # less the closing vertex
-    cap = int(count.max())
-    poly = np.zeros((len(rows), cap, 2))
+def _vertex_arrays(polygons):
+    """(n, V, 2) vertices of each polygon's exterior (less the closing one), padded, and
+    their counts."""
+    coords, index = shapely.get_coordinates(shapely.get_exterior_ring(polygons), return_index=True)
+    begin = np.searchsorted(index, np.arange(len(polygons)))
+    count = np.diff(np.append(begin, len(index))) - 1
+    poly = np.zeros((len(polygons), int(count.max()) if len(polygons) else 0, 2))
     pos = np.arange(len(index)) - begin[index]
     open_ = pos < count[index]
     poly[index[open_], pos[open_]] = coords[open_]
-    # the frame's four planes first, then each tile's own in the order found
-    frame_n = np.array([[-1.0, 0.0], [0.0, -1.0], [1.0, 0.0], [0.0, 1.0]])
-    frame_c = np.array([-0.5 * gap, -0.5 * gap, w - 0.5 * gap, h - 0.5 * gap])
-    nr = len(rows)
-    slot = np.full(len(grown), -1)
-    slot[rows] = np.arange(nr)
-    tile, normal, offset = planes
-    tile = np.concatenate([np.repeat(np.arange(nr), 4), slot[tile]])
-    normal = np.concatenate([np.tile(frame_n, (nr, 1)), normal])
-    offset = np.concatenate([np.tile(frame_c, nr), offset])
-    order = np.argsort(tile, kind="stable")
-    tile, normal, offset = tile[order], normal[order], offset[order]
-    rank = np.arange(len(tile)) - np.searchsorted(tile, tile)
-    for r in range(rank.max() + 1):
-        at = rank == r
-        sub = tile[at]
-        poly, count = _clip_rows(poly, count, sub, normal[at], offset[at])
-    keep = count >= 3
-    out = np.array([shapely.Polygon()] * nr, dtype=object)
-    if keep.any():
-        k = np.flatnonzero(keep)
-        valid = np.arange(poly.shape[1])[None, :] < count[k, None]
-        ring = np.concatenate([poly[k], poly[k, :1]], axis=1)  # closed
-        closed = np.concatenate([valid, np.ones((len(k), 1), dtype=bool)], axis=1)
+    return poly, count
+
+
+def _polygons(poly, count):
+    """Shapely polygons of padded vertex arrays (empty where fewer than 3 vertices)."""
+    out = np.array([shapely.Polygon()] * len(poly), dtype=object)
+    k = np.flatnonzero(count >= 3)
+    if len(k):
+        ring = np.concatenate([poly[k], np.zeros((len(k), 1, 2))], axis=1)
+        ring[np.arange(len(k)), count[k]] = poly[k, 0]  # closed
+        closed = np.arange(ring.shape[1])[None, :] <= count[k, None]
         idx = np.broadcast_to(np.arange(len(k))[:, None], closed.shape)[closed]
         out[k] = shapely.polygons(shapely.linearrings(ring[closed], indices=idx))
     return out
 
 
-def _clip_rows(poly, count, sub, normal, offset):
-    """Rows ``sub`` of ``poly`` (each ``count`` vertices) clipped to normal·x <= offset."""
-    p = poly[sub]
-    c = count[sub]
+def _area(poly, count):
+    """Areas of padded vertex arrays (shoelace)."""
+    v = poly.shape[1]
+    j = np.arange(v)[None, :]
+    nxt = np.where(j + 1 < count[:, None], j + 1, 0)
+    q = np.take_along_axis(poly, nxt[:, :, None], axis=1)
+    cross = poly[..., 0] * q[..., 1] - q[..., 0] * poly[..., 1]
+    return 0.5 * np.abs(np.where(j < count[:, None], cross, 0.0).sum(axis=1))
+
+
+def _clip_arrays(p, c, normal, offset):
+    """Padded vertex arrays ``p`` (``c`` vertices each) clipped to normal·x <= offset
+    (Sutherland-Hodgman): the clipped arrays and their counts."""
     v = p.shape[1]
     j = np.arange(v)[None, :]
     valid = j < c[:, None]
@@ -364,12 +389,18 @@ def _clip_rows(poly, count, sub, normal, offset):
         t = np.where(cross, s / (s - sn), 0.0)
     x = p + t[:, :, None] * (q - p)
     # each edge gives its first vertex where inside, then its crossing where it crosses
-    cand = np.stack([p, x], axis=2).reshape(len(sub), 2 * v, 2)
-    use = np.stack([inside, cross], axis=2).reshape(len(sub), 2 * v)
+    cand = np.stack([p, x], axis=2).reshape(len(p), 2 * v, 2)
+    use = np.stack([inside, cross], axis=2).reshape(len(p), 2 * v)
     new_count = use.sum(axis=1)
-    width = max(int(new_count.max()) if len(sub) else 0, poly.shape[1])
+    width = int(new_count.max()) if len(p) else 0
     order = np.argsort(~use, axis=1, kind="stable")[:, :width]
-    packed = np.take_along_axis(cand, order[:, :, None], axis=1)
+    return np.take_along_axis(cand, order[:, :, None], axis=1), new_count
+
+
+def _clip_rows(poly, count, sub, normal, offset):
+    """Rows ``sub`` of ``poly`` (each ``count`` vertices) clipped to normal·x <= offset."""
+    packed, new_count = _clip_arrays(poly[sub], count[sub], normal, offset)
+    width = max(packed.shape[1], poly.shape[1])
     if width > poly.shape[1]:
         poly = np.concatenate([poly, np.zeros((len(poly), width - poly.shape[1], 2))], axis=1)
     poly[sub] = 0.0
