@@ -192,21 +192,50 @@ def wall_network(seed=3):
     return walls, shapely.union_all(steps)
 
 
-def test_wall_lines_and_their_margin_pieces_are_the_walls():
-    """The merged lines are the pixel steps, and their margin in pieces (any run length)
-    covers the same ground as the steps grown one by one (square ends: right angles
-    only)."""
-    from compact_distributions.cvt.mosaic.cutting import _margin_pieces, wall_lines
+def test_wall_lines_are_the_walls_in_straight_pieces():
+    """The pieces are the pixel steps (and lone pixels) built here one by one: the same
+    ground, each piece straight, none longer than its run."""
+    from compact_distributions.cvt.mosaic.cutting import wall_lines
 
     walls, truth = wall_network()
-    lines = wall_lines(walls)
-    assert shapely.union_all(lines).symmetric_difference(truth).length == pytest.approx(0.0, abs=1e-9)
-    d = 0.37
-    grown = shapely.buffer(shapely.get_parts(truth), d, cap_style="square", join_style="mitre")
-    want = shapely.union_all(grown)
-    for length in (1, 3, 64):
-        got = shapely.union_all(_margin_pieces(lines, d, length))
-        assert got.symmetric_difference(want).area < 1e-9
+    pieces = wall_lines(walls)
+    assert shapely.union_all(pieces).symmetric_difference(truth).length == pytest.approx(0.0, abs=1e-9)
+    lines = pieces[shapely.get_type_id(pieces) == 1]
+    assert (shapely.get_num_coordinates(lines) == 2).all()  # straight
+    points = pieces[shapely.get_type_id(pieces) == 0]
+    assert (shapely.distance(points[:, None], lines[None, :]) > 0.5).all()  # lone pixels
+
+
+def _greedy_turns(pairs, n):
+    """The colouring one node at a time, as a loop: the truth for the vectorised one."""
+    adjacency = [set() for _ in range(n)]
+    for a, b in pairs:
+        if a != b:
+            adjacency[a].add(b)
+            adjacency[b].add(a)
+    turn = [-1] * n
+    for v in sorted(range(n), key=lambda v: -len(adjacency[v])):
+        used = {turn[u] for u in adjacency[v]}
+        t = 0
+        while t in used:
+            t += 1
+        turn[v] = t
+    return np.array(turn)
+
+
+@pytest.mark.parametrize("seed", [0, 1, 2])
+def test_turns_are_the_greedy_colouring(seed):
+    from compact_distributions.cvt.mosaic.cutting import _turns
+
+    rng = np.random.default_rng(seed)
+    n = 300
+    pts = rng.random((n, 2)) * 10
+    d = np.hypot(*(pts[:, None] - pts[None, :]).transpose(2, 0, 1))
+    a, b = np.nonzero(d < 1.2)
+    pairs = np.stack([a, b], axis=1)  # both ways and each node with itself, as queries give them
+    got = _turns(pairs, n)
+    np.testing.assert_array_equal(got, _greedy_turns(pairs, n))
+    assert (got[a[a != b]] != got[b[a != b]]).all()
 
 
 @pytest.mark.parametrize("gap,turn", [(0.6, 0.2), (0.0, 0.5)])

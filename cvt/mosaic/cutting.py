@@ -30,18 +30,17 @@ from __future__ import annotations
 import numpy as np
 import shapely
 
-from ..placement.compaction import wall_segments
 from ..threads import elementwise
 
 CUT_ENLARGE = 1.8  # a cut tile lies within its tile grown by this factor about its centre
 CUT_REACH = 1.0  # tiles this many element spacings or closer to a wall are cut to fit
 _MARGIN = 1e-3  # px kept beyond the gap
-_RUN = 64  # most vertices of a wall line in one piece of its margin (fewer, smaller differences)
 
 
 def wall_lines(walls: np.ndarray):
-    """The centre lines of thin walls as shapely geometries: merged lines, plus a point
-    for each wall pixel that touches no other.
+    """The centre lines of thin walls as straight pieces: each longest straight run of
+    steps between the centres of 4-connected wall pixels (carried on to the picture's
+    border where a wall meets it), and a point for each wall pixel that touches no other.
 
     Parameters
     ----------
@@ -51,39 +50,47 @@ def wall_lines(walls: np.ndarray):
     Returns
     -------
     ndarray of shapely geometries
+        Straight lines and points: convex pieces, each of which a half-plane can keep a
+        tile clear of.
     """
-    steps, points = _wall_pieces(walls)
-    parts = []
-    if len(steps):
-        # the steps meet only at their ends: they are merged as they are, with no noding union
-        merged = shapely.line_merge(shapely.multilinestrings(steps))
-        # less the vertices where a line runs straight on: the same lines, fewer to test
-        parts.append(shapely.get_parts(shapely.simplify(merged, 0.0, preserve_topology=False)))
-    if len(points):
-        parts.append(points)
-    return np.concatenate(parts) if parts else np.zeros(0, dtype=object)
-
-
-def _wall_pieces(walls: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """The walls' centre lines in pieces: unit steps between the centres of 4-connected
-    wall pixels and on to the border (lines), and lone wall pixels (points)."""
-    segs = wall_segments(walls)
-    if len(segs) == 0:
-        return np.zeros(0, dtype=object), np.zeros(0, dtype=object)
+    walls = np.asarray(walls, dtype=bool)
+    h, w = walls.shape
+    if not walls.any():
+        return np.zeros(0, dtype=object)
+    right = walls[:, :-1] & walls[:, 1:]
+    down = walls[:-1, :] & walls[1:, :]
+    row, col, length = _runs(right)
+    x0, y0 = col + 0.5, row + 0.5
+    pieces = [np.stack([x0, y0, x0 + length, y0], axis=1)]
+    col, row, length = _runs(down.T)
+    x0, y0 = col + 0.5, row + 0.5
+    pieces.append(np.stack([x0, y0, x0, y0 + length], axis=1))
     # a wall that meets the picture's border is carried on to it: a cut tile, unlike a
     # whole one, could otherwise bend round the wall's end in the half pixel left there
-    h, w = walls.shape
-    ends = []
-    for row, to_y in ((0, 0.0), (h - 1, float(h))):
-        x = np.flatnonzero(walls[row]) + 0.5
-        ends.append(np.stack([x, np.full_like(x, row + 0.5), x, np.full_like(x, to_y)], axis=1))
-    for col, to_x in ((0, 0.0), (w - 1, float(w))):
-        y = np.flatnonzero(walls[:, col]) + 0.5
-        ends.append(np.stack([np.full_like(y, col + 0.5), y, np.full_like(y, to_x), y], axis=1))
-    segs = np.concatenate([segs, *ends])
-    long = segs[:, 0] != segs[:, 2]
-    long |= segs[:, 1] != segs[:, 3]
-    return shapely.linestrings(segs[long].reshape(-1, 2, 2)), shapely.points(segs[~long, :2])
+    for r, to_y in ((0, 0.0), (h - 1, float(h))):
+        x = np.flatnonzero(walls[r]) + 0.5
+        pieces.append(np.stack([x, np.full_like(x, r + 0.5), x, np.full_like(x, to_y)], axis=1))
+    for c, to_x in ((0, 0.0), (w - 1, float(w))):
+        y = np.flatnonzero(walls[:, c]) + 0.5
+        pieces.append(np.stack([np.full_like(y, c + 0.5), y, np.full_like(y, to_x), y], axis=1))
+    segs = np.concatenate(pieces)
+    lone = walls.copy()
+    lone[:, :-1] &= ~right
+    lone[:, 1:] &= ~right
+    lone[:-1, :] &= ~down
+    lone[1:, :] &= ~down
+    i, j = np.nonzero(lone)
+    return np.concatenate([shapely.linestrings(segs.reshape(-1, 2, 2)), shapely.points(j + 0.5, i + 0.5)])
+
+
+def _runs(mask: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """The runs of True along each row of ``mask``: row, first column, length."""
+    padded = np.zeros((mask.shape[0], mask.shape[1] + 2), dtype=np.int8)
+    padded[:, 1:-1] = mask
+    step = np.diff(padded, axis=1)
+    row, first = np.nonzero(step == 1)
+    _, last = np.nonzero(step == -1)  # row-major: the ends pair with the starts
+    return row, first, last - first
 
 
 def _grown(polygons: np.ndarray, factor: float) -> np.ndarray:
@@ -95,32 +102,48 @@ def _grown(polygons: np.ndarray, factor: float) -> np.ndarray:
 
 
 def _turns(pairs: np.ndarray, n: int) -> np.ndarray:
-    """A turn per node such that no pair shares one (greedy colouring, largest degree first)."""
+    """A turn per node such that no pair shares one: greedy colouring, the nodes taken
+    by degree, largest first (ties by index), each given the least turn none of its
+    neighbours taken before it has.  Worked in rounds: a round turns every node whose
+    neighbours taken before it all have theirs, the same turns as one node at a time."""
     turn = np.full(n, -1, dtype=np.int64)
     if n == 0:
         return turn
-    adjacency = [[] for _ in range(n)]
-    for a, b in pairs:
-        adjacency[a].append(b)
-        adjacency[b].append(a)
-    for v in sorted(range(n), key=lambda v: -len(adjacency[v])):
-        used = {turn[u] for u in adjacency[v]}
-        t = 0
-        while t in used:
-            t += 1
-        turn[v] = t
+    pairs = np.unique(np.sort(np.asarray(pairs, dtype=np.int64).reshape(-1, 2), axis=1), axis=0)
+    pairs = pairs[pairs[:, 0] != pairs[:, 1]]
+    degree = np.bincount(pairs.ravel(), minlength=n)
+    rank = np.empty(n, dtype=np.int64)
+    rank[np.argsort(-degree, kind="stable")] = np.arange(n)
+    # each edge from the node taken first to the one taken later
+    u, v = pairs[:, 0], pairs[:, 1]
+    swap = rank[u] > rank[v]
+    early = np.where(swap, v, u)
+    late = np.where(swap, u, v)
+    order = np.argsort(late, kind="stable")
+    early, late = early[order], late[order]
+    waiting = np.bincount(late, minlength=n)
+    by_early = np.argsort(early, kind="stable")
+    first_out = np.searchsorted(early[by_early], np.arange(n + 1))
+    ready = np.flatnonzero(waiting == 0)
+    while len(ready):
+        # the turns of each ready node's earlier neighbours, all known now
+        lo, hi = np.searchsorted(late, ready), np.searchsorted(late, ready, side="right")
+        counts = hi - lo
+        seen = np.repeat(np.arange(len(ready)), counts)
+        nb = early[np.repeat(lo - np.cumsum(counts) + counts, counts) + np.arange(counts.sum())]
+        used = np.zeros((len(ready), int(counts.max(initial=0)) + 2), dtype=bool)
+        t = turn[nb]
+        fits = t < used.shape[1]
+        used[seen[fits], t[fits]] = True
+        turn[ready] = np.argmin(used, axis=1)  # the least turn not used
+        # their later neighbours wait on one fewer
+        lo, hi = first_out[ready], first_out[ready + 1]
+        counts = hi - lo
+        later = late[by_early[np.repeat(lo - np.cumsum(counts) + counts, counts) + np.arange(counts.sum())]]
+        np.subtract.at(waiting, later, 1)
+        touched = np.unique(later)
+        ready = touched[(waiting[touched] == 0) & (turn[touched] < 0)]
     return turn
-
-
-def _subtract_by_rank(cand: np.ndarray, target: np.ndarray, parts: np.ndarray) -> None:
-    """cand[target[k]] less parts[k] for every k, in place: one vectorised difference per
-    rank (a target's first part, its second, ...), each target's parts in the order given."""
-    order = np.argsort(target, kind="stable")
-    target, parts = target[order], parts[order]
-    rank = np.arange(len(target)) - np.searchsorted(target, target)
-    for r in range(rank.max() + 1 if len(target) else 0):
-        at = rank == r
-        cand[target[at]] = _robust(shapely.difference, cand[target[at]], parts[at])
 
 
 def cut_to_walls(
@@ -158,18 +181,18 @@ def cut_to_walls(
     """
     out = list(polygons)
     h, w = walls.shape
-    lines = wall_lines(walls)
+    pieces = wall_lines(walls)
     geoms = np.array([shapely.Polygon() if p is None else p for p in out], dtype=object)
     present = np.flatnonzero(~shapely.is_empty(geoms))
-    if len(lines) == 0 or len(present) == 0:
+    if len(pieces) == 0 or len(present) == 0:
         return out, 0
-    # the lines query the tiles rather than the other way round: GEOS then prepares each
-    # long line once instead of walking it for every tile
-    near = present[
-        np.unique(
-            shapely.STRtree(geoms[present]).query(lines, predicate="dwithin", distance=reach * spacing)[1]
-        )
-    ]
+    # a tile is near when its nearest piece of wall is within reach
+    tree = shapely.STRtree(pieces)
+    if reach * spacing > 0:
+        found = tree.query_nearest(geoms[present], max_distance=reach * spacing)[0]
+    else:
+        found = tree.query(geoms[present], predicate="intersects")[0]
+    near = present[np.unique(found)]
     if len(near) == 0:
         return out, 0
     full = gap + _MARGIN  # kept from every other tile
@@ -180,10 +203,9 @@ def cut_to_walls(
     # and the pieces of the walls' centre lines within G/2 of it
     outer = geoms.copy()
     outer[near] = grown
-    ci, oi = shapely.STRtree(outer).query(grown, predicate="dwithin", distance=full)
+    ci, oi = _within(outer, grown, full)
     other = oi != near[ci]
     ci, oi = ci[other], oi[other]
-    pieces = _wall_segments(lines)
     wi, wc = shapely.STRtree(grown).query(pieces, predicate="dwithin", distance=half)
     # cut in turns: two tiles whose grown outlines come within the gap never share one
     cand = np.flatnonzero(np.isin(oi, near))
@@ -208,14 +230,15 @@ def cut_to_walls(
     return list(result), grew
 
 
-def _wall_segments(lines: np.ndarray) -> np.ndarray:
-    """The walls' centre lines as their straight segments (and lone points): convex
-    pieces, each of which a half-plane can keep a tile clear of."""
-    is_point = shapely.get_type_id(lines) == 0
-    coords, line = shapely.get_coordinates(lines[~is_point], return_index=True)
-    same = line[1:] == line[:-1]
-    ends = np.stack([coords[:-1][same], coords[1:][same]], axis=1)
-    return np.concatenate([shapely.linestrings(ends), lines[is_point]])
+def _within(geoms: np.ndarray, query: np.ndarray, distance: float) -> tuple[np.ndarray, np.ndarray]:
+    """Pairs (query index, geoms index) less than ``distance`` apart: the boxes grown by
+    it looked up in a tree, then the exact distances (cheaper than the tree's own
+    ``dwithin``)."""
+    lo_x, lo_y, hi_x, hi_y = shapely.bounds(query).T
+    boxes = shapely.box(lo_x - distance, lo_y - distance, hi_x + distance, hi_y + distance)
+    qi, gi = shapely.STRtree(geoms).query(boxes)
+    close = elementwise(shapely.dwithin, query[qi], geoms[gi], distance=distance)
+    return qi[close], gi[close]
 
 
 def _cut_convex(whole, grown, rows, pair_tile, obstacle, keep, size, gap):
@@ -391,10 +414,12 @@ def _clip_arrays(p, c, normal, offset):
     # each edge gives its first vertex where inside, then its crossing where it crosses
     cand = np.stack([p, x], axis=2).reshape(len(p), 2 * v, 2)
     use = np.stack([inside, cross], axis=2).reshape(len(p), 2 * v)
-    new_count = use.sum(axis=1)
-    width = int(new_count.max()) if len(p) else 0
-    order = np.argsort(~use, axis=1, kind="stable")[:, :width]
-    return np.take_along_axis(cand, order[:, :, None], axis=1), new_count
+    place = np.cumsum(use, axis=1)
+    new_count = place[:, -1] if v else np.zeros(len(p), dtype=np.int64)
+    out = np.zeros((len(p), int(new_count.max()) if len(p) else 0, 2))
+    rows, cols = np.nonzero(use)
+    out[rows, place[rows, cols] - 1] = cand[rows, cols]
+    return out, new_count
 
 
 def _clip_rows(poly, count, sub, normal, offset):
@@ -408,43 +433,6 @@ def _clip_rows(poly, count, sub, normal, offset):
     count = count.copy()
     count[sub] = new_count
     return poly, count
-
-
-def _robust(operation, a: np.ndarray, b: np.ndarray) -> np.ndarray:
-    """``operation(a, b)`` element by element; where GEOS gives up on a pair (a topology
-    exception from nearly coincident edges) the result is an empty geometry, so that
-    tile stays whole."""
-    try:
-        return elementwise(operation, a, b)
-    except shapely.errors.GEOSException:
-        out = np.empty(len(a), dtype=object)
-        for k in range(len(a)):
-            try:
-                out[k] = operation(a[k], b[k])
-            except shapely.errors.GEOSException:
-                out[k] = shapely.Polygon()
-        return out
-
-
-def _margin_pieces(lines: np.ndarray, distance: float, length: int = _RUN) -> np.ndarray:
-    """The lines' margin of ``distance`` in pieces: each line cut into runs of at most
-    ``length`` vertices (straight stretches between turns), each run grown by ``distance`` (mitred joins, square caps).  The
-    lines turn only by right angles, where a square cap meets the next run as a mitred
-    join would, so the pieces cover the same ground as the whole lines grown."""
-    is_point = shapely.get_type_id(lines) == 0
-    coords, line = shapely.get_coordinates(lines[~is_point], return_index=True)
-    pos = np.arange(len(line)) - np.searchsorted(line, line)  # each vertex's place on its line
-    end = np.append(line[1:] != line[:-1], True)
-    run = pos // length
-    joint = (pos % length == 0) & (pos > 0)  # a vertex that ends one run and starts the next
-    first = ~(joint & end)  # a line's last vertex starts no run
-    key = np.concatenate([line[first] * len(line) + run[first], line[joint] * len(line) + run[joint] - 1])
-    at = np.concatenate([np.flatnonzero(first), np.flatnonzero(joint)])
-    order = np.lexsort((at, key))
-    _, runs = np.unique(key[order], return_inverse=True)
-    pieces = shapely.linestrings(coords[at[order]], indices=runs)
-    pieces = np.concatenate([pieces, lines[is_point]])
-    return elementwise(shapely.buffer, pieces, distance=distance, join_style="mitre", cap_style="square")
 
 
 def _started_as(cut: np.ndarray, whole: np.ndarray) -> np.ndarray:
@@ -470,20 +458,6 @@ def _started_as(cut: np.ndarray, whole: np.ndarray) -> np.ndarray:
     k = np.where(open_, pos, 0)
     src = begin[index] + (k + start[index]) % n[index]
     out[plain] = shapely.polygons(shapely.linearrings(coords[src], indices=index))
-    return out
-
-
-def _piece_holding(cand: np.ndarray, whole: np.ndarray) -> np.ndarray:
-    """Of each candidate, the piece that holds a point inside the whole tile: what was
-    taken away comes at most ``_MARGIN`` into the whole tile, so one piece holds all of
-    it but that margin."""
-    parts, index = shapely.get_parts(cand, return_index=True)
-    out = np.array([shapely.Polygon()] * len(cand), dtype=object)
-    if len(parts) == 0:
-        return out
-    inside = shapely.get_coordinates(shapely.point_on_surface(whole))
-    hit = shapely.contains_xy(parts, inside[index, 0], inside[index, 1])
-    out[index[hit]] = parts[hit]
     return out
 
 
