@@ -265,14 +265,10 @@ def _cut_convex(whole, grown, rows, pair_tile, obstacle, keep, size, gap):
     nr = len(rows)
     slot = np.full(len(whole), -1)
     slot[rows] = np.arange(nr)
-    # the closest points of each pair: the tile's a, the obstacle's b
-    line = elementwise(shapely.shortest_line, whole[pair_tile], obstacle)
-    ends = shapely.get_coordinates(line).reshape(-1, 2, 2)
-    a, b = ends[:, 0], ends[:, 1]
-    d = np.hypot(*(b - a).T)
+    d = elementwise(shapely.distance, whole[pair_tile], obstacle)
     # the most constraining obstacle first: the least room between it and the tile
     order = np.lexsort((d - keep, pair_tile))
-    pair_tile, obstacle, keep, a, b, d = (x[order] for x in (pair_tile, obstacle, keep, a, b, d))
+    pair_tile, obstacle, keep, d = (x[order] for x in (pair_tile, obstacle, keep, d))
     poly, count = _vertex_arrays(grown[rows])
     w, h = size
     frame_n = np.array([[-1.0, 0.0], [0.0, -1.0], [1.0, 0.0], [0.0, 1.0]])
@@ -288,7 +284,7 @@ def _cut_convex(whole, grown, rows, pair_tile, obstacle, keep, size, gap):
         idx = np.flatnonzero(left)
         first = idx[np.unique(pt[idx], return_index=True)[1]]
         r = pt[first]
-        normal, offset = _best_plane(poly, count, r, first, tiles, obstacles, (a, b, d, keep))
+        normal, offset = _best_plane(poly, count, r, first, tiles, obstacles, (d, keep))
         poly, count = _clip_rows(poly, count, r, normal, offset)
         # every obstacle of these tiles that the plane keeps clear of is done
         row = np.full(nr, -1)
@@ -300,13 +296,13 @@ def _cut_convex(whole, grown, rows, pair_tile, obstacle, keep, size, gap):
         left[first] = False
     cut = _polygons(poly, count)
     ok = shapely.area(cut) > shapely.area(whole[rows]) * (1 + 1e-9)
-    # the distances checked on the outcome, exactly: rounding never lets a cut through
-    got = elementwise(shapely.distance, cut[pt], obstacle)
-    bad = got < np.minimum(keep, d) - 1e-9
-    touching = np.flatnonzero(d <= 1e-9)  # touching already: the cut may touch it, not overlap it
+    # each obstacle lies beyond a plane at its distance (or the room there was) from the
+    # cut, found as it was cleared; one that touched the tile already is checked here:
+    # the cut may touch it, not overlap it
+    touching = np.flatnonzero(d <= 1e-9)
     if len(touching):
-        bad[touching] |= shapely.relate_pattern(cut[pt[touching]], obstacle[touching], "T********")
-    ok[np.unique(pt[bad])] = False
+        bad = shapely.relate_pattern(cut[pt[touching]], obstacle[touching], "T********")
+        ok[pt[touching[bad]]] = False
     return cut, ok
 
 
@@ -343,8 +339,11 @@ def _best_plane(poly, count, r, first, tiles, obstacles, pairs):
     plane that keeps the most of the tile's outline so far, among those that hold the
     whole tile and keep the obstacle at its distance: normal to the line between their
     closest points, or turned from it by up to 60 degrees."""
-    a, b, d, keep = pairs
-    direction = b[first] - a[first]
+    d, keep = pairs
+    # the closest points of each pair: the tile's a, the obstacle's b
+    ends = shapely.get_coordinates(shapely.shortest_line(tiles.geoms[r], obstacles.geoms[first]))
+    a, b = ends[0::2], ends[1::2]
+    direction = b - a
     # touching (no gap): the direction between the centres, the plane the tile's own
     # support line that way (a square's shared side)
     flat = d[first] <= 1e-9
@@ -361,7 +360,7 @@ def _best_plane(poly, count, r, first, tiles, obstacles, pairs):
     high = -tiles.least(r, -normal)
     usable = high <= offset + 1e-12
     # the line between the closest points always holds (at the room there is)
-    offset[:, 0] = np.einsum("ij,ij->i", base, b[first]) - np.minimum(keep[first], d[first])
+    offset[:, 0] = np.einsum("ij,ij->i", base, b) - np.minimum(keep[first], d[first])
     offset[flat, 0] = high[flat, 0]
     usable[:, 0] = True
     # the area each usable candidate keeps (the first always: it wins ties)
