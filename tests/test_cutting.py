@@ -6,6 +6,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 import shapely
+import shapely.affinity
 from scipy.optimize import minimize
 
 from compact_distributions.cvt.mosaic import pipeline as mosaic
@@ -107,6 +108,37 @@ def test_a_wall_that_meets_the_border_is_not_rounded():
         left = before.centroid.x < 30.5
         xs = np.asarray(after.exterior.coords)[:, 0]
         assert (xs <= 30.5 - gap / 2 + 1e-9).all() if left else (xs >= 30.5 + gap / 2 - 1e-9).all()
+
+
+@pytest.mark.parametrize("turn", [0.0, 0.35, -0.6])
+def test_a_lone_tile_beside_a_straight_wall_grows_to_the_walls_margin(turn):
+    """One tile, turned, beside a vertical wall: all that is free within its grown
+    outline is the outline less the wall's G/2 margin (and the frame), and the cut tile
+    is all of it, built here with shapely."""
+    from compact_distributions.cvt.mosaic.cutting import CUT_ENLARGE
+
+    walls = np.zeros((H, W), dtype=bool)
+    walls[:, 30] = True
+    gap = 0.4
+    c, s = np.cos(turn), np.sin(turn)
+    corners = np.array([[-1, -1], [1, -1], [1, 1], [-1, 1]]) * 3.0
+    tile = shapely.Polygon(corners @ np.array([[c, s], [-s, c]]) + [24.0, 20.0])
+    out, grew = cut_to_walls([tile], walls, gap, spacing=6.0)
+    assert grew == 1
+    grown = shapely.affinity.scale(tile, CUT_ENLARGE, CUT_ENLARGE, origin="centroid")
+    free = grown.intersection(shapely.box(gap / 2, gap / 2, 30.5 - gap / 2, H - gap / 2))
+    assert out[0].symmetric_difference(free).area < 1e-3 * free.area  # the _MARGIN kept
+    assert out[0].covers(tile) and out[0].distance(shapely.LineString([(30.5, 0), (30.5, H)])) >= gap / 2
+
+
+def test_cut_tiles_are_convex_and_hold_their_tiles():
+    walls, truth = wall_network()
+    tiles = lattice_beside(truth, 3.0, 0.5, 0.4)
+    out, grew = cut_to_walls(tiles, walls, 0.5, spacing=3.5)
+    assert grew > 0
+    for before, after in zip(tiles, out, strict=True):
+        assert after.convex_hull.area - after.area < 1e-9 * after.area
+        assert after.buffer(1e-9).covers(before)
 
 
 @pytest.mark.parametrize("block,shuffle", [(None, False), (7, True), (40, False)])

@@ -2,27 +2,33 @@
 
 Compaction keeps every tile whole: a square facing a curved or slanted wall touches it
 at a corner and leaves a wedge of grout beside it.  Here each tile near a wall is grown
-about its centre (by ``enlarge``) and trimmed back to what is free: at least G/2 from the
-walls' centre lines and the picture's border, at least G from every other tile.  The
-trimmed tile always holds the whole tile it came from, so cutting only adds area, and it
-never moves another tile.
+about its centre (by ``enlarge``) and nipped back with straight cuts to what is free: at
+least G/2 from the walls' centre lines and the picture's border, at least G from every
+other tile.  The cut tile is convex and always holds the whole tile it came from, so
+cutting only adds area, and it never moves another tile.
+
+The cuts are half-planes.  Each tile's obstacles (the other tiles, and the straight
+pieces of the walls' centre lines: every piece convex) are taken most constraining
+first: the least room between it and the tile.  The plane kept for it is, of the line
+through their closest points and that line turned by up to 60 degrees, the one that
+keeps the most of the tile's outline so far while holding the whole tile and keeping
+the obstacle at its distance; every other obstacle beyond that plane (at its own
+distance) is then done, and the next one left gives the next plane.  So each obstacle
+is cleared by a plane found at its distance, which is the proof of the guarantees; the
+outlines are clipped (Sutherland-Hodgman) whole-array, all tiles' first planes at once,
+then their second, ...
 
 Tiles that could reach one another once grown are cut in turns (a greedy colouring of
 the graph of grown tiles less than G apart): within one turn no two candidates can
-meet, so each turn is one vectorised pass of shapely over its tiles, and later turns see
-the earlier turns' cuts.  "At least G from" is kept by taking away the neighbours grown
-by G with mitred corners (never closer than G anywhere) plus a margin of ``_MARGIN`` for
-the rounding of shapely's overlay.  The walls' G/2-wide margin is grown once, in runs
-of their centre lines with square ends: the lines turn only by right angles, where such
-ends meet as a mitred join would, so the runs cover what the whole lines would.
+meet, and later turns see the earlier turns' cuts (convex too, so the closest points
+still separate).  A cut tile holds no wall pixel centre: every piece of wall within its
+reach is beyond one of its planes.
 
-A cut that would let a tile straddle a strong edge (its hull reaching round the end of
-a wall, :func:`cvt.evaluate.straddling_tiles`) is undone, and so is one where shapely
-gives up on the geometry: that tile stays whole.
-
-Measured on six photographs (2000 squares, default gap and edge threshold, OpenCL):
-cutting the tiles within one spacing of a wall, each within 1.8 times its size, raised
-coverage by 2-10 points (a portrait with many contours from 0.72 to 0.83).
+Measured against the cut this replaced (the grown tile less each neighbour and the
+walls' margin, one shapely difference at a time, 93 000 of them for 20 000 tiles): on
+coffee, chelsea, astronaut and scene.jpg at 2560 px, 20 000 tiles, coverage 0.2-1.5
+points lower (the cuts no longer bend round neighbours), colour error 1.7-4.8 % lower,
+straddling and overlap 0 both ways; the cutting 3.4x less CPU on coffee.
 """
 
 from __future__ import annotations
