@@ -217,10 +217,12 @@ def cut_to_walls(
         tile_pair = members[ci]
         wall_pair = members[wc]
         pair_tile = np.concatenate([ci[tile_pair], wc[wall_pair]])
-        obstacle = np.concatenate([geoms[oi[tile_pair]], pieces[wi[wall_pair]]])
+        # the obstacles as indices into the tiles (as they are now) then the pieces
+        pool = np.concatenate([geoms, pieces])
+        obstacle = np.concatenate([oi[tile_pair], len(geoms) + wi[wall_pair]])
         keep = np.concatenate([np.full(tile_pair.sum(), full), np.full(wall_pair.sum(), half)])
         rows = np.flatnonzero(members)
-        cut, ok = _cut_convex(geoms[near], grown, rows, pair_tile, obstacle, keep, (w, h), gap)
+        cut, ok = _cut_convex(geoms[near], grown, rows, (pair_tile, pool, obstacle, keep), (w, h), gap)
         good = rows[ok]
         geoms[near[good]] = _started_as(cut[ok], geoms[near[good]])
         grew += len(good)
@@ -260,21 +262,23 @@ def _within(geoms: np.ndarray, query: np.ndarray, distance: float) -> tuple[np.n
     return qi[close], gi[close]
 
 
-def _cut_convex(whole, grown, rows, pair_tile, obstacle, keep, size, gap):
+def _cut_convex(whole, grown, rows, pairs, size, gap):
     """The candidates ``rows`` cut as convex polygons: each one's grown outline within
     the frame, less a half-plane for each group of obstacles (module docstring).
 
-    ``pair_tile``, ``obstacle``, ``keep``: per (candidate, obstacle) pair, the candidate
-    (an index into ``whole``/``grown``), the obstacle (a convex geometry) and the
-    distance to keep from it.  Returns the cut outlines of ``rows`` and whether each is
+    ``pairs``: ``pair_tile``, ``pool``, ``obstacle``, ``keep``: per (candidate, obstacle)
+    pair, the candidate (an index into ``whole``/``grown``), the obstacle (an index into
+    ``pool``, convex geometries) and the distance to keep from it.  Returns the cut outlines of ``rows`` and whether each is
     one polygon that grew and keeps every distance (else the tile stays whole)."""
     nr = len(rows)
     slot = np.full(len(whole), -1)
     slot[rows] = np.arange(nr)
-    d = elementwise(shapely.distance, whole[pair_tile], obstacle)
+    pair_tile, pool, obstacle, keep = pairs
+    d = elementwise(shapely.distance, whole[pair_tile], pool[obstacle])
     # the most constraining obstacle first: the least room between it and the tile
     order = np.lexsort((d - keep, pair_tile))
     pair_tile, obstacle, keep, d = (x[order] for x in (pair_tile, obstacle, keep, d))
+    used, obstacle = np.unique(obstacle, return_inverse=True)
     poly, count = _vertex_arrays(grown[rows])
     w, h = size
     frame_n = np.array([[-1.0, 0.0], [0.0, -1.0], [1.0, 0.0], [0.0, 1.0]])
@@ -283,7 +287,7 @@ def _cut_convex(whole, grown, rows, pair_tile, obstacle, keep, size, gap):
     for k in range(4):
         poly, count = _clip_rows(poly, count, every, np.tile(frame_n[k], (nr, 1)), np.full(nr, frame_c[k]))
     tiles = _Ragged(whole[rows])
-    obstacles = _Ragged(obstacle)
+    obstacles = _Ragged(pool[used], obstacle)
     pt = slot[pair_tile]
     left = np.ones(len(pt), dtype=bool)
     while left.any():
@@ -307,27 +311,34 @@ def _cut_convex(whole, grown, rows, pair_tile, obstacle, keep, size, gap):
     # the cut may touch it, not overlap it
     touching = np.flatnonzero(d <= 1e-9)
     if len(touching):
-        bad = shapely.relate_pattern(cut[pt[touching]], obstacle[touching], "T********")
+        bad = shapely.relate_pattern(cut[pt[touching]], pool[used[obstacle[touching]]], "T********")
         ok[pt[touching[bad]]] = False
     return cut, ok
 
 
 class _Ragged:
-    """The vertices of an array of geometries, each one's in a run."""
+    """The vertices of geometries, each one's in a run, read once however many items
+    (``ref``: the geometry of each item; default one item per geometry) share one."""
 
-    def __init__(self, geoms):
+    def __init__(self, geoms, ref=None):
+        self.ref = np.arange(len(geoms)) if ref is None else ref
         self.geoms = geoms
         self.xy, of = shapely.get_coordinates(geoms, return_index=True)
         self.start = np.searchsorted(of, np.arange(len(geoms)))
         self.count = np.diff(np.append(self.start, len(of)))
 
+    def geometry(self, which):
+        """The geometries of items ``which``."""
+        return self.geoms[self.ref[which]]
+
     def centre(self, which):
-        """Centroids of geometries ``which``, (k, 2)."""
-        return shapely.get_coordinates(shapely.centroid(self.geoms[which]))
+        """Centroids of items ``which``, (k, 2)."""
+        return shapely.get_coordinates(shapely.centroid(self.geometry(which)))
 
     def least(self, which, normal):
-        """Per geometry ``which[k]``, the least of normal[k]·vertex over its vertices
+        """Per item ``which[k]``, the least of normal[k]·vertex over its vertices
         (``normal`` (k, 2), or (k, K, 2): K candidates each)."""
+        which = self.ref[which]
         counts = self.count[which]
         at = np.cumsum(counts) - counts
         sel = np.repeat(self.start[which] - at, counts) + np.arange(counts.sum())
@@ -347,7 +358,9 @@ def _best_plane(poly, count, r, first, tiles, obstacles, pairs):
     closest points, or turned from it by up to 60 degrees."""
     d, keep = pairs
     # the closest points of each pair: the tile's a, the obstacle's b
-    ends = shapely.get_coordinates(shapely.shortest_line(tiles.geoms[r], obstacles.geoms[first]))
+    ends = shapely.get_coordinates(
+        elementwise(shapely.shortest_line, tiles.geometry(r), obstacles.geometry(first))
+    )
     a, b = ends[0::2], ends[1::2]
     direction = b - a
     # touching (no gap): the direction between the centres, the plane the tile's own
