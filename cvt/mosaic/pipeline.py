@@ -920,14 +920,19 @@ def _after_the_method(dist, picture, edge_map, cut, gap, spacing, picture_second
     colours, _, error = mosaic_fills(picture, polygons, dist.sites, bounds)
     t2 = time.perf_counter()
     ev = evaluate(polygons, Grid(*edge_map.shape[::-1]))  # the whole picture: walls are grout
-    # a run of tiles at a time, as the fills: each tile's answer is its own
-    straddles = np.concatenate(
-        [np.zeros(0, dtype=bool)]
-        + [
-            straddling_tiles(polygons[lo:hi], edge_map)
-            for lo, hi in zip(bounds[:-1], bounds[1:], strict=True)
-        ]
-    )
+    # a run of tiles at a time, as the fills (each tile's answer is its own), a core's
+    # worth of runs side by side
+    runs = list(zip(bounds[:-1], bounds[1:], strict=True))
+    cores = usable_cores()
+    parts = [np.zeros(0, dtype=bool)]
+    for k in range(0, len(runs), cores):
+        parts += side_by_side(
+            *(
+                lambda lo=lo, hi=hi: straddling_tiles(polygons[lo:hi], edge_map)
+                for lo, hi in runs[k : k + cores]
+            )
+        )
+    straddles = np.concatenate(parts)
     t3 = time.perf_counter()
     stages = {
         "picture_seconds": picture_seconds,  # Lab, density, field and edges
