@@ -91,12 +91,13 @@ def wall_lines(walls: np.ndarray):
 
 def _runs(mask: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """The runs of True along each row of ``mask``: row, first column, length."""
-    padded = np.zeros((mask.shape[0], mask.shape[1] + 2), dtype=np.int8)
-    padded[:, 1:-1] = mask
-    step = np.diff(padded, axis=1)
-    row, first = np.nonzero(step == 1)
-    _, last = np.nonzero(step == -1)  # row-major: the ends pair with the starts
-    return row, first, last - first
+    first = mask.copy()
+    first[:, 1:] &= ~mask[:, :-1]
+    last = mask.copy()
+    last[:, :-1] &= ~mask[:, 1:]
+    row, start = np.nonzero(first)
+    _, end = np.nonzero(last)  # row-major: the ends pair with the starts
+    return row, start, end - start + 1
 
 
 def _grown(polygons: np.ndarray, factor: float) -> np.ndarray:
