@@ -599,10 +599,27 @@ def size_fidelity(areas: npt.ArrayLike, targets: npt.ArrayLike) -> float:
     return float(np.sqrt(np.mean((q - q.mean()) ** 2))) if len(q) else float("nan")
 
 
+def exterior_rings(polygons: np.ndarray) -> np.ndarray:
+    """What ``shapely.get_coordinates`` reads for the exterior rings of ``polygons``: the
+    polygons themselves where all are Polygons without a hole (their coordinates are
+    then their exterior's, in order, and no ring is copied), else their exterior rings.
+
+    Parameters
+    ----------
+    polygons : (N,) object array of shapely geometries
+
+    Returns
+    -------
+    (N,) object array of geometries
+    """
+    plain = (shapely.get_type_id(polygons) == 3).all() and not shapely.get_num_interior_rings(polygons).any()
+    return polygons if plain else shapely.get_exterior_ring(polygons)
+
+
 def orientations(geoms: np.ndarray, k: int) -> np.ndarray:
     """(N,) the phase arg(Σ_edges L·e^{ikψ}) of each polygon's exterior (radians; divide
     by k for an angle): the direction of its edges modulo 360°/k, weighted by length."""
-    coords, owner = shapely.get_coordinates(shapely.get_exterior_ring(geoms), return_index=True)
+    coords, owner = shapely.get_coordinates(exterior_rings(geoms), return_index=True)
     d = np.diff(coords, axis=0)
     same = owner[1:] == owner[:-1]  # consecutive vertices of one ring (rings are closed)
     d, own = d[same], owner[1:][same]
@@ -730,6 +747,7 @@ __all__ = [
     "MEASURES",
     "FIDELITY_TIE",
     "size_fidelity",
+    "exterior_rings",
     "orientations",
     "direction_errors",
     "neighbour_pairs",

@@ -64,6 +64,10 @@ class DensityMap:
     def scales_at(self, sites: np.ndarray) -> np.ndarray:
         return np.sqrt(self._mean / sample_at(self._clipped, sites))
 
+    def scale_image(self) -> np.ndarray:
+        """(H, W) float32: the size factor at every pixel (what ``scales_at`` reads there)."""
+        return np.sqrt(np.float32(self._mean) / self._clipped.astype(np.float32))
+
     def acceptance(self) -> np.ndarray:
         """Per-pixel acceptance probability for rejection sampling (density / max)."""
         return self.values / self.values.max()

@@ -224,3 +224,48 @@ def test_console_script_end_to_end(tmp_path):
     assert (tmp_path / "o" / "result.json").exists()
     bad = subprocess.run(exe + ["run", "--metric", "nope"], capture_output=True, text=True)
     assert bad.returncode == 2 and "Traceback" not in bad.stderr and "unknown --metric" in bad.stderr
+
+
+def test_one_commands_parser_says_what_every_parser_says():
+    """The parser built for ``argv`` alone (only the named command's options; the others
+    by their help) prints what the parser of every command prints: the list of commands,
+    each command's help, and the error of an unknown command or option."""
+    import contextlib
+    import io
+
+    from compact_distributions.bench.commands.cli import SUBCOMMANDS, build_parser
+
+    def said(parser, argv):
+        out, err = io.StringIO(), io.StringIO()
+        with contextlib.redirect_stdout(out), contextlib.redirect_stderr(err), pytest.raises(SystemExit):
+            parser.parse_args(argv)
+        return out.getvalue(), err.getvalue()
+
+    every = build_parser()
+    names = [m.rsplit(".", 1)[1] for m in SUBCOMMANDS]
+    cases = [["--help"], [], ["bogus"], ["--version"]]
+    cases += [[name, extra] for name in names for extra in ("--help", "--no-such-option")]
+    for argv in cases:
+        assert said(build_parser(argv), argv) == said(every, argv), argv
+
+
+def test_help_lists_every_command_without_loading_the_methods():
+    """``cvtbench --help`` names every command with its help, and builds no command's
+    options: neither the method registry nor scipy is loaded."""
+    from compact_distributions.bench.commands.cli import SUBCOMMANDS, command_help
+
+    probe = (
+        "import sys\n"
+        "from compact_distributions.bench.commands.cli import main\n"
+        "code = main(['--help'])\n"
+        "registry = sys.modules.get('compact_distributions.cvt.registry')\n"
+        "print(['scipy'] * ('scipy' in sys.modules) + ['methods'] * bool(registry and registry._load.cache_info().currsize))\n"
+        "sys.exit(code)\n"
+    )
+    done = subprocess.run([sys.executable, "-c", probe], capture_output=True, text=True)
+    assert done.returncode == 0, done.stderr
+    assert done.stdout.strip().splitlines()[-1] == "[]"
+    for module in SUBCOMMANDS:
+        name, text = command_help(module)
+        assert name == module.rsplit(".", 1)[1]
+        assert " ".join(f"{name} {text}".split()) in " ".join(done.stdout.split())

@@ -278,6 +278,81 @@ def test_threads_split_the_work_not_the_result(shape, monkeypatch):
     assert_separated(shape, one.centres, angles, one.sizes, grid, 0.0)
 
 
+@pytest.mark.parametrize("shape", ["square", "triangle"])
+def test_large_programs_step_in_float32_within_their_bounds(shape, monkeypatch):
+    """A program past _PDHG_SINGLE_ENTRIES steps in float32: its moves and growths keep
+    their float64 bounds exactly (float32's may round outward), the elements come out
+    apart (shapely) and within 1e-4 px and 1e-6 of the area of float64's, and threads
+    still split the work, not the result."""
+    from compact_distributions.cvt.placement import compaction
+
+    grid, sites, angles, sizes = random_layout(shape, 5, 150, "L", gap=0.5)
+    wide = compact(sites, angles, sizes, shape, 0.5, grid, gap=0.5, rounds=3, threads=1)
+    caught = []
+    real = compaction._solve_pdhg
+
+    def catch(*args):
+        out = real(*args)
+        caught.append((args, out))
+        return out
+
+    monkeypatch.setattr(compaction, "_PDHG_SINGLE_ENTRIES", 0)
+    monkeypatch.setattr(compaction, "_solve_pdhg", catch)
+    single = compact(sites, angles, sizes, shape, 0.5, grid, gap=0.5, rounds=3, threads=1)
+    assert len(caught) == 3
+    for args, (dc, dr, _, _) in caught:
+        act, delta, lo_dr, hi_dr = args[1], args[5], args[6], args[7]
+        assert (np.abs(dc[act]) <= delta[act, None]).all()
+        assert ((dr[act] >= lo_dr[act]) & (dr[act] <= hi_dr[act])).all()
+    assert not np.array_equal(single.centres, wide.centres)  # float32 did run
+    np.testing.assert_allclose(single.centres, wide.centres, atol=1e-4)
+    assert np.sum(single.sizes**2) == pytest.approx(np.sum(wide.sizes**2), rel=1e-6)
+    assert_separated(shape, single.centres, angles, single.sizes, grid, 0.5)
+    monkeypatch.setattr(compaction, "_PDHG_BLOCK_ENTRIES", 300)
+    split = compact(sites, angles, sizes, shape, 0.5, grid, gap=0.5, rounds=3, threads=2)
+    assert np.array_equal(single.centres, split.centres) and np.array_equal(single.sizes, split.sizes)
+
+
+def test_large_sets_worked_in_z_order_come_back_in_the_callers_order(monkeypatch):
+    """Past _SPATIAL_ORDER_ELEMENTS the elements are worked along a Z-order curve: each
+    result (and each round's state given to on_round) is in the caller's order, the
+    same elements as in the caller's order to rounding (1e-6 px, area 1e-9), apart
+    (shapely), an absent element stays absent, and the angles come back as given."""
+    from compact_distributions.cvt.placement import compaction
+
+    grid, sites, angles, sizes = random_layout("hexagon", 6, 150, "annulus", gap=0.5)
+    sizes = sizes.copy()
+    sizes[7] = 0.0
+
+    def run(states):
+        """Three rounds, each round's sizes kept in ``states``."""
+        return compact(
+            sites,
+            angles,
+            sizes,
+            "hexagon",
+            0.5,
+            grid,
+            gap=0.5,
+            rounds=3,
+            on_round=lambda k, c, s: states.append(s),
+        )
+
+    plain_states, z_states = [], []
+    plain = run(plain_states)
+    monkeypatch.setattr(compaction, "_SPATIAL_ORDER_ELEMENTS", 0)
+    order = compaction._spatial_order(np.asarray(sites, dtype=float))
+    assert sorted(order) == list(range(len(sites))) and not np.array_equal(order, np.arange(len(sites)))
+    z = run(z_states)
+    np.testing.assert_allclose(z.centres, plain.centres, atol=1e-6)
+    np.testing.assert_allclose(z.sizes, plain.sizes, atol=1e-6)
+    assert np.sum(z.sizes**2) == pytest.approx(np.sum(plain.sizes**2), rel=1e-9)
+    for a, b in zip(z_states, plain_states, strict=True):
+        np.testing.assert_allclose(a, b, atol=1e-6)
+    assert z.sizes[7] == 0.0 and np.array_equal(z.angles, angles)
+    assert_separated("hexagon", z.centres, angles, z.sizes, grid, 0.5)
+
+
 def test_rows_no_shrinking_can_meet_put_their_elements_back():
     """An approximate solution that brings two centres closer than the gap (or a centre
     onto the border) would cost an element: both are put back where the round started,

@@ -51,7 +51,63 @@ def _version() -> str:
         return "0+unknown"
 
 
-def build_parser() -> argparse.ArgumentParser:
+class _Listed(Exception):
+    """Raised by :class:`_HelpOnly` with the name and help a command's parser declares."""
+
+
+class _HelpOnly:
+    """Stands in for argparse's subparsers in a command's ``add_parser``: it records the
+    command's name and one-line help and stops that call there, so that ``cvtbench
+    --help`` lists every command without building its options (nor loading what they
+    read, such as the method registry)."""
+
+    def add_parser(self, name: str, **kwargs):
+        raise _Listed(name, kwargs.get("help"))
+
+
+def command_help(module: str) -> tuple[str, str | None]:
+    """The name and one-line help of the command that ``module`` defines, read from its
+    ``add_parser`` call without building its parser.
+
+    Parameters
+    ----------
+    module : str
+        A module of :data:`SUBCOMMANDS`.
+
+    Returns
+    -------
+    tuple of (str, str or None)
+        The command's name and its help.
+    """
+    try:
+        importlib.import_module(module).add_parser(_HelpOnly())
+    except _Listed as listed:
+        return listed.args
+    raise RuntimeError(f"{module}.add_parser never called add_parser")  # a programming error
+
+
+def _chosen(argv) -> str | None:
+    """The command that ``argv`` names: its first word that is no option (the top-level
+    options, -h and --version, take no value), if it is a command's name."""
+    word = next((a for a in argv if not a.startswith("-")), None)
+    return word if word in {m.rsplit(".", 1)[1] for m in SUBCOMMANDS} else None
+
+
+def build_parser(argv=None) -> argparse.ArgumentParser:
+    """The parser of ``cvtbench``.
+
+    Parameters
+    ----------
+    argv : sequence of str, optional
+        The arguments it will parse.  Given, only the parser of the command they name is
+        built (the others are listed by their help alone, as ``--help`` shows them), so
+        that one command loads only what its own options need; not given, every
+        command's parser is built (what the documentation reads).
+
+    Returns
+    -------
+    argparse.ArgumentParser
+    """
     parser = Parser(
         prog="cvtbench",
         description="Compact distributions of discrete elements (Chen, Yang & Yang 2019): "
@@ -60,8 +116,13 @@ def build_parser() -> argparse.ArgumentParser:
     parser.add_argument("--version", action="version", version=f"%(prog)s {_version()}")
     sub = parser.add_subparsers(dest="command", metavar="COMMAND")
     sub.required = True
-    for name in SUBCOMMANDS:
-        importlib.import_module(name).add_parser(sub)
+    chosen = None if argv is None else _chosen(argv)
+    for module in SUBCOMMANDS:
+        if argv is None or module.rsplit(".", 1)[1] == chosen:
+            importlib.import_module(module).add_parser(sub)
+        elif chosen is None:  # --help, no command or an unknown one: the list of commands
+            name, text = command_help(module)
+            sub.add_parser(name, help=text)
     for p in sub.choices.values():  # every command: the same pair, third-party output off by default
         p.add_argument(
             "--verbose",
@@ -97,7 +158,7 @@ def main(argv=None) -> int:
             setattr(sys, name, open(os.devnull, "w"))
     argv = sys.argv[1:] if argv is None else list(argv)
     try:
-        parser = build_parser()
+        parser = build_parser(argv)
         args = parser.parse_args(argv)
         args.argv = argv
         configure_output(verbose=args.verbose)
@@ -132,7 +193,7 @@ def main(argv=None) -> int:
         return 1
 
 
-__all__ = ["SUBCOMMANDS", "Parser", "build_parser", "main"]
+__all__ = ["SUBCOMMANDS", "Parser", "build_parser", "command_help", "main"]
 
 
 if __name__ == "__main__":

@@ -45,15 +45,16 @@ COMPARE_METHODS = ("ours", "ours-compact", "hausner2001")
 
 
 def add_parser(sub):
-    from compact_distributions.cvt.mosaic.image_fields import DEFAULT_EDGE_THRESHOLD
-    from compact_distributions.cvt.mosaic.pipeline import DEFAULT_ELEMENTS, DEFAULT_METHOD
-
     p = sub.add_parser(
         "mosaic",
         help="turn a picture into a mosaic (density and direction from the picture)",
         description=__doc__,
         formatter_class=argparse.RawDescriptionHelpFormatter,
     )
+    # read once the parser is wanted (cvtbench --help lists the command without them)
+    from compact_distributions.cvt.mosaic.image_fields import DEFAULT_EDGE_THRESHOLD
+    from compact_distributions.cvt.mosaic.pipeline import DEFAULT_ELEMENTS, DEFAULT_METHOD
+
     p.add_argument(
         "image", metavar="IMAGE", help="the picture: PNG, JPEG, ... (grey, RGB, RGBA, palette, 16-bit)"
     )

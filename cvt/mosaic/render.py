@@ -2,8 +2,10 @@
 colour helpers that every picture of the suite uses (``cvtbench run``, the figures, the
 sweeps' effect pictures, the mosaics).
 
-Raster: PIL ``ImageDraw.polygon`` at ``supersample`` times the size, reduced with a box
-filter: antialiased edges and no ringing (a pixel inside an element keeps its colour).
+Raster: PIL ``ImageDraw.polygon`` at ``supersample`` times the size, reduced to the mean
+of each supersample x supersample block (Pillow's ``reduce``; a box filter where the size
+is no whole number of blocks): antialiased edges and no ringing (a pixel inside an
+element keeps its colour).
 SVG: ``viewBox="0 0 W H"`` in pixel units (the coordinates of the sites and polygons, y
 down), ``width``/``height`` so that it opens at the raster's size, the background, the
 region where it is not the whole raster, and one element per placed site: a closed
@@ -20,6 +22,7 @@ import numpy as np
 import shapely
 
 from ..errors import InputError
+from ..evaluate import exterior_rings
 from ..pixels import index_ranges, pixel_index
 from .numbers import ring_texts
 
@@ -121,7 +124,7 @@ def fill_rows(fills, n: int) -> np.ndarray:
 def _exteriors(polygons: np.ndarray):
     """The exterior rings of shapely ``polygons`` (not closed): their vertices as one
     (P, 2) array and each ring's vertex count."""
-    xy, ring = shapely.get_coordinates(shapely.get_exterior_ring(polygons), return_index=True)
+    xy, ring = shapely.get_coordinates(exterior_rings(polygons), return_index=True)
     counts = np.bincount(ring, minlength=len(polygons))
     closing = np.zeros(len(xy), dtype=bool)
     closing[np.cumsum(counts) - 1] = True  # each ring repeats its first vertex last
@@ -343,6 +346,15 @@ class _Painter:
                 at += 2 * n
 
 
+def _reduce(img, ss: int, size, box=None):
+    """``img`` (its ``box``) reduced to ``size`` by Pillow's BOX resize (kept rather than
+    ``reduce``, which is faster but rounds once instead of twice: pictures would move by
+    one level wherever a block is not one colour)."""
+    from PIL import Image
+
+    return img.resize(size, Image.BOX, box=box)
+
+
 def draw_elements(
     elements,
     width: int,
@@ -407,7 +419,7 @@ def draw_elements(
             img = full.crop((round(x0 * k), round(y0 * k), round(x0 * k) + big[0], round(y0 * k) + big[1]))
         paint(img, 0, shown)
         if ss > 1:
-            img = img.resize(small, Image.BOX)
+            img = _reduce(img, ss, small)
         return img
     step = int(np.lcm(int(k), ss)) if masked else ss
     rows = max(step, BAND_BYTES // (3 * big[0]) // step * step)
@@ -430,7 +442,7 @@ def draw_elements(
                 band = Image.new("RGB", (big[0], hi - lo), inside if inside is not None else rgb8(background))
             paint(band, lo, shown[near])
             box = (0, top - lo, big[0], top - lo + n_rows)  # the band's own rows, no cropped copy
-            yield top // ss, band.resize((small[0], n_rows // ss), Image.BOX, box=box)
+            yield top // ss, _reduce(band, ss, (small[0], n_rows // ss), box)
 
     if as_rows:
         return RowStream(small, ((first, np.asarray(band)) for first, band in bands()))

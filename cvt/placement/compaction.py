@@ -96,7 +96,38 @@ densities no scene uses (two Gaussian blobs of contrast 5, a linear ramp of cont
 With the 2 % caps: p = 1 left circles at 1.09x, p = 1.5 triangles at 1.04x (1.14x in
 Table 3's quick set), p = 2 cost up to 0.52 points, p = 3 up to 0.95; caps 5 % above
 gained 0.3-1.3 points but left circles at 1.09x.  Without caps the weights are r_i, as
-before.  ``max_growth`` (off by default) caps every size at
+before.
+
+Caps that follow the elements (``max_sizes`` a function of position, ours-compact's
+under a density) are read at each element's centre every round, because the target is
+the density where the element ends, not where it started: on a picture as density
+(scikit-image's camera.png, 512², N = 1000) compaction moves centres by 4 px (median;
+11-15 px at the 99th percentile, elements 16 px apart) and one in five crosses to where
+the density asks for a size 7 % or more away; with the caps fixed at the start those
+elements held half (triangles) to four fifths (circles) of the size error, which was
+1.06/1.15/1.34x ours' on squares/triangles/circles (seeds 0-1).  Read again each
+round, a cap that fell below its element makes it shrink towards it (by up to
+``shrink`` of itself a round; shrinking keeps every row) and one that rose lets it
+grow.  And each element moves only within the widest box (whole pixels, up to its move
+bound, at least ``_STEADY_LEAST``) in which the cap stays within ±``growth`` × (the
+rounds left, this one included) of its own at every pixel: a change the rounds left
+could follow, ±``growth`` in the last round, where a smooth density never binds.  Where
+a round's gain falls below ``tol`` before the last, one more round follows, as the
+last.  Measured (512², N = 1000, 5 shapes, seeds 0-2, ours-compact's size error over
+ours', with one more round than the shape's under a density): camera 0.71-0.93x (was
+0.88-1.33x); three pictures not used in choosing this (astronaut, coffee, chelsea)
+0.66-1.05x (was 0.74-1.29x); four tried after (coins, horse, text, moon) 0.62-1.10x
+(was 0.67-1.52x); coverage −0.88 to +1.04 points.  Table 3's density and combined
+scenes (seeds 0-4): 0.71-0.98x (was 0.72-0.99x), +0.10 to +0.55 points.  Measured
+no better: boxes held to ±growth in the last round alone (coins' triangles and circles
+1.14-1.15x), to ±0.1-0.2 in every round (−1.4 to −3.3 points), to twice the rounds
+left (coins 1.11-1.12x), drops held to ``shrink`` × the rounds left (down to −1.26
+points), a least move of 1 px (coins' circles 1.18x), ``fairness`` 3 (down to −1.4
+points), the shape's rounds alone (down to −2 points), no shrinking towards a cap that
+fell (chelsea's circles 1.14x), every element shrunk to its cap after the last round
+(−2 to −4.5 points).
+
+``max_growth`` (off by default) caps every size at
 (1 + max_growth) × its placed size; ``move_cost`` > 0 puts a price on moves (columns
 Δc⁺, Δc⁻), which keeps regular lattices from drifting (a lattice of circles then reaches
 its optimum π/4 exactly) but measured up to 0.4 points lower and 30-60 % slower on CVTs.
@@ -122,7 +153,23 @@ time and cover 1.1 % more area (Table 2's ours-compact rows 0.4-1.4 points more)
 Plain PDHG's best primal/dual step ratio was 4 (2 and 8 within 0.3 % of the area).
 Measured no better: starting each round from last round's duals (mapped by pair), steps
 folded into the matrices, float32 products, relaxation 1.5 (~20 % fewer steps for the
-same gain).  Halpern's iteration on the reflected step (z ← w·(2T(z) − z) + (1 − w)·z₀,
+same gain).  Float32 pays only once the program outgrows the processor's cache: one of at
+least ``_PDHG_SINGLE_ENTRIES`` entries (some 20 000 squares without walls) steps in float32
+throughout, the answer within 1e-5 px of float64's (area within 1e-8), then checked in
+float64 as always: the LP in 0.55x the time at 64 000 squares (1.6-2.1 M entries; A and
+Aᵀ in float64 are some 40 MB) and 0.7x on a 20 000-tile mosaic (0.7 M entries, in Z
+order; out of it float32 took 1.2x float64's time there).  Fewer steps cost area in every
+round: 50 steps per round instead of 70 covered 0.36 % less area at 64 000 squares, 70
+in the first round and 40 after 0.53 %.  A set of ``_SPATIAL_ORDER_ELEMENTS`` elements or
+more is worked in Z order (:func:`_spatial_order`; results in the caller's order): from
+the random order of Lloyd's sites, 0.78x the processor time of compaction at 64 000
+squares and 0.83x on the mosaic.  The covered area is the same to 3e-5, but the rows
+come in another order and a pair may be seen from its other element, so PDHG's
+approximate steps and ties between equally good directions differ: on the mosaic
+elements ended within 0.03 px of the caller's order's, at 64 000 squares 1.6 % of them
+more than 1 px away (circles: 2e-5 px).  Smaller sets, in cache anyway, keep the
+caller's order and their results bit for bit.
+Halpern's iteration on the reflected step (z ← w·(2T(z) − z) + (1 − w)·z₀,
 w = (k+1)/(k+2), anchored at the start and restarted from T(z) when the fixed-point
 residual has fallen 5-fold; Lu & Yang's r2HPDHG) costs the same per step and needs
 fewer: 70 steps per round at ratio 4 cover more area than 100 plain steps on every
@@ -193,7 +240,10 @@ _HALPERN_RESTART = 0.2  # PDHG: new anchor once the fixed-point residual falls b
 _HALPERN_CHECK = 4  # PDHG: steps between evaluations of that residual
 _PIECE_ROWS = 100_000  # candidate pairs per thread at least (fewer: fewer threads)
 _PDHG_BLOCK_ENTRIES = 200_000  # PDHG: entries of A per thread at least (fewer: fewer threads)
+_PDHG_SINGLE_ENTRIES = 500_000  # PDHG: programs with this many entries of A step in float32
+_SPATIAL_ORDER_ELEMENTS = 10_000  # this many elements or more: worked in Z order (_spatial_order)
 _FAIRNESS = 2.0  # under size caps: growth weighed by r·(cap / r)^this (Sizes and density)
+_STEADY_LEAST = 0.5  # px: under caps that follow the centres, the last round's move bound at least
 
 
 @dataclass
@@ -426,7 +476,7 @@ def _point_trees(points, reach) -> list:
 
 def _near_items(point_trees, item_trees, extra):
     """(k, i): every point k and item i with |points[k] − item| <= reach[k] + the item's
-    half-length + extra (and some farther ones), ordered by k then i.  ``point_trees``:
+    half-length + extra (and some farther ones), in the kd-trees' order.  ``point_trees``:
     the points by class of reach (:func:`_point_trees`); ``item_trees``: [(item
     indices, kd-tree of their midpoints, their largest half-length)]
     (:func:`_segment_trees`)."""
@@ -436,8 +486,7 @@ def _near_items(point_trees, item_trees, extra):
             found = tree.sparse_distance_matrix(item_tree, top + half_length + extra, output_type="ndarray")
             ks.append(cls[found["i"]])
             items.append(members[found["j"]])
-    k, i = np.concatenate(ks), np.concatenate(items)
-    return _sorted_pairs(k, i, 1 + max((m.max(initial=0) for m, _, _ in item_trees), default=0))
+    return np.concatenate(ks), np.concatenate(items)
 
 
 def _sorted_pairs(a, b, nb):
@@ -649,8 +698,10 @@ def _closest_on_segment(px, py, qx, qy, x, y):
 
 def _near_segments(unit, c, r, cos, sin, budget, half, segs, seg_trees, prev, act, point_trees, threads=1):
     """(Element, piece) rows whose gap could close to < ``half`` this round; their n and
-    current gap, the candidates worked in pieces by up to ``threads`` threads
-    (:func:`_in_pieces`: the same rows in the same order)."""
+    current gap, ordered by element then piece.  The candidates are worked in pieces by
+    up to ``threads`` threads (:func:`_in_pieces`: the same rows in the same order), and
+    only the rows kept are sorted (each row's figures do not depend on the others: the
+    same rows in the same order as sorting the two to three times as many candidates)."""
     empty = np.zeros(0)
     if len(act) == 0 or len(segs) == 0:
         return np.zeros(0, np.int64), np.zeros(0, np.int64), empty, empty, empty
@@ -716,7 +767,9 @@ def _near_segments(unit, c, r, cos, sin, budget, half, segs, seg_trees, prev, ac
         keep = best < enough
         return _select(keep, e, s, bx, by, best)
 
-    return _in_pieces(kept, threads, k, s)
+    e, s, bx, by, best = _in_pieces(kept, threads, k, s)
+    at = np.argsort(e * len(segs) + s)  # keys unique: any sort gives this order
+    return tuple(v.take(at) for v in (e, s, bx, by, best))
 
 
 # --------------------------------------------------------------------- constraints
@@ -1181,13 +1234,14 @@ class _HalpernPdhg:
         tau, sigma = steps
         ncol, m = a.shape[1], a.shape[0]
         self.a, self.b = a, b
-        self.x, self.y = np.zeros(ncol), np.zeros(m)
+        dt = b.dtype  # every vector in the program's precision (float64, or float32)
+        self.x, self.y = np.zeros(ncol, dt), np.zeros(m, dt)
         # the anchor z₀ = (x0, y0): the start (0) until the first restart
-        self.x0, self.y0, self.anchored = np.zeros(ncol), np.zeros(m), False
+        self.x0, self.y0, self.anchored = np.zeros(ncol, dt), np.zeros(m, dt), False
         # every step works in these buffers: a fresh array per step would be fresh memory
         # from the system each time (page faults cost about as much as the arithmetic)
-        self.xt, self.z, scratch, self.res_x, self.aty = (np.zeros(ncol) for _ in range(5))
-        self.yt, y_scratch, self.res_y = np.empty(m), np.empty(m), np.empty(m)
+        self.xt, self.z, scratch, self.res_x, self.aty = (np.zeros(ncol, dt) for _ in range(5))
+        self.yt, y_scratch, self.res_y = np.empty(m, dt), np.empty(m, dt), np.empty(m, dt)
         self.kernels = _csr_matvec()
         nnz = len(a.data)
         parts = 1 if self.kernels is None else max(1, min(threads, nnz // _PDHG_BLOCK_ENTRIES))
@@ -1213,7 +1267,7 @@ class _HalpernPdhg:
             scratch,
         )
         self.col_views = [(blk, *(v[blk[0] : blk[1]] for v in x_side)) for blk in col_blocks]
-        y_side = (self.y, self.yt, b, sigma, np.zeros(m), self.res_y, 1.0 / sigma, self.y0, y_scratch)
+        y_side = (self.y, self.yt, b, sigma, np.zeros(m, dt), self.res_y, 1.0 / sigma, self.y0, y_scratch)
         self.row_views = [(blk, *(v[blk[0] : blk[1]] for v in y_side)) for blk in row_blocks]
 
     def each(self, fn, views, *args):
@@ -1345,7 +1399,21 @@ def _solve_pdhg(rows: _Rows, act, c, r, gap, delta, lo_dr, hi_dr, weight, iterat
     row_sum = np.add.reduceat(absval, start[:-1]) if len(absval) else np.zeros(0)
     tau = step_ratio / np.maximum(col_sum, 1e-12)
     sigma = 1.0 / (step_ratio * np.maximum(row_sum, 1e-12))
-    x, steps = _HalpernPdhg(a, b, (lo, hi, cost), (tau, sigma), threads).run(iterations)
+    program = a, b, (lo, hi, cost), (tau, sigma)
+    if a.nnz >= _PDHG_SINGLE_ENTRIES:
+        # past the processor's cache (A and Aᵀ in float64: ~40 MB at 64 000 squares) the
+        # steps are bound by memory traffic, which float32 halves (module docstring,
+        # Solvers); the answer within a few 1e-6 px, then checked in float64 as any other
+        f = np.float32
+        program = (
+            a.astype(f),
+            b.astype(f),
+            (lo.astype(f), hi.astype(f), cost.astype(f)),
+            (tau.astype(f), sigma.astype(f)),
+        )
+    x, steps = _HalpernPdhg(*program, threads).run(iterations)
+    # float32's bounds may round outward: the moves and growths keep float64's exactly
+    x = np.clip(x.astype(np.float64), lo, hi)
     dc = np.zeros((n, 2))
     dr = np.zeros(n)
     dc[act, 0], dc[act, 1], dr[act] = x[0::3], x[1::3], x[2::3]
@@ -1354,6 +1422,43 @@ def _solve_pdhg(rows: _Rows, act, c, r, gap, delta, lo_dr, hi_dr, weight, iterat
 
 
 # --------------------------------------------------------------------- driver
+def _spatial_order(c: np.ndarray) -> np.ndarray:
+    """The elements' order along a Z-order (Morton) curve through their centres: worked
+    in this order, near elements have near indices, so the gathers of the near pairs'
+    search and of the program's sparse products stay within the processor's cache."""
+    lo = c.min(axis=0)
+    cell = max(float((c.max(axis=0) - lo).max()) / 65535.0, 1.0)  # 16 bits a coordinate
+    q = np.floor((c - lo) / cell).astype(np.int64)
+
+    def spread(v):
+        """The 16 low bits of v moved to the even bit positions."""
+        v = (v | (v << 8)) & 0x00FF00FF
+        v = (v | (v << 4)) & 0x0F0F0F0F
+        v = (v | (v << 2)) & 0x33333333
+        return (v | (v << 1)) & 0x55555555
+
+    return np.argsort(spread(q[:, 0]) | (spread(q[:, 1]) << 1), kind="stable")
+
+
+def _work_order(c, *arrays) -> tuple:
+    """The order a set is worked in (None: the caller's; a large set: Z order, for the
+    cache) and ``c`` and the ``arrays`` (None stays None) in that order."""
+    if len(c) < _SPATIAL_ORDER_ELEMENTS:
+        return None, (c, *arrays)
+    order = _spatial_order(c)
+    return order, tuple(a if a is None else a[order] for a in (c, *arrays))
+
+
+def _in_caller_order(order, *arrays) -> tuple:
+    """Copies of ``arrays`` (worked in ``order``, None: the caller's) in the caller's order."""
+    if order is None:
+        return tuple(a.copy() for a in arrays)
+    out = tuple(np.empty_like(a) for a in arrays)
+    for o, a in zip(out, arrays, strict=True):
+        o[order] = a
+    return out
+
+
 def _tiles(c, act, mask, per_tile, k):
     """Tile id per element: squares holding about ``per_tile`` elements each, shifted by
     half a tile on odd rounds so that a pair cut by one tiling is whole in the next."""
@@ -1389,7 +1494,9 @@ class CompactionSettings:
     move : float
         Per round a centre moves at most ``move`` × its element's in-radius along each axis.
     growth, shrink : float
-        Per round a size grows by at most ``growth`` or shrinks by at most ``shrink`` of itself.
+        Per round a size grows by at most ``growth`` or shrinks by at most ``shrink`` of itself
+        (under caps that follow the centres, also how fast a size above its cap shrinks,
+        and how far a cap may change within the last round's moves).
     max_growth : float, optional
         Caps each size at (1 + max_growth) × its given size.
     tol : float
@@ -1459,7 +1566,11 @@ class CompactionSettings:
 
 
 def _checked_elements(centres, angles, sizes, max_sizes):
-    """Centres (N, 2), sizes (N,), angles (N,) and size caps as float64 copies, checked."""
+    """Centres (N, 2), sizes (N,), angles (N,) and size caps as float64 copies, checked,
+    and the caps as a function of position (None unless ``max_sizes`` is one; then the
+    caps returned are None)."""
+    if callable(max_sizes):
+        return (*_checked_elements(centres, angles, sizes, None)[:4], max_sizes)
     c = np.array(centres, dtype=np.float64).reshape(-1, 2)
     n = len(c)
     r = np.array(sizes, dtype=np.float64).reshape(-1)
@@ -1480,7 +1591,7 @@ def _checked_elements(centres, angles, sizes, max_sizes):
         max_sizes = np.broadcast_to(np.asarray(max_sizes, dtype=np.float64), (n,))
         if not (np.isfinite(max_sizes).all() and (max_sizes > 0).all()):
             raise InputError("max_sizes must be finite and positive")
-    return c, r, th, max_sizes
+    return c, r, th, max_sizes, None
 
 
 def _region_and_walls(region, walls):
@@ -1546,13 +1657,77 @@ def _round_rows(unit, c, r, cos, sin, budget, gap, segs, seg_trees, prev, thread
         unit.support(sx, sy, cos[e], sin[e]),
         seg_m,
     )
-    kp = i * n + j
-    order = np.argsort(kp)
-    prev_p = (kp[order], np.stack([px, py], axis=1)[order])
-    ks = e * len(segs) + s
-    order = np.argsort(ks)
-    prev_s = (ks[order], np.stack([sx, sy], axis=1)[order])
+    # the rows come ordered by i then j (e then s): their keys are sorted already
+    prev_p = (i * n + j, np.stack([px, py], axis=1))
+    prev_s = (e * len(segs) + s, np.stack([sx, sy], axis=1))
     return rows.tightest_pieces(), (prev_p, prev_s), (len(i), len(e))
+
+
+def _growth_bounds(settings, r, r0, max_sizes, follow):
+    """(N,) the most each size may change by this round: ``growth`` of itself, less where
+    ``max_growth`` or a cap binds (never below 0); where caps follow the centres
+    (``follow``), an element above its cap must shrink towards it, by up to ``shrink``
+    of itself (the bound is then negative)."""
+    up = settings.growth * r
+    if settings.max_growth is not None:
+        up = np.clip(r0 * (1 + settings.max_growth) - r, 0.0, up)
+    if max_sizes is None:
+        return up
+    above = r - max_sizes
+    up = np.clip(-above, 0.0, up)
+    if follow:
+        # the cap dropped where the element went: shrink towards it (shrinking keeps
+        # every row, so Δc = 0 with Δr at this bound is still feasible)
+        up = np.where(above > 0, -np.minimum(above, settings.shrink * r), up)
+    return up
+
+
+def _round_bounds(settings, unit, c, r, r0, max_sizes, caps):
+    """A round's move bounds, growth bounds (:func:`_growth_bounds`) and caps.  ``caps``
+    is (caps_at, rounds left, raster shape): where caps follow the centres (caps_at not
+    None) they are read at ``c`` and each move is kept where a cap changes by at most
+    ``growth`` × the rounds left, what they could follow (:func:`_caps_here`)."""
+    caps_at, left, shape = caps
+    delta = settings.move * unit.inradius * r
+    if caps_at is not None:
+        max_sizes, delta = _caps_here(caps_at, c, r, delta, settings.growth * left, shape)
+    return delta, _growth_bounds(settings, r, r0, max_sizes, follow=caps_at is not None), max_sizes
+
+
+def _caps_here(caps_at, c, r, delta, steady, shape):
+    """Caps that follow the centres: (N,) the caps at the centres ``c``, and the move
+    bounds: each element moves only within the widest box of whole-pixel half-width w
+    (up to its ``delta``) in which the cap stays within (1 ± ``steady``) of its own at
+    every pixel of the (H, W) raster ``shape``, and at least ``_STEADY_LEAST`` px (module
+    docstring, Sizes and density).  Where ``caps_at`` has an ``image`` (its cap at every
+    pixel) the pixels are read from it, else ``caps_at`` is asked at their centres."""
+    caps = _checked_elements(c, None, r, caps_at(c))[3]
+    image = getattr(caps_at, "image", None)
+    h, w_ = shape
+    col = np.clip(np.floor(c[:, 0]).astype(np.int64), 0, w_ - 1)
+    row = np.clip(np.floor(c[:, 1]).astype(np.int64), 0, h - 1)
+    own = caps if image is None else image[row, col]  # the image's own rounding
+    lo, hi = own * (1 - steady), own * (1 + steady)
+    reach = np.zeros(len(c))
+    live = np.flatnonzero(r > 0)
+    w = 1
+    while len(live):  # one ring of pixels at a time, the elements still steady
+        o = np.arange(-w, w + 1)
+        side = np.full(2 * w + 1, w)
+        dx = np.concatenate([o, o, -side[1:-1], side[1:-1]])
+        dy = np.concatenate([-side, side, o[1:-1], o[1:-1]])
+        j = np.clip(col[live, None] + dx, 0, w_ - 1)
+        i = np.clip(row[live, None] + dy, 0, h - 1)
+        if image is not None:
+            v = image[i, j]
+        else:
+            v = np.asarray(caps_at(np.stack([j.ravel() + 0.5, i.ravel() + 0.5], axis=1)), dtype=np.float64)
+            v = v.reshape(i.shape)
+        live = live[((v >= lo[live, None]) & (v <= hi[live, None])).all(axis=1)]
+        reach[live] = w
+        w += 1
+        live = live[delta[live] > w - 1]  # the box of half-width w is within reach
+    return caps, np.minimum(delta, np.maximum(reach, _STEADY_LEAST))
 
 
 def _objective_weights(r, act, max_sizes, fairness):
@@ -1616,7 +1791,8 @@ def compact(
     (H, W) bool mask (True = inside; the raster's edge is the border too).  ``settings``
     (a :class:`CompactionSettings`; keyword ``overrides`` replace its fields, e.g.
     ``gap=1.5, rounds=8``) say how far elements move and grow per round and when to stop.
-    ``max_sizes`` ((N,), optional) caps each size (a size above its cap may only shrink).
+    ``max_sizes`` ((N,), optional) caps each size (a size above its cap may only shrink);
+    or a function of positions ((M, 2) px -> (M,)): caps that follow the elements.
     ``walls`` ((H, W) bool, outside the region): thin walls whose centre lines
     (:func:`wall_segments`) bound the elements instead of their pixels' sides: each
     element keeps G/2 from a wall's centre line, as from the border.
@@ -1625,26 +1801,22 @@ def compact(
     shape = check_shape(shape)
     gap, rounds = settings.gap, settings.rounds
     mask, walls = _region_and_walls(region, walls)
-    c, r, th, max_sizes = _checked_elements(centres, angles, sizes, max_sizes)
+    c, r, th, max_sizes, caps_at = _checked_elements(centres, angles, sizes, max_sizes)
     unit = element_ball(shape, aspect)
     _check_start(unit, c, r, gap, mask)
     t0 = time.perf_counter()
-    cos, sin = np.cos(th), np.sin(th)
-    r0 = r.copy()
     segs = boundary_segments(mask)
     if walls is not None and walls.any():
         segs = np.concatenate([segs, wall_segments(walls)])
     seg_trees = _segment_trees(segs)
     prev = (None, None)
     result = CompactionResult(c, r, th, 0, 0.0)
+    order, (c, r, r0, cos, sin, max_sizes) = _work_order(c, r, r.copy(), np.cos(th), np.sin(th), max_sizes)
+    left = rounds  # rounds left, this one included (how steady moves under caps_at are)
     for k in range(max(rounds, 1)):
-        delta = settings.move * unit.inradius * r
-        up = settings.growth * r
-        if settings.max_growth is not None:
-            up = np.clip(r0 * (1 + settings.max_growth) - r, 0.0, up)
-        if max_sizes is not None:
-            up = np.clip(max_sizes - r, 0.0, up)
-        budget = math.sqrt(2) * delta + unit.circumradius * up
+        caps = (caps_at, max(left, 1), mask.shape)
+        delta, up, max_sizes = _round_bounds(settings, unit, c, r, r0, max_sizes, caps)
+        budget = math.sqrt(2) * delta + unit.circumradius * np.maximum(up, 0.0)
         rows, prev, (n_pairs, n_pieces) = _round_rows(
             unit, c, r, cos, sin, budget, gap, segs, seg_trees, prev, settings.threads
         )
@@ -1662,7 +1834,7 @@ def compact(
         weight = _objective_weights(r, act, max_sizes, settings.fairness)
         tl = time.perf_counter()
         tcpu = time.process_time()
-        bounds = (gap, delta, -settings.shrink * r, np.maximum(up, 0.0), weight)
+        bounds = (gap, delta, -settings.shrink * r, up, weight)
         dc, dr, iters, failed, violation = _solve_round(settings, rows, act, c, r, bounds, mask, k)
         result.lp_seconds += time.perf_counter() - tl
         tcpu = time.process_time() - tcpu
@@ -1673,7 +1845,7 @@ def compact(
         result.dropped += dropped
         c, r = new_c, new_r
         if on_round is not None:
-            on_round(k + 1, c.copy(), r.copy())
+            on_round(k + 1, *_in_caller_order(order, c, r))
         area1 = float(np.sum(r * r))
         result.rounds = k + 1
         result.history.append(
@@ -1689,9 +1861,11 @@ def compact(
                 "seconds": time.perf_counter() - t0,
             }
         )
-        if area1 < area0 * (1 + settings.tol):
+        stalled = area1 < area0 * (1 + settings.tol)
+        if stalled and (caps_at is None or left <= 1):
             break
-    result.centres, result.sizes = c, r
+        left = 1 if stalled else left - 1  # stalled under caps that follow: one more, the last
+    result.centres, result.sizes = _in_caller_order(order, c, r)
     result.seconds = time.perf_counter() - t0
     return result
 
