@@ -6,6 +6,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 import shapely
+import shapely.affinity
 from scipy.optimize import minimize
 
 from compact_distributions.cvt.mosaic import pipeline as mosaic
@@ -50,12 +51,13 @@ def lattice_beside(line, side, gap, turn=0.0):
     return out
 
 
+@pytest.mark.parametrize("style", ["exact", "straight"])
 @pytest.mark.parametrize("gap,turn", [(0.6, 0.0), (0.6, 0.3), (0.0, 0.0)])
-def test_cut_tiles_keep_the_gap_the_walls_and_their_tiles(gap, turn):
+def test_cut_tiles_keep_the_gap_the_walls_and_their_tiles(gap, turn, style):
     walls, line = staircase()
     tiles = lattice_beside(line, 5.0, gap, turn)
     tiles.append(None)  # a site without a tile stays without one
-    out, grew = cut_to_walls(tiles, walls, gap, spacing=5.0 + gap)
+    out, grew = cut_to_walls(tiles, walls, gap, spacing=5.0 + gap, style=style)
     assert out[-1] is None
     assert grew > 0
     assert len(out) == len(tiles)
@@ -83,17 +85,19 @@ def test_cut_tiles_keep_the_gap_the_walls_and_their_tiles(gap, turn):
     assert gained > 0.1 * line.length
 
 
-def test_far_tiles_and_no_walls_are_left_alone():
+@pytest.mark.parametrize("style", ["exact", "straight"])
+def test_far_tiles_and_no_walls_are_left_alone(style):
     walls, line = staircase()
     tiles = lattice_beside(line, 5.0, 0.6)
-    out, grew = cut_to_walls(tiles, np.zeros_like(walls), 0.6, spacing=5.6)
+    out, grew = cut_to_walls(tiles, np.zeros_like(walls), 0.6, spacing=5.6, style=style)
     assert grew == 0 and all(a is b for a, b in zip(out, tiles, strict=True))
     # reach 0: only tiles within 0 px of a wall's centre line would be cut: none are
-    out, grew = cut_to_walls(tiles, walls, 0.6, spacing=5.6, reach=0.0)
+    out, grew = cut_to_walls(tiles, walls, 0.6, spacing=5.6, reach=0.0, style=style)
     assert grew == 0
 
 
-def test_a_wall_that_meets_the_border_is_not_rounded():
+@pytest.mark.parametrize("style", ["exact", "straight"])
+def test_a_wall_that_meets_the_border_is_not_rounded(style):
     """A vertical wall from the top border to the bottom one, tiles on both sides: no cut
     tile reaches the other side round the wall's end, half a pixel from the border."""
     walls = np.zeros((H, W), dtype=bool)
@@ -101,12 +105,44 @@ def test_a_wall_that_meets_the_border_is_not_rounded():
     line = shapely.LineString([(30.5, 0.0), (30.5, H)])
     gap = 0.1  # the wall's pixel centres stop 0.5 px from the border: a strip of 0.4 px
     tiles = lattice_beside(line, 4.0, gap, turn=0.2)
-    out, grew = cut_to_walls(tiles, walls, gap, spacing=4.4)
+    out, grew = cut_to_walls(tiles, walls, gap, spacing=4.4, style=style)
     assert grew > 0
     for before, after in zip(tiles, out, strict=True):
         left = before.centroid.x < 30.5
         xs = np.asarray(after.exterior.coords)[:, 0]
         assert (xs <= 30.5 - gap / 2 + 1e-9).all() if left else (xs >= 30.5 + gap / 2 - 1e-9).all()
+
+
+@pytest.mark.parametrize("style", ["exact", "straight"])
+@pytest.mark.parametrize("turn", [0.0, 0.35, -0.6])
+def test_a_lone_tile_beside_a_straight_wall_grows_to_the_walls_margin(turn, style):
+    """One tile, turned, beside a vertical wall: all that is free within its grown
+    outline is the outline less the wall's G/2 margin (and the frame), and the cut tile
+    is all of it, built here with shapely."""
+    from compact_distributions.cvt.mosaic.cutting import CUT_ENLARGE
+
+    walls = np.zeros((H, W), dtype=bool)
+    walls[:, 30] = True
+    gap = 0.4
+    c, s = np.cos(turn), np.sin(turn)
+    corners = np.array([[-1, -1], [1, -1], [1, 1], [-1, 1]]) * 3.0
+    tile = shapely.Polygon(corners @ np.array([[c, s], [-s, c]]) + [24.0, 20.0])
+    out, grew = cut_to_walls([tile], walls, gap, spacing=6.0, style=style)
+    assert grew == 1
+    grown = shapely.affinity.scale(tile, CUT_ENLARGE, CUT_ENLARGE, origin="centroid")
+    free = grown.intersection(shapely.box(gap / 2, gap / 2, 30.5 - gap / 2, H - gap / 2))
+    assert out[0].symmetric_difference(free).area < 1e-3 * free.area  # the _MARGIN kept
+    assert out[0].covers(tile) and out[0].distance(shapely.LineString([(30.5, 0), (30.5, H)])) >= gap / 2
+
+
+def test_straight_cut_tiles_are_convex_and_hold_their_tiles():
+    walls, truth = wall_network()
+    tiles = lattice_beside(truth, 3.0, 0.5, 0.4)
+    out, grew = cut_to_walls(tiles, walls, 0.5, spacing=3.5, style="straight")
+    assert grew > 0
+    for before, after in zip(tiles, out, strict=True):
+        assert after.convex_hull.area - after.area < 1e-9 * after.area
+        assert after.buffer(1e-9).covers(before)
 
 
 @pytest.mark.parametrize("block,shuffle", [(None, False), (7, True), (40, False)])
@@ -192,14 +228,28 @@ def wall_network(seed=3):
     return walls, shapely.union_all(steps)
 
 
-def test_wall_lines_and_their_margin_pieces_are_the_walls():
-    """The merged lines are the pixel steps, and their margin in pieces (any run length)
-    covers the same ground as the steps grown one by one (square ends: right angles
-    only)."""
-    from compact_distributions.cvt.mosaic.cutting import _margin_pieces, wall_lines
+def test_wall_lines_are_the_walls_in_straight_pieces():
+    """The pieces are the pixel steps (and lone pixels) built here one by one: the same
+    ground, each piece straight, none longer than its run."""
+    from compact_distributions.cvt.mosaic.cutting import wall_lines
 
     walls, truth = wall_network()
-    lines = wall_lines(walls)
+    pieces = wall_lines(walls)
+    assert shapely.union_all(pieces).symmetric_difference(truth).length == pytest.approx(0.0, abs=1e-9)
+    lines = pieces[shapely.get_type_id(pieces) == 1]
+    assert (shapely.get_num_coordinates(lines) == 2).all()  # straight
+    points = pieces[shapely.get_type_id(pieces) == 0]
+    assert (shapely.distance(points[:, None], lines[None, :]) > 0.5).all()  # lone pixels
+
+
+def test_merged_lines_and_their_margin_pieces_are_the_walls():
+    """The exact cut's merged lines are the pixel steps, and their margin in pieces (any
+    run length) covers the same ground as the steps grown one by one (square ends: right
+    angles only)."""
+    from compact_distributions.cvt.mosaic.cutting import _margin_pieces, _merged_lines
+
+    walls, truth = wall_network()
+    lines = _merged_lines(walls)
     assert shapely.union_all(lines).symmetric_difference(truth).length == pytest.approx(0.0, abs=1e-9)
     d = 0.37
     grown = shapely.buffer(shapely.get_parts(truth), d, cap_style="square", join_style="mitre")
@@ -209,13 +259,63 @@ def test_wall_lines_and_their_margin_pieces_are_the_walls():
         assert got.symmetric_difference(want).area < 1e-9
 
 
+def test_the_style_follows_the_number_of_tiles(monkeypatch):
+    from compact_distributions.cvt.errors import InputError
+    from compact_distributions.cvt.mosaic import cutting
+
+    seen = []
+    monkeypatch.setattr(cutting, "_cut_exact", lambda *a: seen.append("exact") or (list(a[0]), 0))
+    monkeypatch.setattr(cutting, "_cut_straight", lambda *a: seen.append("straight") or (list(a[0]), 0))
+    monkeypatch.setattr(cutting, "EXACT_TILES", 3)
+    walls = np.zeros((8, 8), dtype=bool)
+    cutting.cut_to_walls([None] * 3, walls, 0.5, 2.0)
+    cutting.cut_to_walls([None] * 4, walls, 0.5, 2.0)
+    cutting.cut_to_walls([None] * 4, walls, 0.5, 2.0, style="exact")
+    assert seen == ["exact", "straight", "exact"]
+    with pytest.raises(InputError, match="style"):
+        cutting.cut_to_walls([None], walls, 0.5, 2.0, style="round")
+
+
+def _greedy_turns(pairs, n):
+    """The colouring one node at a time, as a loop: the truth for the vectorised one."""
+    adjacency = [set() for _ in range(n)]
+    for a, b in pairs:
+        if a != b:
+            adjacency[a].add(b)
+            adjacency[b].add(a)
+    turn = [-1] * n
+    for v in sorted(range(n), key=lambda v: -len(adjacency[v])):
+        used = {turn[u] for u in adjacency[v]}
+        t = 0
+        while t in used:
+            t += 1
+        turn[v] = t
+    return np.array(turn)
+
+
+@pytest.mark.parametrize("seed", [0, 1, 2])
+def test_turns_are_the_greedy_colouring(seed):
+    from compact_distributions.cvt.mosaic.cutting import _turns
+
+    rng = np.random.default_rng(seed)
+    n = 300
+    pts = rng.random((n, 2)) * 10
+    d = np.hypot(*(pts[:, None] - pts[None, :]).transpose(2, 0, 1))
+    a, b = np.nonzero(d < 1.2)
+    pairs = np.stack([a, b], axis=1)  # both ways and each node with itself, as queries give them
+    got = _turns(pairs, n)
+    np.testing.assert_array_equal(got, _greedy_turns(pairs, n))
+    assert (got[a[a != b]] != got[b[a != b]]).all()
+
+
+@pytest.mark.parametrize("style", ["exact", "straight"])
 @pytest.mark.parametrize("gap,turn", [(0.6, 0.2), (0.0, 0.5)])
-def test_cut_tiles_keep_the_guarantees_beside_crossing_walls(gap, turn):
+def test_cut_tiles_keep_the_guarantees_beside_crossing_walls(gap, turn, style):
     """Junctions, ends, a loop and walls meeting the border: every cut tile checked against
     the centre lines built from the pixels and every other tile (all pairs)."""
     walls, truth = wall_network()
     tiles = lattice_beside(truth, 3.0, gap, turn)
-    out, grew = cut_to_walls(tiles, walls, gap, spacing=3.0 + gap)
+    out, grew = cut_to_walls(tiles, walls, gap, spacing=3.0 + gap, style=style)
     assert grew > 0
     frame = shapely.box(gap / 2, gap / 2, W - gap / 2, H - gap / 2)
     i, j = np.nonzero(walls)
