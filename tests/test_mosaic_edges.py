@@ -274,12 +274,24 @@ def hex_of(rgb):
 
 
 @pytest.mark.parametrize(
-    "kind,element", [("line", "square"), ("disc", "square"), ("line", "triangle"), ("disc", "circle")]
+    "kind,element,cut",
+    [
+        ("line", "square", None),
+        ("disc", "square", None),
+        ("line", "triangle", None),
+        ("disc", "circle", None),
+        ("disc", "square", "straight"),
+        ("line", "triangle", "straight"),
+    ],
 )
-def test_no_tile_crosses_a_known_edge_and_fills_match_their_side(kind, element):
+def test_no_tile_crosses_a_known_edge_and_fills_match_their_side(kind, element, cut):
     pic = line_picture() if kind == "line" else disc_picture()
-    m = make_mosaic(pic, NUMPY, n_elements=160, element=element, iterations=8, seed=2)
+    m = make_mosaic(pic, NUMPY, n_elements=160, element=element, iterations=8, seed=2, cut=cut)
     assert m.walls and m.placed >= 150
+    if cut == "straight":  # straight cuts leave every tile convex: its own hull
+        tiles = [p for p in m.polygons if p is not None]
+        hulls = shapely.area(shapely.convex_hull(tiles))
+        np.testing.assert_allclose(shapely.area(tiles), hulls, rtol=1e-9)
     depths = [
         side_depths_line(p) if kind == "line" else side_depths_disc(p) for p in m.polygons if p is not None
     ]
@@ -359,6 +371,8 @@ def test_method_is_any_registered_name_a_record_or_a_callable():
         )
     with pytest.raises(InputError, match="edge_threshold"):
         make_mosaic(pic, NUMPY, n_elements=100, iterations=3, edge_threshold=0)
+    with pytest.raises(InputError, match="cut must be"):
+        make_mosaic(pic, NUMPY, n_elements=100, iterations=3, cut="diagonal")
 
 
 # ----------------------------------------------------------------------- result.json by hand
@@ -455,6 +469,8 @@ def two_colours(tmp_path):
         (["--edge-threshold", "lots"], "--edge-threshold"),
         (["--edge-threshold", "nan"], "--edge-threshold"),
         (["--method", "magic"], "magic"),
+        (["--cut", "straight", "--no-cut"], "--no-cut"),
+        (["--cut", "diagonal"], "--cut"),
     ],
 )
 def test_cli_bad_edge_and_method_options_exit_2(two_colours, tmp_path, capsys, argv, match):

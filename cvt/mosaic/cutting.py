@@ -53,6 +53,7 @@ from ..placement.compaction import wall_segments
 from ..threads import elementwise
 
 CUT_ENLARGE = 1.8  # a cut tile lies within its tile grown by this factor about its centre
+CUT_STYLES = ("auto", "exact", "straight")  # cut_to_walls's styles (the docstring)
 CUT_REACH = 1.0  # tiles this many element spacings or closer to a wall are cut to fit
 _MARGIN = 1e-3  # px kept beyond the gap
 _RUN = 64  # most vertices of a wall line in one piece of its margin, exact cut (fewer, smaller differences)
@@ -248,7 +249,7 @@ def cut_to_walls(
     int
         How many tiles grew.
     """
-    if style not in ("auto", "exact", "straight"):
+    if style not in CUT_STYLES:
         raise InputError(f"style must be 'auto', 'exact' or 'straight', got {style!r}")
     if style == "auto":
         style = "exact" if len(polygons) <= EXACT_TILES else "straight"

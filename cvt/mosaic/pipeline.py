@@ -51,7 +51,7 @@ from ..shapes import ELEMENT_SHAPES, element_ball, resolve_shapes, shape_record,
 from ..threads import side_by_side, usable_cores
 from ..validate import live_backend, real_number, whole_number
 from .colour import lab_to_srgb, quantised, srgb_to_lab
-from .cutting import cut_to_walls
+from .cutting import CUT_STYLES, cut_to_walls
 from .image_fields import (
     CONTRAST_RANGE,
     DEFAULT_CONTRAST,
@@ -905,8 +905,21 @@ def _mosaic_problem(edge_map, walls: bool, n_elements, metric, density, field, s
     )
 
 
+def _cut_style(cut, tight: bool) -> str | None:
+    """The style of :func:`cut_to_walls` that ``make_mosaic(cut=...)`` asks for (None: no
+    cut; ``None`` cuts a method's tiles that are ``tight``)."""
+    if cut is None:
+        return "auto" if tight else None
+    if cut is True or cut is False:
+        return "auto" if cut else None
+    if isinstance(cut, str) and cut in CUT_STYLES:
+        return cut
+    raise InputError(f"cut must be True, False, None or one of {', '.join(CUT_STYLES)}, got {cut!r}")
+
+
 def _after_the_method(dist, picture, edge_map, cut, gap, spacing, picture_seconds):
-    """The stages after the method: tiles cut to the walls (``cut``), their colours and
+    """The stages after the method: tiles cut to the walls (``cut``: the cut's style, or
+    None for no cut), their colours and
     the measures (coverage and overlap, straddling, colour error), each timed; the
     method's distribution with the final tiles and every stage's time."""
     polygons = [None if p is None or p.is_empty else p for p in dist.elements]
@@ -914,7 +927,7 @@ def _after_the_method(dist, picture, edge_map, cut, gap, spacing, picture_second
     # the stages after the method are timed too (result.json's stage_seconds)
     t0 = time.perf_counter()
     if cut:
-        polygons, cut_count = cut_to_walls(polygons, edge_map, gap, spacing)
+        polygons, cut_count = cut_to_walls(polygons, edge_map, gap, spacing, style=cut)
     t1 = time.perf_counter()
     bounds = tile_runs(polygons)
     colours, _, error = mosaic_fills(picture, polygons, dist.sites, bounds)
@@ -937,7 +950,7 @@ def _after_the_method(dist, picture, edge_map, cut, gap, spacing, picture_second
         "fills_seconds": t2 - t1,
         "evaluation_seconds": t3 - t2,
     }
-    extra = {**dist.extra, **({"cut_tiles": cut_count} if cut else {}), **stages}
+    extra = {**dist.extra, **({"cut_tiles": cut_count, "cut_style": cut} if cut else {}), **stages}
     dist = dataclasses.replace(dist, elements=polygons, extra=extra)
     return dist, polygons, colours, cut_count, (ev, straddles, error)
 
@@ -1033,7 +1046,7 @@ def make_mosaic(
     edges: bool = True,
     edge_threshold: float = DEFAULT_EDGE_THRESHOLD,
     method_options: dict | None = None,
-    cut: bool | None = None,
+    cut: bool | str | None = None,
     progress=None,
     memory_limit=None,
 ) -> MosaicResult:
@@ -1054,7 +1067,9 @@ def make_mosaic(
     are walls: their pixels leave the region, so cells, tiles and the method's region
     border stop at them.  ``cut``: tiles within a spacing of a wall are then cut to fit
     (:mod:`cvt.cutting`); default ``None`` cuts the tiles of a method whose record says its
-    tiles are tight (``ours-compact``), so that cutting fills what is left along the walls.
+    tiles are tight (``ours-compact``), so that cutting fills what is left along the walls;
+    ``True`` or a style of :func:`cvt.cutting.cut_to_walls` (``"auto"``, ``"exact"``,
+    ``"straight"``; ``True`` and ``None`` mean ``"auto"``) cuts them whatever the method.
     ``method_options``: the method's own declared options (e.g.
     ``{"alternate": True}`` for ours-compact's triangles), checked against its record.  ``progress(k, iterations,
     energy)`` is called after each Lloyd step.  ``memory_limit`` (bytes or a size such as
@@ -1069,6 +1084,7 @@ def make_mosaic(
     edge_threshold = real_number(edge_threshold, "edge_threshold", above=0.0)
     grout = parse_colour(grout, "grout")
     record, given_options, method_options = _method_and_options(method, method_options)
+    cut = _cut_style(cut, record.tight)
     metric_name, element = resolve_shapes(metric, element)
     metric_obj = make_metric(metric_name, aspect)
     picture, source, remake = _raster_picture(image, size, n_elements, backend, element, memory_limit)
@@ -1089,7 +1105,7 @@ def make_mosaic(
         gap=gap,
         **method_options,
     )
-    cut = walls and (record.tight if cut is None else bool(cut))
+    cut = cut if walls else None
     _return_free_memory()
     picture = remake() if picture is None else picture
     dist, polygons, colours, cut_count, measures = _after_the_method(
