@@ -1069,12 +1069,11 @@ def make_mosaic(
     (:mod:`cvt.cutting`); default ``None`` cuts the tiles of a method whose record says its
     tiles are tight (``ours-compact``), so that cutting fills what is left along the walls;
     ``True`` or a style of :func:`cvt.cutting.cut_to_walls` (``"auto"``, ``"exact"``,
-    ``"straight"``; ``True`` and ``None`` mean ``"auto"``) cuts them whatever the method.
-    ``method_options``: the method's own declared options (e.g.
-    ``{"alternate": True}`` for ours-compact's triangles), checked against its record.  ``progress(k, iterations,
-    energy)`` is called after each Lloyd step.  ``memory_limit`` (bytes or a size such as
-    ``"8G"``; default what the machine has available) refuses, before any work, a mosaic
-    estimated to need more (:mod:`cvt.resources`)."""
+    ``"straight"``; ``True``: ``"auto"``) cuts them whatever the method.  ``method_options``:
+    the method's own declared options (e.g. ``{"alternate": True}`` for ours-compact's
+    triangles), checked against its record.  ``progress(k, iterations, energy)`` is called
+    after each Lloyd step.  ``memory_limit`` (bytes or a size such as ``"8G"``; default
+    what the machine has) refuses, before any work, a mosaic estimated to need more."""
     t_start = time.perf_counter()
     live_backend(backend)
     n_elements = whole_number(n_elements, "n_elements", minimum=1)
@@ -1105,11 +1104,10 @@ def make_mosaic(
         gap=gap,
         **method_options,
     )
-    cut = cut if walls else None
     _return_free_memory()
     picture = remake() if picture is None else picture
     dist, polygons, colours, cut_count, measures = _after_the_method(
-        dist, picture, edge_map, cut, gap, spacing, picture_seconds
+        dist, picture, edge_map, cut if walls else None, gap, spacing, picture_seconds
     )
     settings = _Settings(
         metric_name,
