@@ -257,6 +257,14 @@ def cut_to_walls(
     return cut(polygons, walls, gap, spacing, enlarge, reach)
 
 
+def _tile_array(polygons) -> tuple[list, np.ndarray, np.ndarray]:
+    """The tiles as a list, as an object array (an empty polygon where there is none),
+    and the indices of those present."""
+    out = list(polygons)
+    geoms = np.array([shapely.Polygon() if p is None else p for p in out], dtype=object)
+    return out, geoms, np.flatnonzero(~shapely.is_empty(geoms))
+
+
 def _cut_straight(
     polygons,
     walls: np.ndarray,
@@ -265,36 +273,11 @@ def _cut_straight(
     enlarge: float = CUT_ENLARGE,
     reach: float = CUT_REACH,
 ) -> tuple[list, int]:
-    """:func:`cut_to_walls` by straight cuts (module docstring).
-
-    Parameters
-    ----------
-    polygons : sequence of shapely Polygon or None
-        The tiles (None where there is none): convex, pairwise at least ``gap`` apart and
-        at least gap/2 from the walls' centre lines and the raster's border.
-    walls : (H, W) bool ndarray
-        Thin walls.
-    gap : float
-        G, in pixels.
-    spacing : float
-        The element spacing, in pixels.
-    enlarge : float
-        A cut tile lies within its tile grown by this factor about its centre.
-    reach : float
-        Tiles this many spacings or closer to a wall's centre line are cut.
-
-    Returns
-    -------
-    list
-        The tiles, cut ones replaced.
-    int
-        How many tiles grew.
-    """
-    out = list(polygons)
+    """:func:`cut_to_walls` by straight cuts (module docstring; the arguments and the
+    answer are :func:`cut_to_walls`'s)."""
+    out, geoms, present = _tile_array(polygons)
     h, w = walls.shape
     pieces = wall_lines(walls)
-    geoms = np.array([shapely.Polygon() if p is None else p for p in out], dtype=object)
-    present = np.flatnonzero(~shapely.is_empty(geoms))
     if len(pieces) == 0 or len(present) == 0:
         return out, 0
     near = present[np.unique(_near_walls(pieces, geoms[present], reach * spacing))]
@@ -580,36 +563,11 @@ def _cut_exact(
     enlarge: float = CUT_ENLARGE,
     reach: float = CUT_REACH,
 ) -> tuple[list, int]:
-    """:func:`cut_to_walls` by shapely differences (module docstring).
-
-    Parameters
-    ----------
-    polygons : sequence of shapely Polygon or None
-        The tiles (None where there is none): pairwise at least ``gap`` apart and at least
-        gap/2 from the walls' centre lines and the raster's border.
-    walls : (H, W) bool ndarray
-        Thin walls.
-    gap : float
-        G, in pixels.
-    spacing : float
-        The element spacing, in pixels.
-    enlarge : float
-        A cut tile lies within its tile grown by this factor about its centre.
-    reach : float
-        Tiles this many spacings or closer to a wall's centre line are cut.
-
-    Returns
-    -------
-    list
-        The tiles, cut ones replaced.
-    int
-        How many tiles grew.
-    """
-    out = list(polygons)
+    """:func:`cut_to_walls` by shapely differences (module docstring; the arguments and
+    the answer are :func:`cut_to_walls`'s)."""
+    out, geoms_all, present = _tile_array(polygons)
     h, w = walls.shape
     lines = _merged_lines(walls)
-    geoms_all = np.array([shapely.Polygon() if p is None else p for p in out], dtype=object)
-    present = np.flatnonzero(~shapely.is_empty(geoms_all))
     if len(lines) == 0 or len(present) == 0:
         return out, 0
     geoms = geoms_all[present]
