@@ -1716,8 +1716,11 @@ def _round_bounds(settings, unit, c, r, r0, max_sizes, caps):
     or the moves' (lo, hi, pull) of a last round that settles).  ``caps`` is (caps_at,
     rounds left, raster shape): where caps follow the centres (caps_at not None) they are
     read at ``c`` and each move is kept where a cap changes by at most ``growth`` × the
-    rounds left, what they could follow (:func:`_caps_here`); in the last round (PDHG)
-    caps_at's ``settle``, where it has one, may send elements elsewhere (:func:`compact`)."""
+    rounds left, what they could follow (:func:`_caps_here`).  In the last round (PDHG),
+    caps_at's ``settle(c, r, reach, delta, caps) -> (caps, (lo, hi, pull))``, where it has
+    one, gives each element's cap, its move bounds (N, 2) (lo <= 0 <= hi, within ±reach,
+    the move bound, instead of ±delta, the steady box) and a reward on its move (pull·Δc,
+    weighed like its growth), to send it where its cap fits its size."""
     caps_at, left, shape = caps
     delta = settings.move * unit.inradius * r
     box = None
@@ -1831,11 +1834,8 @@ def compact(
     (a :class:`CompactionSettings`; keyword ``overrides`` replace its fields, e.g.
     ``gap=1.5, rounds=8``) say how far elements move and grow per round and when to stop.
     ``max_sizes`` ((N,), optional) caps each size (a size above its cap may only shrink);
-    or a function of positions ((M, 2) px -> (M,)): caps that follow the elements.  Such
-    a function may have ``settle(c, r, reach, delta, caps) -> (caps, (lo, hi, pull))``:
-    in the last round (PDHG) each element's caps, move bounds (N, 2) (lo <= 0 <= hi,
-    within ±``reach``, instead of ±``delta``, the steady box) and a reward on its move
-    (pull·Δc, weighed like its growth), to send it where its cap fits its size.
+    or a function of positions ((M, 2) px -> (M,)): caps that follow the elements (and
+    with a ``settle`` method, settle them in the last round: :func:`_round_bounds`).
     ``walls`` ((H, W) bool, outside the region): thin walls whose centre lines
     (:func:`wall_segments`) bound the elements instead of their pixels' sides: each
     element keeps G/2 from a wall's centre line, as from the border.

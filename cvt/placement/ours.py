@@ -284,15 +284,17 @@ def run_ours_compact(
     Under a density, each element starts at and grows to at most its cap of
     :func:`density_caps` (``density_slack`` above the size that follows the density;
     None: no caps), so that compaction keeps the sizes the density asks for; the caps
-    follow the elements (:class:`DensityCaps`, read at each centre every round, moves
-    kept where they are steady), and ``rounds`` defaults to one more than the shape's.
+    follow the elements (:class:`DensityCaps`: the density smoothed over a pixel, read at
+    each centre every round, moves kept where they are steady; the last round settles each
+    element on a pixel whose own cap fits it), and ``rounds`` defaults to
+    ``DENSITY_EXTRA_ROUNDS`` (two) more than the shape's.
     ``turn_to_field``: under a field, turn each element to the field at its final centre
     and run one more round (False: elements keep their sites' angles).
 
     Where the problem has thin walls (``Problem.walls``), elements come up to the walls'
     centre lines (G/2 off them) instead of stopping at their pixels.  ``tolerance`` and
     ``accelerate`` go to :func:`cvt.lloyd.lloyd`."""
-    # under density caps, by default one round more than the shape's (DENSITY_EXTRA_ROUNDS)
+    # under density caps, by default DENSITY_EXTRA_ROUNDS more than the shape's
     extra = DENSITY_EXTRA_ROUNDS if rounds is None and _follows_density(problem, density_slack) else 0
     shape, turn, gap, rounds = _compaction_plan(problem, element, gap, alternate, rounds)
     rounds += extra
@@ -515,7 +517,7 @@ OURS_COMPACT = Method(
             None,
             "compaction rounds at most (0 to 1000; default: the element's own, "
             + ", ".join(f"{s.name}s {s.compaction_rounds}" for s in SHAPES.values())
-            + "; one more under a density)",
+            + f"; {DENSITY_EXTRA_ROUNDS} more under a density)",
             check=_rounds,
             tag="r",
             label="rounds={}",
