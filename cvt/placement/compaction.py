@@ -121,26 +121,19 @@ ours', with one more round than the shape's under a density): camera 0.71-0.93x 
 scenes (seeds 0-4): 0.71-0.98x (was 0.72-0.99x), +0.10 to +0.55 points.  On a finely
 textured picture (motorcycle_left, seeds 0-1) that left circles and triangles at
 1.12-1.13x (was 1.57-1.66x) and −1.0 to −1.7 points: its cap changes from pixel to
-pixel, so the steady boxes hold elements back and a cap read at one pixel shrinks an
-element for that pixel's sake.  So ours-compact's caps follow the density smoothed over
-a pixel (``cvt.placement.ours.DensityCaps``), and the last round settles (PDHG; a caps
-function's ``settle``): an element may be sent to a pixel next to its own where the
-unsmoothed caps, what the size error reads at its centre, fit its size better; its move
-then stays within the box from its centre into that pixel (instead of ±δ_i), it takes
-the least cap of that box's pixels as its cap, and the objective rewards its move
-towards the pixel (pull·Δc, weighed like its growth).  Measured (512², N = 1000, two
-rounds more than the shape's, seeds 0-1, against the caps at one pixel): motorcycle_left
-circles 1.04x, triangles 1.07x, the other shapes 0.80-0.92x, coverage +1.0 to +2.4
-points; camera, astronaut, coins and rocket, five shapes: 0.60-1.06x (was 0.62-1.13x),
-coverage +0.3 to +5.1 points; two pictures tried after (gravel 0.85-1.01x, was
-0.96-1.11x; hubble_deep_field 1.13-1.63x, was 1.15-1.64x: galaxies of a few pixels,
-where the fit alone, ours-fit, is 1.28x on circles).  Table 3's density and combined
-scenes (seeds 0-4): 0.70-0.97x, +0.06 to +0.45 points; no element settles there (its
-caps change by well under ``SETTLE_GAIN`` between pixels).  What settling buys is the
-size error's read at one pixel: against the density averaged over each element's
-footprint the ratios are the smoothed caps' alone, or a little lower (motorcycle_left
-circles/triangles 0.87x/0.93x against 0.88x/0.94x; caps at one pixel 0.94x/0.98x).  On white noise of ±0.5 in ln(density) about a ramp (160², 200
-elements) circles stay at 1.1x (1.12x; 1.10x with the caps at one pixel).  Measured
+pixel, so the steady boxes held elements back and a cap read at one pixel shrank an
+element for that pixel's sake.  So ours-compact's caps follow the density smoothed over a
+pixel (``cvt.placement.ours.DensityCaps``) and, under a density, compaction runs two
+rounds more than the shape's: motorcycle_left circles 1.11x, triangles 1.12x, squares
+0.99x, coverage −0.35 to +0.35 points against the caps fixed where the elements started
+(Table 3's density and combined scenes, seeds 0-4: 0.70-0.97x, +0.06 to +0.45 points).
+The size error reads the density at one pixel; against the density averaged over each
+element's footprint, motorcycle_left's circles and triangles are 0.88x and 0.94x ours'
+(0.94x and 0.98x with the caps at one pixel).  Not met: hubble_deep_field.jpg, whose
+galaxies are a few pixels across (1.13-1.63x; the fit alone, ours-fit, is 1.28x on
+circles).  Sending an element in the last round to the pixel next to it whose own cap
+fits its size brought motorcycle_left to 1.04x/1.07x, but only by choosing the pixel the
+measure reads (the footprint's ratios did not move): not kept.  Measured
 no better: boxes held to ±growth in the last round alone (coins' triangles and circles
 1.14-1.15x), to ±0.1-0.2 in every round (−1.4 to −3.3 points), to twice the rounds
 left (coins 1.11-1.12x), drops held to ``shrink`` × the rounds left (down to −1.26
@@ -1176,11 +1169,10 @@ def _product(m, v, out, transpose=False):
     return out
 
 
-def _pdhg_program(rows: _Rows, act, c, r, gap, delta, lo_dr, hi_dr, weight, box=None):
+def _pdhg_program(rows: _Rows, act, c, r, gap, delta, lo_dr, hi_dr, weight):
     """The round's program for :func:`_solve_pdhg`: ``A x >= b`` (CSR, and its index,
     value and row-start arrays), the bounds and the cost of x = (Δx, Δy, Δr) per active
-    element.  ``box`` (lo, hi, pull), each (N, 2): the moves' bounds instead of ±``delta``
-    and a reward pull·Δc, weighed like the growth (caps that follow settle, :func:`compact`)."""
+    element."""
     import scipy.sparse as sp
 
     n = len(r)
@@ -1219,10 +1211,6 @@ def _pdhg_program(rows: _Rows, act, c, r, gap, delta, lo_dr, hi_dr, weight, box=
     hi[0::3] = hi[1::3] = d
     lo[2::3], hi[2::3] = lo_dr[act], hi_dr[act]
     cost[2::3] = -weight[act]
-    if box is not None:
-        blo, bhi, pull = box
-        for k in (0, 1):
-            lo[k::3], hi[k::3], cost[k::3] = blo[act, k], bhi[act, k], -weight[act] * pull[act, k]
     return a, b, lo, hi, cost, (index, value, start)
 
 
@@ -1397,9 +1385,7 @@ class _HalpernPdhg:
         return self.xt, steps
 
 
-def _solve_pdhg(
-    rows: _Rows, act, c, r, gap, delta, lo_dr, hi_dr, weight, iterations, step_ratio, threads=1, box=None
-):
+def _solve_pdhg(rows: _Rows, act, c, r, gap, delta, lo_dr, hi_dr, weight, iterations, step_ratio, threads=1):
     """The round's program (the same as :func:`_solve_lp`'s, untiled) solved
     approximately by ``iterations`` steps of the primal-dual hybrid gradient method
     (Chambolle-Pock, diagonal steps of Pock & Chambolle 2011), all elements at once, in
@@ -1419,7 +1405,7 @@ def _solve_pdhg(
     the result does not depend on ``threads``."""
     n = len(r)
     a, b, lo, hi, cost, (index, value, start) = _pdhg_program(
-        rows, act, c, r, gap, delta, lo_dr, hi_dr, weight, box
+        rows, act, c, r, gap, delta, lo_dr, hi_dr, weight
     )
     ncol = a.shape[1]
     # diagonal steps: 1 / (row or column sum of |A|), balanced by step_ratio
@@ -1712,27 +1698,15 @@ def _growth_bounds(settings, r, r0, max_sizes, follow):
 
 
 def _round_bounds(settings, unit, c, r, r0, max_sizes, caps):
-    """A round's move bounds, growth bounds (:func:`_growth_bounds`), caps and box (None,
-    or the moves' (lo, hi, pull) of a last round that settles).  ``caps`` is (caps_at,
-    rounds left, raster shape): where caps follow the centres (caps_at not None) they are
-    read at ``c`` and each move is kept where a cap changes by at most ``growth`` × the
-    rounds left, what they could follow (:func:`_caps_here`).  In the last round (PDHG),
-    caps_at's ``settle(c, r, reach, delta, caps) -> (caps, (lo, hi, pull))``, where it has
-    one, gives each element's cap, its move bounds (N, 2) (lo <= 0 <= hi, within ±reach,
-    the move bound, instead of ±delta, the steady box) and a reward on its move (pull·Δc,
-    weighed like its growth), to send it where its cap fits its size."""
+    """A round's move bounds, growth bounds (:func:`_growth_bounds`) and caps.  ``caps``
+    is (caps_at, rounds left, raster shape): where caps follow the centres (caps_at not
+    None) they are read at ``c`` and each move is kept where a cap changes by at most
+    ``growth`` × the rounds left, what they could follow (:func:`_caps_here`)."""
     caps_at, left, shape = caps
     delta = settings.move * unit.inradius * r
-    box = None
     if caps_at is not None:
-        reach = delta
         max_sizes, delta = _caps_here(caps_at, c, r, delta, settings.growth * left, shape)
-        settle = getattr(caps_at, "settle", None)
-        if settle is not None and left <= 1 and settings.solver == "pdhg":
-            max_sizes, box = settle(c, r, reach, delta, max_sizes)
-            delta = np.maximum(-box[0], box[1]).max(axis=1)  # the box's reach, for the near pairs
-    up = _growth_bounds(settings, r, r0, max_sizes, follow=caps_at is not None)
-    return delta, up, max_sizes, box
+    return delta, _growth_bounds(settings, r, r0, max_sizes, follow=caps_at is not None), max_sizes
 
 
 def _caps_here(caps_at, c, r, delta, steady, shape):
@@ -1785,7 +1759,7 @@ def _objective_weights(r, act, max_sizes, fairness):
 def _solve_round(settings, rows, act, c, r, bounds, mask, k):
     """Δc, Δr of one round by the settings' solver; also its steps, failed tiles and
     the largest row violation left (PDHG)."""
-    gap, delta, lo_dr, hi_dr, weight, box = bounds
+    gap, delta, lo_dr, hi_dr, weight = bounds
     if settings.solver == "pdhg":
         dc, dr, violation, iters = _solve_pdhg(
             rows,
@@ -1800,7 +1774,6 @@ def _solve_round(settings, rows, act, c, r, bounds, mask, k):
             settings.iterations,
             _STEP_RATIO,
             settings.threads,
-            box,
         )
         return dc, dr, iters, 0, violation
     tile = _tiles(c, act, mask, settings.tile_elements, k)
@@ -1834,8 +1807,7 @@ def compact(
     (a :class:`CompactionSettings`; keyword ``overrides`` replace its fields, e.g.
     ``gap=1.5, rounds=8``) say how far elements move and grow per round and when to stop.
     ``max_sizes`` ((N,), optional) caps each size (a size above its cap may only shrink);
-    or a function of positions ((M, 2) px -> (M,)): caps that follow the elements (and
-    with a ``settle`` method, settle them in the last round: :func:`_round_bounds`).
+    or a function of positions ((M, 2) px -> (M,)): caps that follow the elements.
     ``walls`` ((H, W) bool, outside the region): thin walls whose centre lines
     (:func:`wall_segments`) bound the elements instead of their pixels' sides: each
     element keeps G/2 from a wall's centre line, as from the border.
@@ -1858,7 +1830,7 @@ def compact(
     left = rounds  # rounds left, this one included (how steady moves under caps_at are)
     for k in range(max(rounds, 1)):
         caps = (caps_at, max(left, 1), mask.shape)
-        delta, up, max_sizes, box = _round_bounds(settings, unit, c, r, r0, max_sizes, caps)
+        delta, up, max_sizes = _round_bounds(settings, unit, c, r, r0, max_sizes, caps)
         budget = math.sqrt(2) * delta + unit.circumradius * np.maximum(up, 0.0)
         rows, prev, (n_pairs, n_pieces) = _round_rows(
             unit, c, r, cos, sin, budget, gap, segs, seg_trees, prev, settings.threads
@@ -1877,7 +1849,7 @@ def compact(
         weight = _objective_weights(r, act, max_sizes, settings.fairness)
         tl = time.perf_counter()
         tcpu = time.process_time()
-        bounds = (gap, delta, -settings.shrink * r, up, weight, box)
+        bounds = (gap, delta, -settings.shrink * r, up, weight)
         dc, dr, iters, failed, violation = _solve_round(settings, rows, act, c, r, bounds, mask, k)
         result.lp_seconds += time.perf_counter() - tl
         tcpu = time.process_time() - tcpu

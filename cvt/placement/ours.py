@@ -23,7 +23,6 @@ from ..fields import sample_at
 from ..lloyd import LLOYD_OPTIONS, LloydSetup, final_labels, lloyd
 from ..methods import Method, MethodOption, SweepVariant
 from ..metrics import SHAPES
-from ..pixels import pixel_index
 from ..problem import Problem
 from ..shapes import element_polygons, packing_density, shape_record
 from ..validate import whole_number
@@ -98,27 +97,15 @@ def run_ours_fit(problem: Problem, backend, **options) -> Distribution:
 # more coverage than 0.02 and a size error still at most ours' (Table 3, 512², N = 1000)
 DENSITY_CAP_SLACK = 0.03
 # under density caps compaction keeps each move where the caps are steady (within ±growth ×
-# the rounds left), which slows it, and its last round settles (DensityCaps.settle): two
-# rounds more than the shape's by default (with the shape's rounds alone coverage measured
-# up to 2 points lower on photographs as densities; with one more, motorcycle_left's
-# triangles 1.13x ours' size error against 1.07x, seeds 0-1)
+# the rounds left), which slows it: two rounds more than the shape's by default (with the
+# shape's rounds alone coverage measured up to 2 points lower on photographs as densities;
+# with one more, motorcycle_left (seeds 0-1): triangles 1.13x ours' size error against
+# 1.12x, circles 1.07x against 1.11x, 0.1-0.2 points less coverage)
 DENSITY_EXTRA_ROUNDS = 2
 # the caps follow the density's size factor smoothed (Gaussian, in log2) over this many px:
 # on fine texture the factor changes from pixel to pixel, and caps that chase it shrink
 # elements for a pixel's sake and hold their moves back (steady boxes of one pixel)
 DENSITY_CAP_SMOOTH = 1.0
-# the last round settles an element on a pixel next to its own where the unsmoothed caps
-# (what the size error reads at its centre) fit its size better: the least cap of the pixels
-# its move may end on nearest (1 + SETTLE_GROWTH) × its size (a cap below the size counts 1
-# more in |ln(cap / wanted)|), by more than SETTLE_GAIN there than in its own pixel (on a
-# smooth density none does: Table 3 is untouched by it), drawn there by a reward of
-# SETTLE_PULL (× the element's growth weight) per px moved towards it
-SETTLE_GROWTH = 0.08
-SETTLE_GAIN = 0.1
-SETTLE_PULL = 0.3
-# px: a settled centre stays this far inside its pixel (the measure reads the pixel that
-# holds the centroid)
-SETTLE_MARGIN = 0.05
 
 
 @dataclass(frozen=True)
@@ -126,8 +113,7 @@ class DensityCaps:
     """Size caps that follow the density wherever an element stands: ``factor`` × the
     density's size factor there, smoothed over ``smooth`` px (:func:`smoothed_scales`;
     ``scales``: those factors where the caller has them).  Compaction reads them at each element's centre every round
-    (``cvt.placement.compact``'s ``max_sizes``), and its last round settles each element
-    on a pixel whose own cap fits its size (:meth:`settle`)."""
+    (``cvt.placement.compact``'s ``max_sizes``)."""
 
     problem: Problem
     factor: float
@@ -143,56 +129,6 @@ class DensityCaps:
         """(H, W) float32: the cap at every pixel (compaction reads its steady boxes here)."""
         scales = smoothed_scales(self.problem, self.smooth) if self.scales is None else self.scales
         return np.float32(self.factor) * scales
-
-    @functools.cached_property
-    def pixels(self) -> np.ndarray:
-        """(H, W) float32: the unsmoothed cap at every pixel, ``factor`` ×
-        ``problem.scales_at`` there (what the size error reads at a centre)."""
-        return np.float32(self.factor) * smoothed_scales(self.problem, 0.0)
-
-    def settle(self, c, r, reach, delta, caps):
-        """Compaction's last round (``cvt.placement.compact``): an element of size ``r`` at
-        ``c`` ((N, 2) px) may be sent to one of the 8 pixels next to its own (within
-        ``reach`` px along each axis).  Its move then stays within the box from its centre
-        to within that pixel (``SETTLE_MARGIN`` inside it), whose pixels (its own, the
-        target and the two beside both) have unsmoothed caps (:attr:`pixels`) of at least
-        their least, v; it goes where v is nearest (1 + ``SETTLE_GROWTH``) × its size (a v
-        below the size counting 1 more in |ln(v / wanted)|), if that beats its own pixel's
-        cap by more than ``SETTLE_GAIN``, drawn there by a reward of ``SETTLE_PULL`` per px,
-        and takes v as its cap (wherever in the box it ends, it is not above its cap).  One
-        that stays keeps its steady box (±``delta``) and its cap ``caps``.  Returns the caps
-        (N,) and (lo, hi, pull), each (N, 2)."""
-        pixels = self.pixels
-        h, w = pixels.shape
-        i, j = pixel_index(c, w, h)
-        ring = np.arange(-1, 2)
-        di, dj = np.repeat(ring, 3), np.tile(ring, 3)  # offset 4 is the element's own pixel
-        ti = np.clip(i[:, None] + di, 0, h - 1)
-        tj = np.clip(j[:, None] + dj, 0, w - 1)
-        corner = np.stack([tj, ti], axis=2).astype(np.float64)  # (N, 9, 2) x, y
-        nearest = np.clip(c[:, None, :], corner, corner + 1.0) - c[:, None, :]
-        within = np.abs(nearest).max(axis=2) <= reach[:, None] - SETTLE_MARGIN
-        # the least cap of the box's pixels: own, target, and the two that share a side with both
-        v = np.minimum(
-            np.minimum(pixels[ti, tj], pixels[i, j][:, None]),
-            np.minimum(pixels[ti, j[:, None]], pixels[i[:, None], tj]),
-        ).astype(np.float64)
-        wanted = (1.0 + SETTLE_GROWTH) * r[:, None]
-        score = np.abs(np.log(v / np.maximum(wanted, 1e-300))) + (v < r[:, None])
-        score[~within] = np.inf
-        best = np.argmin(score, axis=1)
-        rows = np.arange(len(c))
-        go = (score[rows, best] < score[:, 4] - SETTLE_GAIN) & (r > 0)
-        lo = np.repeat(-delta[:, None], 2, axis=1)
-        hi = -lo
-        pull = np.zeros_like(lo)
-        t = corner[rows, best]
-        far_lo = np.minimum(0.0, t + SETTLE_MARGIN - c)
-        far_hi = np.maximum(0.0, t + 1.0 - SETTLE_MARGIN - c)
-        lo[go] = np.maximum(far_lo[go], -reach[go, None])
-        hi[go] = np.minimum(far_hi[go], reach[go, None])
-        pull[go] = SETTLE_PULL * np.sign(t[go] + 0.5 - c[go])
-        return np.where(go, v[rows, best], caps), (lo, hi, pull)
 
 
 def smoothed_scales(problem: Problem, sigma: float) -> np.ndarray:
@@ -285,8 +221,7 @@ def run_ours_compact(
     :func:`density_caps` (``density_slack`` above the size that follows the density;
     None: no caps), so that compaction keeps the sizes the density asks for; the caps
     follow the elements (:class:`DensityCaps`: the density smoothed over a pixel, read at
-    each centre every round, moves kept where they are steady; the last round settles each
-    element on a pixel whose own cap fits it), and ``rounds`` defaults to
+    each centre every round, moves kept where they are steady), and ``rounds`` defaults to
     ``DENSITY_EXTRA_ROUNDS`` (two) more than the shape's.
     ``turn_to_field``: under a field, turn each element to the field at its final centre
     and run one more round (False: elements keep their sites' angles).
@@ -550,10 +485,6 @@ __all__ = [
     "DensityCaps",
     "DENSITY_EXTRA_ROUNDS",
     "DENSITY_CAP_SMOOTH",
-    "SETTLE_GROWTH",
-    "SETTLE_GAIN",
-    "SETTLE_PULL",
-    "SETTLE_MARGIN",
     "smoothed_scales",
     "density_cap_field",
     "density_caps",
