@@ -12,13 +12,14 @@ from __future__ import annotations
 import functools
 import math
 import time
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from types import MappingProxyType
 
 import numpy as np
 
 from ..distribution import Distribution
 from ..errors import InputError
+from ..fields import sample_at
 from ..lloyd import LLOYD_OPTIONS, LloydSetup, final_labels, lloyd
 from ..methods import Method, MethodOption, SweepVariant
 from ..metrics import SHAPES
@@ -96,54 +97,92 @@ def run_ours_fit(problem: Problem, backend, **options) -> Distribution:
 # more coverage than 0.02 and a size error still at most ours' (Table 3, 512², N = 1000)
 DENSITY_CAP_SLACK = 0.03
 # under density caps compaction keeps each move where the caps are steady (within ±growth ×
-# the rounds left), which slows it: one round more than the shape's by default (with the
-# shape's rounds alone coverage measured up to 2 points lower on photographs as densities)
-DENSITY_EXTRA_ROUNDS = 1
+# the rounds left), which slows it: two rounds more than the shape's by default (with the
+# shape's rounds alone coverage measured up to 2 points lower on photographs as densities;
+# with one more, motorcycle_left (seeds 0-1): triangles 1.13x ours' size error against
+# 1.12x, circles 1.07x against 1.11x, 0.1-0.2 points less coverage)
+DENSITY_EXTRA_ROUNDS = 2
+# the caps follow the density's size factor smoothed (Gaussian, in log2) over this many px:
+# on fine texture the factor changes from pixel to pixel, and caps that chase it shrink
+# elements for a pixel's sake and hold their moves back (steady boxes of one pixel)
+DENSITY_CAP_SMOOTH = 1.0
 
 
 @dataclass(frozen=True)
 class DensityCaps:
     """Size caps that follow the density wherever an element stands: ``factor`` × the
-    density's size factor there (``problem.scales_at``).  Compaction reads them at each
-    element's centre every round (``cvt.placement.compact``'s ``max_sizes``)."""
+    density's size factor there, smoothed over ``smooth`` px (:func:`smoothed_scales`;
+    ``scales``: those factors where the caller has them).  Compaction reads them at each element's centre every round
+    (``cvt.placement.compact``'s ``max_sizes``)."""
 
     problem: Problem
     factor: float
+    smooth: float = DENSITY_CAP_SMOOTH
+    scales: np.ndarray | None = field(default=None, compare=False, repr=False)
 
     def __call__(self, points) -> np.ndarray:
-        """(M,) the caps at ``points`` ((M, 2) px)."""
-        return self.factor * self.problem.scales_at(np.asarray(points, dtype=np.float64).reshape(-1, 2))
+        """(M,) the caps at ``points`` ((M, 2) px): the pixel of :attr:`image` that holds each."""
+        return sample_at(self.image, np.asarray(points, dtype=np.float64).reshape(-1, 2)).astype(np.float64)
 
     @functools.cached_property
     def image(self) -> np.ndarray:
         """(H, W) float32: the cap at every pixel (compaction reads its steady boxes here)."""
-        density = self.problem.density
-        if density is None:
-            raise InputError("DensityCaps needs a problem with a density")
-        return np.float32(self.factor) * density.scale_image()
+        scales = smoothed_scales(self.problem, self.smooth) if self.scales is None else self.scales
+        return np.float32(self.factor) * scales
+
+
+def smoothed_scales(problem: Problem, sigma: float) -> np.ndarray:
+    """(H, W) float32: the density's size factor at every pixel (``problem.scales_at``
+    there), its log2 smoothed by a Gaussian of ``sigma`` px (0: as it is).
+
+    Parameters
+    ----------
+    problem : Problem
+        A problem with a density.
+    sigma : float
+        The Gaussian's standard deviation, px.
+
+    Returns
+    -------
+    numpy.ndarray
+        (H, W) float32 size factors.
+    """
+    density = problem.density
+    if density is None:
+        raise InputError("DensityCaps needs a problem with a density")
+    scales = density.scale_image()
+    if sigma <= 0:
+        return scales
+    from scipy.ndimage import gaussian_filter
+
+    # in place: one picture-sized array besides the filter's own
+    np.log2(scales, out=scales)
+    scales = gaussian_filter(scales, sigma, mode="nearest")
+    return np.exp2(scales, out=scales)
 
 
 def density_cap_field(
     problem: Problem, centres, sizes, shape: str, aspect: float, slack: float, packing: float = 1.0
 ) -> DensityCaps:
     """The caps of :func:`density_caps` as a function of position: κ·(1 + ``slack``) × the
-    density's size factor, κ fixed by the elements at ``centres`` (the placed ones)."""
+    density's (smoothed) size factor, κ fixed by the elements at ``centres`` (the placed ones)."""
     import shapely
 
     from ..shapes import unit_outline
 
-    s = problem.scales_at(centres)
+    scales = smoothed_scales(problem, DENSITY_CAP_SMOOTH)
+    s = DensityCaps(problem, 1.0, scales=scales)(centres)
     unit_area = float(shapely.area(shapely.Polygon(unit_outline(shape, aspect))))
     weight = float(np.sum(s[np.asarray(sizes) > 0] ** 2)) * unit_area
     kappa = math.sqrt(packing * problem.grid.pixel_count / weight) if weight > 0 else 1.0
-    return DensityCaps(problem, kappa * (1.0 + slack))
+    return DensityCaps(problem, kappa * (1.0 + slack), scales=scales)
 
 
 def density_caps(
     problem: Problem, centres, sizes, shape: str, aspect: float, slack: float, packing: float = 1.0
 ) -> np.ndarray:
     """(N,) size caps that follow the density: κ·s_i·(1 + ``slack``), s_i the density's
-    size factor at element i's centre and κ the size at which elements of size κ·s_i (the
+    size factor at element i's centre (smoothed, :class:`DensityCaps`) and κ the size at which elements of size κ·s_i (the
     placed ones, ``sizes`` > 0) would together have ``packing`` × the region's area (the
     shape's densest packing, the shape record's ``packing``: caps no element can reach
     would not bind)."""
@@ -181,15 +220,16 @@ def run_ours_compact(
     Under a density, each element starts at and grows to at most its cap of
     :func:`density_caps` (``density_slack`` above the size that follows the density;
     None: no caps), so that compaction keeps the sizes the density asks for; the caps
-    follow the elements (:class:`DensityCaps`, read at each centre every round, moves
-    kept where they are steady), and ``rounds`` defaults to one more than the shape's.
+    follow the elements (:class:`DensityCaps`: the density smoothed over a pixel, read at
+    each centre every round, moves kept where they are steady), and ``rounds`` defaults to
+    ``DENSITY_EXTRA_ROUNDS`` (two) more than the shape's.
     ``turn_to_field``: under a field, turn each element to the field at its final centre
     and run one more round (False: elements keep their sites' angles).
 
     Where the problem has thin walls (``Problem.walls``), elements come up to the walls'
     centre lines (G/2 off them) instead of stopping at their pixels.  ``tolerance`` and
     ``accelerate`` go to :func:`cvt.lloyd.lloyd`."""
-    # under density caps, by default one round more than the shape's (DENSITY_EXTRA_ROUNDS)
+    # under density caps, by default DENSITY_EXTRA_ROUNDS more than the shape's
     extra = DENSITY_EXTRA_ROUNDS if rounds is None and _follows_density(problem, density_slack) else 0
     shape, turn, gap, rounds = _compaction_plan(problem, element, gap, alternate, rounds)
     rounds += extra
@@ -412,7 +452,7 @@ OURS_COMPACT = Method(
             None,
             "compaction rounds at most (0 to 1000; default: the element's own, "
             + ", ".join(f"{s.name}s {s.compaction_rounds}" for s in SHAPES.values())
-            + "; one more under a density)",
+            + f"; {DENSITY_EXTRA_ROUNDS} more under a density)",
             check=_rounds,
             tag="r",
             label="rounds={}",
@@ -444,6 +484,8 @@ __all__ = [
     "run_ours_compact",
     "DensityCaps",
     "DENSITY_EXTRA_ROUNDS",
+    "DENSITY_CAP_SMOOTH",
+    "smoothed_scales",
     "density_cap_field",
     "density_caps",
     "MOSAIC_COMPACTION_ROUNDS",
