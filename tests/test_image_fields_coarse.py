@@ -1,5 +1,6 @@
 """The picture's fields on a coarse grid (mosaics above EXACT_TILES tiles): the pieces
-against their definitions, and the fields against those made on every pixel."""
+against their definitions, and the fields against those made on every pixel; the strong
+edges' hysteresis and length against a scene whose edges are known."""
 
 import math
 
@@ -117,3 +118,29 @@ def test_bad_step_is_refused(step):
 def test_details_need_every_pixel():
     with pytest.raises(InputError, match="details"):
         F.picture_fields(np.zeros((10, 10)), 4.0, details=True, step=2)
+
+
+def _edge_scene():
+    """CIELAB (L* only): a step of ΔE 20 (strong) that goes on as one of ΔE 8 (weak),
+    a separate weak step, and a small strong square (a short closed edge)."""
+    lab = np.zeros((80, 160, 3))
+    lab[..., 0] = 50.0
+    lab[20:, :40, 0] = 70.0  # strong: ΔE 20 along row 20 for x < 40
+    lab[20:, 40:80, 0] = 58.0  # weak: ΔE 8, continuing the same line
+    lab[40:, 100:150, 0] = 58.0  # weak, alone
+    lab[5:11, 120:126, 0] = 70.0  # strong, about 24 pixels round
+    return lab
+
+
+def test_strong_edges_hysteresis_and_length():
+    """An edge is seeded where its contrast reaches the threshold, goes on while it stays
+    above half of it, and is kept when it is at least min_length pixels long."""
+    lab = _edge_scene()
+    edges = F.strong_edges(lab, 11.0, min_length=10.0)
+    assert edges[18:23, 5:35].any(axis=0).all()  # the strong step, every column
+    assert edges[18:23, 45:75].any(axis=0).all()  # its weak part: carried by hysteresis
+    assert not edges[30:, 95:155].any()  # the weak step alone: no seed
+    assert edges[3:13, 118:128].sum() >= 16  # the small square
+    assert F.strong_edges(lab, 7.0, min_length=10.0)[30:, 95:155].any()  # seeded at 7
+    long_only = F.strong_edges(lab, 11.0, min_length=60.0)
+    assert not long_only[:15, 110:135].any() and long_only[18:23, 5:75].any(axis=0).all()

@@ -729,14 +729,20 @@ def strong_edges(
         # strictly above one neighbour, at least the other: one pixel of a flat ridge
         ridge |= (sector == k) & (contrast > ahead) & (contrast >= behind)
     weak = ridge & (contrast >= EDGE_HYSTERESIS * threshold)
+    del ridge
     parts, n = ndimage.label(weak, structure=np.ones((3, 3), dtype=bool))
     if n == 0:
         return weak
+    # the weak pixels only (a few in a hundred), not whole picture-sized arrays
+    at = np.nonzero(weak)
+    part = parts[at]
+    del parts
     keep = np.zeros(n + 1, dtype=bool)
-    keep[np.unique(parts[weak & (contrast >= threshold)])] = True
-    keep &= np.bincount(parts.ravel(), minlength=n + 1) >= min_length
-    keep[0] = False
-    edges = keep[parts]
+    keep[part[contrast[at] >= threshold]] = True  # a part with a seed
+    keep &= np.bincount(part, minlength=n + 1) >= min_length
+    edges = np.zeros((h, w), dtype=bool)
+    edges[at] = keep[part]
+    del at, part
     # a diagonal step leaves two pixels that touch at a corner only; add the one of the
     # two pixels beside the step that has the higher contrast (the edge passes nearer to
     # it), so that the line separates 4-connected pixels (cells, tiles)
