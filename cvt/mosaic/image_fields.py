@@ -46,6 +46,19 @@ elements, not of a one-pixel line), divided by its 99th percentile and clipped t
 densest to the sparsest cell area (default 3: elements on detail about 1.7 times
 smaller across than on flat areas).  A picture without detail gives a uniform density.
 
+Posters: the fields on a coarse grid
+------------------------------------
+Both fields are smoothed over a spacing or more, so a mosaic of more tiles than
+``cvt.mosaic.cutting.EXACT_TILES`` (whose spacing is a few pixels on a poster) takes
+them from a grid of ``step`` = floor(spacing / 4) pixels (:func:`field_step`): the
+derivative is taken on every pixel as above, its products are averaged over step x step
+blocks (the tensor's window, less the block's own spread, applied on the blocks), the
+edges, density and field are made on the blocks as on the pixels (the smoothing in
+pixels the same) and interpolated bilinearly to every pixel (the field as its unit
+vectors of ``m·θ``).  Measured against the fields made on every pixel: density within
+0.03 (of 1), direction within 2° at half the pixels (tests/test_image_fields_coarse.py).
+Up to ``EXACT_TILES`` tiles the fields are those of every pixel, bit for bit.
+
 Strong edges: walls for the mosaic's tiles
 ------------------------------------------
 :func:`strong_edges` marks the picture's strong edges as thin (one pixel wide,
@@ -616,7 +629,9 @@ def _coarse_fields(chans, spacing: float, period: float, contrast: float, sigma:
             out[lo // step : -(-hi // step)] = _block_sums(part, step)
 
     # the derivative on every pixel, its products averaged over the blocks
-    tensor_by_rows(lambda a, b: chans[a:b], h, use, sigma=sigma, window=0.0, rows=step * (SLAB_ROWS // step))
+    tensor_by_rows(
+        lambda a, b: chans[a:b], h, use, sigma=sigma, window=0.0, rows=step * max(1, SLAB_ROWS // step)
+    )
     rows, cols = np.diff(np.append(np.arange(0, h, step), h)), np.diff(np.append(np.arange(0, w, step), w))
     counts = np.outer(rows, cols).astype(np.float64)
     # the window in pixels less the block's own spread (a box of step pixels has
