@@ -464,9 +464,25 @@ def field_step(height: int, width: int, spacing: float) -> int:
 
 def _block_sums(band: np.ndarray, step: int) -> np.ndarray:
     """(ceil(n / step), ceil(W / step)) sums of ``band``'s step x step blocks (the last
-    row and column of blocks may be cut short by the band's edge)."""
-    rows = np.add.reduceat(band, np.arange(0, band.shape[0], step), axis=0)
-    return np.add.reduceat(rows, np.arange(0, band.shape[1], step), axis=1)
+    row and column of blocks may be cut short by the band's edge).  Whole rows and
+    strided columns are added a block's offset at a time: several times faster than
+    ``np.add.reduceat`` on small blocks."""
+    n, w = band.shape
+    nf, wf = n - n % step, w - w % step
+    rows = np.empty((-(-n // step), w))
+    whole = band[:nf].reshape(nf // step, step, w)
+    np.copyto(rows[: nf // step], whole[:, 0])
+    for k in range(1, step):
+        rows[: nf // step] += whole[:, k]
+    if nf < n:
+        rows[-1] = band[nf:].sum(axis=0)
+    out = np.empty((rows.shape[0], -(-w // step)))
+    np.copyto(out[:, : wf // step], rows[:, 0:wf:step])
+    for k in range(1, step):
+        out[:, : wf // step] += rows[:, k:wf:step]
+    if wf < w:
+        out[:, -1] = rows[:, wf:].sum(axis=1)
+    return out
 
 
 def _block_centres(n: int, step: int) -> np.ndarray:
@@ -714,7 +730,7 @@ def _contrast_rows(picture, sigma: float, srgb: bool, contrast, across=None, sec
             across[lo:hi] = along
         if sector is not None:
             along /= 0.25 * math.pi
-            sector[lo:hi] = np.round(along, out=along).astype(np.int8) % 4  # -2 .. 2 before
+            sector[lo:hi] = np.round(along, out=along).astype(np.int8) & 3  # -2 .. 2 before: mod 4
 
     source = (lambda a, b: srgb_to_lab(picture[a:b])) if srgb else (lambda a, b: picture[a:b])
     tensor_by_rows(source, picture.shape[0], use, sigma=sigma, window=window)
