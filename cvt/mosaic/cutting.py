@@ -49,7 +49,7 @@ import shapely
 
 from ..errors import InputError
 from ..evaluate import straddling_tiles
-from ..placement.compaction import wall_segments
+from ..placement.compaction import _wall_links, wall_segments
 from ..threads import elementwise
 
 CUT_ENLARGE = 1.8  # a cut tile lies within its tile grown by this factor about its centre
@@ -77,14 +77,17 @@ def wall_lines(walls: np.ndarray):
     """
     walls = np.asarray(walls, dtype=bool)
     h, w = walls.shape
-    if not walls.any():
+    i, j, right, down, left, up = _wall_links(walls)
+    if len(i) == 0:
         return np.zeros(0, dtype=object)
-    right = walls[:, :-1] & walls[:, 1:]
-    down = walls[:-1, :] & walls[1:, :]
-    row, col, length = _runs(right)
+    # runs along rows: row-major, a run's pixels come one after another
+    row, col, length = _runs(i, j, right, left)
     x0, y0 = col + 0.5, row + 0.5
     pieces = [np.stack([x0, y0, x0 + length, y0], axis=1)]
-    col, row, length = _runs(down.T)
+    # runs along columns: the pixels taken column by column
+    by_column = np.lexsort((i, j))
+    # column-major, a pixel's lower neighbour comes next
+    col, row, length = _runs(j[by_column], i[by_column], down[by_column], up[by_column])
     x0, y0 = col + 0.5, row + 0.5
     pieces.append(np.stack([x0, y0, x0, y0 + length], axis=1))
     # a wall that meets the picture's border is carried on to it: a cut tile, unlike a
@@ -96,24 +99,22 @@ def wall_lines(walls: np.ndarray):
         y = np.flatnonzero(walls[:, c]) + 0.5
         pieces.append(np.stack([np.full_like(y, c + 0.5), y, np.full_like(y, to_x), y], axis=1))
     segs = np.concatenate(pieces)
-    lone = walls.copy()
-    lone[:, :-1] &= ~right
-    lone[:, 1:] &= ~right
-    lone[:-1, :] &= ~down
-    lone[1:, :] &= ~down
-    i, j = np.nonzero(lone)
-    return np.concatenate([shapely.linestrings(segs.reshape(-1, 2, 2)), shapely.points(j + 0.5, i + 0.5)])
+    lone = ~(right | down | left | up)
+    return np.concatenate(
+        [shapely.linestrings(segs.reshape(-1, 2, 2)), shapely.points(j[lone] + 0.5, i[lone] + 0.5)]
+    )
 
 
-def _runs(mask: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """The runs of True along each row of ``mask``: row, first column, length."""
-    first = mask.copy()
-    first[:, 1:] &= ~mask[:, :-1]
-    last = mask.copy()
-    last[:, :-1] &= ~mask[:, 1:]
-    row, start = np.nonzero(first)
-    _, end = np.nonzero(last)  # row-major: the ends pair with the starts
-    return row, start, end - start + 1
+def _runs(line, pos, on, before) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """The runs of links between wall pixels along lines (rows, or columns): ``line``,
+    ``pos`` the line and place of each pixel, taken line by line in order of place;
+    ``on``: each pixel is linked to the next one, ``before``: the one before to it.
+    Returns each run's line, first place and length (links), in the pixels' order."""
+    start = np.flatnonzero(on & ~before)
+    last = on.copy()
+    last[:-1] &= ~on[1:]  # a run's last link: the next pixel has none onward
+    end = np.flatnonzero(last)
+    return line[start], pos[start], end - start + 1
 
 
 def _merged_lines(walls: np.ndarray):
