@@ -117,6 +117,68 @@ def test_thin_walls_keep_elements_off_their_centre_line_and_cover_more():
     assert evaluate(polys, whole).coverage > evaluate(thick_polys, whole).coverage
 
 
+def ring_walls(size: int) -> np.ndarray:
+    """A 4-connected circle (a curved wall) and a shallow slanted staircase, as an edge
+    map's walls are after thinning."""
+    yy, xx = np.mgrid[0:size, 0:size] + 0.5
+    r = np.hypot(xx - 0.45 * size, yy - 0.5 * size)
+    inside = r < 0.3 * size
+    walls = inside & ~(
+        np.roll(inside, 1, 0) & np.roll(inside, -1, 0) & np.roll(inside, 1, 1) & np.roll(inside, -1, 1)
+    )
+    x = np.arange(size)
+    walls[np.minimum((0.35 * x + 2).astype(int), size - 1), x] = True
+    walls[np.minimum((0.35 * x + 2).astype(int) + 1, size - 1)[:-1], x[1:]] = True  # 4-connected
+    return walls
+
+
+def test_wall_chords_hold_every_step_they_stand_for():
+    """Each step of the walls' centre lines is either a piece of its own or lies within
+    its width of a chord (its two ends do: the widened chord is convex), and no chord
+    comes within its width and G/2 + room of a centre."""
+    from compact_distributions.cvt.placement import compaction as cm
+
+    walls = ring_walls(120)
+    steps = cm.wall_segments(walls)
+    centres = np.array([[54.0, 60.0], [30.0, 12.5], [90.0, 60.0]])
+    pieces, width = cm._wall_chords(walls, centres, 0.3)
+    chords = pieces[width > 0]
+    assert 0 < len(pieces) < 0.6 * len(steps) and len(chords) > 20
+    line = shapely.linestrings(chords.reshape(-1, 2, 2))
+    plain = {tuple(p) for p in pieces[width == 0]}
+    for step in steps:
+        if tuple(step) in plain:
+            continue
+        ends = shapely.points(step.reshape(2, 2))
+        near = shapely.distance(ends[:, None], line[None, :]) <= width[width > 0][None, :]
+        assert near.all(axis=0).any()
+    room = shapely.distance(shapely.points(centres)[:, None], line[None, :]) - width[width > 0]
+    assert room.min() > 0.3
+
+
+def test_compaction_keeps_wide_chords_clear_of_the_walls(monkeypatch):
+    """Above _WALL_CHORD_ELEMENTS elements compaction keeps clear of chords (here forced
+    on a small problem): no element nearer than G/2 to a wall's centre line, none
+    overlapping, none dropped, and coverage close to the steps' own."""
+    from compact_distributions.cvt.placement import compaction as cm
+
+    walls = ring_walls(SIZE)
+    gap = 0.6
+    problem = Problem(Grid(SIZE, SIZE, ~walls), 60, make_metric("linf"), seed=3, walls=walls)
+    steps = run_ours_compact(problem, NumpyBackend(), iterations=6, gap=gap)
+    monkeypatch.setattr(cm, "_WALL_CHORD_ELEMENTS", 0)
+    chords = run_ours_compact(problem, NumpyBackend(), iterations=6, gap=gap)
+    centre_line = shapely.union_all(shapely.linestrings(cm.wall_segments(walls).reshape(-1, 2, 2)))
+    polys = [p for p in chords.elements if p is not None]
+    assert len(polys) == sum(p is not None for p in steps.elements)
+    assert min(p.distance(centre_line) for p in polys) >= gap / 2 - 1e-6
+    whole = Grid(SIZE, SIZE)
+    ev = evaluate(polys, whole)
+    assert ev.overlap == 0.0
+    assert ev.coverage > evaluate(steps.elements, whole).coverage - 0.02
+    assert chords.extra["compaction_dropped"] == 0
+
+
 def test_walls_must_lie_outside_the_region():
     walls = staircase_walls(16)
     with pytest.raises(InputError, match="outside the region"):
