@@ -485,3 +485,33 @@ def test_calls_nested_on_the_pool_run_in_their_own_thread(monkeypatch):
     np.testing.assert_allclose(out["elementwise"], 2.0)  # a diamond of diagonal 2
     assert out["side"] == [1, pytest.approx(2.0 * 8 * threads.PARALLEL_MIN)]
     assert not threads._nested()  # the flag is only ever set on the pool's threads
+
+
+def test_tiles_near_walls_are_those_shapely_finds():
+    """The straight cut's choice of tiles near a wall (most settled by the nearest wall
+    pixel centre, the rest looked up) is the set of tiles that shapely finds within the
+    reach of the walls' centre lines, at every reach."""
+    from compact_distributions.cvt.mosaic import cutting
+
+    rng = np.random.default_rng(4)
+    walls = rng.random((90, 120)) < 0.002
+    walls[40, 10:100] = True
+    walls[np.arange(20, 80), np.arange(20, 80)] = True
+    walls[np.arange(20, 79), np.arange(21, 80)] = True
+    xy = rng.uniform(0, 120, (300, 2)) * [1, 0.75]
+    box = shapely.box(-2, -1.5, 2, 1.5)
+    turns = rng.uniform(0, 90, len(xy))
+    tiles = np.array(
+        [
+            shapely.affinity.translate(shapely.affinity.rotate(box, a), x, y)
+            for (x, y), a in zip(xy, turns, strict=True)
+        ],
+        dtype=object,
+    )
+    pieces = cutting.wall_lines(walls)
+    lines = shapely.union_all(pieces)
+    for reach in (0.0, 0.7, 3.0, 8.0):
+        truth = np.flatnonzero(shapely.distance(tiles, lines) <= reach)
+        got = cutting._near_walls(pieces, tiles, reach, walls)
+        assert np.array_equal(got, truth), reach
+        assert 0 < len(got) < len(tiles)
