@@ -145,10 +145,12 @@ def test_straight_cut_tiles_are_convex_and_hold_their_tiles():
         assert after.buffer(1e-9).covers(before)
 
 
-@pytest.mark.parametrize("block,shuffle", [(None, False), (7, True), (40, False)])
-def test_geometric_median_minimises_the_mean_distance(monkeypatch, block, shuffle):
+@pytest.mark.parametrize(
+    "block,shuffle,single", [(None, False, False), (7, True, False), (40, False, False), (None, False, True)]
+)
+def test_geometric_median_minimises_the_mean_distance(monkeypatch, block, shuffle, single):
     """Against a numerical optimum, whatever the blocks the groups are taken in and the
-    order of the points; a group without points keeps its start."""
+    order of the points, and with float32 steps; a group without points keeps its start."""
     if block is not None:
         monkeypatch.setattr(mosaic, "MEDIAN_BLOCK", block)
     rng = np.random.default_rng(4)
@@ -161,7 +163,8 @@ def test_geometric_median_minimises_the_mean_distance(monkeypatch, block, shuffl
     means = np.stack(
         [points[groups == g].mean(axis=0) if sizes[g] else np.full(3, 7.0) for g in range(len(sizes))]
     )
-    got = geometric_median(points, groups, means)
+    got = geometric_median(points, groups, means, single=single)
+    assert got.dtype == np.float64
     np.testing.assert_array_equal(got[4], means[4])
     for g in np.flatnonzero(sizes):
         pts = points[groups == g]
@@ -173,7 +176,8 @@ def test_geometric_median_minimises_the_mean_distance(monkeypatch, block, shuffl
             cost, means[g], method="Nelder-Mead", options={"xatol": 1e-8, "fatol": 1e-10, "maxiter": 20000}
         ).fun
         assert cost(got[g]) <= best + 1e-3
-        assert cost(got[g]) <= cost(means[g]) + 1e-12  # never worse than the mean
+        # never worse than the mean (float32 steps: but for the rounding of values ~50)
+        assert cost(got[g]) <= cost(means[g]) + (1e-4 if single else 1e-12)
 
 
 @pytest.mark.parametrize("block", [None, 7])
