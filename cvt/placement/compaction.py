@@ -209,8 +209,8 @@ between squares, squares that fit no line and squares with a centre within G/2 +
 ``_CHORD_ROOM`` of the chord stay steps (no element is dropped for a chord).  The last
 round is against the steps themselves, so that the elements close the room the widths
 left.  On a 64 000-tile mosaic at 4096 px (coffee) the pieces' rows fell from 0.63 M
-to 0.27 M a round, compaction's CPU time to 0.76x (0.73x on a 20 000-tile one at 2560
-px).  Measured on 20 000-tile mosaics at 2560 px (astronaut seeds 0-1, rocket):
+to 0.27 M in a round of chords, compaction's CPU time to 0.80x (0.75-0.76x on 20 000-tile
+ones at 2560 px: astronaut, rocket).  Measured on 20 000-tile mosaics at 2560 px (astronaut seeds 0-1, rocket):
 coverage +0.1 to +0.2 points, colour error +0.4 to +0.5 % (seeds alone move it by 0.45
 %); with chords in every round +0.3 to +0.4 points and +1.1 to +1.4 %.  Smaller sets
 keep the steps, and their results bit for bit.
