@@ -117,6 +117,84 @@ def test_thin_walls_keep_elements_off_their_centre_line_and_cover_more():
     assert evaluate(polys, whole).coverage > evaluate(thick_polys, whole).coverage
 
 
+def ring_walls(size: int) -> np.ndarray:
+    """A 4-connected circle (a curved wall) and a shallow slanted staircase, as an edge
+    map's walls are after thinning."""
+    yy, xx = np.mgrid[0:size, 0:size] + 0.5
+    r = np.hypot(xx - 0.45 * size, yy - 0.5 * size)
+    inside = r < 0.3 * size
+    walls = inside & ~(
+        np.roll(inside, 1, 0) & np.roll(inside, -1, 0) & np.roll(inside, 1, 1) & np.roll(inside, -1, 1)
+    )
+    x = np.arange(size)
+    walls[np.minimum((0.35 * x + 2).astype(int), size - 1), x] = True
+    walls[np.minimum((0.35 * x + 2).astype(int) + 1, size - 1)[:-1], x[1:]] = True  # 4-connected
+    return walls
+
+
+def test_wall_chords_hold_every_step_they_stand_for():
+    """Each step of the walls' centre lines is either a piece of its own or lies within
+    its width of a chord (its two ends do: the widened chord is convex), and no chord
+    comes within its width and G/2 + room of a centre."""
+    from compact_distributions.cvt.placement import compaction as cm
+
+    walls = ring_walls(120)
+    steps = cm.wall_segments(walls)
+    centres = np.array([[54.0, 60.0], [30.0, 12.5], [90.0, 60.0]])
+    pieces, width = cm._wall_chords(walls, centres, 0.3)
+    chords = pieces[width > 0]
+    assert 0 < len(pieces) < 0.6 * len(steps) and len(chords) > 20
+    line = shapely.linestrings(chords.reshape(-1, 2, 2))
+    plain = {tuple(p) for p in pieces[width == 0]}
+    for step in steps:
+        if tuple(step) in plain:
+            continue
+        ends = shapely.points(step.reshape(2, 2))
+        near = shapely.distance(ends[:, None], line[None, :]) <= width[width > 0][None, :]
+        assert near.all(axis=0).any()
+    room = shapely.distance(shapely.points(centres)[:, None], line[None, :]) - width[width > 0]
+    assert room.min() > 0.3
+
+
+def test_compaction_keeps_wide_chords_clear_of_the_walls(monkeypatch):
+    """Above _WALL_CHORD_ELEMENTS elements compaction keeps clear of chords (here forced
+    on a small set) and the last round of the steps: after every round no element is
+    nearer than G/2 to a wall's centre line and none overlap; none is dropped, some come
+    up to the walls, and they cover about what they cover with the steps alone."""
+    from compact_distributions.cvt.placement import compaction as cm
+    from compact_distributions.cvt.shapes import element_polygons
+
+    walls = ring_walls(SIZE)
+    gap = 0.6
+    yy, xx = np.mgrid[3:SIZE:7, 3:SIZE:7].reshape(2, -1) + 0.5
+    centres = np.stack([xx, yy], axis=1)
+    clear = np.array(
+        [
+            not walls[max(0, int(y) - 3) : int(y) + 4, max(0, int(x) - 3) : int(x) + 4].any()
+            for x, y in centres
+        ]
+    )
+    centres = centres[clear]
+    angles = np.random.default_rng(1).uniform(0, np.pi / 2, len(centres))
+    sizes = np.full(len(centres), 1.5)
+    centre_line = shapely.union_all(shapely.linestrings(cm.wall_segments(walls).reshape(-1, 2, 2)))
+    seen = []
+
+    def check(k, c, r):
+        polys = element_polygons("square", 1.0, c, angles, r)
+        seen.append(min(shapely.distance(np.array(polys, dtype=object), centre_line)))
+        assert seen[-1] >= gap / 2 - 1e-6
+        assert evaluate(polys, Grid(SIZE, SIZE)).overlap == 0.0
+
+    args = (centres, angles, sizes, "square", 1.0, Grid(SIZE, SIZE, ~walls))
+    plain = cm.compact(*args, walls=walls, gap=gap, rounds=8)
+    monkeypatch.setattr(cm, "_WALL_CHORD_ELEMENTS", 0)
+    chords = cm.compact(*args, walls=walls, gap=gap, rounds=8, on_round=check)
+    assert len(seen) == 8 and chords.dropped == 0 and (chords.sizes > 0).all()
+    assert seen[-1] < gap / 2 + 0.05  # some element came up to a wall
+    assert np.sum(chords.sizes**2) > 0.97 * np.sum(plain.sizes**2)
+
+
 def test_walls_must_lie_outside_the_region():
     walls = staircase_walls(16)
     with pytest.raises(InputError, match="outside the region"):
