@@ -133,35 +133,4 @@ def side_by_side(*calls):
     return [first, *done]
 
 
-def one_ahead(items):
-    """``items`` (an iterable) read one item ahead on the process's pool: the next item
-    is made while the caller works on this one (a picture's next band drawn while this
-    one is compressed; PIL's resampling, zlib and NumPy let go of the GIL).
-
-    Parameters
-    ----------
-    items : iterable
-        Its items may not depend on what the caller does with earlier ones.
-
-    Yields
-    ------
-    object
-        The items of ``items``, in order; an exception in making one is raised here.
-    """
-    source = iter(items)
-    if usable_cores() < 2 or _nested():
-        yield from source
-        return
-    pool = _shared_pool(usable_cores())
-    done = object()
-    make = _on_the_pool(lambda: next(source, done))
-    pending = pool.submit(make)
-    try:
-        while (item := pending.result()) is not done:
-            pending = pool.submit(make)
-            yield item
-    finally:
-        pending.cancel() or pending.exception()  # never two threads in the source at once
-
-
-__all__ = ["PARALLEL_MIN", "usable_cores", "elementwise", "side_by_side", "one_ahead"]
+__all__ = ["PARALLEL_MIN", "usable_cores", "elementwise", "side_by_side"]

@@ -24,7 +24,6 @@ import shapely
 from ..errors import InputError
 from ..evaluate import exterior_rings
 from ..pixels import index_ranges, pixel_index
-from ..threads import one_ahead
 from .numbers import ring_texts
 
 DARK = "#202020"  # outside the region, and joints between elements
@@ -446,8 +445,7 @@ def draw_elements(
             yield top // ss, _reduce(band, ss, (small[0], n_rows // ss), box)
 
     if as_rows:
-        # the next band is drawn while the reader compresses this one
-        return RowStream(small, one_ahead((first, np.asarray(band)) for first, band in bands()))
+        return RowStream(small, ((first, np.asarray(band)) for first, band in bands()))
     out = Image.new("RGB", small)
     for first, band in bands():
         out.paste(band, (0, first))
