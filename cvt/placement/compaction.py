@@ -785,11 +785,12 @@ def _wall_chords(walls: np.ndarray, centres: np.ndarray, room: float) -> tuple[n
     fits = np.flatnonzero((count >= 3) & (wide <= _CHORD_WIDTH))
     cx = (fits % per_row) * _CHORD_BLOCK + mx[fits]
     cy = (fits // per_row) * _CHORD_BLOCK + my[fits]
+    # each fitting square's chord (x0, y0, x1, y1): from its least to its greatest t
+    ends = np.stack(
+        [cx + lo[fits] * ux[fits], cy + lo[fits] * uy[fits], cx + hi[fits] * ux[fits], cy + hi[fits] * uy[fits]],
+        axis=1,
+    ).reshape(-1, 4)
     if len(centres) and len(fits):
-        ends = np.stack([cx + lo[fits] * ux[fits], cy + lo[fits] * uy[fits]], axis=1)
-        ends = np.concatenate(
-            [ends, np.stack([cx + hi[fits] * ux[fits], cy + hi[fits] * uy[fits]], axis=1)], axis=1
-        )
         mid = 0.5 * (ends[:, :2] + ends[:, 2:])
         reach = 0.5 * (hi[fits] - lo[fits]) + wide[fits] + room
         found = cKDTree(mid).sparse_distance_matrix(
@@ -800,7 +801,7 @@ def _wall_chords(walls: np.ndarray, centres: np.ndarray, room: float) -> tuple[n
         close = np.hypot(kx - centres[e, 0], ky - centres[e, 1]) <= wide[fits][k] + room
         clear = np.ones(len(fits), dtype=bool)
         clear[k[close]] = False
-        fits, cx, cy = fits[clear], cx[clear], cy[clear]
+        fits, ends = fits[clear], ends[clear]
     # a step stays unless both its ends lie in a square that has a chord
     chorded = np.zeros(len(count), dtype=bool)
     chorded[fits] = True
@@ -808,15 +809,7 @@ def _wall_chords(walls: np.ndarray, centres: np.ndarray, room: float) -> tuple[n
     last = (steps[:, 3] // _CHORD_BLOCK) * per_row + steps[:, 2] // _CHORD_BLOCK
     first, last = first.astype(np.int64), last.astype(np.int64)
     stays = (first != last) | ~chorded[first]
-    chords = np.stack(
-        [
-            cx + lo[fits] * ux[fits],
-            cy + lo[fits] * uy[fits],
-            cx + hi[fits] * ux[fits],
-            cy + hi[fits] * uy[fits],
-        ],
-        axis=1,
-    )
+    chords = ends
     # a hair more than the farthest centre: the chord's ends and the distances are rounded
     width = np.concatenate([wide[fits] + 1e-9, np.zeros(int(stays.sum()))])
     return np.concatenate([chords, steps[stays]]), width
