@@ -787,7 +787,12 @@ def _wall_chords(walls: np.ndarray, centres: np.ndarray, room: float) -> tuple[n
     cy = (fits // per_row) * _CHORD_BLOCK + my[fits]
     # each fitting square's chord (x0, y0, x1, y1): from its least to its greatest t
     ends = np.stack(
-        [cx + lo[fits] * ux[fits], cy + lo[fits] * uy[fits], cx + hi[fits] * ux[fits], cy + hi[fits] * uy[fits]],
+        [
+            cx + lo[fits] * ux[fits],
+            cy + lo[fits] * uy[fits],
+            cx + hi[fits] * ux[fits],
+            cy + hi[fits] * uy[fits],
+        ],
         axis=1,
     ).reshape(-1, 4)
     if len(centres) and len(fits):
