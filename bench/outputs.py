@@ -681,6 +681,44 @@ def command_line(argv=None) -> str:
     return "cvtbench " + shlex.join(argv)
 
 
+class Beside:
+    """Work run in one thread beside the command's own (writing the pictures: their
+    gathers, conversions and zlib release the GIL), or at once where the process has one
+    core.  ``wait()`` returns the seconds spent waiting for it and re-raises its error; leaving
+    the block waits too, so no file is written after its folder is committed."""
+
+    def __init__(self) -> None:
+        from compact_distributions.cvt.threads import usable_cores
+
+        self._pool = None
+        if usable_cores() > 1:
+            from concurrent.futures import ThreadPoolExecutor
+
+            self._pool = ThreadPoolExecutor(max_workers=1, thread_name_prefix="cvtbench-writer")
+        self._jobs: list = []
+
+    def __enter__(self) -> Beside:
+        return self
+
+    def run(self, fn, *args) -> None:
+        """Run ``fn(*args)`` beside (in order with the other jobs), or now."""
+        if self._pool is None:
+            fn(*args)
+        else:
+            self._jobs.append(self._pool.submit(fn, *args))
+
+    def wait(self) -> float:
+        t0 = time.perf_counter()
+        jobs, self._jobs = self._jobs, []
+        for job in jobs:
+            job.result()
+        return time.perf_counter() - t0
+
+    def __exit__(self, *exc) -> None:
+        if self._pool is not None:
+            self._pool.shutdown(wait=True)
+
+
 __all__ = [
     "PACKAGES",
     "versions",
@@ -708,4 +746,5 @@ __all__ = [
     "png_chunks",
     "write_png",
     "command_line",
+    "Beside",
 ]

@@ -12,6 +12,7 @@ from __future__ import annotations
 
 import json
 import time
+from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
@@ -45,12 +46,26 @@ def stages_of(dist) -> dict:
     return stages
 
 
+@dataclass(frozen=True)
+class RanOn:
+    """What result.json records of the backend that ran a method, taken while it was
+    open: a command may then close it (and free its buffers) before writing."""
+
+    variant: str
+    device: str
+
+    @classmethod
+    def of(cls, backend) -> RanOn:
+        """The record of an open backend."""
+        return cls(backend.variant, backend.device())
+
+
 def build_result(
     kind: str,
     problem,
     dist,
     evaluation,
-    backend,
+    ran_on: RanOn,
     *,
     element: str,
     gap: float,
@@ -62,7 +77,8 @@ def build_result(
     **fields,
 ) -> dict:
     """The result.json record of one run: the problem, the method's Distribution, the
-    evaluation (coverage, overlap, ...) of its elements, the backend that ran it, plus
+    evaluation (coverage, overlap, ...) of its elements, the backend that ran it
+    (``ran_on``), plus
     the command's own ``fields`` (a mosaic's image, colours, ...); ``method_options`` are
     the method's own options as the user set them; ``stage_seconds`` the command's own
     stages (evaluation, writing, ...), added to the method's (:func:`stages_of`).  The
@@ -85,8 +101,8 @@ def build_result(
         "kind": kind,
         "method": dist.method,
         "method_options": dict(method_options or {}),
-        "backend": backend.variant,
-        "device": backend.device(),
+        "backend": ran_on.variant,
+        "device": ran_on.device,
         "metric": problem.metric.name,
         "aspect": problem.metric.aspect,
         "size": [g.width, g.height],
@@ -131,4 +147,4 @@ def _finite(value: float) -> float | None:
     return float(value) if np.isfinite(value) else None
 
 
-__all__ = ["SCHEMA_FILE", "schema", "stages_of", "build_result"]
+__all__ = ["SCHEMA_FILE", "schema", "stages_of", "RanOn", "build_result"]

@@ -186,7 +186,7 @@ def _metric_name(text: str) -> str:
     return resolve_shapes(text, None, names=("--metric", "--element"))[0]
 
 
-def mosaic_result_json(args, m, backend, stage_seconds: dict | None = None) -> dict:
+def mosaic_result_json(args, m, ran_on, stage_seconds: dict | None = None) -> dict:
     """result.json of a mosaic (the schema of bench/results.py)."""
     import dataclasses
 
@@ -213,7 +213,7 @@ def mosaic_result_json(args, m, backend, stage_seconds: dict | None = None) -> d
         m.problem,
         m.to_distribution(),
         ev,
-        backend,
+        ran_on,
         element=m.element,
         gap=m.gap,
         command=command_line(getattr(args, "argv", None)),
@@ -247,7 +247,16 @@ def run(args) -> int:
     )
     from compact_distributions.cvt.resources import mosaic_estimate
 
-    from ..outputs import COMMAND_OUTPUTS, OutputFolder, write_json, write_lines, write_png, write_sites_csv
+    from ..outputs import (
+        COMMAND_OUTPUTS,
+        Beside,
+        OutputFolder,
+        write_json,
+        write_lines,
+        write_png,
+        write_sites_csv,
+    )
+    from ..results import RanOn
 
     # every option, the picture's header and the memory it all asks for are checked first
     t0 = time.perf_counter()
@@ -273,7 +282,7 @@ def run(args) -> int:
         compare=args.compare is not None,
     ).check(args.memory_limit, lower="use a smaller --size, fewer --elements or a smaller --png-scale")
     opts["size"] = (w, h)
-    with OutputFolder(args.out, "--out", COMMAND_OUTPUTS) as tmp:
+    with OutputFolder(args.out, "--out", COMMAND_OUTPUTS) as tmp, Beside() as beside:
         # make_mosaic resamples the picture to the raster (opts["size"]) itself: an
         # enlarged picture need not then be held while the method runs
         rgb, _ = picture_array(args.image, at_least=(w, h), memory_limit=args.memory_limit, name="IMAGE")
@@ -292,18 +301,23 @@ def run(args) -> int:
             if args.compare:
                 _say(args.quiet, f"comparison runs for --compare {args.compare}")
                 comparison = compare_figure(rgb, backend, dict(opts, progress=None), args.compare, m)
-            _say(
-                args.quiet,
-                f"{m.method}: placed {m.placed} of {len(m.sites)} tiles, coverage {m.coverage:.3f}, "
-                f"colour error {m.colour_error:.2f} ΔE*ab, straddling {100 * m.straddling:.1f} %; writing {args.out}",
-            )
-            # the other files first, so that result.json (written last) holds their writing time
-            t_write = time.perf_counter()
-            write_lines(tmp / "mosaic.svg", m.svg_lines())
-            write_png(tmp / "mosaic.png", m.render(scale=png_scale, as_rows=True))  # never whole
-            write_sites_csv(tmp / "sites.csv", m.sites, m.angles, m.scales)
-            result = mosaic_result_json(args, m, backend, {"writing": time.perf_counter() - t_write})
-            write_json(tmp / "result.json", result)
+            ran_on = RanOn.of(backend)
+        # the backend's buffers are let go before the files are written
+        _say(
+            args.quiet,
+            f"{m.method}: placed {m.placed} of {len(m.sites)} tiles, coverage {m.coverage:.3f}, "
+            f"colour error {m.colour_error:.2f} ΔE*ab, straddling {100 * m.straddling:.1f} %; writing {args.out}",
+        )
+        # the other files first, so that result.json (written last) holds their writing time
+        t_write = time.perf_counter()
+        # drawn and deflated beside the rest, in bands (never whole)
+        beside.run(write_png, tmp / "mosaic.png", m.render(scale=png_scale, as_rows=True))
+        write_lines(tmp / "mosaic.svg", m.svg_lines())
+        write_sites_csv(tmp / "sites.csv", m.sites, m.angles, m.scales)
+        result = mosaic_result_json(args, m, ran_on, {"writing": time.perf_counter() - t_write})
+        # what the picture still needed once the rest was done counts as writing
+        result["stage_seconds"]["writing"] += beside.wait()
+        write_json(tmp / "result.json", result)
         if comparison is not None:
             comparison.save(tmp / f"compare_{args.compare}.png")
     _say(

@@ -232,44 +232,6 @@ def _write_cells(path, labels, sites) -> None:
     write_png(path, CellRows(labels, len(sites), sites))
 
 
-class _Beside:
-    """Work run in one thread beside the command's own (the pictures: their gathers,
-    conversions and zlib release the GIL), or at once where the process has one core.
-    ``wait()`` returns the seconds spent waiting for it and re-raises its error; leaving
-    the block waits too, so no file is written after its folder is committed."""
-
-    def __init__(self) -> None:
-        from compact_distributions.cvt.threads import usable_cores
-
-        self._pool = None
-        if usable_cores() > 1:
-            from concurrent.futures import ThreadPoolExecutor
-
-            self._pool = ThreadPoolExecutor(max_workers=1, thread_name_prefix="cvtbench-writer")
-        self._jobs: list = []
-
-    def __enter__(self) -> _Beside:
-        return self
-
-    def run(self, fn, *args) -> None:
-        """Run ``fn(*args)`` beside (in order with the other jobs), or now."""
-        if self._pool is None:
-            fn(*args)
-        else:
-            self._jobs.append(self._pool.submit(fn, *args))
-
-    def wait(self) -> float:
-        t0 = time.perf_counter()
-        jobs, self._jobs = self._jobs, []
-        for job in jobs:
-            job.result()
-        return time.perf_counter() - t0
-
-    def __exit__(self, *exc) -> None:
-        if self._pool is not None:
-            self._pool.shutdown(wait=True)
-
-
 def add_parser(sub):
     p = sub.add_parser(
         "run",
@@ -303,6 +265,7 @@ def run(args) -> int:
 
     from ..outputs import (
         COMMAND_OUTPUTS,
+        Beside,
         OutputFolder,
         command_line,
         write_json,
@@ -310,7 +273,7 @@ def run(args) -> int:
         write_png,
         write_sites_csv,
     )
-    from ..results import build_result
+    from ..results import RanOn, build_result
 
     # every option is checked, and the memory it asks for, before anything is computed
     iterations = whole_number(args.iterations, "--iterations", minimum=0, maximum=MAX_ITERATIONS)
@@ -332,7 +295,7 @@ def run(args) -> int:
         method=method,
     ).check(args.memory_limit, lower="use a smaller --size or fewer --elements")
     load_init(opts)
-    with OutputFolder(args.out, "--out", COMMAND_OUTPUTS) as tmp, _Beside() as beside:
+    with OutputFolder(args.out, "--out", COMMAND_OUTPUTS) as tmp, Beside() as beside:
         problem = build_problem(opts)
         with options.open_backend(args) as backend:
             dist = method(
@@ -351,6 +314,7 @@ def run(args) -> int:
             ev = evaluate(dist.elements, problem.grid, region=region, labels=dist.labels)
             evaluation_seconds = time.perf_counter() - t0
             sources = {k: getattr(args, k) for k in ("init", "density", "field", "region")}
+            ran_on = RanOn.of(backend)
         g = problem.grid
         # the other files first, so that result.json (written last) holds their writing time
         t0 = time.perf_counter()
@@ -368,7 +332,7 @@ def run(args) -> int:
             problem,
             dist,
             ev,
-            backend,
+            ran_on,
             element=dist.extra.get("element", element),
             gap=gap,
             command=command_line(args.argv),
