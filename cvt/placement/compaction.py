@@ -250,7 +250,6 @@ from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass, field, replace
 
 import numpy as np
-from scipy.spatial import cKDTree
 
 from ..errors import InputError
 from ..problem import Grid
@@ -501,6 +500,14 @@ def _reach_classes(reach: np.ndarray) -> list[np.ndarray]:
     return np.split(order, cuts)
 
 
+def _kd_tree(points, **options):
+    """scipy's cKDTree of ``points``, scipy.spatial imported on first use: importing this
+    module (every command's method registry does) stays cheap."""
+    from scipy.spatial import cKDTree
+
+    return cKDTree(points, **options)
+
+
 def _point_trees(points, reach) -> list:
     """[(indices, kd-tree of their points, their largest reach)] per class of reach
     (:func:`_reach_classes`): built once per round, queried for the near pairs and for
@@ -508,7 +515,7 @@ def _point_trees(points, reach) -> list:
     balanced_tree, compact_nodes): faster to build and to query here, and the pairs found
     are the same (their order is set afterwards)."""
     return [
-        (cls, cKDTree(points[cls], balanced_tree=False, compact_nodes=False), reach[cls].max())
+        (cls, _kd_tree(points[cls], balanced_tree=False, compact_nodes=False), reach[cls].max())
         for cls in _reach_classes(reach)
     ]
 
@@ -546,7 +553,7 @@ def _segment_trees(segs: np.ndarray) -> list:
     for members in (np.flatnonzero(short), np.flatnonzero(~short)):
         if len(members):
             mid = 0.5 * (segs[members, :2] + segs[members, 2:])
-            out.append((members, cKDTree(mid), float(half[members].max())))
+            out.append((members, _kd_tree(mid), float(half[members].max())))
     return out
 
 
@@ -798,8 +805,8 @@ def _wall_chords(walls: np.ndarray, centres: np.ndarray, room: float) -> tuple[n
     if len(centres) and len(fits):
         mid = 0.5 * (ends[:, :2] + ends[:, 2:])
         reach = 0.5 * (hi[fits] - lo[fits]) + wide[fits] + room
-        found = cKDTree(mid).sparse_distance_matrix(
-            cKDTree(centres), float(reach.max()), output_type="ndarray"
+        found = _kd_tree(mid).sparse_distance_matrix(
+            _kd_tree(centres), float(reach.max()), output_type="ndarray"
         )
         k, e = found["i"], found["j"]
         kx, ky = _closest_on_segment(*ends[k].T, centres[e, 0], centres[e, 1])
