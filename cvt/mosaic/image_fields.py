@@ -86,6 +86,7 @@ from scipy import ndimage
 
 from ..errors import InputError
 from ..fields import DensityMap, DirectionField
+from ..pixels import pixel_index
 from ..shapes import DEFAULT_ELEMENT, check_shape, shape_record
 from ..validate import real_number
 
@@ -673,21 +674,72 @@ def _coarse_fields(chans, spacing: float, period: float, contrast: float, sigma:
     density = DensityMap(upsample(values, step, h, w))
     del values
 
+    m = 2.0 * math.pi / period
     if edges.any():
-        m = 2.0 * math.pi / period
         c, s = _turned_and_smoothed(_carried(edges, edge_angles), FIELD_SMOOTHING * spacing / step, m, True)
-        # the unit vectors interpolated, then their angle: no jump where angles wrap
-        angles = upsample(s, step, h, w)
-        del s
-        np.arctan2(angles, upsample(c, step, h, w), out=angles)
-        angles /= m
-    else:
-        angles = np.zeros((h, w))
+    else:  # no edge: angle 0 everywhere (atan2(0, 1))
+        c, s = np.ones(edges.shape), np.zeros(edges.shape)
     del edge_angles
     full_edges = np.repeat(np.repeat(edges, step, axis=0)[:h], step, axis=1)[:, :w]
-    return PictureFields(
-        density, DirectionField.from_angles(angles, spec="picture"), None, None, full_edges, None
-    )
+    return PictureFields(density, CoarseField(c, s, step, m, h, w), None, None, full_edges, None)
+
+
+class CoarseField(DirectionField):
+    """A direction field kept on a coarse grid, as the smoothed unit vectors of ``m·θ``.
+
+    The field is read only where sites stand (:meth:`angles_at`), so it is interpolated
+    there, not at every pixel: each read is, to the last bit, the value
+    :func:`upsample` of both vector components and their angle would give at that
+    pixel, without the two picture-sized arrays and the arctangent of every pixel.
+
+    Parameters
+    ----------
+    cos, sin : (ceil(height / step), ceil(width / step)) float64 arrays
+        The smoothed unit vectors' components on the blocks.
+    step : int
+        The blocks' size in pixels.
+    m : float
+        The symmetry: 2π / the element's side period.
+    height, width : int
+        The raster's size in pixels.
+    """
+
+    def __init__(self, cos: np.ndarray, sin: np.ndarray, step: int, m: float, height: int, width: int):
+        super().__init__("picture", None, width, height, arg=("picture", None))
+        self._cos, self._sin = cos, sin
+        self._step, self._m = int(step), float(m)
+
+    @property
+    def shape(self) -> tuple[int, int]:
+        return (self.height, self.width)
+
+    def angles_at(self, sites: np.ndarray) -> np.ndarray:
+        """The angle (radians) at the pixel that holds each of the (N, 2) ``sites``."""
+        i, j = pixel_index(sites, self.width, self.height)
+        return self._at(i, j)
+
+    def angles(self) -> np.ndarray:
+        """(H, W) float64: the angle at every pixel (as :meth:`angles_at` reads it)."""
+        s = upsample(self._sin, self._step, self.height, self.width)
+        np.arctan2(s, upsample(self._cos, self._step, self.height, self.width), out=s)
+        s /= self._m
+        return s
+
+    def _at(self, i: np.ndarray, j: np.ndarray) -> np.ndarray:
+        x0, x1, fx = (a[j] for a in _linear_weights(self.width, self._step))
+        y0, y1, fy = (a[i] for a in _linear_weights(self.height, self._step))
+        parts = []
+        for grid in (self._sin, self._cos):
+            # upsample's arithmetic, term for term: along the rows, then down the columns
+            top = grid[y0, x0]
+            top += (grid[y0, x1] - top) * fx
+            bottom = grid[y1, x0]
+            bottom += (grid[y1, x1] - bottom) * fx
+            top += (bottom - top) * fy
+            parts.append(top)
+        out = np.arctan2(parts[0], parts[1])
+        out /= self._m
+        return out
 
 
 # ----------------------------------------------------------------- strong edges
@@ -819,6 +871,7 @@ __all__ = [
     "FIELD_STEP_SPACINGS",
     "field_step",
     "upsample",
+    "CoarseField",
     "picture_fields",
     "step_response",
     "edge_contrast",
