@@ -66,17 +66,24 @@ def _lab_band(rgb: np.ndarray, lab: np.ndarray) -> None:
     np.power(lin, 2.4, out=lin)
     np.divide(rgb, 12.92, out=lin, where=rgb <= 0.04045)
     xyz = lin @ _RGB_TO_XYZ.T
-    xyz /= _WHITE
-    f = np.cbrt(xyz)
-    small = xyz <= _D**3
-    np.divide(xyz, 3 * _D * _D, out=f, where=small)
+    # from here on a plane per channel: an (n, 3) array broadcast against 3 numbers or
+    # written through a mask runs a loop of 3 per pixel (several times slower); the
+    # same operations on the same numbers, so the same result to the last bit
+    planes = np.empty((3, len(rgb)))
+    f = np.empty_like(planes)
+    for c in range(3):
+        x = planes[c]
+        np.divide(xyz[:, c], _WHITE[c], out=x)
+        np.cbrt(x, out=f[c])
+    small = planes <= _D**3
+    np.divide(planes, 3 * _D * _D, out=f, where=small)
     np.add(f, 4.0 / 29.0, out=f, where=small)
-    np.multiply(f[:, 1], 116.0, out=lab[:, 0])
+    np.multiply(f[1], 116.0, out=lab[:, 0])
     lab[:, 0] -= 16.0
-    np.subtract(f[:, 0], f[:, 1], out=lab[:, 1])
-    lab[:, 1] *= 500.0
-    np.subtract(f[:, 1], f[:, 2], out=lab[:, 2])
-    lab[:, 2] *= 200.0
+    np.subtract(f[0], f[1], out=planes[0])
+    np.multiply(planes[0], 500.0, out=lab[:, 1])
+    np.subtract(f[1], f[2], out=planes[1])
+    np.multiply(planes[1], 200.0, out=lab[:, 2])
 
 
 def lab_to_srgb(lab) -> np.ndarray:
