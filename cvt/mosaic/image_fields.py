@@ -319,19 +319,25 @@ def edge_orientation(
     del twice_xy
     along *= 0.5  # the gradient's line, mod π
     along += 0.5 * math.pi
+    return along, _largest_root(half_trace, diff, jxy, jyy if overwrite else None, exact)
+
+
+def _largest_root(half_trace, diff, jxy, out, exact: bool) -> np.ndarray:
+    """sqrt(λ₁) from half the trace and Jxx - Jyy (``diff``, used as scratch), into
+    ``out`` (None: a new array); ``exact`` as for :func:`edge_orientation`."""
     diff *= 0.5
     if exact:
-        lam1 = np.hypot(diff, jxy, out=jyy if overwrite else None)
+        lam1 = np.hypot(diff, jxy, out=out)
     else:
         np.multiply(diff, diff, out=diff)
-        lam1 = np.multiply(jxy, jxy, out=jyy if overwrite else None)
+        lam1 = np.multiply(jxy, jxy, out=out)
         lam1 += diff
         np.sqrt(lam1, out=lam1)
     del diff
     lam1 += half_trace
     del half_trace
     np.maximum(lam1, 0.0, out=lam1)
-    return along, np.sqrt(lam1, out=lam1)
+    return np.sqrt(lam1, out=lam1)
 
 
 # from this sigma (px) on, gaussian_smooth filters through the FFT: the direct filter's
@@ -782,26 +788,47 @@ def edge_contrast(lab: np.ndarray, sigma: float = 1.0, srgb: bool = False) -> tu
     return contrast, across
 
 
-def _contrast_rows(picture, sigma: float, srgb: bool, contrast, across=None, sector=None) -> None:
-    """:func:`edge_contrast` into ``contrast`` and ``across``, or the 45° sector of the
-    direction across (0..3, int8) into ``sector``, a band of rows at a time."""
+def _contrast_rows(picture, sigma: float, srgb: bool, contrast, across=None, found=None, least=0.0) -> None:
+    """:func:`edge_contrast` into ``contrast`` and ``across``, a band of rows at a time;
+    or, where ``found`` (a list) is given, the contrast only, and for the pixels whose
+    contrast is >= ``least`` a pair (their flat indices, the 45° sector of the direction
+    across there (0..3, int8)) appended to ``found`` for each band."""
     from .colour import srgb_to_lab
 
     window = max(1.0, 2.0 * sigma)
     step = step_response(sigma, window)
+    width = picture.shape[1]
 
     def use(lo, hi, jxx, jxy, jyy):
-        along, strength = edge_orientation(jxx, jxy, jyy, overwrite=True, exact=False)
-        np.divide(strength, step, out=contrast[lo:hi])
-        along -= 0.5 * math.pi
-        if across is not None:
+        if found is None:
+            along, strength = edge_orientation(jxx, jxy, jyy, overwrite=True, exact=False)
+            np.divide(strength, step, out=contrast[lo:hi])
+            along -= 0.5 * math.pi
             across[lo:hi] = along
-        if sector is not None:
-            along /= 0.25 * math.pi
-            sector[lo:hi] = np.round(along, out=along).astype(np.int8) & 3  # -2 .. 2 before: mod 4
+            return
+        # as edge_orientation(exact=False) gives it, keeping Jxx and Jyy for the sectors
+        half_trace = jxx + jyy
+        half_trace *= 0.5
+        strength = _largest_root(half_trace, np.subtract(jxx, jyy), jxy, None, False)
+        strength /= step
+        contrast[lo:hi] = strength
+        at = np.flatnonzero(strength >= least)
+        del strength
+        found.append((at + lo * width, _sectors(jxx.ravel()[at], jxy.ravel()[at], jyy.ravel()[at])))
 
     source = (lambda a, b: srgb_to_lab(picture[a:b])) if srgb else (lambda a, b: picture[a:b])
     tensor_by_rows(source, picture.shape[0], use, sigma=sigma, window=window)
+
+
+def _sectors(jxx, jxy, jyy) -> np.ndarray:
+    """The 45° sector (0..3, int8) of the direction across the edge, ``round(4 φ / π)
+    mod 4`` of φ = edge_orientation's angle - 90°, computed as it computes it."""
+    along = np.arctan2(np.multiply(jxy, 2.0), np.subtract(jxx, jyy))
+    along *= 0.5
+    along += 0.5 * math.pi
+    along -= 0.5 * math.pi
+    along /= 0.25 * math.pi
+    return np.round(along, out=along).astype(np.int8) & 3  # -2 .. 2 before: mod 4
 
 
 # neighbour offsets (row, column) along the direction across the edge, per 45° sector
@@ -824,16 +851,26 @@ def strong_edges(
     # padded copy of a picture-sized array
     pad = np.zeros((h + 2, w + 2))
     contrast = pad[1:-1, 1:-1]
-    sector = np.empty((h, w), dtype=np.int8)
-    _contrast_rows(lab, sigma, srgb, contrast, sector=sector)
-    ridge = np.zeros((h, w), dtype=bool)
-    for k, (di, dj) in enumerate(_ACROSS):
-        ahead = pad[1 + di : 1 + di + h, 1 + dj : 1 + dj + w]
-        behind = pad[1 - di : 1 - di + h, 1 - dj : 1 - dj + w]
-        # strictly above one neighbour, at least the other: one pixel of a flat ridge
-        ridge |= (sector == k) & (contrast > ahead) & (contrast >= behind)
-    weak = ridge & (contrast >= EDGE_HYSTERESIS * threshold)
-    del ridge
+    found: list = []
+    # the ridge is looked for only where the contrast reaches the hysteresis threshold
+    # (a few pixels in a hundred): the same pixels as on the whole picture
+    _contrast_rows(lab, sigma, srgb, contrast, found=found, least=EDGE_HYSTERESIS * threshold)
+    at = np.concatenate([f[0] for f in found]) if found else np.zeros(0, dtype=np.int64)
+    sector = np.concatenate([f[1] for f in found]) if found else np.zeros(0, dtype=np.int8)
+    del found
+    flat = pad.ravel()
+    i, j = np.divmod(at, w)
+    here = (i + 1) * (w + 2) + (j + 1)
+    del i, j
+    offset = np.array([di * (w + 2) + dj for di, dj in _ACROSS])[sector]
+    del sector
+    value = flat[here]
+    # strictly above one neighbour, at least the other: one pixel of a flat ridge
+    ridge = (value > flat[here + offset]) & (value >= flat[here - offset])
+    del here, offset, value
+    weak = np.zeros((h, w), dtype=bool)
+    weak.ravel()[at[ridge]] = True
+    del at, ridge
     parts, n = ndimage.label(weak, structure=np.ones((3, 3), dtype=bool))
     if n == 0:
         return weak
