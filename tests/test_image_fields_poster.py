@@ -37,3 +37,56 @@ def test_fast_strength_is_the_largest_eigenvalue_root():
     np.testing.assert_allclose(fast, np.sqrt(np.maximum(lam, 0.0)), rtol=1e-12, atol=1e-15)
     np.testing.assert_allclose(fast, exact, rtol=4e-16, atol=0)
     np.testing.assert_array_equal(angle_fast, angle)
+
+
+def _strong_edges_on_every_pixel(lab, threshold):
+    """strong_edges written out on whole arrays: the ridge across the edge at every pixel,
+    hysteresis, the diagonal steps filled (min_length 0)."""
+    from scipy import ndimage
+
+    contrast, across = F.edge_contrast(lab)
+    sector = np.round(across / (0.25 * math.pi)).astype(np.int64) % 4
+    h, w = contrast.shape
+    pad = np.pad(contrast, 1)
+    ridge = np.zeros((h, w), dtype=bool)
+    for k, (di, dj) in enumerate(((0, 1), (1, 1), (1, 0), (1, -1))):
+        ahead = pad[1 + di : 1 + di + h, 1 + dj : 1 + dj + w]
+        behind = pad[1 - di : 1 - di + h, 1 - dj : 1 - dj + w]
+        ridge |= (sector == k) & (contrast > ahead) & (contrast >= behind)
+    weak = ridge & (contrast >= F.EDGE_HYSTERESIS * threshold)
+    parts, n = ndimage.label(weak, structure=np.ones((3, 3), dtype=bool))
+    seeded = np.zeros(n + 1, dtype=bool)
+    seeded[parts[weak & (contrast >= threshold)]] = True
+    seeded[0] = False
+    edges = seeded[parts]
+    tl, tr, bl, br = (
+        edges[:-1, :-1].copy(),
+        edges[:-1, 1:].copy(),
+        edges[1:, :-1].copy(),
+        edges[1:, 1:].copy(),
+    )
+    down, up = tl & br & ~tr & ~bl, tr & bl & ~tl & ~br
+    edges[:-1, 1:] |= down & (contrast[:-1, 1:] >= contrast[1:, :-1])
+    edges[1:, :-1] |= down & (contrast[:-1, 1:] < contrast[1:, :-1])
+    edges[:-1, :-1] |= up & (contrast[:-1, :-1] >= contrast[1:, 1:])
+    edges[1:, 1:] |= up & (contrast[:-1, :-1] < contrast[1:, 1:])
+    return edges
+
+
+@pytest.mark.parametrize("seed", [0, 1, None])
+def test_strong_edges_are_the_ridge_found_on_every_pixel(seed, monkeypatch):
+    from scipy import ndimage
+
+    from compact_distributions.cvt.mosaic.colour import srgb_to_lab
+
+    monkeypatch.setattr(F, "SLAB_ROWS", 16)  # several bands, their candidates joined
+    if seed is None:  # flat: a pixel-aligned step's two sides tie, a flat ridge
+        rgb = np.full((96, 120, 3), 0.5)
+    else:
+        rgb = np.clip(ndimage.zoom(np.random.default_rng(seed).random((12, 15, 3)), (8, 8, 1), order=3), 0, 1)
+    rgb[30:60, 20:70] = [0.9, 0.2, 0.1]  # a block with straight and corner edges
+    lab = srgb_to_lab(rgb)
+    want = _strong_edges_on_every_pixel(lab, 11.0)
+    assert want.sum() > 100
+    np.testing.assert_array_equal(F.strong_edges(lab, 11.0), want)
+    np.testing.assert_array_equal(F.strong_edges(rgb, 11.0, srgb=True), want)

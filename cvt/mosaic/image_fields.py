@@ -55,7 +55,9 @@ derivative is taken on every pixel as above, its products are averaged over step
 blocks (the tensor's window, less the block's own spread, applied on the blocks), the
 edges, density and field are made on the blocks as on the pixels (the smoothing in
 pixels the same) and interpolated bilinearly to every pixel (the field as its unit
-vectors of ``m·θ``).  Measured against the fields made on every pixel: density within
+vectors of ``m·θ``, and only where it is read: :class:`CoarseField` keeps them on the
+blocks and interpolates at each site's pixel, the value the whole picture's
+interpolation would have there).  Measured against the fields made on every pixel: density within
 0.03 (of 1), direction within 2° at half the pixels (tests/test_image_fields_coarse.py).
 Up to ``EXACT_TILES`` tiles the fields are those of every pixel, bit for bit.
 
@@ -73,6 +75,8 @@ edge (non-maximum suppression, as Canny's detector) with contrast >= ``threshold
 edge; it is continued along the ridge while the contrast stays >= ``threshold / 2``
 (hysteresis: one edge does not fall apart where it weakens for a few pixels) and kept
 when it is at least ``min_length`` pixels long (shorter ones are detail below a tile).
+The ridge test and the direction across it are computed only where the contrast reaches
+``threshold / 2`` (a few pixels in a hundred), the only pixels they can keep.
 """
 
 from __future__ import annotations
