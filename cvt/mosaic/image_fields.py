@@ -814,10 +814,9 @@ def _contrast_rows(picture, sigma: float, srgb: bool, contrast, across=None, fou
         half_trace = jxx + jyy
         half_trace *= 0.5
         strength = _largest_root(half_trace, np.subtract(jxx, jyy), jxy, None, False)
-        strength /= step
-        contrast[lo:hi] = strength
-        at = np.flatnonzero(strength >= least)
+        band = np.divide(strength, step, out=contrast[lo:hi])
         del strength
+        at = np.flatnonzero(band >= least)
         found.append((at + lo * width, _sectors(jxx.ravel()[at], jxy.ravel()[at], jyy.ravel()[at])))
 
     source = (lambda a, b: srgb_to_lab(picture[a:b])) if srgb else (lambda a, b: picture[a:b])
