@@ -39,3 +39,11 @@ def test_known_colours():
     # sRGB red: L* 53.24, a* 80.09, b* 67.20 (published tables)
     np.testing.assert_allclose(lab[2], [53.24, 80.09, 67.20], atol=0.01)
     assert math.isclose(float(colour.lab_to_srgb(lab)[2, 0]), 1.0, abs_tol=1e-9)
+
+
+def test_planes_are_the_same_numbers_each_channel_contiguous():
+    rgb = np.random.default_rng(5).random((37, 41, 3)).astype(np.float32)
+    lab = colour.srgb_to_lab(rgb, planes=True)
+    assert lab.shape == rgb.shape and all(lab[..., k].flags.c_contiguous for k in range(3))
+    np.testing.assert_array_equal(lab, colour.srgb_to_lab(rgb))
+    np.testing.assert_array_equal(colour.srgb_to_lab(rgb[0, 0], planes=True), colour.srgb_to_lab(rgb[0, 0]))

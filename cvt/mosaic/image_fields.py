@@ -819,7 +819,8 @@ def _contrast_rows(picture, sigma: float, srgb: bool, contrast, across=None, fou
         at = np.flatnonzero(band >= least)
         found.append((at + lo * width, _sectors(jxx.ravel()[at], jxy.ravel()[at], jyy.ravel()[at])))
 
-    source = (lambda a, b: srgb_to_lab(picture[a:b])) if srgb else (lambda a, b: picture[a:b])
+    # in CIELAB a plane per channel: the tensor's filters read each channel without a copy
+    source = (lambda a, b: srgb_to_lab(picture[a:b], planes=True)) if srgb else (lambda a, b: picture[a:b])
     tensor_by_rows(source, picture.shape[0], use, sigma=sigma, window=window)
 
 
