@@ -143,10 +143,7 @@ def structure_tensor(picture: np.ndarray, sigma: float = 1.0, window: float = 2.
     averages the outer products (both in pixels).  x is the column axis, y the row axis
     (down), so orientations come out in the raster frame."""
     chans = as_channels(picture)
-    jxx = np.zeros(chans.shape[:2])
-    jxy = np.zeros_like(jxx)
-    jyy = np.zeros_like(jxx)
-    tmp = np.empty_like(jxx)
+    tmp = None
     for c in range(chans.shape[2]):
         # one channel's plane, copied (float32 widened, exactly): both passes down the
         # columns then read it contiguously, as views, where they would gather and
@@ -154,8 +151,18 @@ def structure_tensor(picture: np.ndarray, sigma: float = 1.0, window: float = 2.
         ch = np.ascontiguousarray(chans[..., c], dtype=np.float64)
         gx = gaussian_filter(ch, sigma, order=(0, 1))
         gy = gaussian_filter(ch, sigma, order=(1, 0))
+        if c == 0:
+            # the sums start from the first channel's products plus 0 (what adding them
+            # to zeros gives, -0 turned +0), in the derivatives' own memory
+            jxy = np.multiply(gx, gy)
+            jxx = np.multiply(gx, gx, out=gx)
+            jyy = np.multiply(gy, gy, out=gy)
+            for part in (jxx, jxy, jyy):
+                part += 0.0
+            continue
         # the products in place: one picture-sized temporary for all of them
-        jxy += np.multiply(gx, gy, out=tmp)
+        tmp = np.multiply(gx, gy, out=tmp)
+        jxy += tmp
         jxx += np.multiply(gx, gx, out=gx)
         jyy += np.multiply(gy, gy, out=gy)
         del gx, gy
