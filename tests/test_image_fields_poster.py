@@ -90,3 +90,19 @@ def test_strong_edges_are_the_ridge_found_on_every_pixel(seed, monkeypatch):
     assert want.sum() > 100
     np.testing.assert_array_equal(F.strong_edges(lab, 11.0), want)
     np.testing.assert_array_equal(F.strong_edges(rgb, 11.0, srgb=True), want)
+
+
+def test_resample_is_each_channel_resized_by_pillow_and_clipped():
+    from PIL import Image
+
+    from compact_distributions.cvt.mosaic.pipeline import resample
+
+    rgb = np.random.default_rng(6).random((31, 47, 3))
+    rgb[5:9, 5:9] = [1.0, 0.0, 1.0]  # Lanczos overshoots beside a hard step: clipped
+    got = resample(rgb, 430, 601)  # rows not a whole number of strips
+    for c in range(3):
+        img = Image.fromarray(rgb[..., c].astype(np.float32), mode="F")
+        want = np.clip(np.asarray(img.resize((430, 601), Image.Resampling.LANCZOS)), 0.0, 1.0)
+        np.testing.assert_array_equal(got[..., c], want)
+    assert got.dtype == np.float32 and got.min() == 0.0 and got.max() == 1.0
+    assert resample(rgb, 47, 31) is rgb
