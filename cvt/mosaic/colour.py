@@ -30,7 +30,7 @@ _D = 6.0 / 29.0
 LAB_BAND = 1 << 15
 
 
-def srgb_to_lab(rgb) -> np.ndarray:
+def srgb_to_lab(rgb, planes: bool = False) -> np.ndarray:
     """(..., 3) sRGB in 0..1 -> (..., 3) CIELAB (L* 0..100), each pixel's the same whatever
     else is converted with it (a block of a picture gives the picture's values).
 
@@ -38,6 +38,10 @@ def srgb_to_lab(rgb) -> np.ndarray:
     ----------
     rgb : (..., 3) array_like
         sRGB values, 0..1.
+    planes : bool
+        Hold each of L*, a*, b* in a plane of its own: the result is the same (..., 3)
+        array of the same numbers, a view of a (3, ...) array, so that ``lab[..., k]`` is
+        contiguous (a filter that reads one channel at a time then needs no copy of it).
 
     Returns
     -------
@@ -47,15 +51,17 @@ def srgb_to_lab(rgb) -> np.ndarray:
     if not np.issubdtype(rgb.dtype, np.floating):
         rgb = rgb.astype(np.float64)
     flat = rgb.reshape(-1, 3)
-    lab = np.empty(flat.shape)
+    lab = np.empty((3, len(flat))).T if planes else np.empty(flat.shape)
     for lo in range(0, len(flat), LAB_BAND):
         # float32 pictures are widened a band at a time (exact), never whole
         _lab_band(flat[lo : lo + LAB_BAND].astype(np.float64, copy=False), lab[lo : lo + LAB_BAND])
+    if planes:
+        return lab.T.reshape((3, *rgb.shape[:-1])).transpose((*range(1, rgb.ndim), 0))
     return lab.reshape(rgb.shape)
 
 
 def _lab_band(rgb: np.ndarray, lab: np.ndarray) -> None:
-    """:func:`srgb_to_lab` of (n, 3) ``rgb`` into ``lab``."""
+    """:func:`srgb_to_lab` of (n, 3) ``rgb`` into ``lab`` (n, 3), any strides."""
     if len(rgb) == 1:  # one row would take BLAS's vector product, a bit off the matrix one
         two = np.empty((2, 3))
         _lab_band(np.repeat(rgb, 2, axis=0), two)
@@ -66,17 +72,24 @@ def _lab_band(rgb: np.ndarray, lab: np.ndarray) -> None:
     np.power(lin, 2.4, out=lin)
     np.divide(rgb, 12.92, out=lin, where=rgb <= 0.04045)
     xyz = lin @ _RGB_TO_XYZ.T
-    xyz /= _WHITE
-    f = np.cbrt(xyz)
-    small = xyz <= _D**3
-    np.divide(xyz, 3 * _D * _D, out=f, where=small)
+    # from here on a plane per channel: an (n, 3) array broadcast against 3 numbers or
+    # written through a mask runs a loop of 3 per pixel (several times slower); the
+    # same operations on the same numbers, so the same result to the last bit
+    planes = np.empty((3, len(rgb)))
+    f = np.empty_like(planes)
+    for c in range(3):
+        x = planes[c]
+        np.divide(xyz[:, c], _WHITE[c], out=x)
+        np.cbrt(x, out=f[c])
+    small = planes <= _D**3
+    np.divide(planes, 3 * _D * _D, out=f, where=small)
     np.add(f, 4.0 / 29.0, out=f, where=small)
-    np.multiply(f[:, 1], 116.0, out=lab[:, 0])
+    np.multiply(f[1], 116.0, out=lab[:, 0])
     lab[:, 0] -= 16.0
-    np.subtract(f[:, 0], f[:, 1], out=lab[:, 1])
-    lab[:, 1] *= 500.0
-    np.subtract(f[:, 1], f[:, 2], out=lab[:, 2])
-    lab[:, 2] *= 200.0
+    np.subtract(f[0], f[1], out=planes[0])
+    np.multiply(planes[0], 500.0, out=lab[:, 1])
+    np.subtract(f[1], f[2], out=planes[1])
+    np.multiply(planes[1], 200.0, out=lab[:, 2])
 
 
 def lab_to_srgb(lab) -> np.ndarray:

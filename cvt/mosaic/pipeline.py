@@ -158,7 +158,14 @@ def resample(rgb: np.ndarray, width: int, height: int) -> np.ndarray:
     out = np.empty((height, width, 3), dtype=np.float32)
     for c in range(3):
         img = Image.fromarray(np.ascontiguousarray(rgb[..., c], dtype=np.float32), mode="F")
-        out[..., c] = np.asarray(img.resize((width, height), Image.Resampling.LANCZOS))
+        img = img.resize((width, height), Image.Resampling.LANCZOS)
+        # read out a strip of rows at a time: a whole channel's bytes would be two more
+        # copies of it (Pillow's encoder chunks and their join) on top of the image, and
+        # a poster's picture is made again at its peak of memory, after the method
+        for lo in range(0, height, 256):
+            hi = min(lo + 256, height)
+            out[lo:hi, :, c] = np.asarray(img.crop((0, lo, width, hi)))
+        del img
     return np.clip(out, 0.0, 1.0, out=out)
 
 
