@@ -86,7 +86,6 @@ from dataclasses import dataclass
 from functools import lru_cache
 
 import numpy as np
-from scipy import ndimage
 
 from ..errors import InputError
 from ..fields import DensityMap, DirectionField
@@ -121,6 +120,14 @@ class PictureFields:
     edges: np.ndarray  # bool: the pixels the direction field is carried from
     detail: np.ndarray | None  # smoothed gradient magnitude, 0..1 after normalisation
     # (edge_angles, strength and detail are None where picture_fields was asked for no details)
+
+
+def _ndimage():
+    """scipy.ndimage, imported on first use: importing this module (every command's
+    parser does, for the mosaic's defaults) stays cheap."""
+    from scipy import ndimage
+
+    return ndimage
 
 
 def as_channels(picture: np.ndarray) -> np.ndarray:
@@ -309,7 +316,7 @@ def gaussian_filter(image: np.ndarray, sigma: float, order: tuple[int, int] = (0
     if sigma <= 1e-15:  # ndimage leaves an axis with no width alone, whatever its order
         return image.astype(np.float64)
     down = _filter_columns(image, sigma, order[0])
-    return ndimage.gaussian_filter1d(down, sigma, axis=1, order=order[1], mode="nearest", output=down)
+    return _ndimage().gaussian_filter1d(down, sigma, axis=1, order=order[1], mode="nearest", output=down)
 
 
 def edge_orientation(
@@ -669,7 +676,7 @@ def _detail(trace: np.ndarray, sigma: float) -> np.ndarray:
 
 def _carried(edges: np.ndarray, edge_angles: np.ndarray) -> np.ndarray:
     """Each pixel's angle from ``edge_angles`` at its nearest ``edges`` pixel."""
-    ii, jj = ndimage.distance_transform_edt(~edges, return_distances=False, return_indices=True)
+    ii, jj = _ndimage().distance_transform_edt(~edges, return_distances=False, return_indices=True)
     return edge_angles[ii, jj]
 
 
@@ -882,7 +889,7 @@ def strong_edges(
     weak = np.zeros((h, w), dtype=bool)
     weak.ravel()[at[ridge]] = True
     del at, ridge
-    parts, n = ndimage.label(weak, structure=np.ones((3, 3), dtype=bool))
+    parts, n = _ndimage().label(weak, structure=np.ones((3, 3), dtype=bool))
     if n == 0:
         return weak
     # the weak pixels only (a few in a hundred), not whole picture-sized arrays
