@@ -45,16 +45,20 @@ class DensityMap:
         v = np.asarray(self.values, dtype=np.float64)
         if v.ndim != 2:
             raise InputError(f"density must be a 2-D image, got shape {v.shape}")
-        if not np.isfinite(v).all() or (v < 0).any():
+        if v.size == 0:
+            raise InputError(f"density image is empty (shape {v.shape})")
+        # min and max carry a NaN through: both finite means every value is
+        lo, hi = float(v.min()), float(v.max())
+        if not (math.isfinite(lo) and math.isfinite(hi)) or lo < 0:
             raise InputError("density must be finite and non-negative everywhere")
-        if v.max() <= 0:
+        if hi <= 0:
             raise InputError("density image is all zero: nothing to distribute sites by")
-        v = v / v.max()  # only ratios matter; huge values must not overflow the mean
+        v = v / hi  # only ratios matter; huge values must not overflow the mean
         self.values = v
-        floor = DENSITY_FLOOR * v.max()
+        floor = DENSITY_FLOOR  # times the largest value, hi / hi = 1 exactly
         # the values themselves where none is below the floor (a picture's density): the
         # same numbers, without a second picture-sized array
-        self._clipped = v if v.min() >= floor else np.maximum(v, floor)
+        self._clipped = v if lo / hi >= floor else np.maximum(v, floor)
         self._mean = float(self._clipped.mean())
 
     @property

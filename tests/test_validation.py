@@ -120,6 +120,13 @@ PICTURE = np.zeros((20, 30, 3))
         (lambda b: DirectionField.named("constant:nan", 8, 8), "constant needs an angle"),
         (lambda b: DirectionField.from_angles(np.full((4, 4), 1e300)), "finite angles"),
         (lambda b: DensityMap(np.full((4, 4), np.nan)), "density must be finite"),
+        (lambda b: DensityMap(np.array([[1.0, np.nan], [2.0, 3.0]])), "density must be finite"),
+        (lambda b: DensityMap(np.array([[1.0, -np.inf], [2.0, 3.0]])), "density must be finite"),
+        (
+            lambda b: DensityMap(np.array([[1.0, 2.0], [-1e-300, 3.0]])),
+            "density must be finite and non-negative",
+        ),
+        (lambda b: DensityMap(np.zeros((0, 4))), "density image is empty"),
     ],
 )
 def test_python_api_arguments(call, message, numpy_backend):
