@@ -520,17 +520,23 @@ STRADDLE_DEPTH = 1.0  # px of tile on each side of an edge for the tile to strad
 def straddling_tiles(elements: Sequence[Any], edges: np.ndarray, depth: float = STRADDLE_DEPTH) -> np.ndarray:
     """(N,) bool: tile k straddles a strong edge, i.e. its outline (convex hull) eroded
     by ``depth`` px holds (inside or on it) the centre of a pixel of ``edges`` ((H, W)
-    bool)."""
-    h, w = edges.shape
+    bool).
+
+    Only the edge pixels are looked at: those within a tile's bounding box (which holds
+    its eroded hull) are found by the tiles' STRtree, and shapely tests each against the
+    eroded hull of the tiles that have any (the others are never eroded)."""
     out = np.zeros(len(elements), dtype=bool)
-    placed = [k for k, e in enumerate(elements) if e is not None and not e.is_empty]
-    if not placed or not edges.any():
+    placed, geoms = _present(elements)
+    ei, ej = np.nonzero(edges)
+    if len(placed) == 0 or len(ei) == 0:
         return out
-    hulls = shapely.convex_hull(np.array([elements[k] for k in placed], dtype=object))
-    eroded = shapely.buffer(hulls, -depth, join_style="mitre")
-    tiles, pixels = pixels_under(list(eroded), w, h)
-    hit = tiles[edges.ravel()[pixels]]
-    out[np.asarray(placed)[np.unique(hit)]] = True
+    centres = shapely.points(ej + 0.5, ei + 0.5)
+    at, tile = shapely.STRtree(geoms).query(centres)  # within the bounding box
+    del centres
+    near, tile = np.unique(tile, return_inverse=True)
+    eroded = shapely.buffer(shapely.convex_hull(geoms[near]), -depth, join_style="mitre")
+    inside = shapely.intersects_xy(eroded[tile], ej[at] + 0.5, ei[at] + 0.5)
+    out[placed[near[np.unique(tile[inside])]]] = True
     return out
 
 

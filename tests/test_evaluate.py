@@ -284,3 +284,45 @@ def test_pixels_under_matches_shapely_on_non_convex_tiles():
     for _ in range(40):
         tiles = non_convex_tiles(rng, w, h) + tricky_tiles(rng, 3, w, h)
         assert_pixels_are_shapelys(tiles, w, h)
+
+
+@pytest.mark.parametrize("seed", range(6))
+def test_straddling_tiles_against_every_pixel(seed):
+    """straddling_tiles against its definition tested pixel by pixel: a tile straddles
+    when some edge pixel's centre is inside or on its convex hull eroded by a pixel (tiles
+    of several kinds, pixel-aligned sides among them, None, a multipolygon)."""
+    from compact_distributions.cvt.evaluate import STRADDLE_DEPTH, straddling_tiles
+
+    rng = np.random.default_rng(seed)
+    h, w = 40, 50
+    tiles = [None, shapely.box(10, 10, 20, 14), shapely.box(30.5, 2.0, 33.5, 9.0)]
+    for _ in range(30):
+        x, y, r = rng.uniform(-3, w + 3), rng.uniform(-3, h + 3), rng.uniform(0.5, 7)
+        kind = rng.integers(0, 3)
+        if kind == 0:
+            tiles.append(
+                shapely.box(np.floor(x), np.floor(y), np.floor(x) + np.ceil(r), np.floor(y) + np.ceil(r))
+            )
+        elif kind == 1:
+            tiles.append(shapely.Point(x, y).buffer(r, quad_segs=3))
+        else:
+            tiles.append(
+                shapely.MultiPolygon(
+                    [shapely.box(x, y, x + r, y + r), shapely.box(x + r + 1, y, x + 2 * r + 1, y + r)]
+                )
+            )
+    edges = rng.random((h, w)) < 0.1
+    edges[12, :] = True  # a wall through the first box, 2 px inside it on either side
+    got = straddling_tiles(tiles, edges)
+    ii, jj = np.nonzero(edges)
+    expected = np.zeros(len(tiles), dtype=bool)
+    for k, tile in enumerate(tiles):
+        if tile is None:
+            continue
+        eroded = shapely.convex_hull(tile).buffer(-STRADDLE_DEPTH, join_style="mitre")
+        expected[k] = any(
+            eroded.intersects(shapely.Point(j + 0.5, i + 0.5)) for i, j in zip(ii, jj, strict=True)
+        )
+    assert expected[1] and not expected[0]
+    assert expected.sum() < len(tiles) - 1  # some tiles hold no edge pixel
+    np.testing.assert_array_equal(got, expected)

@@ -959,18 +959,10 @@ def _after_the_method(dist, picture, edge_map, cut, gap, spacing, picture_second
     bounds = tile_runs(polygons)
     colours, _, error = mosaic_fills(picture, polygons, dist.sites, bounds)
     t2 = time.perf_counter()
-    # a run of tiles at a time, as the fills: each tile's answer is its own (one run at a
-    # time: two side by side raised a 4096² mosaic's peak by about 40 MB); beside the
-    # coverage, whose shapely calls let go of the GIL
+    # beside the coverage, whose shapely calls let go of the GIL
     ev, straddles = side_by_side(
         lambda: evaluate(polygons, Grid(*edge_map.shape[::-1])),  # the whole picture: walls are grout
-        lambda: np.concatenate(
-            [np.zeros(0, dtype=bool)]
-            + [
-                straddling_tiles(polygons[lo:hi], edge_map)
-                for lo, hi in zip(bounds[:-1], bounds[1:], strict=True)
-            ]
-        ),
+        lambda: straddling_tiles(polygons, edge_map),
     )
     t3 = time.perf_counter()
     _return_free_memory()  # the runs' pairs, freed on the threads, before the files are written
