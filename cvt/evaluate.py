@@ -27,6 +27,7 @@ import shapely
 
 from compact_distributions.cvt.pixels import PIXEL_BAND, index_ranges
 from compact_distributions.cvt.problem import Grid
+from compact_distributions.cvt.threads import elementwise
 
 if TYPE_CHECKING:
     from compact_distributions.cvt.problem import Problem
@@ -156,6 +157,41 @@ def _union_area(geoms: np.ndarray, a: np.ndarray, b: np.ndarray) -> float:
     return total
 
 
+APART_MARGIN = 1e-9  # relative to the largest coordinate: projections' rounding is far below
+
+
+def _surely_apart(geoms: np.ndarray, a: np.ndarray, b: np.ndarray) -> np.ndarray:
+    """(P,) bool: the pairs (a, b) of ``geoms`` that cannot meet, because their vertices'
+    projections on the line between their bounding boxes' centres are apart by more than
+    a rounding margin (a shape lies within its vertices' projection interval on any line:
+    two apart intervals separate the shapes).  False leaves a pair to shapely; an empty
+    geometry meets nothing."""
+    coords, owner = shapely.get_coordinates(geoms, return_index=True)
+    count = np.bincount(owner, minlength=len(geoms))
+    start = np.cumsum(count) - count
+    apart = (count[a] == 0) | (count[b] == 0)
+    live = np.flatnonzero(~apart)
+    if len(live) == 0:
+        return apart
+    box = shapely.bounds(geoms)
+    mid = 0.5 * (box[:, :2] + box[:, 2:])
+    ia, ib = a[live], b[live]
+    ux, uy = mid[ib, 0] - mid[ia, 0], mid[ib, 1] - mid[ia, 1]
+
+    def extreme(k: np.ndarray, reduce: np.ufunc) -> np.ndarray:
+        """Per live pair, ``reduce`` (np.maximum or np.minimum) of geometry k's vertices
+        projected on the pair's line."""
+        n = count[k]
+        at = index_ranges(start[k], n)
+        pair = np.repeat(np.arange(len(k)), n)
+        projected = coords[at, 0] * ux[pair] + coords[at, 1] * uy[pair]
+        return reduce.reduceat(projected, np.cumsum(n) - n)
+
+    margin = APART_MARGIN * max(1.0, float(np.abs(coords).max())) * np.hypot(ux, uy)
+    apart[live] = extreme(ib, np.minimum) - extreme(ia, np.maximum) > margin
+    return apart
+
+
 def evaluate(
     elements: Sequence[Any], grid: Grid, region: Any = None, labels: np.ndarray | None = None
 ) -> Evaluation:
@@ -209,10 +245,14 @@ def evaluate(
     clip_areas = shapely.area(clipped)
     total = float(clip_areas.sum())
 
-    tree = shapely.STRtree(clipped)
-    a, b = tree.query(clipped, predicate="intersects")
+    # the pairs whose bounding boxes meet, less those surely apart, tested by shapely
+    a, b = shapely.STRtree(clipped).query(clipped)
     keep = a < b
     a, b = a[keep], b[keep]
+    keep = ~_surely_apart(clipped, a, b)
+    a, b = a[keep], b[keep]
+    meet = elementwise(shapely.intersects, clipped[a], clipped[b])
+    a, b = a[meet], b[meet]
     shared = shapely.area(shapely.intersection(clipped[a], clipped[b])) > 0
     a, b = a[shared], b[shared]
     involved = np.zeros(len(clipped), dtype=bool)

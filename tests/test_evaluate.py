@@ -326,3 +326,44 @@ def test_straddling_tiles_against_every_pixel(seed):
     assert expected[1] and not expected[0]
     assert expected.sum() < len(tiles) - 1  # some tiles hold no edge pixel
     np.testing.assert_array_equal(got, expected)
+
+
+@pytest.mark.parametrize("seed", range(8))
+def test_evaluate_against_brute_force(seed):
+    """Coverage, overlap and overlapping pairs against shapely's union and every pair's
+    intersection: tiles that overlap, touch along a side, nest, leave the region, hold a
+    hole or come in two parts."""
+    rng = np.random.default_rng(seed)
+    w, h = 40, 30
+    tiles = [shapely.box(0, 0, 5, 5), shapely.box(5, 0, 10, 5), shapely.box(2, 2, 3, 3)]  # touch; nest
+    for _ in range(40):
+        x, y, r = rng.uniform(-4, w + 4), rng.uniform(-4, h + 4), rng.uniform(0.3, 6)
+        kind = rng.integers(0, 4)
+        if kind == 0:
+            tiles.append(shapely.Polygon([(x, y), (x + r, y), (x, y + r)]))
+        elif kind == 1:
+            tiles.append(shapely.Point(x, y).buffer(r, quad_segs=2))
+        elif kind == 2:
+            tiles.append(
+                shapely.box(x, y, x + r, y + r).difference(
+                    shapely.box(x + r / 4, y + r / 4, x + r / 2, y + r / 2)
+                )
+            )
+        else:
+            tiles.append(
+                shapely.MultiPolygon(
+                    [shapely.box(x, y, x + r, y + r), shapely.box(x + r + 1, y, x + 2 * r + 1, y + r)]
+                )
+            )
+    region = shapely.box(0, 0, w, h)
+    inside = [t.intersection(region) for t in tiles]
+    union = shapely.union_all(inside).area
+    pairs = sum(
+        inside[i].intersection(inside[j]).area > 0
+        for i in range(len(tiles))
+        for j in range(i + 1, len(tiles))
+    )
+    ev = evaluate(tiles, Grid(w, h))
+    assert pairs > 0 and ev.overlapping_pairs == pairs
+    assert ev.coverage == pytest.approx(union / (w * h), abs=1e-12)
+    assert ev.overlap == pytest.approx((sum(t.area for t in inside) - union) / (w * h), abs=1e-12)
