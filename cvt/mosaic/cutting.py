@@ -76,11 +76,20 @@ def wall_lines(walls: np.ndarray):
         Straight lines and points: convex pieces, each of which a half-plane can keep a
         tile clear of.
     """
+    segs, points = _wall_line_ends(walls)
+    if len(segs) + len(points) == 0:
+        return np.zeros(0, dtype=object)
+    return np.concatenate([shapely.linestrings(segs), shapely.points(points)])
+
+
+def _wall_line_ends(walls: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """:func:`wall_lines` as coordinates: each straight line's ends, (n, 2, 2), and each
+    point, (m, 2)."""
     walls = np.asarray(walls, dtype=bool)
     h, w = walls.shape
     i, j, right, down, left, up = _wall_links(walls)
     if len(i) == 0:
-        return np.zeros(0, dtype=object)
+        return np.zeros((0, 2, 2)), np.zeros((0, 2))
     # runs along rows: row-major, a run's pixels come one after another
     row, col, length = _runs(i, j, right, left)
     x0, y0 = col + 0.5, row + 0.5
@@ -101,9 +110,7 @@ def wall_lines(walls: np.ndarray):
         pieces.append(np.stack([np.full_like(y, c + 0.5), y, np.full_like(y, to_x), y], axis=1))
     segs = np.concatenate(pieces)
     lone = ~(right | down | left | up)
-    return np.concatenate(
-        [shapely.linestrings(segs.reshape(-1, 2, 2)), shapely.points(j[lone] + 0.5, i[lone] + 0.5)]
-    )
+    return segs.reshape(-1, 2, 2), np.stack([j[lone] + 0.5, i[lone] + 0.5], axis=1)
 
 
 def _runs(line, pos, on, before) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
@@ -279,6 +286,7 @@ def _cut_straight(
     answer are :func:`cut_to_walls`'s)."""
     out, geoms, present = _tile_array(polygons)
     h, w = walls.shape
+    segs, points = _wall_line_ends(walls)
     pieces = wall_lines(walls)
     if len(pieces) == 0 or len(present) == 0:
         return out, 0
@@ -301,6 +309,13 @@ def _cut_straight(
     cand = np.flatnonzero(np.isin(oi, near))
     slot = np.searchsorted(near, oi[cand])
     turn = _turns(np.stack([ci[cand], slot], axis=1), len(near))
+    # every tile's and piece's vertices, padded (the tiles' rows follow their cuts);
+    # most have at most ``narrow`` (the whole tiles, the pieces), read at that width
+    tile_xy = _padded(*_vertex_arrays(geoms))
+    piece_xy = np.concatenate([segs, np.repeat(points[:, None, :], 2, axis=1)])
+    narrow = max(tile_xy.shape[1], 2)
+    tile_xy, piece_xy = _widened(tile_xy, narrow), _widened(piece_xy, narrow)
+    tile_count = np.full(len(geoms), narrow)
     grew = 0
     for t in range(turn.max() + 1):
         members = turn == t
@@ -312,9 +327,16 @@ def _cut_straight(
         obstacle = np.concatenate([oi[tile_pair], len(geoms) + wi[wall_pair]])
         keep = np.concatenate([np.full(tile_pair.sum(), full), np.full(wall_pair.sum(), half)])
         rows = np.flatnonzero(members)
-        cut, ok = _cut_convex(geoms[near], grown, rows, (pair_tile, pool, obstacle, keep), (w, h), gap)
+        vertices = (tile_xy, piece_xy, tile_count, narrow)
+        cut, ok, poly, count = _cut_convex(
+            geoms[near], grown, rows, (pair_tile, pool, obstacle, keep), (w, h), gap, (near, vertices)
+        )
         good = rows[ok]
         geoms[near[good]] = _started_as(cut[ok], geoms[near[good]])
+        cut_xy = _padded(poly[ok], count[ok])
+        tile_xy = _widened(tile_xy, cut_xy.shape[1])
+        tile_xy[near[good]] = _widened(cut_xy, tile_xy.shape[1])
+        tile_count[near[good]] = count[ok]
         grew += len(good)
     result = np.empty(len(out), dtype=object)
     result[:] = out
@@ -372,14 +394,17 @@ def _within(geoms: np.ndarray, query: np.ndarray, distance: float) -> tuple[np.n
     return qi[close], gi[close]
 
 
-def _cut_convex(whole, grown, rows, pairs, size, gap):
+def _cut_convex(whole, grown, rows, pairs, size, gap, padded):
     """The candidates ``rows`` cut as convex polygons: each one's grown outline within
     the frame, less a half-plane for each group of obstacles (module docstring).
 
     ``pairs``: ``pair_tile``, ``pool``, ``obstacle``, ``keep``: per (candidate, obstacle)
     pair, the candidate (an index into ``whole``/``grown``), the obstacle (an index into
     ``pool``, convex geometries) and the distance to keep from it.  Returns the cut outlines of ``rows`` and whether each is
-    one polygon that grew and keeps every distance (else the tile stays whole)."""
+    one polygon that grew and keeps every distance (else the tile stays whole).
+    ``padded``: ``near`` (the tiles of ``whole``) and the vertices of the tiles and the
+    pieces of ``pool``, padded (:func:`_padded`), each tile's count and the narrow width
+    that the whole tiles and the pieces fit."""
     nr = len(rows)
     slot = np.full(len(whole), -1)
     slot[rows] = np.arange(nr)
@@ -396,8 +421,17 @@ def _cut_convex(whole, grown, rows, pairs, size, gap):
     every = np.arange(nr)
     for k in range(4):
         poly, count = _clip_rows(poly, count, every, np.tile(frame_n[k], (nr, 1)), np.full(nr, frame_c[k]))
-    tiles = _Ragged(whole[rows])
-    obstacles = _Ragged(pool[used], obstacle)
+    near, (tile_xy, piece_xy, tile_count, narrow) = padded
+    tiles = _Padded(tile_xy[near[rows], :narrow], whole[rows])
+    # the obstacles' vertices: the tiles (cut ones may be wider) then the pieces
+    of_tile = used < len(tile_xy)
+    obstacles = _Padded(
+        _stacked(tile_xy[used[of_tile]], piece_xy[used[~of_tile] - len(tile_xy)]),
+        pool[used],
+        obstacle,
+        np.concatenate([tile_count[used[of_tile]], np.zeros((~of_tile).sum(), dtype=np.int64)]) > narrow,
+        narrow,
+    )
     pt = slot[pair_tile]
     left = np.ones(len(pt), dtype=bool)
     while left.any():
@@ -423,19 +457,21 @@ def _cut_convex(whole, grown, rows, pairs, size, gap):
     if len(touching):
         bad = shapely.relate_pattern(cut[pt[touching]], pool[used[obstacle[touching]]], "T********")
         ok[pt[touching[bad]]] = False
-    return cut, ok
+    return cut, ok, poly, count
 
 
-class _Ragged:
-    """The vertices of geometries, each one's in a run, read once however many items
-    (``ref``: the geometry of each item; default one item per geometry) share one."""
+class _Padded:
+    """Convex geometries and their vertices, padded (:func:`_padded`), each read however
+    many items (``ref``: the geometry of each item; default one item per geometry)
+    share one."""
 
-    def __init__(self, geoms, ref=None):
+    def __init__(self, xy, geoms, ref=None, wide=None, narrow=None):
         self.ref = np.arange(len(geoms)) if ref is None else ref
         self.geoms = geoms
-        self.xy, of = shapely.get_coordinates(geoms, return_index=True)
-        self.start = np.searchsorted(of, np.arange(len(geoms)))
-        self.count = np.diff(np.append(self.start, len(of)))
+        self.xy = xy
+        # geometries with more than ``narrow`` vertices (the rest are read at that width)
+        self.wide = wide
+        self.narrow = narrow if narrow is not None else xy.shape[1]
 
     def geometry(self, which):
         """The geometries of items ``which``."""
@@ -448,12 +484,41 @@ class _Ragged:
     def least(self, which, normal):
         """Per item ``which[k]``, the least of normal[k]·vertex over its vertices
         (``normal`` (k, 2), or (k, K, 2): K candidates each)."""
-        which = self.ref[which]
-        counts = self.count[which]
-        at = np.cumsum(counts) - counts
-        sel = np.repeat(self.start[which] - at, counts) + np.arange(counts.sum())
-        proj = np.einsum("vj,v...j->v...", self.xy[sel], np.repeat(normal, counts, axis=0))
-        return np.minimum.reduceat(proj, at, axis=0)
+        rows = self.ref[which]
+        out = _least(self.xy[rows, : self.narrow], normal)
+        if self.wide is not None:
+            wide = np.flatnonzero(self.wide[rows])
+            if len(wide):
+                out[wide] = _least(self.xy[rows[wide]], normal[wide])
+        return out
+
+
+def _least(p, normal):
+    """Per row, the least of normal·vertex over the padded vertices ``p`` (k, V, 2), for
+    ``normal`` (k, 2) or (k, K, 2)."""
+    if normal.ndim == 2:
+        return (p[..., 0] * normal[:, None, 0] + p[..., 1] * normal[:, None, 1]).min(axis=1)
+    return (p[:, :, None, 0] * normal[:, None, :, 0] + p[:, :, None, 1] * normal[:, None, :, 1]).min(axis=1)
+
+
+def _stacked(a, b):
+    """Padded vertex arrays stacked, the narrower widened to the other's width."""
+    width = max(a.shape[1], b.shape[1])
+    return np.concatenate([_widened(a, width), _widened(b, width)])
+
+
+def _padded(poly, count):
+    """Padded vertex arrays (as :func:`_vertex_arrays` gives them) with each row's spare
+    places holding its first vertex: a least or greatest over a row is its vertices'."""
+    spare = np.arange(poly.shape[1])[None, :] >= count[:, None]
+    return np.where(spare[:, :, None], poly[:, :1], poly)
+
+
+def _widened(xy, width):
+    """Padded vertex arrays (:func:`_padded`) widened to ``width`` places."""
+    if xy.shape[1] >= width:
+        return xy
+    return np.concatenate([xy, np.repeat(xy[:, :1], width - xy.shape[1], axis=1)], axis=1)
 
 
 # turns of the line between a tile's and an obstacle's closest points tried as the
