@@ -76,7 +76,11 @@ def wall_lines(walls: np.ndarray):
         Straight lines and points: convex pieces, each of which a half-plane can keep a
         tile clear of.
     """
-    segs, points = _wall_line_ends(walls)
+    return _line_geometries(*_wall_line_ends(walls))
+
+
+def _line_geometries(segs: np.ndarray, points: np.ndarray) -> np.ndarray:
+    """Shapely lines of ends ``segs`` (n, 2, 2), then points ``points`` (m, 2)."""
     if len(segs) + len(points) == 0:
         return np.zeros(0, dtype=object)
     return np.concatenate([shapely.linestrings(segs), shapely.points(points)])
@@ -178,7 +182,10 @@ def _turns(pairs: np.ndarray, n: int) -> np.ndarray:
     turn = np.full(n, -1, dtype=np.int64)
     if n == 0:
         return turn
-    pairs = np.unique(np.sort(np.asarray(pairs, dtype=np.int64).reshape(-1, 2), axis=1), axis=0)
+    pairs = np.sort(np.asarray(pairs, dtype=np.int64).reshape(-1, 2), axis=1)
+    # each pair once, in order (one key per pair sorts as the pairs do, and far quicker)
+    key = np.unique(pairs[:, 0] * n + pairs[:, 1])
+    pairs = np.stack([key // n, key % n], axis=1)
     pairs = pairs[pairs[:, 0] != pairs[:, 1]]
     degree = np.bincount(pairs.ravel(), minlength=n)
     rank = np.empty(n, dtype=np.int64)
@@ -287,7 +294,7 @@ def _cut_straight(
     out, geoms, present = _tile_array(polygons)
     h, w = walls.shape
     segs, points = _wall_line_ends(walls)
-    pieces = wall_lines(walls)
+    pieces = _line_geometries(segs, points)
     if len(pieces) == 0 or len(present) == 0:
         return out, 0
     near = present[_near_walls(pieces, geoms[present], reach * spacing, walls)]
@@ -304,6 +311,7 @@ def _cut_straight(
     ci, oi = _within(outer, grown, full)
     other = oi != near[ci]
     ci, oi = ci[other], oi[other]
+    piece_xy = np.concatenate([segs, np.repeat(points[:, None, :], 2, axis=1)])
     wi, wc = _within(grown, pieces, half)
     # cut in turns: two tiles whose grown outlines come within the gap never share one
     cand = np.flatnonzero(np.isin(oi, near))
@@ -312,7 +320,7 @@ def _cut_straight(
     # every tile's and piece's vertices, padded (the tiles' rows follow their cuts);
     # most have at most ``narrow`` (the whole tiles, the pieces), read at that width
     tile_xy = _padded(*_vertex_arrays(geoms))
-    piece_xy = np.concatenate([segs, np.repeat(points[:, None, :], 2, axis=1)])
+    grown_xy = _vertex_arrays(grown)
     narrow = max(tile_xy.shape[1], 2)
     tile_xy, piece_xy = _widened(tile_xy, narrow), _widened(piece_xy, narrow)
     tile_count = np.full(len(geoms), narrow)
@@ -329,7 +337,7 @@ def _cut_straight(
         rows = np.flatnonzero(members)
         vertices = (tile_xy, piece_xy, tile_count, narrow)
         cut, ok, poly, count = _cut_convex(
-            geoms[near], grown, rows, (pair_tile, pool, obstacle, keep), (w, h), gap, (near, vertices)
+            geoms[near], grown_xy, rows, (pair_tile, pool, obstacle, keep), (w, h), gap, (near, vertices)
         )
         good = rows[ok]
         geoms[near[good]] = _started_as(cut[ok], geoms[near[good]])
@@ -397,6 +405,7 @@ def _within(geoms: np.ndarray, query: np.ndarray, distance: float) -> tuple[np.n
 def _cut_convex(whole, grown, rows, pairs, size, gap, padded):
     """The candidates ``rows`` cut as convex polygons: each one's grown outline within
     the frame, less a half-plane for each group of obstacles (module docstring).
+    ``grown``: the grown outlines' vertex arrays and counts (:func:`_vertex_arrays`).
 
     ``pairs``: ``pair_tile``, ``pool``, ``obstacle``, ``keep``: per (candidate, obstacle)
     pair, the candidate (an index into ``whole``/``grown``), the obstacle (an index into
@@ -414,7 +423,8 @@ def _cut_convex(whole, grown, rows, pairs, size, gap, padded):
     order = np.lexsort((d - keep, pair_tile))
     pair_tile, obstacle, keep, d = (x[order] for x in (pair_tile, obstacle, keep, d))
     used, obstacle = np.unique(obstacle, return_inverse=True)
-    poly, count = _vertex_arrays(grown[rows])
+    count = grown[1][rows]
+    poly = grown[0][rows, : int(count.max(initial=0))]
     w, h = size
     frame_n = np.array([[-1.0, 0.0], [0.0, -1.0], [1.0, 0.0], [0.0, 1.0]])
     frame_c = np.array([-0.5 * gap, -0.5 * gap, w - 0.5 * gap, h - 0.5 * gap])
