@@ -44,6 +44,8 @@ At 2000 tiles it loses 1-4 points of coverage: there the exact cut is kept.
 
 from __future__ import annotations
 
+from concurrent.futures import ThreadPoolExecutor
+
 import numpy as np
 import shapely
 from scipy.spatial import cKDTree
@@ -324,28 +326,50 @@ def _cut_straight(
     narrow = max(tile_xy.shape[1], 2)
     tile_xy, piece_xy = _widened(tile_xy, narrow), _widened(piece_xy, narrow)
     tile_count = np.full(len(geoms), narrow)
-    grew = 0
+    # each turn's pairs: (candidate, obstacle) as indices into the tiles (as they are
+    # when the turn comes) then the pieces, the distance to keep, and whether the
+    # obstacle is a tile cut in an earlier turn
+    when = np.full(len(geoms), -1)
+    when[near] = turn
+    plans = []
     for t in range(turn.max() + 1):
         members = turn == t
-        tile_pair = members[ci]
-        wall_pair = members[wc]
+        tile_pair, wall_pair = members[ci], members[wc]
         pair_tile = np.concatenate([ci[tile_pair], wc[wall_pair]])
-        # the obstacles as indices into the tiles (as they are now) then the pieces
-        pool = np.concatenate([geoms, pieces])
         obstacle = np.concatenate([oi[tile_pair], len(geoms) + wi[wall_pair]])
         keep = np.concatenate([np.full(tile_pair.sum(), full), np.full(wall_pair.sum(), half)])
-        rows = np.flatnonzero(members)
-        vertices = (tile_xy, piece_xy, tile_count, narrow)
-        cut, ok, poly, count = _cut_convex(
-            geoms[near], grown_xy, rows, (pair_tile, pool, obstacle, keep), (w, h), gap, (near, vertices)
-        )
-        good = rows[ok]
-        geoms[near[good]] = _started_as(cut[ok], geoms[near[good]])
-        cut_xy = _padded(poly[ok], count[ok])
-        tile_xy = _widened(tile_xy, cut_xy.shape[1])
-        tile_xy[near[good]] = _widened(cut_xy, tile_xy.shape[1])
-        tile_count[near[good]] = count[ok]
-        grew += len(good)
+        moved = np.zeros(len(obstacle), dtype=bool)
+        moved[: tile_pair.sum()] = (when[oi[tile_pair]] >= 0) & (when[oi[tile_pair]] < t)
+        plans.append((np.flatnonzero(members), pair_tile, obstacle, keep, moved))
+    pool = np.concatenate([geoms, pieces])
+    whole = geoms[near]  # a candidate is whole until its own turn
+    grew = 0
+    # the distances of the pairs whose obstacle no turn before theirs moves are found
+    # while the turns before run (GEOS lets go of the GIL): one thread beside this one
+    with ThreadPoolExecutor(1) as beside:
+        fixed = [
+            beside.submit(shapely.distance, whole[pair_tile[~moved]], pool[obstacle[~moved]])
+            for _, pair_tile, obstacle, _, moved in plans[1:]
+        ]
+        for t, (rows, pair_tile, obstacle, keep, moved) in enumerate(plans):
+            pool = np.concatenate([geoms, pieces])
+            d = np.empty(len(obstacle))
+            if t == 0:
+                d[:] = elementwise(shapely.distance, whole[pair_tile], pool[obstacle])
+            else:
+                d[~moved] = fixed[t - 1].result()
+                d[moved] = elementwise(shapely.distance, whole[pair_tile[moved]], pool[obstacle[moved]])
+            vertices = (tile_xy, piece_xy, tile_count, narrow)
+            cut, ok, poly, count = _cut_convex(
+                whole, grown_xy, rows, (pair_tile, pool, obstacle, keep, d), (w, h), gap, (near, vertices)
+            )
+            good = rows[ok]
+            geoms[near[good]] = _started_as(cut[ok], geoms[near[good]])
+            cut_xy = _padded(poly[ok], count[ok])
+            tile_xy = _widened(tile_xy, cut_xy.shape[1])
+            tile_xy[near[good]] = _widened(cut_xy, tile_xy.shape[1])
+            tile_count[near[good]] = count[ok]
+            grew += len(good)
     result = np.empty(len(out), dtype=object)
     result[:] = out
     result[near] = geoms[near]  # every candidate is a tile (not None)
@@ -407,9 +431,10 @@ def _cut_convex(whole, grown, rows, pairs, size, gap, padded):
     the frame, less a half-plane for each group of obstacles (module docstring).
     ``grown``: the grown outlines' vertex arrays and counts (:func:`_vertex_arrays`).
 
-    ``pairs``: ``pair_tile``, ``pool``, ``obstacle``, ``keep``: per (candidate, obstacle)
-    pair, the candidate (an index into ``whole``/``grown``), the obstacle (an index into
-    ``pool``, convex geometries) and the distance to keep from it.  Returns the cut outlines of ``rows`` and whether each is
+    ``pairs``: ``pair_tile``, ``pool``, ``obstacle``, ``keep``, ``d``: per (candidate,
+    obstacle) pair, the candidate (an index into ``whole``/``grown``), the obstacle (an
+    index into ``pool``, convex geometries), the distance to keep from it and the
+    distance between them.  Returns the cut outlines of ``rows`` and whether each is
     one polygon that grew and keeps every distance (else the tile stays whole).
     ``padded``: ``near`` (the tiles of ``whole``) and the vertices of the tiles and the
     pieces of ``pool``, padded (:func:`_padded`), each tile's count and the narrow width
@@ -417,8 +442,7 @@ def _cut_convex(whole, grown, rows, pairs, size, gap, padded):
     nr = len(rows)
     slot = np.full(len(whole), -1)
     slot[rows] = np.arange(nr)
-    pair_tile, pool, obstacle, keep = pairs
-    d = elementwise(shapely.distance, whole[pair_tile], pool[obstacle])
+    pair_tile, pool, obstacle, keep, d = pairs
     # the most constraining obstacle first: the least room between it and the tile
     order = np.lexsort((d - keep, pair_tile))
     pair_tile, obstacle, keep, d = (x[order] for x in (pair_tile, obstacle, keep, d))
