@@ -310,11 +310,14 @@ def _cut_straight(
     # and the pieces of the walls' centre lines within G/2 of it
     outer = geoms.copy()
     outer[near] = grown
-    ci, oi = _within(outer, grown, full)
+    grown_xy = _vertex_arrays(grown)
+    grown_disks = _disks(*grown_xy)
+    outer_disks = _disks(*_vertex_arrays(outer))
+    ci, oi = _within(outer, grown, full, _tile_bounds(grown_disks, outer_disks))
     other = oi != near[ci]
     ci, oi = ci[other], oi[other]
     piece_xy = np.concatenate([segs, np.repeat(points[:, None, :], 2, axis=1)])
-    wi, wc = _within(grown, pieces, half)
+    wi, wc = _within(grown, pieces, half, _piece_bounds(grown_disks, piece_xy))
     # cut in turns: two tiles whose grown outlines come within the gap never share one
     cand = np.flatnonzero(np.isin(oi, near))
     slot = np.searchsorted(near, oi[cand])
@@ -322,7 +325,6 @@ def _cut_straight(
     # every tile's and piece's vertices, padded (the tiles' rows follow their cuts);
     # most have at most ``narrow`` (the whole tiles, the pieces), read at that width
     tile_xy = _padded(*_vertex_arrays(geoms))
-    grown_xy = _vertex_arrays(grown)
     narrow = max(tile_xy.shape[1], 2)
     tile_xy, piece_xy = _widened(tile_xy, narrow), _widened(piece_xy, narrow)
     tile_count = np.full(len(geoms), narrow)
@@ -388,19 +390,7 @@ def _near_walls(pieces: np.ndarray, tiles: np.ndarray, distance: float, walls: n
     within reach of a centre is near, and one whose outer disk is beyond reach of them
     all by half a pixel is not.  The few others (some 3 %) are looked up exactly."""
     i, j = np.nonzero(walls)
-    poly, count = _vertex_arrays(tiles)
-    v = np.arange(poly.shape[1])[None, :]
-    real = v < count[:, None]
-    inner = (poly * real[:, :, None]).sum(axis=1) / count[:, None]
-    off = poly - inner[:, None, :]
-    outer_r = np.sqrt(np.where(real, (off**2).sum(axis=2), 0.0).max(axis=1))
-    # the inner disk: the least distance from the point to the lines of the edges
-    nxt = np.where(v + 1 < count[:, None], v + 1, 0)
-    edge = np.take_along_axis(poly, nxt[:, :, None], axis=1) - poly
-    length = np.hypot(edge[..., 0], edge[..., 1])
-    with np.errstate(invalid="ignore", divide="ignore"):
-        across = np.abs(edge[..., 0] * off[..., 1] - edge[..., 1] * off[..., 0]) / length
-    inner_r = np.where(real & (length > 0), across, np.inf).min(axis=1)
+    inner, inner_r, outer_r = _disks(*_vertex_arrays(tiles))
     # (a tree built plainly is quicker to build and query here; beyond the reach that
     # could matter a tile is far: infinity)
     centres = cKDTree(np.stack([j + 0.5, i + 0.5], axis=1), balanced_tree=False, compact_nodes=False)
@@ -415,15 +405,74 @@ def _near_walls(pieces: np.ndarray, tiles: np.ndarray, distance: float, walls: n
     return np.union1d(np.flatnonzero(sure), found)
 
 
-def _within(geoms: np.ndarray, query: np.ndarray, distance: float) -> tuple[np.ndarray, np.ndarray]:
+def _disks(poly: np.ndarray, count: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Of convex polygons (padded vertex arrays, :func:`_vertex_arrays`): a point inside
+    each (its vertices' mean), the radius of the disk about it that the polygon holds
+    (the least distance to its edges' lines) and of the one that holds the polygon."""
+    v = np.arange(poly.shape[1])[None, :]
+    real = v < count[:, None]
+    with np.errstate(invalid="ignore", divide="ignore"):
+        inner = (poly * real[:, :, None]).sum(axis=1) / count[:, None]
+    off = poly - inner[:, None, :]
+    outer_r = np.sqrt(np.where(real, (off**2).sum(axis=2), 0.0).max(axis=1, initial=0.0))
+    nxt = np.where(v + 1 < count[:, None], v + 1, 0)
+    edge = np.take_along_axis(poly, nxt[:, :, None], axis=1) - poly
+    length = np.hypot(edge[..., 0], edge[..., 1])
+    with np.errstate(invalid="ignore", divide="ignore"):
+        across = np.abs(edge[..., 0] * off[..., 1] - edge[..., 1] * off[..., 0]) / length
+    inner_r = np.where(real & (length > 0), across, np.inf).min(axis=1, initial=np.inf)
+    return inner, inner_r, outer_r
+
+
+def _within(geoms: np.ndarray, query: np.ndarray, distance: float, bounds=None) -> tuple[np.ndarray, np.ndarray]:
     """Pairs (query index, geoms index) less than ``distance`` apart: the boxes grown by
     it looked up in a tree, then the exact distances (cheaper than the tree's own
-    ``dwithin``)."""
+    ``dwithin``).  ``bounds(qi, gi)``, if given, gives a lower and an upper bound of each
+    pair's distance: GEOS is asked only where they leave it open."""
     lo_x, lo_y, hi_x, hi_y = shapely.bounds(query).T
     boxes = shapely.box(lo_x - distance, lo_y - distance, hi_x + distance, hi_y + distance)
     qi, gi = shapely.STRtree(geoms).query(boxes)
-    close = elementwise(shapely.dwithin, query[qi], geoms[gi], distance=distance)
+    if bounds is None:
+        close = elementwise(shapely.dwithin, query[qi], geoms[gi], distance=distance)
+        return qi[close], gi[close]
+    low, high = bounds(qi, gi)
+    close = high <= distance - _HAIR
+    ask = np.flatnonzero(~close & (low <= distance + _HAIR))
+    close[ask] = elementwise(shapely.dwithin, query[qi[ask]], geoms[gi[ask]], distance=distance)
     return qi[close], gi[close]
+
+
+_HAIR = 1e-9  # px: a bound nearer than this to the threshold leaves the pair to GEOS
+
+
+def _tile_bounds(a: tuple, b: tuple):
+    """``bounds`` for :func:`_within` of convex polygons (their :func:`_disks` ``a``,
+    the query's, and ``b``): apart by at most the room between their inner disks, at
+    least that between their outer ones."""
+
+    def bounds(qi, gi):
+        gap = np.hypot(*(a[0][qi] - b[0][gi]).T)
+        return gap - a[2][qi] - b[2][gi], gap - a[1][qi] - b[1][gi]
+
+    return bounds
+
+
+def _piece_bounds(disks: tuple, segs: np.ndarray):
+    """``bounds`` for :func:`_within` of the wall pieces (their ends ``segs``, (n, 2, 2);
+    the query) and convex polygons (their :func:`_disks`): the distance from the inner
+    point to the piece less the outer radius, less the inner radius."""
+
+    def bounds(qi, gi):
+        p = disks[0][gi]
+        a, b = segs[qi, 0], segs[qi, 1]
+        ab = b - a
+        with np.errstate(invalid="ignore", divide="ignore"):
+            t = np.clip(((p - a) * ab).sum(axis=1) / (ab * ab).sum(axis=1), 0.0, 1.0)
+        t = np.where(np.isfinite(t), t, 0.0)  # a point: its one end
+        gap = np.hypot(*(a + t[:, None] * ab - p).T)
+        return gap - disks[2][gi], gap - disks[1][gi]
+
+    return bounds
 
 
 def _cut_convex(whole, grown, rows, pairs, size, gap, padded):
