@@ -327,6 +327,7 @@ def _cut_straight(
     tile_xy = _padded(*_vertex_arrays(geoms))
     narrow = max(tile_xy.shape[1], 2)
     tile_xy, piece_xy = _widened(tile_xy, narrow), _widened(piece_xy, narrow)
+    tile_narrow = tile_xy.copy()  # every tile's first ``narrow`` vertices
     tile_count = np.full(len(geoms), narrow)
     # each turn's pairs: (candidate, obstacle) as indices into the tiles (as they are
     # when the turn comes) then the pieces, the distance to keep, and whether the
@@ -361,7 +362,7 @@ def _cut_straight(
             else:
                 d[~moved] = fixed[t - 1].result()
                 d[moved] = elementwise(shapely.distance, whole[pair_tile[moved]], pool[obstacle[moved]])
-            vertices = (tile_xy, piece_xy, tile_count, narrow)
+            vertices = (tile_xy, tile_narrow, piece_xy, tile_count)
             cut, ok, poly, count = _cut_convex(
                 whole, grown_xy, rows, (pair_tile, pool, obstacle, keep, d), (w, h), gap, (near, vertices)
             )
@@ -370,6 +371,7 @@ def _cut_straight(
             cut_xy = _padded(poly[ok], count[ok])
             tile_xy = _widened(tile_xy, cut_xy.shape[1])
             tile_xy[near[good]] = _widened(cut_xy, tile_xy.shape[1])
+            tile_narrow[near[good]] = tile_xy[near[good], :narrow]
             tile_count[near[good]] = count[ok]
             grew += len(good)
     result = np.empty(len(out), dtype=object)
@@ -504,16 +506,18 @@ def _cut_convex(whole, grown, rows, pairs, size, gap, padded):
     every = np.arange(nr)
     for k in range(4):
         poly, count = _clip_rows(poly, count, every, np.tile(frame_n[k], (nr, 1)), np.full(nr, frame_c[k]))
-    near, (tile_xy, piece_xy, tile_count, narrow) = padded
-    tiles = _Padded(tile_xy[near[rows], :narrow], whole[rows])
+    near, (tile_xy, tile_narrow, piece_xy, tile_count) = padded
+    narrow = tile_narrow.shape[1]
+    tiles = _Padded(tile_narrow[near[rows]], whole[rows])
     # the obstacles' vertices: the tiles (cut ones may be wider) then the pieces
-    of_tile = used < len(tile_xy)
+    of_tile = np.flatnonzero(used < len(tile_xy))
+    wide = of_tile[tile_count[used[of_tile]] > narrow]
     obstacles = _Padded(
-        _stacked(tile_xy[used[of_tile]], piece_xy[used[~of_tile] - len(tile_xy)]),
+        np.concatenate([tile_narrow[used[of_tile]], piece_xy[used[len(of_tile) :] - len(tile_xy)]]),
         pool[used],
         obstacle,
-        np.concatenate([tile_count[used[of_tile]], np.zeros((~of_tile).sum(), dtype=np.int64)]) > narrow,
-        narrow,
+        wide,
+        tile_xy[used[wide]],
     )
     pt = slot[pair_tile]
     left = np.ones(len(pt), dtype=bool)
@@ -546,15 +550,18 @@ def _cut_convex(whole, grown, rows, pairs, size, gap, padded):
 class _Padded:
     """Convex geometries and their vertices, padded (:func:`_padded`), each read however
     many items (``ref``: the geometry of each item; default one item per geometry)
-    share one."""
+    share one.  ``xy``: every geometry's first ``narrow`` vertices (all of most);
+    ``wide``: those with more (their indices), and ``wide_xy`` all of theirs."""
 
-    def __init__(self, xy, geoms, ref=None, wide=None, narrow=None):
+    def __init__(self, xy, geoms, ref=None, wide=None, wide_xy=None):
         self.ref = np.arange(len(geoms)) if ref is None else ref
         self.geoms = geoms
         self.xy = xy
-        # geometries with more than ``narrow`` vertices (the rest are read at that width)
-        self.wide = wide
-        self.narrow = narrow if narrow is not None else xy.shape[1]
+        self.wide_xy = wide_xy
+        self.slot = None
+        if wide is not None and len(wide):
+            self.slot = np.full(len(geoms), -1)
+            self.slot[wide] = np.arange(len(wide))
 
     def geometry(self, which):
         """The geometries of items ``which``."""
@@ -568,11 +575,12 @@ class _Padded:
         """Per item ``which[k]``, the least of normal[k]·vertex over its vertices
         (``normal`` (k, 2), or (k, K, 2): K candidates each)."""
         rows = self.ref[which]
-        out = _least(self.xy[rows, : self.narrow], normal)
-        if self.wide is not None:
-            wide = np.flatnonzero(self.wide[rows])
+        out = _least(self.xy[rows], normal)
+        if self.slot is not None:
+            slot = self.slot[rows]
+            wide = np.flatnonzero(slot >= 0)
             if len(wide):
-                out[wide] = _least(self.xy[rows[wide]], normal[wide])
+                out[wide] = _least(self.wide_xy[slot[wide]], normal[wide])
         return out
 
 
@@ -582,12 +590,6 @@ def _least(p, normal):
     if normal.ndim == 2:
         return (p[..., 0] * normal[:, None, 0] + p[..., 1] * normal[:, None, 1]).min(axis=1)
     return (p[:, :, None, 0] * normal[:, None, :, 0] + p[:, :, None, 1] * normal[:, None, :, 1]).min(axis=1)
-
-
-def _stacked(a, b):
-    """Padded vertex arrays stacked, the narrower widened to the other's width."""
-    width = max(a.shape[1], b.shape[1])
-    return np.concatenate([_widened(a, width), _widened(b, width)])
 
 
 def _padded(poly, count):
