@@ -367,12 +367,15 @@ def _cut_straight(
                 whole, grown_xy, rows, (pair_tile, pool, obstacle, keep, d), (w, h), gap, (near, vertices)
             )
             good = rows[ok]
-            geoms[near[good]] = _started_as(cut[ok], geoms[near[good]])
-            cut_xy = _padded(poly[ok], count[ok])
+            # each cut outline begun at its vertex nearest the whole tile's first one
+            # (as _started_as does, here on the arrays)
+            poly, count = _started_at(poly[ok], count[ok], tile_xy[near[good], 0])
+            geoms[near[good]] = _polygons(poly, count)
+            cut_xy = _padded(poly, count)
             tile_xy = _widened(tile_xy, cut_xy.shape[1])
             tile_xy[near[good]] = _widened(cut_xy, tile_xy.shape[1])
             tile_narrow[near[good]] = tile_xy[near[good], :narrow]
-            tile_count[near[good]] = count[ok]
+            tile_count[near[good]] = count
             grew += len(good)
     result = np.empty(len(out), dtype=object)
     result[:] = out
@@ -426,7 +429,9 @@ def _disks(poly: np.ndarray, count: np.ndarray) -> tuple[np.ndarray, np.ndarray,
     return inner, inner_r, outer_r
 
 
-def _within(geoms: np.ndarray, query: np.ndarray, distance: float, bounds=None) -> tuple[np.ndarray, np.ndarray]:
+def _within(
+    geoms: np.ndarray, query: np.ndarray, distance: float, bounds=None
+) -> tuple[np.ndarray, np.ndarray]:
     """Pairs (query index, geoms index) less than ``distance`` apart: the boxes grown by
     it looked up in a tree, then the exact distances (cheaper than the tree's own
     ``dwithin``).  ``bounds(qi, gi)``, if given, gives a lower and an upper bound of each
@@ -694,10 +699,13 @@ def _clip_arrays(p, c, normal, offset):
     v = p.shape[1]
     j = np.arange(v)[None, :]
     valid = j < c[:, None]
-    nxt = np.where(j + 1 < c[:, None], j + 1, 0)
-    q = np.take_along_axis(p, nxt[:, :, None], axis=1)
-    s = np.einsum("rvk,rk->rv", p, normal) - offset[:, None]
-    sn = np.take_along_axis(s, nxt, axis=1)
+    # each vertex's next one round its ring (the rows with spare places closed by hand)
+    short = np.flatnonzero((c < v) & (c > 0))
+    q = np.roll(p, -1, axis=1)
+    q[short, c[short] - 1] = p[short, 0]
+    s = p[..., 0] * normal[:, None, 0] + p[..., 1] * normal[:, None, 1] - offset[:, None]
+    sn = np.roll(s, -1, axis=1)
+    sn[short, c[short] - 1] = s[short, 0]
     inside = valid & (s <= 0)
     cross = valid & (((s < 0) & (sn > 0)) | ((s > 0) & (sn < 0)))
     with np.errstate(invalid="ignore", divide="ignore"):
@@ -870,6 +878,21 @@ def _started_as(cut: np.ndarray, whole: np.ndarray) -> np.ndarray:
     src = begin[index] + (k + start[index]) % n[index]
     out[plain] = shapely.polygons(shapely.linearrings(coords[src], indices=index))
     return out
+
+
+def _started_at(poly: np.ndarray, count: np.ndarray, first: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Padded vertex arrays (:func:`_vertex_arrays`) each rolled to begin at its vertex
+    nearest the point ``first`` (k, 2) (the first such where several are), as
+    :func:`_started_as` begins a polygon's outline."""
+    spare = np.arange(poly.shape[1])[None, :] >= count[:, None]
+    d = ((poly - first[:, None, :]) ** 2).sum(axis=2)
+    d[spare] = np.inf
+    start = np.argmin(d, axis=1)
+    pos = np.arange(poly.shape[1])[None, :]
+    src = (pos + start[:, None]) % np.maximum(count, 1)[:, None]
+    out = np.take_along_axis(poly, src[:, :, None], axis=1)
+    out[spare] = 0.0
+    return out, count
 
 
 def _piece_holding(cand: np.ndarray, whole: np.ndarray) -> np.ndarray:
