@@ -312,8 +312,7 @@ def _cut_straight(
     outer[near] = grown
     grown_xy = _vertex_arrays(grown)
     grown_disks = _disks(*grown_xy)
-    outer_disks = _disks(*_vertex_arrays(outer))
-    ci, oi = _within(outer, grown, full, _tile_bounds(grown_disks, outer_disks))
+    ci, oi = _within(outer, grown, full, _tile_bounds(grown_disks, outer))
     other = oi != near[ci]
     ci, oi = ci[other], oi[other]
     piece_xy = np.concatenate([segs, np.repeat(points[:, None, :], 2, axis=1)])
@@ -322,13 +321,17 @@ def _cut_straight(
     cand = np.flatnonzero(np.isin(oi, near))
     slot = np.searchsorted(near, oi[cand])
     turn = _turns(np.stack([ci[cand], slot], axis=1), len(near))
-    # every tile's and piece's vertices, padded (the tiles' rows follow their cuts);
-    # most have at most ``narrow`` (the whole tiles, the pieces), read at that width
-    tile_xy = _padded(*_vertex_arrays(geoms))
+    # the vertices of every tile that is cut or in the way and of every piece, padded
+    # (a tile's row follows its cuts); most have at most ``narrow`` (the whole tiles,
+    # the pieces), read at that width
+    involved = np.union1d(near, oi)
+    row_of = np.full(len(geoms), -1)
+    row_of[involved] = np.arange(len(involved))
+    tile_xy = _padded(*_vertex_arrays(geoms[involved]))
     narrow = max(tile_xy.shape[1], 2)
     tile_xy, piece_xy = _widened(tile_xy, narrow), _widened(piece_xy, narrow)
     tile_narrow = tile_xy.copy()  # every tile's first ``narrow`` vertices
-    tile_count = np.full(len(geoms), narrow)
+    tile_count = np.full(len(involved), narrow)
     # each turn's pairs: (candidate, obstacle) as indices into the tiles (as they are
     # when the turn comes) then the pieces, the distance to keep, and whether the
     # obstacle is a tile cut in an earlier turn
@@ -362,20 +365,21 @@ def _cut_straight(
             else:
                 d[~moved] = fixed[t - 1].result()
                 d[moved] = elementwise(shapely.distance, whole[pair_tile[moved]], pool[obstacle[moved]])
-            vertices = (tile_xy, tile_narrow, piece_xy, tile_count)
+            vertices = (row_of, tile_xy, tile_narrow, piece_xy, tile_count)
             cut, ok, poly, count = _cut_convex(
                 whole, grown_xy, rows, (pair_tile, pool, obstacle, keep, d), (w, h), gap, (near, vertices)
             )
             good = rows[ok]
             # each cut outline begun at its vertex nearest the whole tile's first one
             # (as _started_as does, here on the arrays)
-            poly, count = _started_at(poly[ok], count[ok], tile_xy[near[good], 0])
+            at = row_of[near[good]]
+            poly, count = _started_at(poly[ok], count[ok], tile_xy[at, 0])
             geoms[near[good]] = _polygons(poly, count)
             cut_xy = _padded(poly, count)
             tile_xy = _widened(tile_xy, cut_xy.shape[1])
-            tile_xy[near[good]] = _widened(cut_xy, tile_xy.shape[1])
-            tile_narrow[near[good]] = tile_xy[near[good], :narrow]
-            tile_count[near[good]] = count
+            tile_xy[at] = _widened(cut_xy, tile_xy.shape[1])
+            tile_narrow[at] = tile_xy[at, :narrow]
+            tile_count[at] = count
             grew += len(good)
     result = np.empty(len(out), dtype=object)
     result[:] = out
@@ -452,12 +456,14 @@ def _within(
 _HAIR = 1e-9  # px: a bound nearer than this to the threshold leaves the pair to GEOS
 
 
-def _tile_bounds(a: tuple, b: tuple):
-    """``bounds`` for :func:`_within` of convex polygons (their :func:`_disks` ``a``,
-    the query's, and ``b``): apart by at most the room between their inner disks, at
+def _tile_bounds(a: tuple, polygons: np.ndarray):
+    """``bounds`` for :func:`_within` of convex polygons (the query's :func:`_disks`
+    ``a``, and ``polygons``): apart by at most the room between their inner disks, at
     least that between their outer ones."""
 
     def bounds(qi, gi):
+        used, gi = np.unique(gi, return_inverse=True)
+        b = _disks(*_vertex_arrays(polygons[used]))
         gap = np.hypot(*(a[0][qi] - b[0][gi]).T)
         return gap - a[2][qi] - b[2][gi], gap - a[1][qi] - b[1][gi]
 
@@ -490,11 +496,13 @@ def _cut_convex(whole, grown, rows, pairs, size, gap, padded):
     ``pairs``: ``pair_tile``, ``pool``, ``obstacle``, ``keep``, ``d``: per (candidate,
     obstacle) pair, the candidate (an index into ``whole``/``grown``), the obstacle (an
     index into ``pool``, convex geometries), the distance to keep from it and the
-    distance between them.  Returns the cut outlines of ``rows`` and whether each is
-    one polygon that grew and keeps every distance (else the tile stays whole).
-    ``padded``: ``near`` (the tiles of ``whole``) and the vertices of the tiles and the
-    pieces of ``pool``, padded (:func:`_padded`), each tile's count and the narrow width
-    that the whole tiles and the pieces fit."""
+    distance between them.  ``padded``: ``near`` (the tiles of ``whole``) and
+    (``row_of``, ``tile_xy``, ``tile_narrow``, ``piece_xy``, ``tile_count``): each tile's
+    row (-1 where it is never read), the rows' vertices (:func:`_padded`) in full and at
+    the narrow width that the whole tiles and the pieces (``piece_xy``) fit, and their
+    counts.  Returns the cut outlines of ``rows``, whether each is one polygon that grew
+    and keeps every distance (else the tile stays whole), and their vertex arrays and
+    counts."""
     nr = len(rows)
     slot = np.full(len(whole), -1)
     slot[rows] = np.arange(nr)
@@ -511,18 +519,20 @@ def _cut_convex(whole, grown, rows, pairs, size, gap, padded):
     every = np.arange(nr)
     for k in range(4):
         poly, count = _clip_rows(poly, count, every, np.tile(frame_n[k], (nr, 1)), np.full(nr, frame_c[k]))
-    near, (tile_xy, tile_narrow, piece_xy, tile_count) = padded
+    near, (row_of, tile_xy, tile_narrow, piece_xy, tile_count) = padded
     narrow = tile_narrow.shape[1]
-    tiles = _Padded(tile_narrow[near[rows]], whole[rows])
+    tiles = _Padded(tile_narrow[row_of[near[rows]]], whole[rows])
     # the obstacles' vertices: the tiles (cut ones may be wider) then the pieces
-    of_tile = np.flatnonzero(used < len(tile_xy))
-    wide = of_tile[tile_count[used[of_tile]] > narrow]
+    n_tiles = len(row_of)
+    of_tile = np.flatnonzero(used < n_tiles)
+    at = row_of[used[of_tile]]
+    wide = of_tile[tile_count[at] > narrow]
     obstacles = _Padded(
-        np.concatenate([tile_narrow[used[of_tile]], piece_xy[used[len(of_tile) :] - len(tile_xy)]]),
+        np.concatenate([tile_narrow[at], piece_xy[used[len(of_tile) :] - n_tiles]]),
         pool[used],
         obstacle,
         wide,
-        tile_xy[used[wide]],
+        tile_xy[row_of[used[wide]]],
     )
     pt = slot[pair_tile]
     left = np.ones(len(pt), dtype=bool)
@@ -862,28 +872,14 @@ def _started_as(cut: np.ndarray, whole: np.ndarray) -> np.ndarray:
     plain = np.flatnonzero(shapely.get_num_interior_rings(cut) == 0)
     if len(plain) == 0:
         return out
-    coords, index = shapely.get_coordinates(shapely.get_exterior_ring(cut[plain]), return_index=True)
-    begin = np.searchsorted(index, np.arange(len(plain)))
-    n = np.diff(np.append(begin, len(index))) - 1  # vertices less the closing one
-    pos = np.arange(len(index)) - begin[index]
-    open_ = pos < n[index]
     first = shapely.get_coordinates(shapely.get_point(shapely.get_exterior_ring(whole[plain]), 0))
-    d = ((coords - first[index]) ** 2).sum(axis=1)
-    d[~open_] = np.inf
-    order = np.lexsort((d, index))
-    start = np.zeros(len(plain), dtype=np.int64)
-    start[index[order[begin]]] = pos[order[begin]]
-    # the ring rolled: the open vertices from ``start``, then the first one again to close
-    k = np.where(open_, pos, 0)
-    src = begin[index] + (k + start[index]) % n[index]
-    out[plain] = shapely.polygons(shapely.linearrings(coords[src], indices=index))
+    out[plain] = _polygons(*_started_at(*_vertex_arrays(cut[plain]), first))
     return out
 
 
 def _started_at(poly: np.ndarray, count: np.ndarray, first: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """Padded vertex arrays (:func:`_vertex_arrays`) each rolled to begin at its vertex
-    nearest the point ``first`` (k, 2) (the first such where several are), as
-    :func:`_started_as` begins a polygon's outline."""
+    nearest the point ``first`` (k, 2), the first such where several are."""
     spare = np.arange(poly.shape[1])[None, :] >= count[:, None]
     d = ((poly - first[:, None, :]) ** 2).sum(axis=2)
     d[spare] = np.inf
