@@ -438,17 +438,17 @@ def _within(
 ) -> tuple[np.ndarray, np.ndarray]:
     """Pairs (query index, geoms index) less than ``distance`` apart: the boxes grown by
     it looked up in a tree, then the exact distances (cheaper than the tree's own
-    ``dwithin``).  ``bounds(qi, gi)``, if given, gives a lower and an upper bound of each
-    pair's distance: GEOS is asked only where they leave it open."""
+    ``dwithin``).  ``bounds(qi, gi, low, high)``, if given, tells which pairs are
+    surely nearer than ``low`` and which surely farther than ``high``: GEOS is asked
+    only about the rest."""
     lo_x, lo_y, hi_x, hi_y = shapely.bounds(query).T
     boxes = shapely.box(lo_x - distance, lo_y - distance, hi_x + distance, hi_y + distance)
     qi, gi = shapely.STRtree(geoms).query(boxes)
     if bounds is None:
         close = elementwise(shapely.dwithin, query[qi], geoms[gi], distance=distance)
         return qi[close], gi[close]
-    low, high = bounds(qi, gi)
-    close = high <= distance - _HAIR
-    ask = np.flatnonzero(~close & (low <= distance + _HAIR))
+    close, far = bounds(qi, gi, distance - _HAIR, distance + _HAIR)
+    ask = np.flatnonzero(~close & ~far)
     close[ask] = elementwise(shapely.dwithin, query[qi[ask]], geoms[gi[ask]], distance=distance)
     return qi[close], gi[close]
 
@@ -459,13 +459,13 @@ _HAIR = 1e-9  # px: a bound nearer than this to the threshold leaves the pair to
 def _tile_bounds(a: tuple, polygons: np.ndarray):
     """``bounds`` for :func:`_within` of convex polygons (the query's :func:`_disks`
     ``a``, and ``polygons``): apart by at most the room between their inner disks, at
-    least that between their outer ones."""
+    least that between their outer ones (compared squared)."""
 
-    def bounds(qi, gi):
+    def bounds(qi, gi, low, high):
         used, gi = np.unique(gi, return_inverse=True)
         b = _disks(*_vertex_arrays(polygons[used]))
-        gap = np.hypot(*(a[0][qi] - b[0][gi]).T)
-        return gap - a[2][qi] - b[2][gi], gap - a[1][qi] - b[1][gi]
+        apart = a[0][qi] - b[0][gi]
+        return _nearer(apart, a[1][qi] + b[1][gi], low, high, a[2][qi] + b[2][gi])
 
     return bounds
 
@@ -473,19 +473,27 @@ def _tile_bounds(a: tuple, polygons: np.ndarray):
 def _piece_bounds(disks: tuple, segs: np.ndarray):
     """``bounds`` for :func:`_within` of the wall pieces (their ends ``segs``, (n, 2, 2);
     the query) and convex polygons (their :func:`_disks`): the distance from the inner
-    point to the piece less the outer radius, less the inner radius."""
+    point to the piece less the inner radius, less the outer one."""
 
-    def bounds(qi, gi):
+    def bounds(qi, gi, low, high):
         p = disks[0][gi]
         a, b = segs[qi, 0], segs[qi, 1]
         ab = b - a
         with np.errstate(invalid="ignore", divide="ignore"):
             t = np.clip(((p - a) * ab).sum(axis=1) / (ab * ab).sum(axis=1), 0.0, 1.0)
         t = np.where(np.isfinite(t), t, 0.0)  # a point: its one end
-        gap = np.hypot(*(a + t[:, None] * ab - p).T)
-        return gap - disks[2][gi], gap - disks[1][gi]
+        return _nearer(a + t[:, None] * ab - p, disks[1][gi], low, high, disks[2][gi])
 
     return bounds
+
+
+def _nearer(apart, inner, low, high, outer):
+    """Where the vector ``apart`` (k, 2) between two disks' centres (or a centre and its
+    nearest point of a piece) is no longer than ``low`` plus the ``inner`` radii, and
+    where it is longer than ``high`` plus the ``outer`` ones: squared, no roots."""
+    length2 = apart[:, 0] * apart[:, 0] + apart[:, 1] * apart[:, 1]
+    reach = low + inner
+    return (reach >= 0) & (length2 <= reach * reach), length2 > (high + outer) ** 2
 
 
 def _cut_convex(whole, grown, rows, pairs, size, gap, padded):
@@ -508,7 +516,10 @@ def _cut_convex(whole, grown, rows, pairs, size, gap, padded):
     slot[rows] = np.arange(nr)
     pair_tile, pool, obstacle, keep, d = pairs
     # the most constraining obstacle first: the least room between it and the tile
-    order = np.lexsort((d - keep, pair_tile))
+    order = np.argsort(d - keep, kind="stable")
+    # then by candidate, stable (as np.lexsort; a key of 16 bits sorts by radix)
+    key = pair_tile[order].astype(np.uint16 if len(whole) <= 1 << 16 else np.int64)
+    order = order[np.argsort(key, kind="stable")]
     pair_tile, obstacle, keep, d = (x[order] for x in (pair_tile, obstacle, keep, d))
     used, obstacle = np.unique(obstacle, return_inverse=True)
     count = grown[1][rows]
