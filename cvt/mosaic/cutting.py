@@ -433,24 +433,29 @@ def _disks(poly: np.ndarray, count: np.ndarray) -> tuple[np.ndarray, np.ndarray,
     return inner, inner_r, outer_r
 
 
-def _within(
-    geoms: np.ndarray, query: np.ndarray, distance: float, bounds=None
-) -> tuple[np.ndarray, np.ndarray]:
+def _within(geoms: np.ndarray, query: np.ndarray, distance: float, bounds) -> tuple[np.ndarray, np.ndarray]:
     """Pairs (query index, geoms index) less than ``distance`` apart: the boxes grown by
     it looked up in a tree, then the exact distances (cheaper than the tree's own
-    ``dwithin``).  ``bounds(qi, gi, low, high)``, if given, tells which pairs are
-    surely nearer than ``low`` and which surely farther than ``high``: GEOS is asked
-    only about the rest."""
-    lo_x, lo_y, hi_x, hi_y = shapely.bounds(query).T
-    boxes = shapely.box(lo_x - distance, lo_y - distance, hi_x + distance, hi_y + distance)
-    qi, gi = shapely.STRtree(geoms).query(boxes)
-    if bounds is None:
-        close = elementwise(shapely.dwithin, query[qi], geoms[gi], distance=distance)
-        return qi[close], gi[close]
+    ``dwithin``).  ``bounds(qi, gi, low, high)`` tells which pairs are surely nearer
+    than ``low`` and which surely farther than ``high``: GEOS is asked only about the
+    rest."""
+    qi, gi = _boxes_within(geoms, query, distance)
     close, far = bounds(qi, gi, distance - _HAIR, distance + _HAIR)
     ask = np.flatnonzero(~close & ~far)
     close[ask] = elementwise(shapely.dwithin, query[qi[ask]], geoms[gi[ask]], distance=distance)
     return qi[close], gi[close]
+
+
+def _boxes_within(geoms: np.ndarray, query: np.ndarray, distance: float) -> tuple[np.ndarray, np.ndarray]:
+    """Pairs (query index, geoms index) whose boxes come within ``distance``, the query
+    indices in order: the boxes of the fewer grown by it, in a tree or as the query
+    (each query's pairs then come in another order)."""
+    few = query if len(query) <= len(geoms) else geoms
+    lo_x, lo_y, hi_x, hi_y = shapely.bounds(few).T
+    boxes = shapely.box(lo_x - distance, lo_y - distance, hi_x + distance, hi_y + distance)
+    if len(query) <= len(geoms):
+        return shapely.STRtree(geoms).query(boxes)
+    return shapely.STRtree(boxes).query(query)
 
 
 _HAIR = 1e-9  # px: a bound nearer than this to the threshold leaves the pair to GEOS
@@ -549,7 +554,9 @@ def _cut_convex(whole, grown, rows, pairs, size, gap, padded):
     left = np.ones(len(pt), dtype=bool)
     while left.any():
         idx = np.flatnonzero(left)
-        first = idx[np.unique(pt[idx], return_index=True)[1]]
+        # each tile's first pair left (the pairs go tile by tile)
+        of = pt[idx]
+        first = idx[np.flatnonzero(np.concatenate([[True], of[1:] != of[:-1]]))]
         r = pt[first]
         normal, offset = _best_plane(poly, count, r, first, tiles, obstacles, (d, keep))
         poly, count = _clip_rows(poly, count, r, normal, offset)
