@@ -532,9 +532,14 @@ def _cut_convex(whole, grown, rows, pairs, size, gap, padded):
     w, h = size
     frame_n = np.array([[-1.0, 0.0], [0.0, -1.0], [1.0, 0.0], [0.0, 1.0]])
     frame_c = np.array([-0.5 * gap, -0.5 * gap, w - 0.5 * gap, h - 0.5 * gap])
-    every = np.arange(nr)
     for k in range(4):
-        poly, count = _clip_rows(poly, count, every, np.tile(frame_n[k], (nr, 1)), np.full(nr, frame_c[k]))
+        # only the outlines that reach beyond this side (the others it leaves as they are)
+        s = poly[..., 0] * frame_n[k, 0] + poly[..., 1] * frame_n[k, 1] - frame_c[k]
+        sub = np.flatnonzero(((s > 0) & (np.arange(poly.shape[1]) < count[:, None])).any(axis=1))
+        if len(sub):
+            poly, count = _clip_rows(
+                poly, count, sub, np.tile(frame_n[k], (len(sub), 1)), np.full(len(sub), frame_c[k])
+            )
     near, (row_of, tile_xy, tile_narrow, piece_xy, tile_count) = padded
     narrow = tile_narrow.shape[1]
     tiles = _Padded(tile_narrow[row_of[near[rows]]], whole[rows])
