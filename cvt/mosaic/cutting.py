@@ -332,21 +332,7 @@ def _cut_straight(
     tile_xy, piece_xy = _widened(tile_xy, narrow), _widened(piece_xy, narrow)
     tile_narrow = tile_xy.copy()  # every tile's first ``narrow`` vertices
     tile_count = np.full(len(involved), narrow)
-    # each turn's pairs: (candidate, obstacle) as indices into the tiles (as they are
-    # when the turn comes) then the pieces, the distance to keep, and whether the
-    # obstacle is a tile cut in an earlier turn
-    when = np.full(len(geoms), -1)
-    when[near] = turn
-    plans = []
-    for t in range(turn.max() + 1):
-        members = turn == t
-        tile_pair, wall_pair = members[ci], members[wc]
-        pair_tile = np.concatenate([ci[tile_pair], wc[wall_pair]])
-        obstacle = np.concatenate([oi[tile_pair], len(geoms) + wi[wall_pair]])
-        keep = np.concatenate([np.full(tile_pair.sum(), full), np.full(wall_pair.sum(), half)])
-        moved = np.zeros(len(obstacle), dtype=bool)
-        moved[: tile_pair.sum()] = (when[oi[tile_pair]] >= 0) & (when[oi[tile_pair]] < t)
-        plans.append((np.flatnonzero(members), pair_tile, obstacle, keep, moved))
+    plans = _turn_plans(turn, near, (ci, oi), (wc, wi), len(geoms), (full, half))
     pool = np.concatenate([geoms, pieces])
     whole = geoms[near]  # a candidate is whole until its own turn
     grew = 0
@@ -385,6 +371,28 @@ def _cut_straight(
     result[:] = out
     result[near] = geoms[near]  # every candidate is a tile (not None)
     return list(result), grew
+
+
+def _turn_plans(turn, near, tile_pairs, wall_pairs, n_tiles, keeps) -> list:
+    """Each turn's candidates (indices into ``near``) and pairs: (candidate, obstacle)
+    with the obstacle as an index into the tiles (as they are when the turn comes) then
+    the pieces (``wall_pairs``' second indices, after ``n_tiles``), the distance to keep
+    (``keeps``: from tiles, from pieces), and whether the obstacle is a tile cut in an
+    earlier turn."""
+    (ci, oi), (wc, wi) = tile_pairs, wall_pairs
+    when = np.full(n_tiles, -1)
+    when[near] = turn
+    plans = []
+    for t in range(turn.max() + 1):
+        members = turn == t
+        tile_pair, wall_pair = members[ci], members[wc]
+        pair_tile = np.concatenate([ci[tile_pair], wc[wall_pair]])
+        obstacle = np.concatenate([oi[tile_pair], n_tiles + wi[wall_pair]])
+        keep = np.concatenate([np.full(tile_pair.sum(), keeps[0]), np.full(wall_pair.sum(), keeps[1])])
+        moved = np.zeros(len(obstacle), dtype=bool)
+        moved[: tile_pair.sum()] = (when[oi[tile_pair]] >= 0) & (when[oi[tile_pair]] < t)
+        plans.append((np.flatnonzero(members), pair_tile, obstacle, keep, moved))
+    return plans
 
 
 _BLOCK = 24  # px: the pieces of wall are gathered by the square of this side their centre lies in
