@@ -634,8 +634,15 @@ def _least(p, normal):
     """Per row, the least of normal·vertex over the padded vertices ``p`` (k, V, 2), for
     ``normal`` (k, 2) or (k, K, 2)."""
     if normal.ndim == 2:
-        return (p[..., 0] * normal[:, None, 0] + p[..., 1] * normal[:, None, 1]).min(axis=1)
-    return (p[:, :, None, 0] * normal[:, None, :, 0] + p[:, :, None, 1] * normal[:, None, :, 1]).min(axis=1)
+        proj = p[..., 0] * normal[:, None, 0] + p[..., 1] * normal[:, None, 1]
+    else:
+        proj = p[:, :, None, 0] * normal[:, None, :, 0] + p[:, :, None, 1] * normal[:, None, :, 1]
+    # the least folded over the few vertex places (several times quicker than a
+    # reduction along that short axis)
+    out = proj[:, 0].copy()
+    for v in range(1, proj.shape[1]):
+        np.minimum(out, proj[:, v], out=out)
+    return out
 
 
 def _padded(poly, count):
