@@ -330,8 +330,11 @@ def _cut_straight(
     tile_xy = _padded(*_vertex_arrays(geoms[involved]))
     narrow = max(tile_xy.shape[1], 2)
     tile_xy, piece_xy = _widened(tile_xy, narrow), _widened(piece_xy, narrow)
-    tile_narrow = tile_xy.copy()  # every tile's first ``narrow`` vertices
     tile_count = np.full(len(involved), narrow)
+    # the rows of the obstacles (the tiles', then the pieces') and their first
+    # ``narrow`` vertices (all of most)
+    pool_row = np.concatenate([row_of, len(involved) + np.arange(len(pieces))])
+    pool_xy = np.concatenate([tile_xy, piece_xy])
     plans = _turn_plans(turn, near, (ci, oi), (wc, wi), len(geoms), (full, half))
     pool = np.concatenate([geoms, pieces])
     whole = geoms[near]  # a candidate is whole until its own turn
@@ -351,7 +354,9 @@ def _cut_straight(
             else:
                 d[~moved] = fixed[t - 1].result()
                 d[moved] = elementwise(shapely.distance, whole[pair_tile[moved]], pool[obstacle[moved]])
-            vertices = (row_of, tile_xy, tile_narrow, piece_xy, tile_count)
+            wide = np.flatnonzero(tile_count > narrow)
+            by_row = np.concatenate([geoms[involved], pieces])
+            vertices = (pool_row, pool_xy, by_row, wide, tile_xy[wide])
             cut, ok, poly, count = _cut_convex(
                 whole, grown_xy, rows, (pair_tile, pool, obstacle, keep, d), (w, h), gap, (near, vertices)
             )
@@ -364,7 +369,7 @@ def _cut_straight(
             cut_xy = _padded(poly, count)
             tile_xy = _widened(tile_xy, cut_xy.shape[1])
             tile_xy[at] = _widened(cut_xy, tile_xy.shape[1])
-            tile_narrow[at] = tile_xy[at, :narrow]
+            pool_xy[at] = tile_xy[at, :narrow]
             tile_count[at] = count
             grew += len(good)
     result = np.empty(len(out), dtype=object)
@@ -518,10 +523,10 @@ def _cut_convex(whole, grown, rows, pairs, size, gap, padded):
     obstacle) pair, the candidate (an index into ``whole``/``grown``), the obstacle (an
     index into ``pool``, convex geometries), the distance to keep from it and the
     distance between them.  ``padded``: ``near`` (the tiles of ``whole``) and
-    (``row_of``, ``tile_xy``, ``tile_narrow``, ``piece_xy``, ``tile_count``): each tile's
-    row (-1 where it is never read), the rows' vertices (:func:`_padded`) in full and at
-    the narrow width that the whole tiles and the pieces (``piece_xy``) fit, and their
-    counts.  Returns the cut outlines of ``rows``, whether each is one polygon that grew
+    (``pool_row``, ``pool_xy``, ``by_row``, ``wide``, ``wide_xy``): each obstacle's row
+    (-1 where it is never read), the rows' first vertices (:func:`_padded`, at the
+    narrow width that the whole tiles and the pieces fit) and geometries, and the rows
+    with more vertices and all of theirs.  Returns the cut outlines of ``rows``, whether each is one polygon that grew
     and keeps every distance (else the tile stays whole), and their vertex arrays and
     counts."""
     nr = len(rows)
@@ -534,7 +539,6 @@ def _cut_convex(whole, grown, rows, pairs, size, gap, padded):
     key = pair_tile[order].astype(np.uint16 if len(whole) <= 1 << 16 else np.int64)
     order = order[np.argsort(key, kind="stable")]
     pair_tile, obstacle, keep, d = (x[order] for x in (pair_tile, obstacle, keep, d))
-    used, obstacle = np.unique(obstacle, return_inverse=True)
     count = grown[1][rows]
     poly = grown[0][rows, : int(count.max(initial=0))]
     w, h = size
@@ -548,21 +552,9 @@ def _cut_convex(whole, grown, rows, pairs, size, gap, padded):
             poly, count = _clip_rows(
                 poly, count, sub, np.tile(frame_n[k], (len(sub), 1)), np.full(len(sub), frame_c[k])
             )
-    near, (row_of, tile_xy, tile_narrow, piece_xy, tile_count) = padded
-    narrow = tile_narrow.shape[1]
-    tiles = _Padded(tile_narrow[row_of[near[rows]]], whole[rows])
-    # the obstacles' vertices: the tiles (cut ones may be wider) then the pieces
-    n_tiles = len(row_of)
-    of_tile = np.flatnonzero(used < n_tiles)
-    at = row_of[used[of_tile]]
-    wide = of_tile[tile_count[at] > narrow]
-    obstacles = _Padded(
-        np.concatenate([tile_narrow[at], piece_xy[used[len(of_tile) :] - n_tiles]]),
-        pool[used],
-        obstacle,
-        wide,
-        tile_xy[row_of[used[wide]]],
-    )
+    near, (pool_row, pool_xy, by_row, wide, wide_xy) = padded
+    tiles = _Padded(pool_xy[pool_row[near[rows]]], whole[rows])
+    obstacles = _Padded(pool_xy, by_row, pool_row[obstacle], wide, wide_xy)
     pt = slot[pair_tile]
     left = np.ones(len(pt), dtype=bool)
     while left.any():
@@ -588,7 +580,7 @@ def _cut_convex(whole, grown, rows, pairs, size, gap, padded):
     # the cut may touch it, not overlap it
     touching = np.flatnonzero(d <= 1e-9)
     if len(touching):
-        bad = shapely.relate_pattern(cut[pt[touching]], pool[used[obstacle[touching]]], "T********")
+        bad = shapely.relate_pattern(cut[pt[touching]], pool[obstacle[touching]], "T********")
         ok[pt[touching[bad]]] = False
     return cut, ok, poly, count
 
