@@ -569,7 +569,7 @@ def _cut_convex(whole, grown, rows, pairs, size, gap, padded):
         row = np.full(nr, -1)
         row[r] = np.arange(len(r))
         along = row[pt[idx]]
-        least = obstacles.least(idx, normal[along])
+        least = obstacles.least(idx, np.take(normal, along, axis=0))
         clear = least - keep[idx] >= offset[along] - 1e-12
         left[idx[clear]] = False
         left[first] = False
@@ -613,7 +613,7 @@ class _Padded:
         """Per item ``which[k]``, the least of normal[k]·vertex over its vertices
         (``normal`` (k, 2), or (k, K, 2): K candidates each)."""
         rows = self.ref[which]
-        out = _least(self.xy[rows], normal)
+        out = _least(np.take(self.xy, rows, axis=0), normal)  # (take: far quicker than [rows])
         if self.slot is not None:
             slot = self.slot[rows]
             wide = np.flatnonzero(slot >= 0)
@@ -689,7 +689,7 @@ def _best_plane(poly, count, r, first, tiles, obstacles, pairs):
     usable[:, 0] = True
     # the area each usable candidate keeps (the first always: it wins ties)
     row, k = np.nonzero(usable)
-    p, n = _clip_arrays(poly[r[row]], count[r[row]], normal[row, k], offset[row, k])
+    p, n = _clip_arrays(np.take(poly, r[row], axis=0), count[r[row]], normal[row, k], offset[row, k])
     area = np.full(usable.shape, -np.inf)
     area[row, k] = _area(p, n)
     best = np.argmax(area, axis=1)
@@ -764,7 +764,7 @@ def _clip_arrays(p, c, normal, offset):
 
 def _clip_rows(poly, count, sub, normal, offset):
     """Rows ``sub`` of ``poly`` (each ``count`` vertices) clipped to normal·x <= offset."""
-    packed, new_count = _clip_arrays(poly[sub], count[sub], normal, offset)
+    packed, new_count = _clip_arrays(np.take(poly, sub, axis=0), count[sub], normal, offset)
     width = max(packed.shape[1], poly.shape[1])
     if width > poly.shape[1]:
         poly = np.concatenate([poly, np.zeros((len(poly), width - poly.shape[1], 2))], axis=1)
