@@ -752,14 +752,23 @@ def _clip_arrays(p, c, normal, offset):
         t = np.where(cross, s / (s - sn), 0.0)
     x = p + t[:, :, None] * (q - p)
     # each edge gives its first vertex where inside, then its crossing where it crosses
-    cand = np.stack([p, x], axis=2).reshape(len(p), 2 * v, 2)
     use = np.stack([inside, cross], axis=2).reshape(len(p), 2 * v)
     place = np.cumsum(use, axis=1)
     new_count = place[:, -1] if v else np.zeros(len(p), dtype=np.int64)
-    out = np.zeros((len(p), int(new_count.max()) if len(p) else 0, 2))
-    rows, cols = np.nonzero(use)
-    out[rows, place[rows, cols] - 1] = cand[rows, cols]
-    return out, new_count
+    width = int(new_count.max()) if len(p) else 0
+    # gathered and placed through flat indices (quicker than fancy indexing by pairs)
+    at = np.flatnonzero(use)
+    edge = at // 2  # the edge (row * v + vertex) each comes from
+    vals = np.where(
+        (at % 2 == 0)[:, None],
+        np.take(p.reshape(-1, 2), edge, axis=0),
+        np.take(x.reshape(-1, 2), edge, axis=0),
+    )
+    dest = (at // (2 * v)) * width + np.take(place, at) - 1
+    out = np.zeros(len(p) * width * 2)
+    out[2 * dest] = vals[:, 0]
+    out[2 * dest + 1] = vals[:, 1]
+    return out.reshape(len(p), width, 2), new_count
 
 
 def _clip_rows(poly, count, sub, normal, offset):
