@@ -172,7 +172,8 @@ def _grown(polygons: np.ndarray, factor: float) -> np.ndarray:
     """Each polygon scaled by ``factor`` about its centroid (vectorised)."""
     centres = shapely.get_coordinates(shapely.centroid(polygons))
     coords, index = shapely.get_coordinates(polygons, return_index=True)
-    out = shapely.set_coordinates(polygons.copy(), centres[index] + factor * (coords - centres[index]))
+    at = np.take(centres, index, axis=0)
+    out = shapely.set_coordinates(polygons.copy(), at + factor * (coords - at))
     return out
 
 
@@ -482,7 +483,7 @@ def _tile_bounds(a: tuple, polygons: np.ndarray):
     def bounds(qi, gi, low, high):
         used, gi = np.unique(gi, return_inverse=True)
         b = _disks(*_vertex_arrays(polygons[used]))
-        apart = a[0][qi] - b[0][gi]
+        apart = np.take(a[0], qi, axis=0) - np.take(b[0], gi, axis=0)
         return _nearer(apart, a[1][qi] + b[1][gi], low, high, a[2][qi] + b[2][gi])
 
     return bounds
@@ -494,8 +495,9 @@ def _piece_bounds(disks: tuple, segs: np.ndarray):
     point to the piece less the inner radius, less the outer one."""
 
     def bounds(qi, gi, low, high):
-        p = disks[0][gi]
-        a, b = segs[qi, 0], segs[qi, 1]
+        p = np.take(disks[0], gi, axis=0)
+        ends = np.take(segs, qi, axis=0)
+        a, b = ends[:, 0], ends[:, 1]
         ab = b - a
         with np.errstate(invalid="ignore", divide="ignore"):
             t = np.clip(((p - a) * ab).sum(axis=1) / (ab * ab).sum(axis=1), 0.0, 1.0)
@@ -689,12 +691,18 @@ def _best_plane(poly, count, r, first, tiles, obstacles, pairs):
     usable[:, 0] = True
     # the area each usable candidate keeps (the first always: it wins ties)
     row, k = np.nonzero(usable)
-    p, n = _clip_arrays(np.take(poly, r[row], axis=0), count[r[row]], normal[row, k], offset[row, k])
+    flat = row * normal.shape[1] + k
+    p, n = _clip_arrays(
+        np.take(poly, r[row], axis=0),
+        count[r[row]],
+        np.take(normal.reshape(-1, 2), flat, axis=0),
+        offset[row, k],
+    )
     area = np.full(usable.shape, -np.inf)
     area[row, k] = _area(p, n)
     best = np.argmax(area, axis=1)
     pick = np.arange(len(r))
-    return normal[pick, best], offset[pick, best]
+    return np.take(normal.reshape(-1, 2), pick * normal.shape[1] + best, axis=0), offset[pick, best]
 
 
 def _vertex_arrays(polygons):
@@ -706,7 +714,9 @@ def _vertex_arrays(polygons):
     poly = np.zeros((len(polygons), int(count.max()) if len(polygons) else 0, 2))
     pos = np.arange(len(index)) - begin[index]
     open_ = pos < count[index]
-    poly[index[open_], pos[open_]] = coords[open_]
+    flat = (index * poly.shape[1] + pos)[open_]  # placed through flat indices (quicker)
+    poly.reshape(-1, 2)[:, 0][flat] = coords[open_, 0]
+    poly.reshape(-1, 2)[:, 1][flat] = coords[open_, 1]
     return poly, count
 
 
