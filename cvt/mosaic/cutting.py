@@ -528,9 +528,9 @@ def _cut_convex(whole, grown, rows, pairs, size, gap, padded):
     (``pool_row``, ``pool_xy``, ``by_row``, ``wide``, ``wide_xy``): each obstacle's row
     (-1 where it is never read), the rows' first vertices (:func:`_padded`, at the
     narrow width that the whole tiles and the pieces fit) and geometries, and the rows
-    with more vertices and all of theirs.  Returns the cut outlines of ``rows``, whether each is one polygon that grew
-    and keeps every distance (else the tile stays whole), and their vertex arrays and
-    counts."""
+    with more vertices and all of theirs.  Returns the cut outlines of ``rows``, whether
+    each is one polygon that grew and keeps every distance (else the tile stays whole),
+    and their vertex arrays and counts."""
     nr = len(rows)
     slot = np.full(len(whole), -1)
     slot[rows] = np.arange(nr)
