@@ -655,3 +655,26 @@ def test_outlines_start_at_the_vertex_nearest_a_point():
         assert np.array_equal(out[k, : n[k]], np.roll(ring, -start, axis=0))
         assert not out[k, n[k] :].any()
     assert np.array_equal(out[:5, 0], first[:5])
+
+
+def test_segment_distances_are_geos_distances_bit_for_bit():
+    """The whole-array distance of convex polygons to segments and points is shapely's
+    (GEOS's) own number wherever it answers; it leaves open (NaN) only pairs that meet
+    or nearly do, and answers for all that are apart."""
+    from compact_distributions.cvt.mosaic import cutting
+
+    rng = np.random.default_rng(11)
+    geoms, (poly, count) = _convex_polygons(rng, 400, spread=30.0)
+    padded = cutting._padded(poly, count)
+    ends = rng.uniform(0, 36, (400, 2))
+    step = rng.normal(size=(400, 2)) * rng.choice([0.0, 1.0, 8.0], (400, 1))  # some points
+    step[:100] = np.round(step[:100])  # some along the axes, as the walls' pieces
+    segs = np.stack([ends, ends + step], axis=1)
+    pieces = np.array([shapely.LineString(s) if (s[0] != s[1]).any() else shapely.Point(s[0]) for s in segs])
+    got = cutting.segment_distances(padded, segs)
+    truth = shapely.distance(geoms, pieces)
+    answered = ~np.isnan(got)
+    assert np.array_equal(got[answered], truth[answered])
+    assert (truth[~answered] < 1e-6).all()  # left open: they meet
+    assert answered[truth > 1e-6].all() and 0 < (~answered).sum() < 400
+    assert (shapely.get_type_id(pieces[answered]) == 0).any()

@@ -339,19 +339,23 @@ def _cut_straight(
     plans = _turn_plans(turn, near, (ci, oi), (wc, wi), len(geoms), (full, half))
     pool = np.concatenate([geoms, pieces])
     whole = geoms[near]  # a candidate is whole until its own turn
+    whole_xy = np.take(pool_xy, pool_row[near], axis=0)  # (all their vertices: narrow)
+    piece_ends = piece_xy[:, :2]
     grew = 0
     # the distances of the pairs whose obstacle no turn before theirs moves are found
     # while the turns before run (GEOS lets go of the GIL): one thread beside this one
     with ThreadPoolExecutor(1) as beside:
         fixed = [
-            beside.submit(shapely.distance, whole[pair_tile[~moved]], pool[obstacle[~moved]])
+            beside.submit(
+                _distances, (whole, whole_xy), (pool, piece_ends), pair_tile[~moved], obstacle[~moved]
+            )
             for _, pair_tile, obstacle, _, moved in plans[1:]
         ]
         for t, (rows, pair_tile, obstacle, keep, moved) in enumerate(plans):
             pool = np.concatenate([geoms, pieces])
             d = np.empty(len(obstacle))
             if t == 0:
-                d[:] = elementwise(shapely.distance, whole[pair_tile], pool[obstacle])
+                d[:] = _distances((whole, whole_xy), (pool, piece_ends), pair_tile, obstacle, elementwise)
             else:
                 d[~moved] = fixed[t - 1].result()
                 d[moved] = elementwise(shapely.distance, whole[pair_tile[moved]], pool[obstacle[moved]])
@@ -377,6 +381,112 @@ def _cut_straight(
     result[:] = out
     result[near] = geoms[near]  # every candidate is a tile (not None)
     return list(result), grew
+
+
+def _distances(tiles: tuple, obstacles: tuple, pair_tile, obstacle, run=None) -> np.ndarray:
+    """``shapely.distance(tiles[pair_tile], pool[obstacle])``: the pairs of a tile and a
+    piece of wall by :func:`segment_distances` (the same numbers, quicker), the others
+    and the few it leaves open by GEOS (through ``run(shapely.distance, ...)`` if given).
+    ``tiles``: the tiles and their padded vertices; ``obstacles``: the pool (the tiles
+    then the pieces) and the pieces' ends."""
+    whole, whole_xy = tiles
+    pool, ends = obstacles
+    n_tiles = len(pool) - len(ends)
+    d = np.full(len(obstacle), np.nan)
+    wall = np.flatnonzero(obstacle >= n_tiles)
+    d[wall] = segment_distances(
+        np.take(whole_xy, pair_tile[wall], axis=0), np.take(ends, obstacle[wall] - n_tiles, axis=0)
+    )
+    ask = np.flatnonzero(np.isnan(d))
+    if len(ask):
+        a, b = whole[pair_tile[ask]], pool[obstacle[ask]]
+        d[ask] = run(shapely.distance, a, b) if run is not None else shapely.distance(a, b)
+    return d
+
+
+_HAIR_APART = 1e-9  # px: a pair nearer than this to meeting is left to GEOS
+_BLOCK_PAIRS = 8192  # pairs per block of segment_distances (its arrays stay in cache)
+
+
+def segment_distances(poly: np.ndarray, segs: np.ndarray) -> np.ndarray:
+    """Distances between convex polygons and segments, as GEOS computes them, whole-array.
+
+    GEOS's distance between a polygon and a line that do not meet is the least, over each
+    pair of a polygon edge and the segment, of four point-to-segment distances (each end
+    of one to the other); over all the edges, that is the least distance of each vertex
+    to the segment and of each end of the segment to each edge, each here computed in
+    GEOS's own arithmetic (``Distance::pointToSegment``), so the least is the same number
+    bit for bit.  Only pairs surely apart are so computed: the segment's line, or a line
+    through a polygon edge, has the other wholly beyond it by more than a hair.
+
+    Parameters
+    ----------
+    poly : (n, V, 2) float ndarray
+        Each convex polygon's vertices in ring order (either way round), the places past
+        its own vertices holding its first one.
+    segs : (n, 2, 2) float ndarray
+        Each segment's ends (a point: both the same).
+
+    Returns
+    -------
+    (n,) float ndarray
+        ``shapely.distance(polygon, segment)``, NaN where the pair is not surely apart (ask
+        GEOS).
+    """
+    out = np.empty(len(poly))
+    for s in range(0, len(poly), _BLOCK_PAIRS):
+        out[s : s + _BLOCK_PAIRS] = _segment_block(poly[s : s + _BLOCK_PAIRS], segs[s : s + _BLOCK_PAIRS])
+    return out
+
+
+def _point_segment(px, py, ax, ay, bx, by):
+    """GEOS's ``Distance::pointToSegment``, element by element, in its arithmetic."""
+    dx, dy = bx - ax, by - ay
+    len2 = dx * dx + dy * dy
+    ex, ey = px - ax, py - ay
+    with np.errstate(invalid="ignore", divide="ignore"):
+        r = (ex * dx + ey * dy) / len2
+        s = ((ay - py) * dx - (ax - px) * dy) / len2
+        mid = np.abs(s) * np.sqrt(len2)
+    fx, fy = px - bx, py - by
+    out = np.where(r >= 1.0, np.sqrt(fx * fx + fy * fy), mid)
+    # the first end where A = B (r is then not a number) or r <= 0
+    return np.where(~(r > 0.0), np.sqrt(ex * ex + ey * ey), out)
+
+
+def _segment_block(poly: np.ndarray, segs: np.ndarray) -> np.ndarray:
+    """:func:`segment_distances` of one block: folded vertex by vertex (a reduction along
+    the short vertex axis is several times slower)."""
+    cx, cy, dx, dy = segs[:, 0, 0], segs[:, 0, 1], segs[:, 1, 0], segs[:, 1, 1]
+    sx, sy = dx - cx, dy - cy
+    margin = _HAIR_APART * np.sqrt(sx * sx + sy * sy)
+    v = poly.shape[1]
+    area = np.zeros(len(poly))
+    for k in range(v):  # twice the signed area: which way round the ring goes
+        a, b = poly[:, k], poly[:, (k + 1) % v]
+        area += a[:, 0] * b[:, 1] - b[:, 0] * a[:, 1]
+    turn = np.sign(area)
+    least = np.full(len(poly), np.inf)
+    above = np.ones(len(poly), dtype=bool)
+    below = np.ones(len(poly), dtype=bool)
+    apart = np.zeros(len(poly), dtype=bool)
+    for k in range(v):
+        a, b = poly[:, k], poly[:, (k + 1) % v]
+        ax, ay, bx, by = a[:, 0], a[:, 1], b[:, 0], b[:, 1]
+        np.minimum(least, _point_segment(ax, ay, cx, cy, dx, dy), out=least)
+        np.minimum(least, _point_segment(cx, cy, ax, ay, bx, by), out=least)
+        np.minimum(least, _point_segment(dx, dy, ax, ay, bx, by), out=least)
+        # apart: every vertex beyond the segment's line (one side), or both ends beyond
+        # this edge's line (outward)
+        side = sx * (ay - cy) - sy * (ax - cx)
+        above &= side > margin
+        below &= side < -margin
+        ex, ey = bx - ax, by - ay
+        edge = _HAIR_APART * np.sqrt(ex * ex + ey * ey)
+        out_c = turn * (ex * (cy - ay) - ey * (cx - ax)) < -edge
+        out_d = turn * (ex * (dy - ay) - ey * (dx - ax)) < -edge
+        apart |= out_c & out_d
+    return np.where(apart | above | below, least, np.nan)
 
 
 def _turn_plans(turn, near, tile_pairs, wall_pairs, n_tiles, keeps) -> list:
