@@ -552,6 +552,15 @@ def test_pairs_within_a_distance_are_those_shapely_finds():
     truth = shapely.dwithin(query[qi.ravel()], geoms[gi.ravel()], distance=distance)
     assert sorted(zip(*got, strict=True)) == sorted(zip(qi.ravel()[truth], gi.ravel()[truth], strict=True))
     assert 0 < len(got[0]) < truth.size
+    # queries that are some of the geometries themselves: each such pair asked once
+    sel = rng.choice(len(geoms), 50, replace=False)
+    twin = np.full(len(geoms), -1)
+    twin[sel] = np.arange(len(sel))
+    bounds = cutting._tile_bounds(cutting._disks(poly[sel], count[sel]), geoms)
+    got = cutting._within(geoms, geoms[sel], distance, bounds, twin)
+    qi, gi = np.meshgrid(np.arange(len(sel)), np.arange(len(geoms)), indexing="ij")
+    truth = shapely.dwithin(geoms[sel][qi.ravel()], geoms[gi.ravel()], distance=distance)
+    assert sorted(zip(*got, strict=True)) == sorted(zip(qi.ravel()[truth], gi.ravel()[truth], strict=True))
     # axis-aligned pieces and points, some exactly ``distance`` beyond a vertex
     ends = rng.integers(0, 60, (300, 2)) + 0.5
     length = rng.integers(0, 6, 300)

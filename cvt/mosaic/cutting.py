@@ -324,7 +324,9 @@ def _cut_straight(
     outer[near] = grown
     grown_xy = _vertex_arrays(grown)
     grown_disks = _disks(*grown_xy)
-    ci, oi = _within(outer, grown, full, _tile_bounds(grown_disks, outer))
+    twin = np.full(len(geoms), -1)
+    twin[near] = np.arange(len(near))  # outer[near[k]] is grown[k]
+    ci, oi = _within(outer, grown, full, _tile_bounds(grown_disks, outer), twin)
     other = oi != near[ci]
     ci, oi = ci[other], oi[other]
     piece_xy = np.concatenate([segs, np.repeat(points[:, None, :], 2, axis=1)])
@@ -568,15 +570,31 @@ def _disks(poly: np.ndarray, count: np.ndarray) -> tuple[np.ndarray, np.ndarray,
     return inner, inner_r, outer_r
 
 
-def _within(geoms: np.ndarray, query: np.ndarray, distance: float, bounds) -> tuple[np.ndarray, np.ndarray]:
+def _within(
+    geoms: np.ndarray, query: np.ndarray, distance: float, bounds, twin: np.ndarray | None = None
+) -> tuple[np.ndarray, np.ndarray]:
     """Pairs (query index, geoms index) less than ``distance`` apart: the boxes grown by
     it looked up in a tree, then the exact distances (cheaper than the tree's own
     ``dwithin``).  ``bounds(qi, gi, low, high)`` tells which pairs are surely nearer
     than ``low`` and which surely farther than ``high``: GEOS is asked only about the
-    rest."""
+    rest.  ``twin``: per geometry, the query that is the same geometry (-1 if none);
+    GEOS's distance is the same either way round, so of each two such pairs (a, b),
+    (b, a) it is asked once."""
     qi, gi = _boxes_within(geoms, query, distance)
     close, far = bounds(qi, gi, distance - _HAIR, distance + _HAIR)
     ask = np.flatnonzero(~close & ~far)
+    if twin is not None:
+        other = twin[gi[ask]]
+        both = other >= 0
+        pairs, ask = ask[both], ask[~both]
+        a, b = qi[pairs], other[both]
+        _, once, back = np.unique(
+            np.minimum(a, b) * len(query) + np.maximum(a, b), return_index=True, return_inverse=True
+        )
+        found = elementwise(
+            shapely.dwithin, query[qi[pairs[once]]], geoms[gi[pairs[once]]], distance=distance
+        )
+        close[pairs] = found[back]
     close[ask] = elementwise(shapely.dwithin, query[qi[ask]], geoms[gi[ask]], distance=distance)
     return qi[close], gi[close]
 
