@@ -519,3 +519,171 @@ def test_tiles_near_walls_are_those_shapely_finds():
         got = cutting._near_walls(pieces, tiles, reach, walls)
         assert np.array_equal(got, truth), reach
         assert 0 < len(got) < len(tiles)
+
+
+def _convex_polygons(rng, n, spread=60.0):
+    """Random convex polygons (3 to 9 vertices, some turned squares), as shapely and as
+    the straight cut's padded vertex arrays."""
+    from compact_distributions.cvt.mosaic import cutting
+
+    out = []
+    for _ in range(n):
+        k = rng.integers(3, 10)
+        angles = np.sort(rng.uniform(0, 2 * np.pi, k))
+        radius = rng.uniform(1.0, 6.0)
+        xy = np.stack([np.cos(angles), np.sin(angles)], axis=1) * radius + rng.uniform(0, spread, 2)
+        out.append(shapely.Polygon(xy))
+    geoms = np.array(out, dtype=object)
+    return geoms, cutting._vertex_arrays(geoms)
+
+
+def test_pairs_within_a_distance_are_those_shapely_finds():
+    """The straight cut's pairs of tiles, and of wall pieces and tiles, within a distance
+    (settled by disks where they can be, by GEOS where not) are the pairs that shapely
+    finds by brute force, with pieces placed exactly at the distance from an edge."""
+    from compact_distributions.cvt.mosaic import cutting
+
+    rng = np.random.default_rng(7)
+    geoms, (poly, count) = _convex_polygons(rng, 120)
+    query, (qpoly, qcount) = _convex_polygons(rng, 40)
+    distance = 0.8
+    got = cutting._within(geoms, query, distance, cutting._tile_bounds(cutting._disks(qpoly, qcount), geoms))
+    qi, gi = np.meshgrid(np.arange(len(query)), np.arange(len(geoms)), indexing="ij")
+    truth = shapely.dwithin(query[qi.ravel()], geoms[gi.ravel()], distance=distance)
+    assert sorted(zip(*got, strict=True)) == sorted(zip(qi.ravel()[truth], gi.ravel()[truth], strict=True))
+    assert 0 < len(got[0]) < truth.size
+    # queries that are some of the geometries themselves: each such pair asked once
+    sel = rng.choice(len(geoms), 50, replace=False)
+    twin = np.full(len(geoms), -1)
+    twin[sel] = np.arange(len(sel))
+    bounds = cutting._tile_bounds(cutting._disks(poly[sel], count[sel]), geoms)
+    got = cutting._within(geoms, geoms[sel], distance, bounds, twin)
+    qi, gi = np.meshgrid(np.arange(len(sel)), np.arange(len(geoms)), indexing="ij")
+    truth = shapely.dwithin(geoms[sel][qi.ravel()], geoms[gi.ravel()], distance=distance)
+    assert sorted(zip(*got, strict=True)) == sorted(zip(qi.ravel()[truth], gi.ravel()[truth], strict=True))
+    # axis-aligned pieces and points, some exactly ``distance`` beyond a vertex
+    ends = rng.integers(0, 60, (300, 2)) + 0.5
+    length = rng.integers(0, 6, 300)
+    down = rng.random(300) < 0.5
+    segs = np.stack([ends, ends + np.where(down[:, None], [[0, 1]], [[1, 0]]) * length[:, None]], axis=1)
+    top = poly[
+        np.arange(len(poly)),
+        np.argmax(poly[..., 1] - 1e9 * (np.arange(poly.shape[1]) >= count[:, None]), axis=1),
+    ]
+    segs[:40] = np.stack([top[:40] + [-1, distance], top[:40] + [1, distance]], axis=1)  # just touching reach
+    pieces = np.array([shapely.LineString(s) if (s[0] != s[1]).any() else shapely.Point(s[0]) for s in segs])
+    bounds = cutting._piece_bounds(cutting._disks(poly, count), segs)
+    pi, gi = cutting._within(geoms, pieces, distance, bounds)
+    pq, gq = np.meshgrid(np.arange(len(pieces)), np.arange(len(geoms)), indexing="ij")
+    truth = shapely.dwithin(pieces[pq.ravel()], geoms[gq.ravel()], distance=distance)
+    assert sorted(zip(pi, gi, strict=True)) == sorted(zip(pq.ravel()[truth], gq.ravel()[truth], strict=True))
+    assert (pi[1:] >= pi[:-1]).all()  # each piece's pairs together, the pieces in order
+
+
+def test_clipped_arrays_are_shapely_half_plane_intersections():
+    """Padded vertex arrays clipped to a half-plane (whole-array Sutherland-Hodgman) are
+    the polygons' intersections with it as shapely computes them; an outline wholly
+    inside is left as it was, vertex for vertex."""
+    from compact_distributions.cvt.mosaic import cutting
+
+    rng = np.random.default_rng(8)
+    geoms, (poly, count) = _convex_polygons(rng, 200, spread=10.0)
+    angle = rng.uniform(0, 2 * np.pi, len(geoms))
+    normal = np.stack([np.cos(angle), np.sin(angle)], axis=1)
+    centre = shapely.get_coordinates(shapely.centroid(geoms))
+    offset = (normal * centre).sum(axis=1) + rng.uniform(-4, 8, len(geoms))
+    out, n = cutting._clip_arrays(poly, count, normal, offset)
+    got = cutting._polygons(out, n)
+    # the half-plane as a large polygon: the line's two far points and two beyond them
+    along = np.stack([-normal[:, 1], normal[:, 0]], axis=1)
+    foot = normal * offset[:, None]
+    far = 1e3
+    halves = shapely.polygons(
+        np.stack(
+            [
+                foot - far * along,
+                foot + far * along,
+                foot + far * along - far * normal,
+                foot - far * along - far * normal,
+            ],
+            axis=1,
+        )
+    )
+    truth = shapely.intersection(geoms, halves)
+    assert np.allclose(shapely.area(got), shapely.area(truth), rtol=0, atol=1e-9)
+    assert (shapely.area(shapely.symmetric_difference(got, truth)) < 1e-9).all()
+    whole = np.flatnonzero(np.isclose(shapely.area(truth), shapely.area(geoms), rtol=0, atol=0))
+    assert len(whole) and all(np.array_equal(out[k, : n[k]], poly[k, : count[k]]) for k in whole)
+    assert 0 < (n == 0).sum() < len(n)  # some cut away whole, most kept in part
+
+
+def test_padded_vertices_give_each_geometrys_least_projection():
+    """The straight cut's least of normal·vertex, read from padded arrays at a narrow
+    width with the wider outlines apart, is the least over each geometry's own vertices
+    (shapely's coordinates), for one normal each and for several."""
+    from compact_distributions.cvt.mosaic import cutting
+
+    rng = np.random.default_rng(9)
+    geoms, (poly, count) = _convex_polygons(rng, 80)
+    padded = cutting._padded(poly, count)
+    narrow = 5
+    wide = np.flatnonzero(count > narrow)
+    items = rng.integers(0, len(geoms), 500)
+    shapes = cutting._Padded(np.ascontiguousarray(padded[:, :narrow]), geoms, items, wide, padded[wide])
+    which = rng.permutation(len(items))[:300]
+    normal = rng.normal(size=(300, 2))
+    several = rng.normal(size=(300, 9, 2))
+    coords = [shapely.get_coordinates(g) for g in geoms[items[which]]]
+
+    def least(c, m):  # over one geometry's vertices, in the same arithmetic
+        return (c[:, None, 0] * m[..., 0] + c[:, None, 1] * m[..., 1]).min(axis=0)
+
+    assert np.array_equal(
+        shapes.least(which, normal), [least(c, m[None])[0] for c, m in zip(coords, normal, strict=True)]
+    )
+    assert np.array_equal(
+        shapes.least(which, several), [least(c, m) for c, m in zip(coords, several, strict=True)]
+    )
+    assert 0 < len(wide) < len(geoms)
+
+
+def test_outlines_start_at_the_vertex_nearest_a_point():
+    """Padded outlines rolled to begin at their vertex nearest a point (the first of
+    equally near ones) keep their vertices and their order round the ring."""
+    from compact_distributions.cvt.mosaic import cutting
+
+    rng = np.random.default_rng(10)
+    geoms, (poly, count) = _convex_polygons(rng, 60)
+    first = rng.uniform(0, 60, (len(geoms), 2))
+    first[:5] = poly[:5, 2]  # on a vertex
+    out, n = cutting._started_at(poly, count, first)
+    assert np.array_equal(n, count)
+    for k in range(len(geoms)):
+        ring = poly[k, : count[k]]
+        start = int(np.argmin(((ring - first[k]) ** 2).sum(axis=1)))
+        assert np.array_equal(out[k, : n[k]], np.roll(ring, -start, axis=0))
+        assert not out[k, n[k] :].any()
+    assert np.array_equal(out[:5, 0], first[:5])
+
+
+def test_segment_distances_are_geos_distances_bit_for_bit():
+    """The whole-array distance of convex polygons to segments and points is shapely's
+    (GEOS's) own number wherever it answers; it leaves open (NaN) only pairs that meet
+    or nearly do, and answers for all that are apart."""
+    from compact_distributions.cvt.mosaic import cutting
+
+    rng = np.random.default_rng(11)
+    geoms, (poly, count) = _convex_polygons(rng, 400, spread=30.0)
+    padded = cutting._padded(poly, count)
+    ends = rng.uniform(0, 36, (400, 2))
+    step = rng.normal(size=(400, 2)) * rng.choice([0.0, 1.0, 8.0], (400, 1))  # some points
+    step[:100] = np.round(step[:100])  # some along the axes, as the walls' pieces
+    segs = np.stack([ends, ends + step], axis=1)
+    pieces = np.array([shapely.LineString(s) if (s[0] != s[1]).any() else shapely.Point(s[0]) for s in segs])
+    got = cutting.segment_distances(padded, segs)
+    truth = shapely.distance(geoms, pieces)
+    answered = ~np.isnan(got)
+    assert np.array_equal(got[answered], truth[answered])
+    assert (truth[~answered] < 1e-6).all()  # left open: they meet
+    assert answered[truth > 1e-6].all() and 0 < (~answered).sum() < 400
+    assert (shapely.get_type_id(pieces[answered]) == 0).any()
