@@ -60,7 +60,6 @@ from concurrent.futures import ThreadPoolExecutor
 
 import numpy as np
 import shapely
-from scipy.spatial import cKDTree
 
 from ..errors import InputError
 from ..evaluate import straddling_tiles
@@ -536,6 +535,8 @@ def _near_walls(pieces: np.ndarray, tiles: np.ndarray, distance: float, walls: n
     farther than half a pixel from one, so a tile whose inner disk about that point is
     within reach of a centre is near, and one whose outer disk is beyond reach of them
     all by half a pixel is not.  The few others (some 3 %) are looked up exactly."""
+    from scipy.spatial import cKDTree  # here: importing this module (the parser does) stays cheap
+
     i, j = np.nonzero(walls)
     inner, inner_r, outer_r = _disks(*_vertex_arrays(tiles))
     # (a tree built plainly is quicker to build and query here; beyond the reach that
