@@ -41,11 +41,9 @@ error 1.7-4.8 % lower, straddling and overlap 0 both ways; on coffee the cutting
 0.3x the CPU (2.2 against 7.4 s, one process).  At 2000 tiles it loses 1-4 points of
 coverage: there the exact cut is kept.
 
-Where the time goes (coffee, 4096 px, 64 000 tiles, 26 835 cut, 676 000 pairs): about
-3.1-3.5 s on one core or two beside other work (4.0-4.9 s before; the same tiles bit
-for bit; old and new in one process, medians of 5), some 40 % of
-it GEOS (the distances of the tile pairs, the closest points behind each plane, the
-pairs within reach that the disks leave open), the rest the rounds of planes.  Three
+Where the time goes (coffee, 4096 px, 64 000 tiles, 26 835 cut, 676 000 pairs): some
+40 % in GEOS (the distances of the tile pairs, the closest points behind each plane,
+the pairs within reach that the disks leave open), the rest the rounds of planes.  Three
 things keep the NumPy side quick on a few vertices a row: rows gathered with
 ``np.take`` (fancy indexing of (n, V, 2) rows was 9-15x slower), least and greatest
 folded over the vertex places with ``np.minimum`` (a reduction along that short axis

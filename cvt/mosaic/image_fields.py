@@ -154,7 +154,7 @@ def structure_tensor(picture: np.ndarray, sigma: float = 1.0, window: float = 2.
     for c in range(chans.shape[2]):
         # one channel's plane, copied (float32 widened, exactly): both passes down the
         # columns then read it contiguously, as views, where they would gather and
-        # widen each band of rows from the strided channel (about 0.9x the tensor's time)
+        # widen each band of rows from the strided channel
         ch = np.ascontiguousarray(chans[..., c], dtype=np.float64)
         gx = gaussian_filter(ch, sigma, order=(0, 1))
         gy = gaussian_filter(ch, sigma, order=(1, 0))
@@ -327,8 +327,8 @@ def edge_orientation(
     ``overwrite``: ``jxx`` and ``jyy`` may be used as scratch (the strength is returned
     in ``jyy``'s memory), so that the tensor and its results need one picture-sized
     array more than the tensor, not three.  ``exact``: λ₁'s root term by ``np.hypot``
-    (False: ``sqrt(a² + b²)``, within one unit in the last place of it and about eight
-    times faster: ``hypot`` takes 30 ns a pixel, more than the rest together)."""
+    (False: ``sqrt(a² + b²)``, within one unit in the last place of it and several times
+    faster: ``hypot`` costs more than the rest together)."""
     half_trace = jxx + jyy
     half_trace *= 0.5
     diff = np.subtract(jxx, jyy, out=jxx if overwrite else None)
