@@ -281,6 +281,7 @@ _CHORD_BLOCK = 8  # px: a chord stands for the wall pixels of a square of this s
 _CHORD_WIDTH = 0.75  # px: the most a chord's wall pixel centres may lie off it
 _CHORD_ROOM = 1.0  # px: no chord where a centre is within this of it (beyond G/2 and its width)
 _FAIRNESS = 2.0  # under size caps: growth weighed by r·(cap / r)^this (Sizes and density)
+_REACH_STEPS = 1  # reach classes per factor 2 (_reach_classes)
 _STEADY_LEAST = 0.5  # px: under caps that follow the centres, the last round's move bound at least
 
 
@@ -419,7 +420,9 @@ def _best_pair_directions(unit, c, r, cos, sin, i, j, prev_n, enough=None, along
     ri, rj, ci, si, cj, sj = (a[:, 0] for a in args[2:])
     if faces:
         _face_gaps(unit, dx, dy, ri, rj, ci, si, cj, sj, out=g[:, :faces])
-    if j_faces:
+    if j_faces and len(other) == len(i):  # all turned apart (a field): no gathers
+        _face_gaps(unit, -dx, -dy, rj, ri, cj, sj, ci, si, out=g[:, faces : faces + j_faces])
+    elif j_faces:
         g[:, faces : faces + j_faces] = -np.inf
         g[other, faces : faces + j_faces] = _face_gaps(
             unit, -dx[other], -dy[other], rj[other], ri[other], cj[other], sj[other], ci[other], si[other]
@@ -471,14 +474,18 @@ def _face_gaps(unit, dx, dy, ra, rb, ca, sa, cb, sb, out=None):
         fx, fy = unit.face_normals(ca, sa, h, faces_first=True)
         nd = fx * dx + fy * dy
         # = rb·h_b(±n): b turned as a is has a's offsets along a's normals (to rounding)
-        same = np.flatnonzero((ca == cb) & (sa == sb))
-        hb = np.empty_like(nd)
+        alike = (ca == cb) & (sa == sb)
+        same = np.flatnonzero(alike)
         if len(same) == len(ra):  # all turned alike (no field): one broadcast
+            hb = np.empty_like(nd)
             hb[:] = offsets[:h]
+        elif len(same) == 0:  # all turned apart (a field): no gathers
+            hb = unit.support(fx, fy, cb, sb)
         else:
+            hb = np.empty_like(nd)
             hb[:, same] = offsets[:h]
-        turned = np.flatnonzero((ca != cb) | (sa != sb))
-        hb[:, turned] = unit.support(fx[:, turned], fy[:, turned], cb[turned], sb[turned])
+            turned = np.flatnonzero(~alike)
+            hb[:, turned] = unit.support(fx[:, turned], fy[:, turned], cb[turned], sb[turned])
         hb *= rb
         np.subtract(nd, hb, out=by_face[:h])
         np.negative(nd, out=by_face[h:])
@@ -491,10 +498,10 @@ def _face_gaps(unit, dx, dy, ra, rb, ca, sa, cb, sb, out=None):
 
 
 def _reach_classes(reach: np.ndarray) -> list[np.ndarray]:
-    """The indices of ``reach`` grouped into classes whose reaches lie within a factor 2:
-    a query sized by its class's largest reach, not by the largest of all, keeps the
-    candidates of small elements few where sizes vary (a density)."""
-    level = np.floor(np.log2(reach / reach.min())).astype(np.int64)
+    """The indices of ``reach`` grouped into classes whose reaches lie within a factor
+    2^(1/_REACH_STEPS): a query sized by its class's largest reach, not by the largest of
+    all, keeps the candidates of small elements few where sizes vary (a density)."""
+    level = np.floor(_REACH_STEPS * np.log2(reach / reach.min())).astype(np.int64)
     order = np.argsort(level, kind="stable")
     cuts = np.flatnonzero(np.diff(level[order])) + 1
     return np.split(order, cuts)
@@ -544,16 +551,19 @@ def _sorted_pairs(a, b, nb):
 
 
 def _segment_trees(segs: np.ndarray) -> list:
-    """[(indices, kd-tree of their midpoints, largest half-length)] for the short pieces
-    (a wall's staircase: 1-2 px) and the long ones apart: a query about a piece's
-    midpoint must reach its half-length further, and most pieces are short."""
+    """[(indices, kd-tree of their midpoints, largest half-length)] per class of
+    half-length (a wall's staircase: 1-2 px; a chord: up to 6; a border piece: up to
+    16): a query about a piece's midpoint must reach its half-length further, and most
+    pieces are short."""
     half = 0.5 * np.hypot(segs[:, 2] - segs[:, 0], segs[:, 3] - segs[:, 1])
-    short = half <= 1.0
+    # classes of half-length within a factor 2 (at most 1 px: one class); one class of
+    # all the long ones widened the query of a 3 px chord by a 16 px border piece's half
+    level = np.ceil(np.log2(np.maximum(half, 1.0))).astype(np.int64)
     out = []
-    for members in (np.flatnonzero(short), np.flatnonzero(~short)):
-        if len(members):
-            mid = 0.5 * (segs[members, :2] + segs[members, 2:])
-            out.append((members, _kd_tree(mid), float(half[members].max())))
+    for v in np.unique(level):
+        members = np.flatnonzero(level == v)
+        mid = 0.5 * (segs[members, :2] + segs[members, 2:])
+        out.append((members, _kd_tree(mid), float(half[members].max())))
     return out
 
 
