@@ -414,14 +414,17 @@ def _best_pair_directions(unit, c, r, cos, sin, i, j, prev_n, enough=None, along
         # is turned as i is and the shape is centrally symmetric, j's faces are i's (its
         # opposite normals), later in the order of preference and of the same gap (to
         # rounding, far below _TIE): never chosen, so not evaluated
-        other = np.flatnonzero((cos[i] != cos[j]) | (sin[i] != sin[j]))
+        apart = (cos[i] != cos[j]) | (sin[i] != sin[j])
+        other = np.flatnonzero(apart)
     j_faces = faces if len(other) else 0
     g = np.empty((len(i), faces + j_faces + 2))
     ri, rj, ci, si, cj, sj = (a[:, 0] for a in args[2:])
     if faces:
         _face_gaps(unit, dx, dy, ri, rj, ci, si, cj, sj, out=g[:, :faces])
-    if j_faces and len(other) == len(i):  # all turned apart (a field): no gathers
+    if j_faces and 2 * len(other) > len(i):  # most turned apart (a field): all, no gathers
         _face_gaps(unit, -dx, -dy, rj, ri, cj, sj, ci, si, out=g[:, faces : faces + j_faces])
+        if len(other) < len(i):
+            g[np.flatnonzero(~apart), faces : faces + j_faces] = -np.inf
     elif j_faces:
         g[:, faces : faces + j_faces] = -np.inf
         g[other, faces : faces + j_faces] = _face_gaps(
@@ -479,8 +482,9 @@ def _face_gaps(unit, dx, dy, ra, rb, ca, sa, cb, sb, out=None):
         if len(same) == len(ra):  # all turned alike (no field): one broadcast
             hb = np.empty_like(nd)
             hb[:] = offsets[:h]
-        elif len(same) == 0:  # all turned apart (a field): no gathers
+        elif 2 * len(same) < len(ra):  # most turned apart (a field): all, no gathers
             hb = unit.support(fx, fy, cb, sb)
+            hb[:, same] = offsets[:h]
         else:
             hb = np.empty_like(nd)
             hb[:, same] = offsets[:h]
@@ -847,6 +851,10 @@ class _Pieces:
     widen: np.ndarray | None
     widest: float
     trees: list
+    columns: tuple = ()  # segs' four columns, each contiguous: gathers of a column are cheap
+
+    def __post_init__(self):
+        self.columns = tuple(np.ascontiguousarray(v) for v in self.segs.T)
 
 
 def _region_pieces(mask, walls, centres, gap, chords=True) -> _Pieces:
@@ -877,6 +885,28 @@ def _seg_gap(unit, px, py, qx, qy, cx, cy, r, cos, sin, nx, ny):
     )
 
 
+def _seg_face_gaps(unit, px, py, qx, qy, x, y, r, cos, sin, out):
+    """Left side of (2) along each face normal of the element (turned by its angle):
+    (K, rows) into ``out``; along its own faces the element reaches out by the shape's
+    offsets.  Where the normals come in exactly opposite pairs (n_{k+K/2} = −n_k, a
+    square's), the second half is the first's products negated: the same numbers
+    (negation is exact) for half the products."""
+    normals, offsets = unit.faces.normals, unit.faces.offsets[:, None]
+    h = len(normals) // 2
+    if not (unit.faces.symmetric and np.array_equal(normals[h:], -normals[:h])):
+        fx, fy = unit.face_normals(cos, sin, faces_first=True)
+        p_, q_ = fx * px + fy * py, fx * qx + fy * qy
+        out[:] = np.minimum(p_, q_) - fx * x - fy * y - r * offsets
+        return
+    fx, fy = unit.face_normals(cos, sin, h, faces_first=True)
+    p_, q_ = fx * px + fy * py, fx * qx + fy * qy
+    fxx, fyy = fx * x, fy * y
+    # min(−p, −q) − (−fx·x) − (−fy·y) = (fx·x − max(p, q)) + fy·y, bit for bit
+    np.subtract(np.minimum(p_, q_) - fxx, fyy, out=out[:h])
+    np.add(fxx - np.maximum(p_, q_), fyy, out=out[h:])
+    out -= r * offsets
+
+
 def _closest_on_segment(px, py, qx, qy, x, y):
     ex, ey = qx - px, qy - py
     ll = ex * ex + ey * ey
@@ -900,7 +930,7 @@ def _near_segments(unit, c, r, cos, sin, budget, half, pieces, prev, act, point_
     def kept(k, s):
         """The candidates (k, s) (position in act, piece) that make rows, with n and gap."""
         e = act[k]
-        px, py, qx, qy = segs[s, 0], segs[s, 1], segs[s, 2], segs[s, 3]
+        px, py, qx, qy = (v.take(s) for v in pieces.columns)
         x, y = c[e, 0], c[e, 1]
         kx, ky = _closest_on_segment(px, py, qx, qy, x, y)
         d = np.hypot(kx - x, ky - y)
@@ -929,12 +959,7 @@ def _near_segments(unit, c, r, cos, sin, budget, half, pieces, prev, act, point_
         g = np.empty((len(e), faces + 3))
         g[:, 0] = gap_of(nsx[:, None], nsy[:, None])[:, 0]
         if faces:  # worked face by face along the rows, as in _face_gaps
-            fx, fy = unit.face_normals(cos[e], sin[e], faces_first=True)
-            # along its own faces the element reaches out by the shape's offsets
-            p_, q_ = fx * px + fy * py, fx * qx + fy * qy
-            g[:, 1 : 1 + faces].T[:] = (
-                np.minimum(p_, q_) - fx * x - fy * y - r[e] * unit.faces.offsets[:, None]
-            )
+            _seg_face_gaps(unit, px, py, qx, qy, x, y, r[e], cos[e], sin[e], g[:, 1 : 1 + faces].T)
         # last round's n: new rows have none (NaN, never chosen)
         known = np.flatnonzero(np.isfinite(prev_n[:, 0]))
         g[:, -2] = np.nan
