@@ -281,7 +281,7 @@ _CHORD_BLOCK = 8  # px: a chord stands for the wall pixels of a square of this s
 _CHORD_WIDTH = 0.75  # px: the most a chord's wall pixel centres may lie off it
 _CHORD_ROOM = 1.0  # px: no chord where a centre is within this of it (beyond G/2 and its width)
 _FAIRNESS = 2.0  # under size caps: growth weighed by r·(cap / r)^this (Sizes and density)
-_REACH_STEPS = 1  # reach classes per factor 2 (_reach_classes)
+_REACH_STEPS = 2  # reach classes per factor 2 (_reach_classes)
 _STEADY_LEAST = 0.5  # px: under caps that follow the centres, the last round's move bound at least
 
 
@@ -320,7 +320,7 @@ def _argmax_rows(g, tie=_TIE):
     top -= tie
     k = np.zeros(len(g), dtype=np.int64)
     for m in range(len(by_candidate) - 1, -1, -1):  # the first within tie wins: filled last
-        k[by_candidate[m] >= top] = m
+        np.copyto(k, m, where=by_candidate[m] >= top)
     return k, g[np.arange(len(g)), k]
 
 
@@ -417,7 +417,9 @@ def _best_pair_directions(unit, c, r, cos, sin, i, j, prev_n, enough=None, along
         apart = (cos[i] != cos[j]) | (sin[i] != sin[j])
         other = np.flatnonzero(apart)
     j_faces = faces if len(other) else 0
-    g = np.empty((len(i), faces + j_faces + 2))
+    # candidate-major (a view of it transposed): each candidate's column is contiguous
+    # for its writes and for _argmax_rows, which needs no transposed copy of it
+    g = np.empty((faces + j_faces + 2, len(i))).T
     ri, rj, ci, si, cj, sj = (a[:, 0] for a in args[2:])
     if faces:
         _face_gaps(unit, dx, dy, ri, rj, ci, si, cj, sj, out=g[:, :faces])
@@ -657,14 +659,14 @@ def _select(keep, *arrays) -> tuple:
 
 def _lookup(prev, keys):
     """Last round's direction of each key (NaN where the key is new)."""
-    out = np.full((len(keys), 2), np.nan)
     if prev is None or len(prev[0]) == 0:
-        return out
+        return np.full((len(keys), 2), np.nan)
     pk, pn = prev
     pos = np.searchsorted(pk, keys)
     np.minimum(pos, len(pk) - 1, out=pos)
-    hit = np.flatnonzero(pk.take(pos) == keys)
-    out[hit] = pn[pos.take(hit)]
+    # most keys were there last round: all gathered, the new ones set to NaN after
+    out = pn.take(pos, axis=0)
+    out[np.flatnonzero(pk.take(pos) != keys)] = np.nan
     return out
 
 
@@ -885,28 +887,6 @@ def _seg_gap(unit, px, py, qx, qy, cx, cy, r, cos, sin, nx, ny):
     )
 
 
-def _seg_face_gaps(unit, px, py, qx, qy, x, y, r, cos, sin, out):
-    """Left side of (2) along each face normal of the element (turned by its angle):
-    (K, rows) into ``out``; along its own faces the element reaches out by the shape's
-    offsets.  Where the normals come in exactly opposite pairs (n_{k+K/2} = −n_k, a
-    square's), the second half is the first's products negated: the same numbers
-    (negation is exact) for half the products."""
-    normals, offsets = unit.faces.normals, unit.faces.offsets[:, None]
-    h = len(normals) // 2
-    if not (unit.faces.symmetric and np.array_equal(normals[h:], -normals[:h])):
-        fx, fy = unit.face_normals(cos, sin, faces_first=True)
-        p_, q_ = fx * px + fy * py, fx * qx + fy * qy
-        out[:] = np.minimum(p_, q_) - fx * x - fy * y - r * offsets
-        return
-    fx, fy = unit.face_normals(cos, sin, h, faces_first=True)
-    p_, q_ = fx * px + fy * py, fx * qx + fy * qy
-    fxx, fyy = fx * x, fy * y
-    # min(−p, −q) − (−fx·x) − (−fy·y) = (fx·x − max(p, q)) + fy·y, bit for bit
-    np.subtract(np.minimum(p_, q_) - fxx, fyy, out=out[:h])
-    np.add(fxx - np.maximum(p_, q_), fyy, out=out[h:])
-    out -= r * offsets
-
-
 def _closest_on_segment(px, py, qx, qy, x, y):
     ex, ey = qx - px, qy - py
     ll = ex * ex + ey * ey
@@ -956,10 +936,15 @@ def _near_segments(unit, c, r, cos, sin, budget, half, pieces, prev, act, point_
         gap_for = _gaps_of_rows(_seg_gap, unit, args)
         gap_of = gap_for(slice(None))
         faces = len(unit.faces.normals) if not unit.curved else 0
-        g = np.empty((len(e), faces + 3))
+        g = np.empty((faces + 3, len(e))).T  # candidate-major, as in _best_pair_directions
         g[:, 0] = gap_of(nsx[:, None], nsy[:, None])[:, 0]
         if faces:  # worked face by face along the rows, as in _face_gaps
-            _seg_face_gaps(unit, px, py, qx, qy, x, y, r[e], cos[e], sin[e], g[:, 1 : 1 + faces].T)
+            fx, fy = unit.face_normals(cos[e], sin[e], faces_first=True)
+            # along its own faces the element reaches out by the shape's offsets
+            p_, q_ = fx * px + fy * py, fx * qx + fy * qy
+            g[:, 1 : 1 + faces].T[:] = (
+                np.minimum(p_, q_) - fx * x - fy * y - r[e] * unit.faces.offsets[:, None]
+            )
         # last round's n: new rows have none (NaN, never chosen)
         known = np.flatnonzero(np.isfinite(prev_n[:, 0]))
         g[:, -2] = np.nan
