@@ -627,7 +627,9 @@ def _near_pairs(unit, c, r, cos, sin, budget, gap, prev, act, point_trees, threa
         return _select(keep, i, j, nx, ny, g)
 
     i, j, nx, ny, g = _in_pieces(kept, threads, a, b)
-    at = np.argsort(i * len(r) + j)  # keys unique (a < b): any sort gives this order
+    # keys unique (a < b): any sort gives this order; the kd-trees' order comes in long
+    # sorted runs (Z order), which the stable sort (a merge sort) takes whole
+    at = np.argsort(i * len(r) + j, kind="stable")
     return tuple(v.take(at) for v in (i, j, nx, ny, g))
 
 
@@ -906,6 +908,8 @@ def _near_segments(unit, c, r, cos, sin, budget, half, pieces, prev, act, point_
     if len(act) == 0 or len(segs) == 0:
         return np.zeros(0, np.int64), np.zeros(0, np.int64), empty, empty, empty
     k, s = _near_items(point_trees, pieces.trees, half + pieces.widest + _SELECT)
+    # every element's face normals, turned, once: gathered per row (the same numbers)
+    normals = unit.face_normals(cos, sin, faces_first=True) if not unit.curved else None
 
     def kept(k, s):
         """The candidates (k, s) (position in act, piece) that make rows, with n and gap."""
@@ -939,7 +943,7 @@ def _near_segments(unit, c, r, cos, sin, budget, half, pieces, prev, act, point_
         g = np.empty((faces + 3, len(e))).T  # candidate-major, as in _best_pair_directions
         g[:, 0] = gap_of(nsx[:, None], nsy[:, None])[:, 0]
         if faces:  # worked face by face along the rows, as in _face_gaps
-            fx, fy = unit.face_normals(cos[e], sin[e], faces_first=True)
+            fx, fy = (v.take(e, axis=1) for v in normals)
             # along its own faces the element reaches out by the shape's offsets
             p_, q_ = fx * px + fy * py, fx * qx + fy * qy
             g[:, 1 : 1 + faces].T[:] = (
@@ -970,7 +974,7 @@ def _near_segments(unit, c, r, cos, sin, budget, half, pieces, prev, act, point_
         return _select(keep, e, s, bx, by, best)
 
     e, s, bx, by, best = _in_pieces(kept, threads, k, s)
-    at = np.argsort(e * len(segs) + s)  # keys unique: any sort gives this order
+    at = np.argsort(e * len(segs) + s, kind="stable")  # keys unique: as in _near_pairs
     return tuple(v.take(at) for v in (e, s, bx, by, best))
 
 
