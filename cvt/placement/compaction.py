@@ -569,7 +569,9 @@ def _segment_trees(segs: np.ndarray) -> list:
     for v in np.unique(level):
         members = np.flatnonzero(level == v)
         mid = 0.5 * (segs[members, :2] + segs[members, 2:])
-        out.append((members, _kd_tree(mid), float(half[members].max())))
+        # unbalanced, plain boxes: as in _point_trees (the same candidates, faster)
+        tree = _kd_tree(mid, balanced_tree=False, compact_nodes=False)
+        out.append((members, tree, float(half[members].max())))
     return out
 
 
@@ -755,7 +757,12 @@ def wall_segments(walls: np.ndarray) -> np.ndarray:
     """(S, 4) pieces (x0, y0, x1, y1) of the centre lines of thin walls: from each wall
     pixel's centre to the centre of each wall pixel right of it and below it (a lone
     wall pixel is a point).  For a 4-connected wall the pieces form one unbroken line."""
-    i, j, r, d, left, up = _wall_links(walls)
+    return _steps(_wall_links(walls))
+
+
+def _steps(links) -> np.ndarray:
+    """:func:`wall_segments` from the walls' links (:func:`_wall_links`)."""
+    i, j, r, d, left, up = links
     x, y = j + 0.5, i + 0.5
     # a wall pixel only reached from the left or from above is already on a piece
     lone = ~(r | d | left | up)
@@ -767,7 +774,9 @@ def wall_segments(walls: np.ndarray) -> np.ndarray:
     return np.concatenate(pieces).astype(np.float64).reshape(-1, 4)
 
 
-def _wall_chords(walls: np.ndarray, centres: np.ndarray, room: float) -> tuple[np.ndarray, np.ndarray]:
+def _wall_chords(
+    walls: np.ndarray, centres: np.ndarray, room: float, walled=None
+) -> tuple[np.ndarray, np.ndarray]:
     """The centre lines of thin walls as fewer, wider pieces: (S, 4) pieces (x0, y0, x1,
     y1) and (S,) their widths.  The wall pixels are taken a square of ``_CHORD_BLOCK``
     px at a time; where a square's pixel centres (three or more) lie within
@@ -778,10 +787,10 @@ def _wall_chords(walls: np.ndarray, centres: np.ndarray, room: float) -> tuple[n
     (width 0), and so do the squares with one of the ``centres`` within ``room`` plus the
     chord's width and half-length of its middle (an element there could not keep clear
     of it).  Kept clear of by G/2 plus its width, a chord keeps every step it stands for
-    G/2 away."""
-    i, j, *_ = _wall_links(walls)
+    G/2 away.  ``walled``: the walls' (links, steps) where the caller has them."""
+    links, steps = _walled(walls) if walled is None else walled
+    i, j = links[:2]
     h, w = np.shape(walls)
-    steps = wall_segments(walls)
     if len(i) == 0:
         return steps, np.zeros(len(steps))
     per_row = -(-w // _CHORD_BLOCK)
@@ -861,20 +870,29 @@ class _Pieces:
         self.columns = tuple(np.ascontiguousarray(v) for v in self.segs.T)
 
 
-def _region_pieces(mask, walls, centres, gap, chords=True) -> _Pieces:
+def _walled(walls: np.ndarray) -> tuple:
+    """The walls' links (:func:`_wall_links`) and steps (:func:`wall_segments`), found
+    once (a picture-sized np.nonzero) for the chords and for the last round's steps."""
+    links = _wall_links(walls)
+    return links, _steps(links)
+
+
+def _region_pieces(mask, walls, centres, gap, chords=True, walled=None) -> _Pieces:
     """The boundary's pieces (:func:`boundary_segments`) and the walls' (:func:`wall_segments`;
     with ``chords``, for more than ``_WALL_CHORD_ELEMENTS`` elements (``centres``: the
     placed ones'), :func:`_wall_chords`, none where a centre is within G/2 +
-    ``_CHORD_ROOM`` of one)."""
+    ``_CHORD_ROOM`` of one).  ``walled``: :func:`_walled` of the walls where the caller
+    has it."""
     segs = boundary_segments(mask)
     widen = None
     if walls is not None and walls.any():
+        walled = _walled(walls) if walled is None else walled
         if chords and len(centres) > _WALL_CHORD_ELEMENTS:
-            chords, width = _wall_chords(walls, centres, 0.5 * gap + _CHORD_ROOM)
+            chords, width = _wall_chords(walls, centres, 0.5 * gap + _CHORD_ROOM, walled)
             widen = np.concatenate([np.zeros(len(segs)), width])
             segs = np.concatenate([segs, chords])
         else:
-            segs = np.concatenate([segs, wall_segments(walls)])
+            segs = np.concatenate([segs, walled[1]])
     widest = 0.0 if widen is None or len(widen) == 0 else float(widen.max())
     return _Pieces(segs, widen, widest, _segment_trees(segs))
 
@@ -2015,7 +2033,8 @@ def compact(
     unit = element_ball(shape, aspect)
     _check_start(unit, c, r, gap, mask)
     t0 = time.perf_counter()
-    pieces = _region_pieces(mask, walls, c[r > 0], gap)
+    walled = _walled(walls) if walls is not None and walls.any() else None
+    pieces = _region_pieces(mask, walls, c[r > 0], gap, walled=walled)
     prev = (None, None)
     result = CompactionResult(c, r, th, 0, 0.0)
     order, (c, r, r0, cos, sin, max_sizes) = _work_order(c, r, r.copy(), np.cos(th), np.sin(th), max_sizes)
@@ -2027,7 +2046,8 @@ def compact(
         if left <= 1 and pieces.widen is not None:
             # the last round against the walls' own steps: the elements close the room
             # the chords' widths left (the pieces change: no last directions for them)
-            pieces, prev = _region_pieces(mask, walls, c[r > 0], gap, chords=False), (prev[0], None)
+            pieces = _region_pieces(mask, walls, c[r > 0], gap, chords=False, walled=walled)
+            prev = (prev[0], None)
         rows, prev, (n_pairs, n_pieces) = _round_rows(
             unit, c, r, cos, sin, budget, gap, pieces, prev, settings.threads
         )
