@@ -2046,8 +2046,7 @@ def compact(
         if left <= 1 and pieces.widen is not None:
             # the last round against the walls' own steps: the elements close the room
             # the chords' widths left (the pieces change: no last directions for them)
-            pieces = _region_pieces(mask, walls, c[r > 0], gap, chords=False, walled=walled)
-            prev = (prev[0], None)
+            pieces, prev = _region_pieces(mask, walls, c[r > 0], gap, False, walled), (prev[0], None)
         rows, prev, (n_pairs, n_pieces) = _round_rows(
             unit, c, r, cos, sin, budget, gap, pieces, prev, settings.threads
         )
@@ -2063,8 +2062,7 @@ def compact(
             break
         area0 = float(np.sum(r * r))
         weight = _objective_weights(r, act, max_sizes, settings.fairness)
-        tl = time.perf_counter()
-        tcpu = time.process_time()
+        tl, tcpu = time.perf_counter(), time.process_time()
         bounds = (gap, delta, -settings.shrink * r, up, weight)
         dc, dr, iters, failed, violation = _solve_round(settings, rows, act, c, r, bounds, mask, k)
         result.lp_seconds += time.perf_counter() - tl
