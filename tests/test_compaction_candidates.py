@@ -33,7 +33,7 @@ def _scene(seed, n=260, pieces=180, side=160.0):
     q = p + length[:, None] * np.stack([np.cos(turn), np.sin(turn)], axis=1)
     segs = np.concatenate([p, q], axis=1)
     widen = np.where(rng.random(pieces) < 0.5, rng.uniform(0.0, 0.75, pieces), 0.0)
-    return c, r, th, budget, cp._Pieces(segs, widen, float(widen.max()), cp._segment_trees(segs))
+    return c, r, th, budget, cp._Pieces(segs, widen, float(widen.max()), cp._segment_trees(segs, widen))
 
 
 def _trees(c, r, budget, unit):
@@ -56,7 +56,7 @@ def test_candidates_hold_every_pair_and_piece_within_reach(seed):
     want = np.argwhere(np.triu(d <= reach[:, None] + reach[None, :] + GAP, 1))
     assert len(want) > 100
     assert {(int(x), int(y)) for x, y in want} <= got
-    k, s = cp._near_items(trees, pieces.trees, 0.5 * GAP + pieces.widest + cp._SELECT)
+    k, s = cp._near_items(trees, pieces.trees, 0.5 * GAP + cp._SELECT)
     got = set(zip(k.tolist(), s.tolist(), strict=True))
     segs = pieces.segs
     mid = 0.5 * (segs[:, :2] + segs[:, 2:])
@@ -117,7 +117,8 @@ def test_rows_are_those_of_every_candidate(shape, aspect, monkeypatch):
 def test_reach_and_half_length_classes_partition_and_bound():
     """_reach_classes: every index once, each class's reaches within a factor
     2^(1/_REACH_STEPS); _segment_trees: every piece once, each class's half-lengths
-    within a factor 2 (or all at most 1 px), the recorded largest half-length exact."""
+    within a factor 2 (or all at most 1 px), widened pieces and the others apart, the
+    recorded reach its largest half-length plus its largest width."""
     rng = np.random.default_rng(4)
     reach = np.exp(rng.uniform(0.0, 4.0, 500))
     classes = cp._reach_classes(reach)
@@ -127,12 +128,16 @@ def test_reach_and_half_length_classes_partition_and_bound():
     segs = rng.uniform(0.0, 50.0, (400, 4))
     segs[:40, 2:] = segs[:40, :2]  # points
     half = 0.5 * np.hypot(segs[:, 2] - segs[:, 0], segs[:, 3] - segs[:, 1])
-    trees = cp._segment_trees(segs)
-    members = np.concatenate([t[0] for t in trees])
-    assert np.array_equal(np.sort(members), np.arange(400))
-    for idx, _, top in trees:
-        assert top == half[idx].max()
-        assert top <= 1.0 or half[idx].min() > top / 2
+    widen = np.where(rng.random(400) < 0.3, rng.uniform(0.0, 0.75, 400), 0.0)
+    for w in (None, widen):
+        trees = cp._segment_trees(segs, w)
+        members = np.concatenate([t[0] for t in trees])
+        assert np.array_equal(np.sort(members), np.arange(400))
+        w = np.zeros(400) if w is None else w
+        for idx, _, top in trees:
+            assert top == half[idx].max() + w[idx].max()
+            assert half[idx].max() <= 1.0 or half[idx].min() > half[idx].max() / 2
+            assert (w[idx] > 0).all() or (w[idx] == 0).all()
 
 
 def test_lookup_matches_a_dict():

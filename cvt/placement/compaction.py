@@ -535,10 +535,10 @@ def _point_trees(points, reach) -> list:
 
 def _near_items(point_trees, item_trees, extra):
     """(k, i): every point k and item i with |points[k] − item| <= reach[k] + the item's
-    half-length + extra (and some farther ones), in the kd-trees' order.  ``point_trees``:
-    the points by class of reach (:func:`_point_trees`); ``item_trees``: [(item
-    indices, kd-tree of their midpoints, their largest half-length)]
-    (:func:`_segment_trees`)."""
+    half-length and width + extra (and some farther ones), in the kd-trees' order.
+    ``point_trees``: the points by class of reach (:func:`_point_trees`); ``item_trees``:
+    [(item indices, kd-tree of their midpoints, their largest half-length plus their
+    largest width)] (:func:`_segment_trees`)."""
     ks, items = [], []
     for cls, tree, top in point_trees:
         for members, item_tree, half_length in item_trees:
@@ -556,22 +556,25 @@ def _sorted_pairs(a, b, nb):
     return key // nb, key % nb
 
 
-def _segment_trees(segs: np.ndarray) -> list:
-    """[(indices, kd-tree of their midpoints, largest half-length)] per class of
-    half-length (a wall's staircase: 1-2 px; a chord: up to 6; a border piece: up to
-    16): a query about a piece's midpoint must reach its half-length further, and most
-    pieces are short."""
+def _segment_trees(segs: np.ndarray, widen: np.ndarray | None = None) -> list:
+    """[(indices, kd-tree of their midpoints, largest half-length + largest width)] per
+    class of half-length (a wall's staircase: 1-2 px; a chord: up to 6; a border piece:
+    up to 16) and of width (``widen``: a chord's; None: all 0): a query about a piece's
+    midpoint must reach its half-length and width further, and most pieces are short
+    steps of no width."""
     half = 0.5 * np.hypot(segs[:, 2] - segs[:, 0], segs[:, 3] - segs[:, 1])
-    # classes of half-length within a factor 2 (at most 1 px: one class); one class of
-    # all the long ones widened the query of a 3 px chord by a 16 px border piece's half
-    level = np.ceil(np.log2(np.maximum(half, 1.0))).astype(np.int64)
+    widen = np.zeros(len(segs)) if widen is None else widen
+    # classes of half-length within a factor 2 (at most 1 px: one class), the widened
+    # apart: one class of all the long ones widened the query of a 3 px chord by a 16 px
+    # border piece's half, and one of all the short ones a step's by a chord's width
+    level = 2 * np.ceil(np.log2(np.maximum(half, 1.0))).astype(np.int64) + (widen > 0)
     out = []
     for v in np.unique(level):
         members = np.flatnonzero(level == v)
         mid = 0.5 * (segs[members, :2] + segs[members, 2:])
         # unbalanced, plain boxes: as in _point_trees (the same candidates, faster)
         tree = _kd_tree(mid, balanced_tree=False, compact_nodes=False)
-        out.append((members, tree, float(half[members].max())))
+        out.append((members, tree, float(half[members].max() + widen[members].max())))
     return out
 
 
@@ -894,7 +897,7 @@ def _region_pieces(mask, walls, centres, gap, chords=True, walled=None) -> _Piec
         else:
             segs = np.concatenate([segs, walled[1]])
     widest = 0.0 if widen is None or len(widen) == 0 else float(widen.max())
-    return _Pieces(segs, widen, widest, _segment_trees(segs))
+    return _Pieces(segs, widen, widest, _segment_trees(segs, widen))
 
 
 def _seg_gap(unit, px, py, qx, qy, cx, cy, r, cos, sin, nx, ny):
@@ -925,7 +928,7 @@ def _near_segments(unit, c, r, cos, sin, budget, half, pieces, prev, act, point_
     segs, widen = pieces.segs, pieces.widen
     if len(act) == 0 or len(segs) == 0:
         return np.zeros(0, np.int64), np.zeros(0, np.int64), empty, empty, empty
-    k, s = _near_items(point_trees, pieces.trees, half + pieces.widest + _SELECT)
+    k, s = _near_items(point_trees, pieces.trees, half + _SELECT)  # the trees hold the widths
     # every element's face normals, turned, once: gathered per row (the same numbers)
     normals = unit.face_normals(cos, sin, faces_first=True) if not unit.curved else None
 
