@@ -239,6 +239,12 @@ Choices in the formulation
 * The region is kept by (2) against boundary pieces with a best direction per piece.
 * The program is solved approximately as a whole by PDHG, or exactly per tile with walls
   between tiles by HiGHS (see Solvers); the exact check after each round makes either safe.
+* The near pairs and pieces of a round are cut by exact filters from the candidates of
+  kd-trees: the centres by class of reach (within a factor √2), the pieces' midpoints by
+  class of half-length (within a factor 2) and of width (chords apart), each query
+  sized by its classes' largest.  Any superset gives the same rows (sorted by their
+  keys); finer classes only make it smaller: at 64 000 squares on a walled mosaic the
+  candidates fell from 0.58 M to 0.33 M (pieces) and 0.62 M to 0.47 M (pairs) a round.
 """
 
 from __future__ import annotations
