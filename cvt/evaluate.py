@@ -567,6 +567,7 @@ def colour_error(
 
 
 STRADDLE_DEPTH = 1.0  # px of tile on each side of an edge for the tile to straddle it
+STRADDLE_PIXELS = 1 << 18  # edge pixels straddling_tiles looks up at once (bounded memory)
 
 
 def straddling_tiles(elements: Sequence[Any], edges: np.ndarray, depth: float = STRADDLE_DEPTH) -> np.ndarray:
@@ -574,21 +575,23 @@ def straddling_tiles(elements: Sequence[Any], edges: np.ndarray, depth: float = 
     by ``depth`` px holds (inside or on it) the centre of a pixel of ``edges`` ((H, W)
     bool).
 
-    Only the edge pixels are looked at: those within a tile's bounding box (which holds
-    its eroded hull) are found by the tiles' STRtree, and shapely tests each against the
-    eroded hull of the tiles that have any (the others are never eroded)."""
+    Only the edge pixels are looked at, :data:`STRADDLE_PIXELS` at a time: those within a
+    tile's bounding box (which holds its eroded hull) are found by the tiles' STRtree,
+    and shapely tests each against the eroded hull of the tiles that have any (the others
+    are never eroded)."""
     out = np.zeros(len(elements), dtype=bool)
     placed, geoms = _present(elements)
     ei, ej = np.nonzero(edges)
     if len(placed) == 0 or len(ei) == 0:
         return out
-    centres = shapely.points(ej + 0.5, ei + 0.5)
-    at, tile = shapely.STRtree(geoms).query(centres)  # within the bounding box
-    del centres
-    near, tile = np.unique(tile, return_inverse=True)
-    eroded = shapely.buffer(shapely.convex_hull(geoms[near]), -depth, join_style="mitre")
-    inside = shapely.intersects_xy(eroded[tile], ej[at] + 0.5, ei[at] + 0.5)
-    out[placed[near[np.unique(tile[inside])]]] = True
+    tree = shapely.STRtree(geoms)
+    for lo in range(0, len(ei), STRADDLE_PIXELS):
+        x, y = ej[lo : lo + STRADDLE_PIXELS] + 0.5, ei[lo : lo + STRADDLE_PIXELS] + 0.5
+        at, tile = tree.query(shapely.points(x, y))  # within the bounding box
+        near, tile = np.unique(tile, return_inverse=True)
+        eroded = shapely.buffer(shapely.convex_hull(geoms[near]), -depth, join_style="mitre")
+        inside = shapely.intersects_xy(eroded[tile], x[at], y[at])
+        out[placed[near[np.unique(tile[inside])]]] = True
     return out
 
 
@@ -801,6 +804,7 @@ __all__ = [
     "ERROR_BAND",
     "colour_error",
     "STRADDLE_DEPTH",
+    "STRADDLE_PIXELS",
     "straddling_tiles",
     "MEASURES",
     "FIDELITY_TIE",

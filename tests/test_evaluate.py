@@ -286,13 +286,17 @@ def test_pixels_under_matches_shapely_on_non_convex_tiles():
         assert_pixels_are_shapelys(tiles, w, h)
 
 
+@pytest.mark.parametrize("block", [None, 7])
 @pytest.mark.parametrize("seed", range(6))
-def test_straddling_tiles_against_every_pixel(seed):
+def test_straddling_tiles_against_every_pixel(seed, block, monkeypatch):
     """straddling_tiles against its definition tested pixel by pixel: a tile straddles
     when some edge pixel's centre is inside or on its convex hull eroded by a pixel (tiles
     of several kinds, pixel-aligned sides among them, None, a multipolygon)."""
+    from compact_distributions.cvt import evaluate as measures
     from compact_distributions.cvt.evaluate import STRADDLE_DEPTH, straddling_tiles
 
+    if block is not None:  # the edge pixels looked up a few at a time
+        monkeypatch.setattr(measures, "STRADDLE_PIXELS", block)
     rng = np.random.default_rng(seed)
     h, w = 40, 50
     tiles = [None, shapely.box(10, 10, 20, 14), shapely.box(30.5, 2.0, 33.5, 9.0)]
