@@ -74,6 +74,7 @@ def build_result(
     method_options: dict | None = None,
     stage_seconds: dict | None = None,
     placed=None,
+    measured: dict | None = None,
     **fields,
 ) -> dict:
     """The result.json record of one run: the problem, the method's Distribution, the
@@ -83,17 +84,19 @@ def build_result(
     the method's own options as the user set them; ``stage_seconds`` the command's own
     stages (evaluation, writing, ...), added to the method's (:func:`stages_of`).  The
     fidelity measures (``cvt.evaluate.fidelity``) are taken of ``placed`` (default the
-    Distribution's elements)."""
+    Distribution's elements), and timed as the ``measures`` stage, unless the command
+    took them already (``measured``; their time is then among the method's stages)."""
     from compact_distributions.cvt.evaluate import fidelity
 
     from .outputs import machine, versions
 
     # coverage at ≤ 1 % overlap stays a sweep measure (Tables 2 and 3): its scaled copies
     # cost tens of kB per element where elements are tiny and overlap when grown
-    t0 = time.perf_counter()
-    placed = dist.elements if placed is None else placed
-    measured = {k: _finite(v) for k, v in fidelity(placed, problem, element).items()}
-    stage_seconds = {**(stage_seconds or {}), "measures": time.perf_counter() - t0}
+    if measured is None:
+        t0 = time.perf_counter()
+        measured = fidelity(dist.elements if placed is None else placed, problem, element)
+        stage_seconds = {**(stage_seconds or {}), "measures": time.perf_counter() - t0}
+    measured = {k: _finite(v) for k, v in measured.items()}
 
     g = problem.grid
     sources = sources or {}

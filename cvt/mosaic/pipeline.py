@@ -39,7 +39,7 @@ import numpy as np
 
 from ..distribution import Distribution
 from ..errors import InputError
-from ..evaluate import Evaluation, colour_error, evaluate, pixels_under, straddling_tiles
+from ..evaluate import Evaluation, colour_error, evaluate, fidelity, pixels_under, straddling_tiles
 from ..metrics import make_metric
 from ..moments import Moments, moments_from_runs
 from ..pixels import index_ranges, pixel_index
@@ -146,26 +146,35 @@ def raster_size(width: int, height: int, size=None, name: str = "size") -> tuple
     return max(1, round(width * k)), max(1, round(height * k))
 
 
-def resample(rgb: np.ndarray, width: int, height: int) -> np.ndarray:
+def resample(rgb: np.ndarray, width: int, height: int, side_by_side_channels: bool = True) -> np.ndarray:
     """The picture at (height, width): Lanczos (antialiased when shrinking), clipped to 0..1.
 
     Resampled, it is float32: Pillow resamples in float32, so that holds every value
-    exactly at half the memory of float64; at its own size, ``rgb`` itself."""
+    exactly at half the memory of float64; at its own size, ``rgb`` itself.  The three
+    channels are resampled side by side (``side_by_side_channels``), or one after the
+    other, each channel's resampled image held alone (where memory is short)."""
     if rgb.shape[:2] == (height, width):
         return rgb
     from PIL import Image
 
     out = np.empty((height, width, 3), dtype=np.float32)
-    for c in range(3):
+
+    def channel(c: int) -> None:
         img = Image.fromarray(np.ascontiguousarray(rgb[..., c], dtype=np.float32), mode="F")
         img = img.resize((width, height), Image.Resampling.LANCZOS)
         # read out a strip of rows at a time: a whole channel's bytes would be two more
-        # copies of it (Pillow's encoder chunks and their join) on top of the image, and
-        # a poster's picture is made again at its peak of memory, after the method
+        # copies of it (Pillow's encoder chunks and their join) on top of the image
         for lo in range(0, height, 256):
             hi = min(lo + 256, height)
             out[lo:hi, :, c] = np.asarray(img.crop((0, lo, width, hi)))
-        del img
+
+    # Pillow lets go of the GIL while it resamples
+    calls = [lambda c=c: channel(c) for c in range(3)]
+    if side_by_side_channels:
+        side_by_side(*calls)
+    else:
+        for call in calls:
+            call()
     return np.clip(out, 0.0, 1.0, out=out)
 
 
@@ -746,6 +755,9 @@ class MosaicResult:
         What the method returned.
     evaluation : Evaluation or None, optional
         Coverage and overlap, as measured.
+    fidelity : dict or None, optional
+        The tiles' size and direction fidelity and grout (:func:`cvt.evaluate.fidelity`
+        on the problem), as measured.
     backend : str, optional
         The backend variant that ran the Lloyd iterations.
     device : str, optional
@@ -792,6 +804,7 @@ class MosaicResult:
     problem: Problem | None = field(default=None, repr=False)
     distribution: Distribution | None = field(default=None, repr=False)  # what the method returned
     evaluation: Evaluation | None = field(default=None, repr=False)  # coverage and overlap, as measured
+    fidelity: dict | None = field(default=None, repr=False)  # cvt.evaluate.fidelity of the tiles
     backend: str = "numpy"
     device: str = ""
     source: str = ""
@@ -875,8 +888,11 @@ def _raster_picture(image, size, n_elements, backend, element, memory_limit):
         rgb, source = picture_array(image, at_least=(w, h), memory_limit=memory_limit)
     picture = resample(rgb, w, h)
     # a picture enlarged to the raster can be made again from the smaller one, the same
-    # to the last bit, so it need not be held while the method runs
-    remake = (lambda: resample(rgb, w, h)) if rgb.nbytes < picture.nbytes else None
+    # to the last bit, so it need not be held while the method runs (made again at the
+    # method's peak of memory: a channel at a time)
+    remake = (
+        (lambda: resample(rgb, w, h, side_by_side_channels=False)) if rgb.nbytes < picture.nbytes else None
+    )
     return picture, source, remake
 
 
@@ -944,20 +960,26 @@ def _cut_style(cut, tight: bool) -> str | None:
     raise InputError(f"cut must be True, False, None or one of {', '.join(CUT_STYLES)}, got {cut!r}")
 
 
-def _after_the_method(dist, picture, edge_map, cut, gap, spacing, picture_seconds):
+def _after_the_method(dist, picture_of, edge_map, cut, gap, spacing, picture_seconds, measured_as):
     """The stages after the method: tiles cut to the walls (``cut``: the cut's style, or
-    None for no cut), their colours and
-    the measures (coverage and overlap, straddling, colour error), each timed; the
-    method's distribution with the final tiles and every stage's time."""
+    None for no cut), their colours and the measures (coverage and overlap, straddling,
+    colour error, and :func:`cvt.evaluate.fidelity` on ``measured_as``: the problem and the
+    tile shape), each timed; the method's distribution with the final tiles and every
+    stage's time.  ``picture_of()`` gives the picture (made again, where it was let go)."""
     polygons = [None if p is None or p.is_empty else p for p in dist.elements]
-    cut_count = 0
     # the stages after the method are timed too (result.json's stage_seconds)
     t0 = time.perf_counter()
+    picture = picture_of()
+    cut_count = 0
     if cut:
         polygons, cut_count = cut_to_walls(polygons, edge_map, gap, spacing, style=cut)
     t1 = time.perf_counter()
     bounds = tile_runs(polygons)
-    colours, _, error = mosaic_fills(picture, polygons, dist.sites, bounds)
+    # the fidelity measures beside the fills (Delaunay and GEOS let go of the GIL)
+    (colours, _, error), measures = side_by_side(
+        lambda: mosaic_fills(picture, polygons, dist.sites, bounds),
+        lambda: _timed_fidelity(polygons, *measured_as),
+    )
     t2 = time.perf_counter()
     # beside the coverage, whose shapely calls let go of the GIL
     ev, straddles = side_by_side(
@@ -971,10 +993,18 @@ def _after_the_method(dist, picture, edge_map, cut, gap, spacing, picture_second
         "cutting_seconds": t1 - t0,
         "fills_seconds": t2 - t1,
         "evaluation_seconds": t3 - t2,
+        "measures_seconds": measures.pop("seconds"),  # on its thread, beside the fills
     }
     extra = {**dist.extra, **({"cut_tiles": cut_count, "cut_style": cut} if cut else {}), **stages}
     dist = dataclasses.replace(dist, elements=polygons, extra=extra)
-    return dist, polygons, colours, cut_count, (ev, straddles, error)
+    return dist, picture, (polygons, colours, cut_count), (ev, straddles, error, measures)
+
+
+def _timed_fidelity(polygons, problem: Problem, element: str) -> dict:
+    """:func:`cvt.evaluate.fidelity` of the tiles, with the seconds it took (``seconds``)."""
+    t0 = time.perf_counter()
+    measured = fidelity(polygons, problem, element)
+    return {**measured, "seconds": time.perf_counter() - t0}
 
 
 def _method_and_options(method, method_options):
@@ -1008,7 +1038,7 @@ class _Settings:
 def _result(dist, problem, fields, picture, edge_map, tiles, measures, settings: _Settings) -> MosaicResult:
     """The mosaic's record, from the stages' results and :func:`make_mosaic`'s settings."""
     polygons, colours, cut_count = tiles
-    ev, straddles, error = measures
+    ev, straddles, error, measured = measures
     placed = sum(p is not None for p in polygons)
     backend = settings.backend
     return MosaicResult(
@@ -1041,6 +1071,7 @@ def _result(dist, problem, fields, picture, edge_map, tiles, measures, settings:
         problem=problem,
         distribution=dist,
         evaluation=ev,
+        fidelity=measured,
         backend=backend.variant,
         device=backend.device(),
         source=settings.source,
@@ -1127,9 +1158,9 @@ def make_mosaic(
         **method_options,
     )
     _return_free_memory()
-    picture = remake() if picture is None else picture
-    dist, polygons, colours, cut_count, measures = _after_the_method(
-        dist, picture, edge_map, cut if walls else None, gap, spacing, picture_seconds
+    picture_of = remake if picture is None else (lambda: picture)
+    dist, picture, tiles, measures = _after_the_method(
+        dist, picture_of, edge_map, cut if walls else None, gap, spacing, picture_seconds, (problem, element)
     )
     settings = _Settings(
         metric_name,
@@ -1145,9 +1176,7 @@ def make_mosaic(
         source,
         t_start,
     )
-    return _result(
-        dist, problem, fields, picture, edge_map, (polygons, colours, cut_count), measures, settings
-    )
+    return _result(dist, problem, fields, picture, edge_map, tiles, measures, settings)
 
 
 __all__ = [
