@@ -535,6 +535,13 @@ class Backend(ABC):
         return search_on_host(cells)
 
     # ------------------------------------------------------------------ lifetime
+    def release_buffers(self) -> None:  # noqa: B027 - optional hook, nothing kept by default
+        """Let go of the buffers kept from one call to the next.
+
+        They are made again when next needed: a caller done with the backend for a
+        while frees their memory without closing it.
+        """
+
     def close(self) -> None:  # noqa: B027 - optional hook, nothing to release by default
         """Release device resources (contexts, buffers)."""
 

@@ -777,15 +777,18 @@ class OpenCLBackend(Backend):
     def device(self) -> str:
         return describe_device(self._cl, self._device)
 
-    def close(self) -> None:
+    def release_buffers(self) -> None:
         for buf in self._buffers.values():
             buf.release()
         self._buffers.clear()
+        self._mask_source = None  # its buffer went with the rest
+        self._labels_buf = self._labelled = None
+
+    def close(self) -> None:
+        self.release_buffers()
         self._programs.clear()
         self._wall_kernels.clear()
         self._fit_kernels.clear()
-        self._mask_source = None
-        self._labels_buf = self._labelled = None
         self._queue = self._context = None
 
     # ---------------------------------------------------------------- programs

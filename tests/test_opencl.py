@@ -249,6 +249,26 @@ def test_same_input_same_labels(backends):
     np.testing.assert_array_equal(first, other)
 
 
+def test_released_buffers_are_made_again_with_the_same_labels_and_moments():
+    """After release_buffers the backend holds no buffer and the next calls (labels, and
+    the walled moments with their mask) make them again: the same answers as before."""
+    sites, angles, scales, metric, grid = random_case("l2-axial", True, seed=4)
+    backend = OpenCLBackend()
+    try:
+        call = dict(angles=angles, scales=scales, metric=metric, grid=grid)
+        labels, moments = backend.label(sites, **call), backend.walled_moments(sites, **call)
+        backend.release_buffers()
+        assert not backend._buffers
+        again = backend.walled_moments(sites, **call)
+        np.testing.assert_array_equal(backend.label(sites, **call), labels)
+    finally:
+        backend.close()
+    for field in ("count", "sx", "sy", "sxx", "syy"):
+        np.testing.assert_array_equal(getattr(moments, field), getattr(again, field))
+    # pixels counted (the pieces a cell does not keep are left out): not an empty answer
+    assert 0.5 * grid.mask.sum() < moments.count.sum() <= grid.mask.sum()
+
+
 def test_programs_are_built_once_per_metric_kind():
     ocl = OpenCLBackend()
     try:

@@ -33,6 +33,7 @@ import dataclasses
 import math
 import os
 import time
+from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -965,14 +966,21 @@ def _after_the_method(dist, picture_of, edge_map, cut, gap, spacing, picture_sec
     None for no cut), their colours and the measures (coverage and overlap, straddling,
     colour error, and :func:`cvt.evaluate.fidelity` on ``measured_as``: the problem and the
     tile shape), each timed; the method's distribution with the final tiles and every
-    stage's time.  ``picture_of()`` gives the picture (made again, where it was let go)."""
+    stage's time.  ``picture_of()`` gives the picture (made again, beside the cut, where
+    it was let go)."""
     polygons = [None if p is None or p.is_empty else p for p in dist.elements]
     # the stages after the method are timed too (result.json's stage_seconds)
     t0 = time.perf_counter()
-    picture = picture_of()
-    cut_count = 0
     if cut:
-        polygons, cut_count = cut_to_walls(polygons, edge_map, gap, spacing, style=cut)
+        # the picture is made on a thread of its own beside the cut (whose GEOS calls,
+        # like Pillow's resampling, let go of the GIL), not on the pool the cut's
+        # elementwise calls wait on
+        with ThreadPoolExecutor(1) as beside:
+            made = beside.submit(picture_of)
+            polygons, cut_count = cut_to_walls(polygons, edge_map, gap, spacing, style=cut)
+            picture = made.result()
+    else:
+        cut_count, picture = 0, picture_of()
     t1 = time.perf_counter()
     bounds = tile_runs(polygons)
     # the fidelity measures beside the fills (Delaunay and GEOS let go of the GIL)
@@ -1157,6 +1165,11 @@ def make_mosaic(
         gap=gap,
         **method_options,
     )
+    # the stages after the method need no backend: its buffers are let go (a poster's
+    # are some 150 MB), as the picture is made again
+    release = getattr(backend, "release_buffers", None)
+    if callable(release):
+        release()
     _return_free_memory()
     picture_of = remake if picture is None else (lambda: picture)
     dist, picture, tiles, measures = _after_the_method(
