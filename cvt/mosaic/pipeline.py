@@ -909,6 +909,15 @@ def _return_free_memory() -> None:
         pass
 
 
+def _release_buffers(backend) -> None:
+    """Let go of the backend's kept buffers (the stages after the method need none; a
+    poster's are some 150 MB, as the picture is made again) and of the C heap's free pages."""
+    release = getattr(backend, "release_buffers", None)
+    if callable(release):
+        release()
+    _return_free_memory()
+
+
 # up to this many pixels the picture's fields and its edge map are made side by side (on
 # two cores); above it one after the other, as each holds a structure tensor and its
 # temporaries (about 50 bytes a pixel) while it works
@@ -1165,12 +1174,7 @@ def make_mosaic(
         gap=gap,
         **method_options,
     )
-    # the stages after the method need no backend: its buffers are let go (a poster's
-    # are some 150 MB), as the picture is made again
-    release = getattr(backend, "release_buffers", None)
-    if callable(release):
-        release()
-    _return_free_memory()
+    _release_buffers(backend)
     picture_of = remake if picture is None else (lambda: picture)
     dist, picture, tiles, measures = _after_the_method(
         dist, picture_of, edge_map, cut if walls else None, gap, spacing, picture_seconds, (problem, element)
