@@ -18,6 +18,7 @@ than by ``union_all`` of everything (4000 circles on 1024²: ~0.03 s instead of 
 from __future__ import annotations
 
 import itertools
+import time
 from collections.abc import Iterable, Sequence
 from dataclasses import dataclass
 from typing import TYPE_CHECKING, Any
@@ -773,6 +774,31 @@ def fidelity(
     }
 
 
+def timed_fidelity(elements: Sequence[Any], problem: Problem, shape: str) -> tuple[dict[str, float], float]:
+    """:func:`fidelity` of ``elements`` and the seconds it took (for a command that takes
+    it on a thread of its own, beside other work, and reports it as a stage).
+
+    Parameters
+    ----------
+    elements : sequence of shapely geometries or None
+        The placed elements.
+    problem : Problem
+        The problem they were placed on (its density and field).
+    shape : str
+        Their shape (a ``cvt.shapes`` name).
+
+    Returns
+    -------
+    measures : dict of str to float
+        As :func:`fidelity` gives them.
+    seconds : float
+        Wall time of the call.
+    """
+    t0 = time.perf_counter()
+    measured = fidelity(elements, problem, shape)
+    return measured, time.perf_counter() - t0
+
+
 def measures(
     elements: Sequence[Any], problem: Problem, shape: str, aspect: float | None = None, region: Any = None
 ) -> dict[str, float]:
@@ -809,6 +835,7 @@ __all__ = [
     "MEASURES",
     "FIDELITY_TIE",
     "size_fidelity",
+    "timed_fidelity",
     "exterior_rings",
     "orientations",
     "direction_errors",

@@ -18,6 +18,7 @@ import argparse
 import os
 import sys
 import time
+from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass
 
 import numpy as np
@@ -259,7 +260,6 @@ def run(args) -> int:
     from compact_distributions.baselines import get_method
     from compact_distributions.cvt.evaluate import evaluate, region_polygon
     from compact_distributions.cvt.lloyd import MAX_ITERATIONS
-    from compact_distributions.cvt.mosaic.render import PAPER, draw_elements, svg_lines
     from compact_distributions.cvt.placement.fit import parse_gap
     from compact_distributions.cvt.resources import run_estimate
 
@@ -269,9 +269,6 @@ def run(args) -> int:
         OutputFolder,
         command_line,
         write_json,
-        write_lines,
-        write_png,
-        write_sites_csv,
     )
     from ..results import RanOn, build_result
 
@@ -315,30 +312,28 @@ def run(args) -> int:
             evaluation_seconds = time.perf_counter() - t0
             sources = {k: getattr(args, k) for k in ("init", "density", "field", "region")}
             ran_on = RanOn.of(backend)
-        g = problem.grid
+        shape = dist.extra.get("element", element)
         # the other files first, so that result.json (written last) holds their writing time
         t0 = time.perf_counter()
-        write_sites_csv(tmp / "sites.csv", dist.sites, dist.angles, dist.scales)
-        write_lines(
-            tmp / "elements.svg",
-            svg_lines(dist.elements, g.width, g.height, region=None if g.mask is None else region),
-        )
-        picture = draw_elements(dist.elements, g.width, g.height, region_colour=PAPER, region_mask=g.mask)
-        beside.run(write_png, tmp / "elements.png", picture)  # deflated beside the measures
-        del picture
-        stages = {"evaluation": evaluation_seconds, "writing": time.perf_counter() - t0}
+        measured, measures_seconds = _write_files(tmp, beside, dist, problem, region, shape)
+        stages = {
+            "evaluation": evaluation_seconds,
+            "writing": time.perf_counter() - t0,
+            "measures": measures_seconds,  # on its thread, beside the files
+        }
         result = build_result(
             "run",
             problem,
             dist,
             ev,
             ran_on,
-            element=dist.extra.get("element", element),
+            element=shape,
             gap=gap,
             command=command_line(args.argv),
             sources=sources,
             method_options=extra,
             stage_seconds=stages,
+            measured=measured,
         )
         # what the pictures still needed once the rest was done counts as writing
         result["stage_seconds"]["writing"] += beside.wait()
@@ -353,6 +348,29 @@ def run(args) -> int:
             file=sys.stderr,
         )
     return 0
+
+
+def _write_files(tmp, beside, dist, problem, region, shape):
+    """sites.csv, elements.svg and elements.png (deflated ``beside``) of ``dist``, with
+    its fidelity measures taken on a thread of their own meanwhile (Delaunay and GEOS let
+    go of the GIL); the measures and the seconds they took."""
+    from compact_distributions.cvt.evaluate import timed_fidelity
+    from compact_distributions.cvt.mosaic.render import PAPER, draw_elements, svg_lines
+
+    from ..outputs import write_lines, write_png, write_sites_csv
+
+    g = problem.grid
+    with ThreadPoolExecutor(1, thread_name_prefix="cvtbench-measures") as measuring:
+        measures = measuring.submit(timed_fidelity, dist.elements, problem, shape)
+        write_sites_csv(tmp / "sites.csv", dist.sites, dist.angles, dist.scales)
+        write_lines(
+            tmp / "elements.svg",
+            svg_lines(dist.elements, g.width, g.height, region=None if g.mask is None else region),
+        )
+        picture = draw_elements(dist.elements, g.width, g.height, region_colour=PAPER, region_mask=g.mask)
+        beside.run(write_png, tmp / "elements.png", picture)  # deflated beside the measures
+        del picture
+        return measures.result()
 
 
 __all__ = [

@@ -40,7 +40,7 @@ import numpy as np
 
 from ..distribution import Distribution
 from ..errors import InputError
-from ..evaluate import Evaluation, colour_error, evaluate, fidelity, pixels_under, straddling_tiles
+from ..evaluate import Evaluation, colour_error, evaluate, pixels_under, straddling_tiles, timed_fidelity
 from ..metrics import make_metric
 from ..moments import Moments, moments_from_runs
 from ..pixels import index_ranges, pixel_index
@@ -993,9 +993,9 @@ def _after_the_method(dist, picture_of, edge_map, cut, gap, spacing, picture_sec
     t1 = time.perf_counter()
     bounds = tile_runs(polygons)
     # the fidelity measures beside the fills (Delaunay and GEOS let go of the GIL)
-    (colours, _, error), measures = side_by_side(
+    (colours, _, error), (measures, measures_seconds) = side_by_side(
         lambda: mosaic_fills(picture, polygons, dist.sites, bounds),
-        lambda: _timed_fidelity(polygons, *measured_as),
+        lambda: timed_fidelity(polygons, *measured_as),
     )
     t2 = time.perf_counter()
     # beside the coverage, whose shapely calls let go of the GIL
@@ -1010,18 +1010,11 @@ def _after_the_method(dist, picture_of, edge_map, cut, gap, spacing, picture_sec
         "cutting_seconds": t1 - t0,
         "fills_seconds": t2 - t1,
         "evaluation_seconds": t3 - t2,
-        "measures_seconds": measures.pop("seconds"),  # on its thread, beside the fills
+        "measures_seconds": measures_seconds,  # on its thread, beside the fills
     }
     extra = {**dist.extra, **({"cut_tiles": cut_count, "cut_style": cut} if cut else {}), **stages}
     dist = dataclasses.replace(dist, elements=polygons, extra=extra)
     return dist, picture, (polygons, colours, cut_count), (ev, straddles, error, measures)
-
-
-def _timed_fidelity(polygons, problem: Problem, element: str) -> dict:
-    """:func:`cvt.evaluate.fidelity` of the tiles, with the seconds it took (``seconds``)."""
-    t0 = time.perf_counter()
-    measured = fidelity(polygons, problem, element)
-    return {**measured, "seconds": time.perf_counter() - t0}
 
 
 def _method_and_options(method, method_options):
