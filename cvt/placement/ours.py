@@ -106,6 +106,10 @@ DENSITY_EXTRA_ROUNDS = 2
 # on fine texture the factor changes from pixel to pixel, and caps that chase it shrink
 # elements for a pixel's sake and hold their moves back (steady boxes of one pixel)
 DENSITY_CAP_SMOOTH = 1.0
+DENSITY_SHRINK_ABOVE = None
+DENSITY_SHRINK_SMOOTH = 0.0
+DENSITY_REGROW_ROUNDS = 0
+DENSITY_REGROW_MOVE = 1e-9
 
 
 @dataclass(frozen=True)
@@ -367,6 +371,14 @@ def _compact_and_turn(problem: Problem, sites, placed, shape, settings, turn_to_
         )
         packed.centres, packed.sizes = turned.centres, turned.sizes
         packed.dropped += turned.dropped
+    if caps is not None and DENSITY_SHRINK_ABOVE is not None:
+        point = DensityCaps(problem, caps.factor, smooth=DENSITY_SHRINK_SMOOTH)
+        at = point(packed.centres)
+        packed.sizes = np.minimum(packed.sizes, DENSITY_SHRINK_ABOVE * at)
+        if DENSITY_REGROW_ROUNDS:
+            from dataclasses import replace as _r
+            again = compact(packed.centres, angles, packed.sizes, shape, aspect, grid, _r(settings, move=DENSITY_REGROW_MOVE), walls=walls, max_sizes=np.maximum(at, 1e-9), rounds=DENSITY_REGROW_ROUNDS)
+            packed.centres, packed.sizes = again.centres, again.sizes
     return packed, angles
 
 
