@@ -288,7 +288,7 @@ _CHORD_WIDTH = 0.75  # px: the most a chord's wall pixel centres may lie off it
 _CHORD_ROOM = 1.0  # px: no chord where a centre is within this of it (beyond G/2 and its width)
 _FAIRNESS = 2.0  # under size caps: growth weighed by r·(cap / r)^this (Sizes and density)
 _REACH_STEPS = 2  # reach classes per factor 2 (_reach_classes)
-_STEADY_LEAST = 0.5  # px: under caps that follow the centres, the last round's move bound at least
+_STEADY_LEAST = 0.2  # px: under caps that follow the centres, the last round's move bound at least
 
 
 @dataclass

@@ -12,7 +12,7 @@ from __future__ import annotations
 import functools
 import math
 import time
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from types import MappingProxyType
 
 import numpy as np
@@ -97,19 +97,29 @@ def run_ours_fit(problem: Problem, backend, **options) -> Distribution:
 # more coverage than 0.02 and a size error still at most ours' (Table 3, 512², N = 1000)
 DENSITY_CAP_SLACK = 0.03
 # under density caps compaction keeps each move where the caps are steady (within ±growth ×
-# the rounds left), which slows it: two rounds more than the shape's by default (with the
-# shape's rounds alone coverage measured up to 2 points lower on photographs as densities;
-# with one more, motorcycle_left (seeds 0-1): triangles 1.13x ours' size error against
-# 1.12x, circles 1.07x against 1.11x, 0.1-0.2 points less coverage)
-DENSITY_EXTRA_ROUNDS = 2
+# the rounds left), which slows it: rounds more than the shape's by default, of which the last
+# DENSITY_POINT_ROUNDS against the density read at one pixel.  Six before those: with two
+# (today's until then) hubble_deep_field's circles measured 1.23x ours' size error (1.10x
+# with six), with four its triangles lost 1.05 points of coverage (0.78 with six)
+DENSITY_EXTRA_ROUNDS = 9
 # the caps follow the density's size factor smoothed (Gaussian, in log2) over this many px:
 # on fine texture the factor changes from pixel to pixel, and caps that chase it shrink
 # elements for a pixel's sake and hold their moves back (steady boxes of one pixel)
 DENSITY_CAP_SMOOTH = 1.0
-DENSITY_SHRINK_ABOVE = None
-DENSITY_SHRINK_SMOOTH = 0.0
-DENSITY_REGROW_ROUNDS = 0
-DENSITY_REGROW_MOVE = 1e-9
+# the size error reads the density at the one pixel under each element's centre, and where
+# the density changes within an element (a picture's small bright spots) that differs from
+# the smoothed cap: the last rounds follow caps read at one pixel, DENSITY_POINT_SLACK above
+# the smoothed caps' factor, and no element ends more than DENSITY_POINT_LIMIT above the cap
+# read at its own centre's pixel (shrinking about its centre: no overlap, nothing moves).
+# Measured with compaction's fairness 3 and its least steady move 0.2 px (cvt/placement/
+# compaction.py, Sizes and density), module docstring of compaction for the figures
+DENSITY_POINT_ROUNDS = 3
+# compaction's fairness under these caps (cvt/placement/compaction.py, Sizes and density;
+# its default 2): with 2, motorcycle_left's and hubble_deep_field's triangles measured
+# 1.15x and 1.14x ours' size error, with 3 0.97x and 0.97x
+DENSITY_FAIRNESS = 3.0
+DENSITY_POINT_SLACK = 0.2
+DENSITY_POINT_LIMIT = 0.1
 
 
 @dataclass(frozen=True)
@@ -255,6 +265,8 @@ def run_ours_compact(
     t3 = time.perf_counter()
     sizes, caps = _capped_by_density(problem, centres, sizes, shape, alternate, density_slack)
     settings = CompactionSettings(gap=gap, rounds=rounds)
+    if caps is not None:
+        settings = replace(settings, fairness=DENSITY_FAIRNESS)
     packed, angles = _compact_and_turn(
         problem, res.sites, (centres, angles, sizes, caps), shape, settings, turn_to_field
     )
@@ -349,10 +361,13 @@ def _compaction_plan(problem: Problem, element, gap, alternate, rounds):
 def _compact_and_turn(problem: Problem, sites, placed, shape, settings, turn_to_field):
     """Compaction of the fitted elements ``placed`` (centres, angles, sizes, size caps),
     then, under a field, each turned to the field at its final centre and one more round
-    to shrink whatever that turn made overlap.  Returns the result and the angles."""
+    to shrink whatever that turn made overlap; under size caps the last rounds follow the
+    density read at one pixel (:func:`_point_pass`).  Returns the result and the angles."""
     centres, angles, sizes, caps = placed
     aspect, grid, walls = problem.metric.aspect, problem.grid, problem.walls
-    packed = compact(centres, angles, sizes, shape, aspect, grid, settings, walls=walls, max_sizes=caps)
+    last = 0 if caps is None else min(DENSITY_POINT_ROUNDS, settings.rounds // 2)
+    main = replace(settings, rounds=settings.rounds - last)
+    packed = compact(centres, angles, sizes, shape, aspect, grid, main, walls=walls, max_sizes=caps)
     if turn_to_field and problem.field is not None:
         # compaction moved the elements off their sites: turn each by the field's change
         # between its site and its centre
@@ -371,15 +386,30 @@ def _compact_and_turn(problem: Problem, sites, placed, shape, settings, turn_to_
         )
         packed.centres, packed.sizes = turned.centres, turned.sizes
         packed.dropped += turned.dropped
-    if caps is not None and DENSITY_SHRINK_ABOVE is not None:
-        point = DensityCaps(problem, caps.factor, smooth=DENSITY_SHRINK_SMOOTH)
-        at = point(packed.centres)
-        packed.sizes = np.minimum(packed.sizes, DENSITY_SHRINK_ABOVE * at)
-        if DENSITY_REGROW_ROUNDS:
-            from dataclasses import replace as _r
-            again = compact(packed.centres, angles, packed.sizes, shape, aspect, grid, _r(settings, move=DENSITY_REGROW_MOVE), walls=walls, max_sizes=np.maximum(at, 1e-9), rounds=DENSITY_REGROW_ROUNDS)
-            packed.centres, packed.sizes = again.centres, again.sizes
+    if caps is not None:
+        _point_pass(problem, packed, angles, shape, replace(settings, rounds=last), caps)
     return packed, angles
+
+
+def _point_pass(problem: Problem, packed, angles, shape, settings, caps: DensityCaps) -> None:
+    """The last ``settings.rounds`` rounds of ours-compact under a density, on ``packed``
+    (a :class:`CompactionResult`, updated in place): caps read at one pixel (no
+    smoothing), ``DENSITY_POINT_SLACK`` above ``caps``' factor, and before and after
+    them each size cut to at most (1 + ``DENSITY_POINT_LIMIT``) × ``caps``' factor × the
+    density's size factor at its centre's pixel (what the size error reads)."""
+    point = DensityCaps(problem, caps.factor * (1 + DENSITY_POINT_SLACK), smooth=0.0)
+    # shrinking an element about its own centre keeps it inside itself: no overlap
+    limit = (1 + DENSITY_POINT_LIMIT) / (1 + DENSITY_POINT_SLACK)
+    sizes = np.minimum(packed.sizes, limit * point(packed.centres))
+    aspect, grid, walls = problem.metric.aspect, problem.grid, problem.walls
+    last = compact(packed.centres, angles, sizes, shape, aspect, grid, settings, walls=walls, max_sizes=point)
+    packed.centres = last.centres
+    packed.sizes = np.minimum(last.sizes, limit * point(last.centres))
+    packed.rounds += last.rounds
+    packed.seconds += last.seconds
+    packed.lp_seconds += last.lp_seconds
+    packed.dropped += last.dropped
+    packed.history += last.history
 
 
 # compaction's peak per element (near pairs, their directions, the linear program):
