@@ -99,8 +99,8 @@ DENSITY_CAP_SLACK = 0.03
 # under density caps compaction keeps each move where the caps are steady (within ±growth ×
 # the rounds left), which slows it: rounds more than the shape's by default, of which the last
 # DENSITY_POINT_ROUNDS against the density read at one pixel.  Six before those: with two
-# (today's until then) hubble_deep_field's circles measured 1.23x ours' size error (1.10x
-# with six), with four its triangles lost 1.05 points of coverage (0.78 with six)
+# (as before the last rounds came) hubble_deep_field's circles measured 1.12x ours' size
+# error and −1.5 points of coverage, with four 1.06x and −1.1, with six 1.10x and −0.6
 DENSITY_EXTRA_ROUNDS = 9
 # the caps follow the density's size factor smoothed (Gaussian, in log2) over this many px:
 # on fine texture the factor changes from pixel to pixel, and caps that chase it shrink
@@ -111,15 +111,16 @@ DENSITY_CAP_SMOOTH = 1.0
 # the smoothed cap: the last rounds follow caps read at one pixel, DENSITY_POINT_SLACK above
 # the smoothed caps' factor, and no element ends more than DENSITY_POINT_LIMIT above the cap
 # read at its own centre's pixel (shrinking about its centre: no overlap, nothing moves).
-# Measured with compaction's fairness 3 and its least steady move 0.2 px (cvt/placement/
-# compaction.py, Sizes and density), module docstring of compaction for the figures
+# Measured with DENSITY_FAIRNESS and compaction's least steady move 0.2 px; the figures
+# are in cvt/placement/compaction.py's module docstring (Sizes and density)
+# (hubble_deep_field's circles: a limit of 0.15 measured 1.16x, a slack of 0.1 1.12x)
 DENSITY_POINT_ROUNDS = 3
-# compaction's fairness under these caps (cvt/placement/compaction.py, Sizes and density;
-# its default 2): with 2, motorcycle_left's and hubble_deep_field's triangles measured
-# 1.15x and 1.14x ours' size error, with 3 0.97x and 0.97x
-DENSITY_FAIRNESS = 3.0
 DENSITY_POINT_SLACK = 0.2
 DENSITY_POINT_LIMIT = 0.1
+# compaction's fairness under these caps (cvt/placement/compaction.py, Sizes and density;
+# its default 2): with 2, motorcycle_left's and hubble_deep_field's triangles measured
+# 1.13x and 1.17x ours' size error (hubble's circles 1.19x), with 3 0.97x and 0.97x (1.10x)
+DENSITY_FAIRNESS = 3.0
 
 
 @dataclass(frozen=True)
@@ -235,8 +236,12 @@ def run_ours_compact(
     :func:`density_caps` (``density_slack`` above the size that follows the density;
     None: no caps), so that compaction keeps the sizes the density asks for; the caps
     follow the elements (:class:`DensityCaps`: the density smoothed over a pixel, read at
-    each centre every round, moves kept where they are steady), and ``rounds`` defaults to
-    ``DENSITY_EXTRA_ROUNDS`` (two) more than the shape's.
+    each centre every round, moves kept where they are steady; compaction's ``fairness``
+    ``DENSITY_FAIRNESS``), and ``rounds`` defaults to ``DENSITY_EXTRA_ROUNDS`` (nine) more
+    than the shape's.  The last ``DENSITY_POINT_ROUNDS`` of them (three; at most half the
+    rounds) follow caps read at one pixel, and no element ends more than
+    ``DENSITY_POINT_LIMIT`` (10 %) above the cap read at its own centre's pixel: the size
+    error reads the density there (:func:`_point_pass`).
     ``turn_to_field``: under a field, turn each element to the field at its final centre
     and run one more round (False: elements keep their sites' angles).
 
@@ -527,6 +532,10 @@ __all__ = [
     "DensityCaps",
     "DENSITY_EXTRA_ROUNDS",
     "DENSITY_CAP_SMOOTH",
+    "DENSITY_POINT_ROUNDS",
+    "DENSITY_POINT_SLACK",
+    "DENSITY_POINT_LIMIT",
+    "DENSITY_FAIRNESS",
     "smoothed_scales",
     "density_cap_field",
     "density_caps",
