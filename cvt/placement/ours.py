@@ -241,7 +241,7 @@ def run_ours_compact(
     than the shape's.  The last ``DENSITY_POINT_ROUNDS`` of them (three; at most half the
     rounds) follow caps read at one pixel, and no element ends more than
     ``DENSITY_POINT_LIMIT`` (10 %) above the cap read at its own centre's pixel: the size
-    error reads the density there (:func:`_point_pass`).
+    error reads the density there (:func:`_cut_to_point`).
     ``turn_to_field``: under a field, turn each element to the field at its final centre
     and run one more round (False: elements keep their sites' angles).
 
@@ -365,56 +365,56 @@ def _compaction_plan(problem: Problem, element, gap, alternate, rounds):
 
 def _compact_and_turn(problem: Problem, sites, placed, shape, settings, turn_to_field):
     """Compaction of the fitted elements ``placed`` (centres, angles, sizes, size caps),
-    then, under a field, each turned to the field at its final centre and one more round
-    to shrink whatever that turn made overlap; under size caps the last rounds follow the
-    density read at one pixel (:func:`_point_pass`).  Returns the result and the angles."""
+    under size caps its last rounds against the density read at one pixel
+    (:func:`_point_caps`), then, under a field, each element turned to the field at its
+    final centre and one more round to shrink whatever that turn made overlap.  Returns
+    the result and the angles."""
     centres, angles, sizes, caps = placed
     aspect, grid, walls = problem.metric.aspect, problem.grid, problem.walls
+
+    def more(centres, sizes, angles, rounds, caps):
+        # rounds of compaction from these centres and sizes
+        return compact(
+            centres, angles, sizes, shape, aspect, grid, settings, walls=walls, max_sizes=caps, rounds=rounds
+        )
+
     last = 0 if caps is None else min(DENSITY_POINT_ROUNDS, settings.rounds // 2)
-    main = replace(settings, rounds=settings.rounds - last)
-    packed = compact(centres, angles, sizes, shape, aspect, grid, main, walls=walls, max_sizes=caps)
+    packed = more(centres, sizes, angles, settings.rounds - last, caps)
+    if caps is not None:
+        caps = _point_caps(problem, caps)
+        _cut_to_point(packed, caps)
+        point = more(packed.centres, packed.sizes, angles, last, caps)
+        packed.centres, packed.sizes = point.centres, point.sizes
+        packed.rounds += point.rounds
+        packed.seconds += point.seconds
+        packed.lp_seconds += point.lp_seconds
+        packed.dropped += point.dropped
+        packed.history += point.history
     if turn_to_field and problem.field is not None:
         # compaction moved the elements off their sites: turn each by the field's change
         # between its site and its centre
         angles = angles + problem.angles_at(packed.centres) - problem.angles_at(sites)
-        turned = compact(
-            packed.centres,
-            angles,
-            packed.sizes,
-            shape,
-            aspect,
-            grid,
-            settings,
-            walls=walls,
-            max_sizes=caps,
-            rounds=1,
-        )
+        turned = more(packed.centres, packed.sizes, angles, 1, caps)
         packed.centres, packed.sizes = turned.centres, turned.sizes
         packed.dropped += turned.dropped
     if caps is not None:
-        _point_pass(problem, packed, angles, shape, replace(settings, rounds=last), caps)
+        _cut_to_point(packed, caps)
     return packed, angles
 
 
-def _point_pass(problem: Problem, packed, angles, shape, settings, caps: DensityCaps) -> None:
-    """The last ``settings.rounds`` rounds of ours-compact under a density, on ``packed``
-    (a :class:`CompactionResult`, updated in place): caps read at one pixel (no
-    smoothing), ``DENSITY_POINT_SLACK`` above ``caps``' factor, and before and after
-    them each size cut to at most (1 + ``DENSITY_POINT_LIMIT``) × ``caps``' factor × the
-    density's size factor at its centre's pixel (what the size error reads)."""
-    point = DensityCaps(problem, caps.factor * (1 + DENSITY_POINT_SLACK), smooth=0.0)
-    # shrinking an element about its own centre keeps it inside itself: no overlap
+def _point_caps(problem: Problem, caps: DensityCaps) -> DensityCaps:
+    """Ours-compact's caps for its last rounds under a density: read at one pixel (no
+    smoothing), ``DENSITY_POINT_SLACK`` above the factor of the smoothed ``caps``."""
+    return DensityCaps(problem, caps.factor * (1 + DENSITY_POINT_SLACK), smooth=0.0)
+
+
+def _cut_to_point(packed, point: DensityCaps) -> None:
+    """Each size of ``packed`` (a :class:`CompactionResult`, in place) cut to at most
+    (1 + ``DENSITY_POINT_LIMIT``) × the smoothed caps' factor × the density's size factor
+    at its centre's pixel (what the size error reads); ``point``: :func:`_point_caps`."""
     limit = (1 + DENSITY_POINT_LIMIT) / (1 + DENSITY_POINT_SLACK)
-    sizes = np.minimum(packed.sizes, limit * point(packed.centres))
-    aspect, grid, walls = problem.metric.aspect, problem.grid, problem.walls
-    last = compact(packed.centres, angles, sizes, shape, aspect, grid, settings, walls=walls, max_sizes=point)
-    packed.centres = last.centres
-    packed.sizes = np.minimum(last.sizes, limit * point(last.centres))
-    packed.rounds += last.rounds
-    packed.seconds += last.seconds
-    packed.lp_seconds += last.lp_seconds
-    packed.dropped += last.dropped
-    packed.history += last.history
+    # shrinking an element about its own centre keeps it inside itself: no overlap
+    packed.sizes = np.minimum(packed.sizes, limit * point(packed.centres))
 
 
 # compaction's peak per element (near pairs, their directions, the linear program):
