@@ -224,3 +224,58 @@ def test_compaction_keeps_the_density_sizes_on_texture(shape):
     1.07x and 0.99x)."""
     ratios = _size_error_ratios(_texture_problem, shape)
     assert np.mean(ratios) <= 1.1, ratios
+
+
+def _spots_problem(shape: str, seed: int) -> Problem:
+    """A density no Table 3 scene uses, like a deep-sky photograph: a dim ground (0.1) and
+    60 bright Gaussian spots of 0.7-2.5 px (peak about 1), smaller than the elements
+    (about 11 px apart), so that the density changes within an element."""
+    size = 160
+    rng = np.random.default_rng(11)
+    yy, xx = np.mgrid[0:size, 0:size] + 0.5
+    x, y, s = rng.uniform(0, size, 60), rng.uniform(0, size, 60), rng.uniform(0.7, 2.5, 60)
+    d = 0.1 + np.exp(-((xx[..., None] - x) ** 2 + (yy[..., None] - y) ** 2) / (2 * s * s)).sum(axis=-1)
+    metric = make_metric(shape_record(shape).metric)
+    return Problem(Grid(size, size), 200, metric, density=DensityMap(d), seed=seed)
+
+
+def _size_error_by_hand(elements, density: np.ndarray) -> float:
+    """The size error from its definition, without cvt.evaluate: each polygon's area and
+    centroid by the shoelace formulas, the target area ∝ 1 / the density at the pixel
+    under the centroid, the RMS of log2(area / target) about its mean."""
+    q = []
+    for e in elements:
+        if e is None:
+            continue
+        x, y = np.asarray(e.exterior.coords).T
+        cross = x[:-1] * y[1:] - x[1:] * y[:-1]
+        area = cross.sum() / 2
+        cx = ((x[:-1] + x[1:]) * cross).sum() / (6 * area)
+        cy = ((y[:-1] + y[1:]) * cross).sum() / (6 * area)
+        q.append(np.log2(abs(area) * density[int(cy), int(cx)]))
+    q = np.array(q)
+    return float(np.sqrt(np.mean((q - q.mean()) ** 2)))
+
+
+@pytest.mark.parametrize("shape", ["circle", "triangle"])
+def test_compaction_keeps_the_density_sizes_on_small_spots(shape):
+    """Where the density changes within an element (bright spots a few px across), the
+    size error, which reads the density at the one pixel under each element's centre,
+    stays within 1.1x ours' (mean of seeds 0-1; measured: circles 0.87x, triangles 0.83x;
+    before the last rounds against the density read at one pixel, circles 1.22x), and
+    the elements do not overlap (every pair's common area, by shapely, under 1e-9 px²)."""
+    import shapely
+
+    backend = NumpyBackend()
+    ratios = []
+    for seed in (0, 1):
+        problem = _spots_problem(shape, seed)
+        density = problem.density.values  # the spots' floor (0.1 / max) is above DENSITY_FLOOR
+        ours = run_ours(problem, backend, iterations=10).elements
+        packed = run_ours_compact(problem, backend, iterations=10).elements
+        ratios.append(_size_error_by_hand(packed, density) / _size_error_by_hand(ours, density))
+        polys = np.array([e for e in packed if e is not None], dtype=object)
+        i, j = shapely.STRtree(polys).query(polys, predicate="intersects")
+        keep = i < j
+        assert shapely.area(shapely.intersection(polys[i[keep]], polys[j[keep]])).max(initial=0.0) < 1e-9
+    assert np.mean(ratios) <= 1.1, ratios

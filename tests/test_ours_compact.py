@@ -209,7 +209,12 @@ def test_density_caps_keep_the_sizes_the_density_asks_for():
     within 1.1x of ours' and still covers far more."""
     from compact_distributions.bench.scenes import scene_problem
     from compact_distributions.cvt.evaluate import fidelity
-    from compact_distributions.cvt.placement.ours import DENSITY_CAP_SLACK, density_caps
+    from compact_distributions.cvt.placement.ours import (
+        DENSITY_CAP_SLACK,
+        DENSITY_POINT_LIMIT,
+        density_cap_field,
+        density_caps,
+    )
 
     problem = scene_problem("density", 160, 100, make_metric("linf"), 0)
     backend = NumpyBackend()
@@ -234,10 +239,13 @@ def test_density_caps_keep_the_sizes_the_density_asks_for():
     caps = density_caps(problem, centres, np.ones(len(polys)), "square", 1.0, DENSITY_CAP_SLACK)
     assert np.sum(4 * (caps / (1 + DENSITY_CAP_SLACK)) ** 2) == pytest.approx(problem.grid.pixel_count)
     half_sides = np.sqrt(shapely.area(np.array(polys, dtype=object))) / 2
-    # the centres moved a little: nine in ten within 1 % of the cap at their final
-    # centre, every one within 3 %
-    assert (half_sides <= caps * 1.01 + 0.05).mean() > 0.9
-    assert (half_sides <= caps * 1.03 + 0.05).all()
+    # no element ends more than DENSITY_POINT_LIMIT (10 %) above the cap's factor times
+    # the density's size factor at its centre's pixel (1 % for κ, read here at the final
+    # centres, in the run where the fit left them); most are below it
+    factor = density_cap_field(problem, centres, np.ones(len(polys)), "square", 1.0, DENSITY_CAP_SLACK).factor
+    point_caps = factor * problem.scales_at(centres)
+    assert (half_sides <= point_caps * (1 + DENSITY_POINT_LIMIT) * 1.01).all()
+    assert np.median(half_sides / point_caps) < 1.0
 
 
 def test_compacted_elements_follow_the_field_at_their_own_centres():

@@ -145,11 +145,13 @@ def test_junit_of_fabricated_checks_parses():
 # end to end on small problems
 
 
+# 45 elements (28 in the ring): with 40, ours-compact's size error on the 25 in the ring
+# spread so over seeds 0-2 (0.48, 0.26, 0.44) that its tolerance exceeded a 1.5x edit
 TINY = {
     "runs": {
         "scene": "combined",
         "size": 96,
-        "n_elements": 40,
+        "n_elements": 45,
         "iterations": 8,
         "seeds": [0, 1],
         "spread_seeds": 3,
