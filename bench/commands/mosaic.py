@@ -221,7 +221,6 @@ def mosaic_result_json(args, m, ran_on, stage_seconds: dict | None = None) -> di
         method_options=m.method_options,
         stage_seconds=stage_seconds,
         placed=m.polygons,
-        measured=m.fidelity,
         image=m.source,
         colours=hex_colours(m.colours),
         grout=hex_colour(m.grout),

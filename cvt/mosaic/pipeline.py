@@ -40,7 +40,7 @@ import numpy as np
 
 from ..distribution import Distribution
 from ..errors import InputError
-from ..evaluate import Evaluation, colour_error, evaluate, pixels_under, straddling_tiles, timed_fidelity
+from ..evaluate import Evaluation, colour_error, evaluate, pixels_under, straddling_tiles
 from ..metrics import make_metric
 from ..moments import Moments, moments_from_runs
 from ..pixels import index_ranges, pixel_index
@@ -756,9 +756,6 @@ class MosaicResult:
         What the method returned.
     evaluation : Evaluation or None, optional
         Coverage and overlap, as measured.
-    fidelity : dict or None, optional
-        The tiles' size and direction fidelity and grout (:func:`cvt.evaluate.fidelity`
-        on the problem), as measured.
     backend : str, optional
         The backend variant that ran the Lloyd iterations.
     device : str, optional
@@ -805,7 +802,6 @@ class MosaicResult:
     problem: Problem | None = field(default=None, repr=False)
     distribution: Distribution | None = field(default=None, repr=False)  # what the method returned
     evaluation: Evaluation | None = field(default=None, repr=False)  # coverage and overlap, as measured
-    fidelity: dict | None = field(default=None, repr=False)  # cvt.evaluate.fidelity of the tiles
     backend: str = "numpy"
     device: str = ""
     source: str = ""
@@ -970,11 +966,10 @@ def _cut_style(cut, tight: bool) -> str | None:
     raise InputError(f"cut must be True, False, None or one of {', '.join(CUT_STYLES)}, got {cut!r}")
 
 
-def _after_the_method(dist, picture_of, edge_map, cut, gap, spacing, picture_seconds, measured_as):
+def _after_the_method(dist, picture_of, edge_map, cut, gap, spacing, picture_seconds):
     """The stages after the method: tiles cut to the walls (``cut``: the cut's style, or
     None for no cut), their colours and the measures (coverage and overlap, straddling,
-    colour error, and :func:`cvt.evaluate.fidelity` on ``measured_as``: the problem and the
-    tile shape), each timed; the method's distribution with the final tiles and every
+    colour error), each timed; the method's distribution with the final tiles and every
     stage's time.  ``picture_of()`` gives the picture (made again, beside the cut, where
     it was let go)."""
     polygons = [None if p is None or p.is_empty else p for p in dist.elements]
@@ -992,11 +987,7 @@ def _after_the_method(dist, picture_of, edge_map, cut, gap, spacing, picture_sec
         cut_count, picture = 0, picture_of()
     t1 = time.perf_counter()
     bounds = tile_runs(polygons)
-    # the fidelity measures beside the fills (Delaunay and GEOS let go of the GIL)
-    (colours, _, error), (measures, measures_seconds) = side_by_side(
-        lambda: mosaic_fills(picture, polygons, dist.sites, bounds),
-        lambda: timed_fidelity(polygons, *measured_as),
-    )
+    colours, _, error = mosaic_fills(picture, polygons, dist.sites, bounds)
     t2 = time.perf_counter()
     # beside the coverage, whose shapely calls let go of the GIL
     ev, straddles = side_by_side(
@@ -1010,11 +1001,10 @@ def _after_the_method(dist, picture_of, edge_map, cut, gap, spacing, picture_sec
         "cutting_seconds": t1 - t0,
         "fills_seconds": t2 - t1,
         "evaluation_seconds": t3 - t2,
-        "measures_seconds": measures_seconds,  # on its thread, beside the fills
     }
     extra = {**dist.extra, **({"cut_tiles": cut_count, "cut_style": cut} if cut else {}), **stages}
     dist = dataclasses.replace(dist, elements=polygons, extra=extra)
-    return dist, picture, (polygons, colours, cut_count), (ev, straddles, error, measures)
+    return dist, picture, (polygons, colours, cut_count), (ev, straddles, error)
 
 
 def _method_and_options(method, method_options):
@@ -1048,7 +1038,7 @@ class _Settings:
 def _result(dist, problem, fields, picture, edge_map, tiles, measures, settings: _Settings) -> MosaicResult:
     """The mosaic's record, from the stages' results and :func:`make_mosaic`'s settings."""
     polygons, colours, cut_count = tiles
-    ev, straddles, error, measured = measures
+    ev, straddles, error = measures
     placed = sum(p is not None for p in polygons)
     backend = settings.backend
     return MosaicResult(
@@ -1081,7 +1071,6 @@ def _result(dist, problem, fields, picture, edge_map, tiles, measures, settings:
         problem=problem,
         distribution=dist,
         evaluation=ev,
-        fidelity=measured,
         backend=backend.variant,
         device=backend.device(),
         source=settings.source,
@@ -1170,7 +1159,7 @@ def make_mosaic(
     _release_buffers(backend)
     picture_of = remake if picture is None else (lambda: picture)
     dist, picture, tiles, measures = _after_the_method(
-        dist, picture_of, edge_map, cut if walls else None, gap, spacing, picture_seconds, (problem, element)
+        dist, picture_of, edge_map, cut if walls else None, gap, spacing, picture_seconds
     )
     settings = _Settings(
         metric_name,
