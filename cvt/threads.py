@@ -9,7 +9,9 @@ from __future__ import annotations
 
 import os
 import threading
+from collections.abc import Callable, Iterator
 from concurrent.futures import ThreadPoolExecutor
+from contextlib import contextmanager
 
 import numpy as np
 
@@ -133,4 +135,26 @@ def side_by_side(*calls):
     return [first, *done]
 
 
-__all__ = ["PARALLEL_MIN", "usable_cores", "elementwise", "side_by_side"]
+@contextmanager
+def on_its_own_thread(call: Callable, *args) -> Iterator[Callable]:
+    """``call(*args)`` run on a thread of its own while the ``with`` block runs (not on
+    the process's pool, whose calls the block may wait on).
+
+    Parameters
+    ----------
+    call : callable
+        Independent of what the block does; it should let go of the GIL to gain anything.
+    *args
+        Its arguments.
+
+    Yields
+    ------
+    callable
+        ``result()``: waits for the call and returns what it returned (its exception is
+        raised there).  Leaving the block waits for the call too.
+    """
+    with ThreadPoolExecutor(1, thread_name_prefix="beside") as pool:
+        yield pool.submit(call, *args).result
+
+
+__all__ = ["PARALLEL_MIN", "usable_cores", "elementwise", "side_by_side", "on_its_own_thread"]

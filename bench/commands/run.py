@@ -18,7 +18,6 @@ import argparse
 import os
 import sys
 import time
-from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass
 
 import numpy as np
@@ -356,12 +355,12 @@ def _write_files(tmp, beside, dist, problem, region, shape):
     go of the GIL); the measures and the seconds they took."""
     from compact_distributions.cvt.evaluate import timed_fidelity
     from compact_distributions.cvt.mosaic.render import PAPER, draw_elements, svg_lines
+    from compact_distributions.cvt.threads import on_its_own_thread
 
     from ..outputs import write_lines, write_png, write_sites_csv
 
     g = problem.grid
-    with ThreadPoolExecutor(1, thread_name_prefix="cvtbench-measures") as measuring:
-        measures = measuring.submit(timed_fidelity, dist.elements, problem, shape)
+    with on_its_own_thread(timed_fidelity, dist.elements, problem, shape) as measures:
         write_sites_csv(tmp / "sites.csv", dist.sites, dist.angles, dist.scales)
         write_lines(
             tmp / "elements.svg",
@@ -370,7 +369,7 @@ def _write_files(tmp, beside, dist, problem, region, shape):
         picture = draw_elements(dist.elements, g.width, g.height, region_colour=PAPER, region_mask=g.mask)
         beside.run(write_png, tmp / "elements.png", picture)  # deflated beside the measures
         del picture
-        return measures.result()
+        return measures()
 
 
 __all__ = [

@@ -33,7 +33,6 @@ import dataclasses
 import math
 import os
 import time
-from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -49,7 +48,7 @@ from ..problem import Grid, Problem, parse_size
 from ..registry import resolve_method
 from ..resources import mosaic_estimate
 from ..shapes import ELEMENT_SHAPES, element_ball, resolve_shapes, shape_record, unit_outline
-from ..threads import side_by_side, usable_cores
+from ..threads import on_its_own_thread, side_by_side, usable_cores
 from ..validate import live_backend, real_number, whole_number
 from .colour import lab_to_srgb, quantised, srgb_to_lab
 from .cutting import CUT_STYLES, cut_to_walls
@@ -976,13 +975,11 @@ def _after_the_method(dist, picture_of, edge_map, cut, gap, spacing, picture_sec
     # the stages after the method are timed too (result.json's stage_seconds)
     t0 = time.perf_counter()
     if cut:
-        # the picture is made on a thread of its own beside the cut (whose GEOS calls,
-        # like Pillow's resampling, let go of the GIL), not on the pool the cut's
-        # elementwise calls wait on
-        with ThreadPoolExecutor(1) as beside:
-            made = beside.submit(picture_of)
+        # the picture is made beside the cut (whose GEOS calls, like Pillow's
+        # resampling, let go of the GIL)
+        with on_its_own_thread(picture_of) as made:
             polygons, cut_count = cut_to_walls(polygons, edge_map, gap, spacing, style=cut)
-            picture = made.result()
+            picture = made()
     else:
         cut_count, picture = 0, picture_of()
     t1 = time.perf_counter()
