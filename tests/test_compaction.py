@@ -25,6 +25,7 @@ from compact_distributions.cvt.placement.alternate import (
     check_alternate,
 )
 from compact_distributions.cvt.placement.compaction import (
+    CompactionResult,
     _best_pair_directions,
     boundary_segments,
     compact,
@@ -802,3 +803,20 @@ def test_sorted_pairs_are_lexicographic():
     assert np.array_equal(sa, a[order]) and np.array_equal(sb, b[order])
     empty = np.zeros(0, np.int64)
     assert all(len(v) == 0 for v in _sorted_pairs(empty, empty, 1))
+
+
+def test_a_later_pass_continues_a_result():
+    # hand-made passes: the later one's elements, both passes' counts (or only the
+    # elements it dropped, where its rounds belong to another step)
+    first = CompactionResult(np.zeros((2, 2)), np.ones(2), np.zeros(2), 3, 1.5, 0.5, 1, [{"round": 1}])
+    later = CompactionResult(
+        np.ones((2, 2)), np.array([2.0, 0.0]), np.zeros(2), 2, 0.25, 0.125, 1, [{"round": 2}]
+    )
+    both = first.followed_by(later)
+    assert (both.rounds, both.seconds, both.lp_seconds, both.dropped) == (5, 1.75, 0.625, 2)
+    assert both.history == [{"round": 1}, {"round": 2}]
+    assert np.array_equal(both.centres, np.ones((2, 2))) and np.array_equal(both.sizes, [2.0, 0.0])
+    turned = first.followed_by(later, counted=False)
+    assert (turned.rounds, turned.seconds, turned.lp_seconds, turned.dropped) == (3, 1.5, 0.5, 2)
+    assert turned.history == [{"round": 1}] and np.array_equal(turned.sizes, [2.0, 0.0])
+    assert first.rounds == 3 and np.array_equal(first.sizes, [1.0, 1.0])  # the first is left as it was

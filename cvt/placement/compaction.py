@@ -337,6 +337,38 @@ class CompactionResult:
     dropped: int = 0  # elements given size 0 (centre closer than the gap to another)
     history: list = field(default_factory=list)  # per round: pairs, pieces, area, seconds
 
+    def followed_by(self, later: CompactionResult, *, counted: bool = True) -> CompactionResult:
+        """This result continued by ``later``, a pass of compaction started from its
+        centres and sizes: later's centres and sizes, the elements either pass dropped,
+        and (``counted``) the rounds, seconds and history of both; otherwise this
+        result's own (a pass that is part of another step, such as a turn round).
+
+        Parameters
+        ----------
+        later : CompactionResult
+            The later pass.
+        counted : bool
+            Whether the later pass's rounds and times count as compaction's.
+
+        Returns
+        -------
+        CompactionResult
+        """
+        if not counted:
+            return replace(
+                self, centres=later.centres, sizes=later.sizes, dropped=self.dropped + later.dropped
+            )
+        return replace(
+            self,
+            centres=later.centres,
+            sizes=later.sizes,
+            rounds=self.rounds + later.rounds,
+            seconds=self.seconds + later.seconds,
+            lp_seconds=self.lp_seconds + later.lp_seconds,
+            dropped=self.dropped + later.dropped,
+            history=self.history + later.history,
+        )
+
     def as_dict(self) -> dict:
         return {
             "compaction_rounds": self.rounds,

@@ -383,20 +383,13 @@ def _compact_and_turn(problem: Problem, sites, placed, shape, settings, turn_to_
     if caps is not None:
         caps = _point_caps(problem, caps)
         _cut_to_point(packed, caps)
-        point = more(packed.centres, packed.sizes, angles, last, caps)
-        packed.centres, packed.sizes = point.centres, point.sizes
-        packed.rounds += point.rounds
-        packed.seconds += point.seconds
-        packed.lp_seconds += point.lp_seconds
-        packed.dropped += point.dropped
-        packed.history += point.history
+        packed = packed.followed_by(more(packed.centres, packed.sizes, angles, last, caps))
     if turn_to_field and problem.field is not None:
         # compaction moved the elements off their sites: turn each by the field's change
         # between its site and its centre
         angles = angles + problem.angles_at(packed.centres) - problem.angles_at(sites)
-        turned = more(packed.centres, packed.sizes, angles, 1, caps)
-        packed.centres, packed.sizes = turned.centres, turned.sizes
-        packed.dropped += turned.dropped
+        # the turn's round belongs to the turn: compaction's rounds and times leave it out
+        packed = packed.followed_by(more(packed.centres, packed.sizes, angles, 1, caps), counted=False)
     if caps is not None:
         _cut_to_point(packed, caps)
     return packed, angles
