@@ -150,6 +150,53 @@ def test_elements_move_only_where_the_caps_stay_steady(with_image):
     np.testing.assert_array_equal(wide, delta)
 
 
+@pytest.mark.parametrize("with_image", [True, False])
+def test_steady_moves_match_a_box_by_box_search(with_image):
+    """The steady move bounds against a search by hand: for each element, the boxes of
+    half-width 1, 2, ... about its pixel (clipped to the raster), kept while every pixel
+    of the box is within ±tolerance of its own cap and the box is within its move bound;
+    on a rough random image, with elements beside each border, in corners and inside."""
+    from compact_distributions.cvt.placement.compaction import _STEADY_LEAST, _caps_here
+
+    rng = np.random.default_rng(7)
+    h, w = 23, 31
+    image = 1.0 + 0.1 * rng.random((h, w))
+    image[rng.random((h, w)) < 0.04] = 2.0  # spikes that end some boxes
+    image[:, :3] = 3.0  # a strip along the left border: a box read past the right border
+    image = image.astype(np.float32)  # or a row's end would meet the next row's start
+
+    class Caps:
+        def __call__(self, points):
+            p = np.asarray(points)
+            return image[p[:, 1].astype(int), p[:, 0].astype(int)].astype(np.float64)
+
+    caps_at = Caps()
+    if with_image:
+        caps_at.image = image
+    c = np.concatenate(
+        [
+            rng.uniform([0, 0], [w, h], (60, 2)),
+            [[0.2, 0.3], [30.9, 22.9], [0.5, 11.5], [15.5, 22.5], [30.5, 11.5], [29.5, 8.5], [30.2, 16.5]],
+        ]
+    )
+    r = np.where(np.arange(len(c)) % 9 == 4, 0.0, 1.0)  # some elements without a size
+    delta = rng.uniform(0.1, 12.0, len(c))
+    delta[-3:] = 12.0
+    tolerance = 0.12
+    _, steady = _caps_here(caps_at, c, r, delta, tolerance, (h, w))
+    for k, (x, y) in enumerate(c):
+        col, row, reach = int(x), int(y), 0
+        own = image[row, col]
+        for half in range(1, 40):
+            if half > 1 and not delta[k] > half - 1:
+                break
+            box = image[max(0, row - half) : row + half + 1, max(0, col - half) : col + half + 1]
+            if r[k] == 0 or not np.all((box >= own * (1 - tolerance)) & (box <= own * (1 + tolerance))):
+                break
+            reach = half
+        assert steady[k] == min(delta[k], max(reach, _STEADY_LEAST)), k
+
+
 def _sharp_problem(shape: str, seed: int) -> Problem:
     """A density with sharp edges that no Table 3 scene has: a step of contrast 6.7 at
     x = 0.4·size (sparse left) and a disc of 0.3 in the dense right half."""

@@ -1998,6 +1998,19 @@ def _round_bounds(settings, unit, c, r, r0, max_sizes, caps):
     return delta, _growth_bounds(settings, r, r0, max_sizes, follow=caps_at is not None), max_sizes
 
 
+def _ring_values(image, caps_at, which, col, row, dx, dy, shape) -> np.ndarray:
+    """(len(which), len(dx)) the caps at the pixels (row + dy, col + dx) of elements
+    ``which``, clipped to the (H, W) raster ``shape``: read from ``image`` where there is
+    one, else asked of ``caps_at`` at the pixels' centres."""
+    h, w_ = shape
+    j = np.clip(col[which, None] + dx, 0, w_ - 1)
+    i = np.clip(row[which, None] + dy, 0, h - 1)
+    if image is not None:
+        return image[i, j]
+    v = np.asarray(caps_at(np.stack([j.ravel() + 0.5, i.ravel() + 0.5], axis=1)), dtype=np.float64)
+    return v.reshape(i.shape)
+
+
 def _caps_here(caps_at, c, r, delta, steady, shape):
     """Caps that follow the centres: (N,) the caps at the centres ``c``, and the move
     bounds: each element moves only within the widest box of whole-pixel half-width w
@@ -2014,20 +2027,26 @@ def _caps_here(caps_at, c, r, delta, steady, shape):
     lo, hi = own * (1 - steady), own * (1 + steady)
     reach = np.zeros(len(c))
     live = np.flatnonzero(r > 0)
+    # an element's rings within the raster are read by offsets into the flat image, the
+    # others' pixels clipped to its border (what the rings beyond it repeat)
+    room = np.minimum(np.minimum(col, w_ - 1 - col), np.minimum(row, h - 1 - row))
+    at = row * w_ + col
+    flat = None if image is None else image.ravel()
     w = 1
     while len(live):  # one ring of pixels at a time, the elements still steady
         o = np.arange(-w, w + 1)
         side = np.full(2 * w + 1, w)
         dx = np.concatenate([o, o, -side[1:-1], side[1:-1]])
         dy = np.concatenate([-side, side, o[1:-1], o[1:-1]])
-        j = np.clip(col[live, None] + dx, 0, w_ - 1)
-        i = np.clip(row[live, None] + dy, 0, h - 1)
-        if image is not None:
-            v = image[i, j]
+        if image is None:
+            v = _ring_values(None, caps_at, live, col, row, dx, dy, (h, w_))
         else:
-            v = np.asarray(caps_at(np.stack([j.ravel() + 0.5, i.ravel() + 0.5], axis=1)), dtype=np.float64)
-            v = v.reshape(i.shape)
-        live = live[((v >= lo[live, None]) & (v <= hi[live, None])).all(axis=1)]
+            inner = room[live] >= w
+            v = np.empty((len(live), len(dx)), dtype=image.dtype)
+            v[inner] = flat.take(at[live[inner], None] + (dy * w_ + dx))
+            v[~inner] = _ring_values(image, None, live[~inner], col, row, dx, dy, (h, w_))
+        # steady: every pixel of the ring within the element's band (NaN is not)
+        live = live[(v.min(axis=1) >= lo[live]) & (v.max(axis=1) <= hi[live])]
         reach[live] = w
         w += 1
         live = live[delta[live] > w - 1]  # the box of half-width w is within reach
