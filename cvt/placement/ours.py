@@ -382,7 +382,7 @@ def _compact_and_turn(problem: Problem, sites, placed, shape, settings, turn_to_
     packed = more(centres, sizes, angles, settings.rounds - last, caps)
     if caps is not None:
         caps = _point_caps(problem, caps)
-        _cut_to_point(packed, caps)
+        packed = _cut_to_point(packed, caps)
         packed = packed.followed_by(more(packed.centres, packed.sizes, angles, last, caps))
     if turn_to_field and problem.field is not None:
         # compaction moved the elements off their sites: turn each by the field's change
@@ -391,7 +391,7 @@ def _compact_and_turn(problem: Problem, sites, placed, shape, settings, turn_to_
         # the turn's round belongs to the turn: compaction's rounds and times leave it out
         packed = packed.followed_by(more(packed.centres, packed.sizes, angles, 1, caps), counted=False)
     if caps is not None:
-        _cut_to_point(packed, caps)
+        packed = _cut_to_point(packed, caps)
     return packed, angles
 
 
@@ -401,13 +401,13 @@ def _point_caps(problem: Problem, caps: DensityCaps) -> DensityCaps:
     return DensityCaps(problem, caps.factor * (1 + DENSITY_POINT_SLACK), smooth=0.0)
 
 
-def _cut_to_point(packed, point: DensityCaps) -> None:
-    """Each size of ``packed`` (a :class:`CompactionResult`, in place) cut to at most
+def _cut_to_point(packed, point: DensityCaps):
+    """``packed`` (a :class:`CompactionResult`) with each size cut to at most
     (1 + ``DENSITY_POINT_LIMIT``) × the smoothed caps' factor × the density's size factor
     at its centre's pixel (what the size error reads); ``point``: :func:`_point_caps`."""
     limit = (1 + DENSITY_POINT_LIMIT) / (1 + DENSITY_POINT_SLACK)
     # shrinking an element about its own centre keeps it inside itself: no overlap
-    packed.sizes = np.minimum(packed.sizes, limit * point(packed.centres))
+    return replace(packed, sizes=np.minimum(packed.sizes, limit * point(packed.centres)))
 
 
 # compaction's peak per element (near pairs, their directions, the linear program):
