@@ -114,7 +114,7 @@ def test_density_region_and_image_field(tmp_path, images, capsys):
             "--elements",
             "40",
             "--size",
-            "80",
+            "80x80",
             "--iterations",
             "2",
             "--density",
@@ -133,6 +133,31 @@ def test_density_region_and_image_field(tmp_path, images, capsys):
     sites = np.array(r["sites"])
     assert (np.hypot(sites[:, 0] - 40, sites[:, 1] - 40) < 31).all()
     assert r["region_pixels"] < 80 * 80 and len(set(np.round(r["scales"], 6))) > 5
+
+
+@pytest.mark.parametrize(
+    "pictures,size,raster",
+    [
+        (("density",), "96", [96, 72]),  # the density's 64x48: 4:3
+        (("disc",), "64", [64, 64]),  # the region's 80x80
+        (("disc", "density"), "96", [96, 72]),  # --density before --region, however given
+        (("density",), "30x50", [30, 50]),  # WxH is what it says
+        ((), "96", [96, 96]),  # no picture: a square
+    ],
+)
+def test_a_single_size_follows_the_first_pictures_aspect(pictures, size, raster, tmp_path, images, capsys):
+    options = {"density": "--density", "disc": "--region"}
+    given = [a for name in pictures for a in (options[name], str(images[name]))]
+    code, _, err = run_cli(
+        ["run", "--elements", "20", "--size", size, "--iterations", "1", "--quiet", *given]
+        + ["--out", str(tmp_path / "o")],
+        capsys,
+    )
+    assert code == 0, err
+    r = json.loads((tmp_path / "o" / "result.json").read_text())
+    assert r["size"] == raster
+    with Image.open(tmp_path / "o" / "elements.png") as png:
+        assert list(png.size) == raster
 
 
 BAD = [

@@ -39,7 +39,12 @@ def add_problem_arguments(p: argparse.ArgumentParser) -> None:
     """The options that define a Problem."""
     options.add_shape_options(p, default_element=DEFAULT_ELEMENT)
     p.add_argument("--elements", default=None, help=f"number of elements N (default {DEFAULT_ELEMENTS})")
-    p.add_argument("--size", default=DEFAULT_SIZE, help=f"{options.SIZE_HELP} (default {DEFAULT_SIZE})")
+    p.add_argument(
+        "--size",
+        default=DEFAULT_SIZE,
+        help="raster: WxH, or N for the long side (the other side follows the aspect of the first "
+        f"picture given: --density, --region or a --field image; square without one) (default {DEFAULT_SIZE})",
+    )
     p.add_argument("--init", metavar="SITES.CSV", help="start from these sites (columns x,y in pixels)")
     p.add_argument(
         "--density", metavar="IMAGE", help="density image (bright = dense = small cells); resampled to --size"
@@ -148,7 +153,8 @@ def parse_problem_options(args) -> ProblemOptions:
     """Every problem option checked (the init CSV sized, images not yet): InputError
     with a one-line message naming the option."""
     from compact_distributions.cvt.fields import FIELD_HELP, parse_field_spec
-    from compact_distributions.cvt.mosaic.images import open_picture
+    from compact_distributions.cvt.mosaic.images import open_picture, upright_size
+    from compact_distributions.cvt.mosaic.pipeline import raster_size
     from compact_distributions.cvt.problem import MAX_SEED
 
     w, h = parse_size(args.size, "--size")
@@ -156,7 +162,6 @@ def parse_problem_options(args) -> ProblemOptions:
         args.metric, args.element, DEFAULT_ELEMENT, ("--metric", "--element")
     )
     metric = make_metric(metric_name, args.aspect, option="--aspect")
-    n = None if args.elements is None else whole_number(args.elements, "--elements", minimum=1, maximum=w * h)
     seed = whole_number(args.seed, "--seed", minimum=0, maximum=MAX_SEED)
     field_file = field_name = None
     if args.field is not None:
@@ -167,10 +172,14 @@ def parse_problem_options(args) -> ProblemOptions:
             field_file = args.field
         else:
             raise InputError(f"--field {args.field!r} is neither a field nor an image file; use {FIELD_HELP}")
+    shown = None  # the first picture's size as it is shown: a single --size follows its aspect
     for option, path in (("--density", args.density), ("--region", args.region), ("--field", field_file)):
         if path is not None:
-            with open_picture(path, option):  # exists, is a picture, is no bomb: known before any work
-                pass
+            with open_picture(path, option) as header:  # exists, is a picture, is no bomb: before any work
+                shown = upright_size(header) if shown is None else shown
+    if shown is not None:
+        w, h = raster_size(*shown, args.size, "--size")
+    n = None if args.elements is None else whole_number(args.elements, "--elements", minimum=1, maximum=w * h)
     # the init file is sized here (a streamed row count) and read only once the run's
     # memory for that many sites is known to fit (:func:`load_init`)
     rows = count_csv_rows(args.init, w * h) if args.init else None
