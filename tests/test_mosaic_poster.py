@@ -56,6 +56,44 @@ def test_picture_fields_without_details_are_the_same_fields():
     assert lean.strength is None and lean.detail is None and full.strength is not None
 
 
+def _same_fields(a, b, height, width) -> bool:
+    pixels = np.argwhere(np.ones((height, width)))[:, ::-1] + 0.5
+    return (
+        np.array_equal(a.density.values, b.density.values)
+        and np.array_equal(a.field.angles_at(pixels), b.field.angles_at(pixels))
+        and np.array_equal(a.edges, b.edges)
+    )
+
+
+@pytest.mark.parametrize("step", [1, 3])
+def test_picture_fields_later_reads_no_more_of_the_picture(step):
+    rng = np.random.default_rng(7)
+    picture = resample(rng.random((30, 40, 3)), 260, 200)
+    want = F.picture_fields(picture.copy(), 8.0, "square", details=False, step=step)
+    finish = F.picture_fields_later(picture, 8.0, "square", details=False, step=step)
+    picture[:] = rng.random(picture.shape)  # the rest must not read it again
+    got = finish()
+    assert want.density.values.std() > 0 and want.edges.any()
+    assert _same_fields(want, got, 200, 260)
+
+
+def test_picture_analysis_of_a_poster_is_that_of_the_fields_and_edges_apart(monkeypatch):
+    from compact_distributions.cvt.mosaic import pipeline
+
+    rng = np.random.default_rng(8)
+    picture = resample(rng.random((30, 40, 3)), 400, 300)
+    spacing = 4.0  # a coarse grid of 1-pixel blocks is no grid: field_step gives 1 here
+    monkeypatch.setattr(F, "field_step", lambda h, w, s: 2)
+    want_fields = F.picture_fields(picture, spacing, "square", details=False)
+    want_edges = F.strong_edges(picture, 11.0, min_length=pipeline.EDGE_MIN_LENGTH * spacing, srgb=True)
+    # as a picture above SIDE_BY_SIDE_PIXELS: the fields finished beside the edges' pass
+    monkeypatch.setattr(pipeline, "SIDE_BY_SIDE_PIXELS", 0)
+    fields, edges, seconds = pipeline._picture_analysis(picture, spacing, "square", 3.0, 11.0)
+    assert want_edges.any() and np.array_equal(edges, want_edges)
+    assert isinstance(fields.field, F.CoarseField) and _same_fields(want_fields, fields, 300, 400)
+    assert seconds > 0
+
+
 def test_lab_of_one_pixel_is_its_lab_in_the_picture():
     rng = np.random.default_rng(5)
     flat = rng.random((5000, 3))

@@ -81,7 +81,9 @@ The ridge test and the direction across it are computed only where the contrast 
 
 from __future__ import annotations
 
+import functools
 import math
+from collections.abc import Callable
 from dataclasses import dataclass
 from functools import lru_cache
 
@@ -602,6 +604,46 @@ def picture_fields(
     the pixels (the window and the smoothing in pixels, the same) and interpolated
     bilinearly to every pixel; the edges are the coarse grid's, each block's pixels
     alike; no details."""
+    return picture_fields_later(picture, spacing, element, contrast, sigma, details, step)()
+
+
+def picture_fields_later(
+    picture: np.ndarray,
+    spacing: float,
+    element: str = DEFAULT_ELEMENT,
+    contrast: float = DEFAULT_CONTRAST,
+    sigma: float = 1.0,
+    details: bool = True,
+    step: int | None = None,
+) -> Callable[[], PictureFields]:
+    """:func:`picture_fields` in two parts: the pass over the picture now, and the rest in
+    the call returned, which reads no more of ``picture`` and may run on another thread
+    beside other work (on a coarse grid, ``step`` above 1, the rest is the blocks' fields,
+    their upsampling and smoothing; on every pixel all is done now).
+
+    Parameters
+    ----------
+    picture : (H, W) or (H, W, C) float ndarray
+        Values 0..1.
+    spacing : float
+        The mean element spacing in pixels.
+    element : str
+        The element's shape (a ``cvt.shapes`` name).
+    contrast : float
+        The densest to the sparsest cell area.
+    sigma : float
+        The derivative's scale in pixels.
+    details : bool
+        Also give the tensor's edge angles, its strength and the detail map.
+    step : int or None
+        The grid the fields are computed on, in pixels (None: :func:`field_step`).
+
+    Returns
+    -------
+    callable
+        ``finish()``: the :class:`PictureFields` :func:`picture_fields` returns (call it
+        once).
+    """
     check_shape(element)
     contrast = real_number(contrast, "contrast", *CONTRAST_RANGE)
     chans = as_channels(picture)
@@ -654,7 +696,8 @@ def picture_fields(
         if not details:
             edge_angles = None
     field = DirectionField.from_angles(angles, spec="picture")
-    return PictureFields(density, field, edge_angles, strength, edges, detail)
+    made = PictureFields(density, field, edge_angles, strength, edges, detail)
+    return lambda: made
 
 
 def _edge_pixels(strength: np.ndarray) -> np.ndarray:
@@ -680,8 +723,12 @@ def _carried(edges: np.ndarray, edge_angles: np.ndarray) -> np.ndarray:
     return edge_angles[ii, jj]
 
 
-def _coarse_fields(chans, spacing: float, period: float, contrast: float, sigma: float, step: int):
-    """:func:`picture_fields` on a grid of ``step`` x ``step`` blocks (no details)."""
+def _coarse_fields(
+    chans, spacing: float, period: float, contrast: float, sigma: float, step: int
+) -> Callable[[], PictureFields]:
+    """:func:`picture_fields` on a grid of ``step`` x ``step`` blocks (no details), in two
+    parts: the derivative's pass over the picture now (on every core), and the rest, which
+    reads only the blocks' sums, in the call returned."""
     h, w = chans.shape[:2]
     hc, wc = -(-h // step), -(-w // step)
     sums = [np.empty((hc, wc)) for _ in range(3)]  # the block sums of the products
@@ -694,6 +741,13 @@ def _coarse_fields(chans, spacing: float, period: float, contrast: float, sigma:
     tensor_by_rows(
         lambda a, b: chans[a:b], h, use, sigma=sigma, window=0.0, rows=step * max(1, SLAB_ROWS // step)
     )
+    return functools.partial(_fields_from_block_sums, sums, (h, w), spacing, period, contrast, sigma, step)
+
+
+def _fields_from_block_sums(sums: list, size: tuple, spacing, period, contrast, sigma, step) -> PictureFields:
+    """The rest of :func:`_coarse_fields`, from the blocks' sums of the tensor's products
+    (``sums``, emptied here) of a picture of ``size`` (H, W)."""
+    h, w = size
     rows, cols = np.diff(np.append(np.arange(0, h, step), h)), np.diff(np.append(np.arange(0, w, step), w))
     counts = np.outer(rows, cols).astype(np.float64)
     # the window in pixels less the block's own spread (a box of step pixels has
@@ -944,6 +998,7 @@ __all__ = [
     "upsample",
     "CoarseField",
     "picture_fields",
+    "picture_fields_later",
     "step_response",
     "edge_contrast",
     "strong_edges",

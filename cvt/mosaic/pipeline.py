@@ -58,6 +58,7 @@ from .image_fields import (
     DEFAULT_EDGE_THRESHOLD,
     PictureFields,
     picture_fields,
+    picture_fields_later,
     strong_edges,
 )
 from .render import draw_elements, ellipse_parameters, parse_colour, svg_lines
@@ -914,8 +915,8 @@ def _release_buffers(backend) -> None:
 
 
 # up to this many pixels the picture's fields and its edge map are made side by side (on
-# two cores); above it one after the other, as each holds a structure tensor and its
-# temporaries (about 50 bytes a pixel) while it works
+# two cores); above it their passes over the picture one after the other, as each holds
+# a structure tensor and its temporaries (about 50 bytes a pixel) while it works
 SIDE_BY_SIDE_PIXELS = 1 << 23
 
 
@@ -933,9 +934,14 @@ def _picture_analysis(picture, spacing, element, contrast, edge_threshold):
     t0 = time.perf_counter()
     if picture.shape[0] * picture.shape[1] <= SIDE_BY_SIDE_PIXELS:
         made = side_by_side(fields, edges)
-    else:
-        made = [fields(), edges()]
-    return made[0], made[1], time.perf_counter() - t0
+        return made[0], made[1], time.perf_counter() - t0
+    # the fields' pass over the picture first, then the rest of the fields (on their
+    # blocks, mostly on one core) beside the edges' pass
+    finish = picture_fields_later(picture, spacing, element, contrast=contrast, details=False)
+    with on_its_own_thread(finish) as finished:
+        edge_map = edges()
+        made_fields = finished()
+    return made_fields, edge_map, time.perf_counter() - t0
 
 
 def _mosaic_problem(edge_map, walls: bool, n_elements, metric, density, field, seed) -> Problem:
