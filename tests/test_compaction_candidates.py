@@ -67,6 +67,30 @@ def test_candidates_hold_every_pair_and_piece_within_reach(seed):
     assert {(int(x), int(y)) for x, y in want} <= got
 
 
+def test_candidates_on_every_core_come_in_the_order_of_one_core(monkeypatch):
+    """The kd-tree queries run side by side on the process's pool: their candidates are
+    those of the queries run one after another in this thread, in the same order."""
+    from compact_distributions.cvt import threads
+
+    unit = element_ball("square", 1.0)
+    c, r, _, budget, pieces = _scene(3, n=900, pieces=400)
+    act, trees = _trees(c, r, budget, unit)
+    assert len(trees) > 3  # several classes of reach: several queries each
+
+    def candidates():
+        return (
+            *cp._pairs_within(trees, len(act), GAP + cp._SELECT, ordered=False),
+            *cp._near_items(trees, pieces.trees, 0.5 * GAP + cp._SELECT),
+        )
+
+    monkeypatch.setattr(threads, "usable_cores", lambda: 2)
+    pooled = candidates()
+    monkeypatch.setattr(threads, "usable_cores", lambda: 1)  # side_by_side: one call after another
+    alone = candidates()
+    for got, want in zip(pooled, alone, strict=True):
+        assert len(want) > 1000 and np.array_equal(got, want)
+
+
 @pytest.mark.parametrize(
     ("shape", "aspect"), [("square", 1.0), ("rectangle", 0.5), ("triangle", 1.0), ("ellipse", 0.5)]
 )

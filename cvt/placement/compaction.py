@@ -612,13 +612,16 @@ def _near_items(point_trees, item_trees, extra):
     ``point_trees``: the points by class of reach (:func:`_point_trees`); ``item_trees``:
     [(item indices, kd-tree of their midpoints, their largest half-length plus their
     largest width)] (:func:`_segment_trees`)."""
-    ks, items = [], []
-    for cls, tree, top in point_trees:
-        for members, item_tree, half_length in item_trees:
-            found = tree.sparse_distance_matrix(item_tree, top + half_length + extra, output_type="ndarray")
-            ks.append(cls[found["i"]])
-            items.append(members[found["j"]])
-    return np.concatenate(ks), np.concatenate(items)
+
+    def near(cls, tree, top, members, item_tree, half_length):
+        found = tree.sparse_distance_matrix(item_tree, top + half_length + extra, output_type="ndarray")
+        return cls[found["i"]], members[found["j"]]
+
+    # scipy's queries let go of the GIL: one per pair of classes, on every core, in order
+    found = side_by_side(
+        *(functools.partial(near, *points, *items) for points in point_trees for items in item_trees)
+    )
+    return np.concatenate([k for k, _ in found]), np.concatenate([i for _, i in found])
 
 
 def _sorted_pairs(a, b, nb):
@@ -658,16 +661,22 @@ def _pairs_within(point_trees, count, extra, ordered=True):
     (``point_trees``: :func:`_point_trees`), so one large element does not widen the
     query of every small one."""
     classes, trees, tops = zip(*point_trees, strict=True)
-    a_s, b_s = [], []
-    for x, (cx, tx) in enumerate(zip(classes, trees, strict=True)):
-        got = tx.query_pairs(2 * tops[x] + extra, output_type="ndarray")
-        a_s.append(cx[got[:, 0]])
-        b_s.append(cx[got[:, 1]])
-        for y in range(x + 1, len(classes)):
-            found = tx.sparse_distance_matrix(trees[y], tops[x] + tops[y] + extra, output_type="ndarray")
-            a_s.append(cx[found["i"]])
-            b_s.append(classes[y][found["j"]])
-    a, b = np.concatenate(a_s), np.concatenate(b_s)
+
+    def within(x):
+        got = trees[x].query_pairs(2 * tops[x] + extra, output_type="ndarray")
+        return classes[x][got[:, 0]], classes[x][got[:, 1]]
+
+    def between(x, y):
+        found = trees[x].sparse_distance_matrix(trees[y], tops[x] + tops[y] + extra, output_type="ndarray")
+        return classes[x][found["i"]], classes[y][found["j"]]
+
+    # scipy's queries let go of the GIL: each on the next free core, the answers in order
+    queries = []
+    for x in range(len(classes)):
+        queries.append(functools.partial(within, x))
+        queries += [functools.partial(between, x, y) for y in range(x + 1, len(classes))]
+    found = side_by_side(*queries)
+    a, b = np.concatenate([p for p, _ in found]), np.concatenate([q for _, q in found])
     if not ordered:
         return np.minimum(a, b), np.maximum(a, b)
     return _sorted_pairs(np.minimum(a, b), np.maximum(a, b), count)
