@@ -54,6 +54,7 @@ STRtree's where it decides ties (the tiles'); the walls' pairs go piece by piece
 
 from __future__ import annotations
 
+import functools
 from concurrent.futures import ThreadPoolExecutor
 
 import numpy as np
@@ -62,7 +63,7 @@ import shapely
 from ..errors import InputError
 from ..evaluate import straddling_tiles
 from ..placement.compaction import _wall_links, wall_segments
-from ..threads import elementwise
+from ..threads import elementwise, side_by_side
 
 CUT_ENLARGE = 1.8  # a cut tile lies within its tile grown by this factor about its centre
 CUT_STYLES = ("auto", "exact", "straight")  # cut_to_walls's styles (the docstring)
@@ -324,11 +325,15 @@ def _cut_straight(
     grown_disks = _disks(*grown_xy)
     twin = np.full(len(geoms), -1)
     twin[near] = np.arange(len(near))  # outer[near[k]] is grown[k]
-    ci, oi = _within(outer, grown, full, _tile_bounds(grown_disks, outer), twin)
+    piece_xy = np.concatenate([segs, np.repeat(points[:, None, :], 2, axis=1)])
+    # the tiles near each candidate and the pieces near it, side by side (GEOS and the
+    # trees let go of the GIL)
+    (ci, oi), (wi, wc) = side_by_side(
+        functools.partial(_within, outer, grown, full, _tile_bounds(grown_disks, outer), twin),
+        functools.partial(_within, grown, pieces, half, _piece_bounds(grown_disks, piece_xy)),
+    )
     other = oi != near[ci]
     ci, oi = ci[other], oi[other]
-    piece_xy = np.concatenate([segs, np.repeat(points[:, None, :], 2, axis=1)])
-    wi, wc = _within(grown, pieces, half, _piece_bounds(grown_disks, piece_xy))
     # cut in turns: two tiles whose grown outlines come within the gap never share one
     cand = np.flatnonzero(np.isin(oi, near))
     slot = np.searchsorted(near, oi[cand])
