@@ -800,8 +800,13 @@ class CoarseField(DirectionField):
 
     def __init__(self, cos: np.ndarray, sin: np.ndarray, step: int, m: float, height: int, width: int):
         super().__init__("picture", None, width, height, arg=("picture", None))
-        self._cos, self._sin = cos, sin
+        # each block's (sin, cos) side by side: a site's read fetches both at once
+        self._vectors = np.stack([sin, cos], axis=-1)
+        self._sin, self._cos = self._vectors[..., 0], self._vectors[..., 1]
         self._step, self._m = int(step), float(m)
+        # per pixel column and row: the two blocks around it and the second one's weight
+        self._x_weights = _linear_weights(width, self._step)
+        self._y_weights = _linear_weights(height, self._step)
 
     @property
     def shape(self) -> tuple[int, int]:
@@ -820,17 +825,24 @@ class CoarseField(DirectionField):
         return s
 
     def _at(self, i: np.ndarray, j: np.ndarray) -> np.ndarray:
-        x0, x1, fx = (a[j] for a in _linear_weights(self.width, self._step))
-        y0, y1, fy = (a[i] for a in _linear_weights(self.height, self._step))
-        parts = []
-        for grid in (self._sin, self._cos):
-            # upsample's arithmetic, term for term: along the rows, then down the columns
-            top = grid[y0, x0]
-            top += (grid[y0, x1] - top) * fx
-            bottom = grid[y1, x0]
-            bottom += (grid[y1, x1] - bottom) * fx
-            top += (bottom - top) * fy
-            parts.append(top)
+        x0, x1, fx = (a.take(j) for a in self._x_weights)
+        y0, y1, fy = (a.take(i) for a in self._y_weights)
+        fx, fy = fx[:, None], fy[:, None]
+        # the four blocks around each site by flat index, (sin, cos) together: on a
+        # poster's grid the reads are cache misses, and a gather by row and column
+        # costs more again
+        row0, row1 = y0 * self._vectors.shape[1], y1 * self._vectors.shape[1]
+        vectors = self._vectors.reshape(-1, 2)
+        at00, at01, at10, at11 = (
+            vectors.take(k, axis=0) for k in (row0 + x0, row0 + x1, row1 + x0, row1 + x1)
+        )
+        # upsample's arithmetic, term for term: along the rows, then down the columns
+        top = at00
+        top += (at01 - top) * fx
+        bottom = at10
+        bottom += (at11 - bottom) * fx
+        top += (bottom - top) * fy
+        parts = top[:, 0], top[:, 1]
         out = np.arctan2(parts[0], parts[1])
         out /= self._m
         return out
