@@ -316,24 +316,9 @@ def _cut_straight(
     full = gap + _MARGIN  # kept from every other tile
     half = 0.5 * gap + _MARGIN  # kept from the walls' centre lines
     grown = _grown(geoms[near], enlarge)
-    # a cut tile lies within its grown outline: each candidate's obstacles are the tiles
-    # whose outline, grown where it is a candidate, comes within G of its grown outline,
-    # and the pieces of the walls' centre lines within G/2 of it
-    outer = geoms.copy()
-    outer[near] = grown
     grown_xy = _vertex_arrays(grown)
-    grown_disks = _disks(*grown_xy)
-    twin = np.full(len(geoms), -1)
-    twin[near] = np.arange(len(near))  # outer[near[k]] is grown[k]
     piece_xy = np.concatenate([segs, np.repeat(points[:, None, :], 2, axis=1)])
-    # the tiles near each candidate and the pieces near it, side by side (GEOS and the
-    # trees let go of the GIL)
-    (ci, oi), (wi, wc) = side_by_side(
-        functools.partial(_within, outer, grown, full, _tile_bounds(grown_disks, outer), twin),
-        functools.partial(_within, grown, pieces, half, _piece_bounds(grown_disks, piece_xy)),
-    )
-    other = oi != near[ci]
-    ci, oi = ci[other], oi[other]
+    (ci, oi), (wi, wc) = _obstacles(geoms, near, (grown, _disks(*grown_xy)), (pieces, piece_xy), full, half)
     # cut in turns: two tiles whose grown outlines come within the gap never share one
     cand = np.flatnonzero(np.isin(oi, near))
     slot = np.searchsorted(near, oi[cand])
@@ -397,6 +382,26 @@ def _cut_straight(
     result[:] = out
     result[near] = geoms[near]  # every candidate is a tile (not None)
     return list(result), grew
+
+
+def _obstacles(geoms, near, grown: tuple, pieces: tuple, full: float, half: float) -> tuple:
+    """Each candidate's obstacles (a cut tile lies within its grown outline): ((candidate,
+    tile) pairs of the other tiles whose outline, grown where it is a candidate, comes
+    within ``full`` of its grown outline; (piece, candidate) pairs of the pieces of the
+    walls' centre lines within ``half`` of it).  ``grown``: the candidates' grown outlines
+    and their :func:`_disks`; ``pieces``: the pieces and their ends."""
+    outlines, disks = grown
+    outer = geoms.copy()
+    outer[near] = outlines
+    twin = np.full(len(geoms), -1)
+    twin[near] = np.arange(len(near))  # outer[near[k]] is outlines[k]
+    # the two searches side by side (GEOS and the trees let go of the GIL)
+    (ci, oi), by_piece = side_by_side(
+        functools.partial(_within, outer, outlines, full, _tile_bounds(disks, outer), twin),
+        functools.partial(_within, outlines, pieces[0], half, _piece_bounds(disks, pieces[1])),
+    )
+    other = oi != near[ci]
+    return (ci[other], oi[other]), by_piece
 
 
 def _distances(tiles: tuple, obstacles: tuple, pair_tile, obstacle, run=None) -> np.ndarray:
