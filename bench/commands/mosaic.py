@@ -1,9 +1,9 @@
 """`cvtbench mosaic IMAGE --out DIR`: a picture turned into a mosaic (paper §4.1).
 
 Tile sizes follow a density map and tile directions a field, both extracted from the
-picture (cvt/image_fields.py); the picture's strong edges are walls that no tile
-crosses; a method places the tiles (--method); each tile is filled with the mean colour,
-in CIELAB, of the picture under it, on a grout-coloured background.
+picture (cvt/mosaic/image_fields.py); the picture's strong edges are walls that no tile
+crosses; a method places the tiles (--method); each tile is filled with the geometric
+median, in CIELAB, of the picture under it, on a grout-coloured background.
 
 DIR/mosaic.svg    the mosaic: grout background, one filled tile per placed site
 DIR/mosaic.png    the same, rendered (antialiased) at the raster size times --png-scale
