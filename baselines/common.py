@@ -40,6 +40,7 @@ from compact_distributions.cvt.shapes import (
     element_ball,
     element_polygons,
 )
+from compact_distributions.cvt.threads import prepared_copy
 from compact_distributions.cvt.validate import real_number
 
 BUDGET_DELTA = 0.95
@@ -276,8 +277,7 @@ def make_elements(shape: Metric, centres, angles, sizes, grid: Grid, region=None
     if len(placed) == 0:
         return out, 0.0
     polys = element_polygons(shape.element, shape.aspect, centres[placed], angles[placed], sizes[placed])
-    shapely.prepare(region)
-    inside = shapely.contains(region, polys)
+    inside = shapely.contains(prepared_copy(region), polys)
     clipped_area = 0.0
     if not inside.all():
         cut = np.flatnonzero(~inside)

@@ -29,7 +29,7 @@ import shapely
 
 from compact_distributions.cvt.pixels import PIXEL_BAND, index_ranges
 from compact_distributions.cvt.problem import Grid
-from compact_distributions.cvt.threads import elementwise
+from compact_distributions.cvt.threads import elementwise, prepared_copy
 
 if TYPE_CHECKING:
     from compact_distributions.cvt.problem import Problem
@@ -249,10 +249,9 @@ def evaluate(
     area = shapely.area(region)
     if len(geoms) == 0:
         return Evaluation(0.0, 0.0, 0, skipped, 0.0, 0.0, empty)
-    shapely.prepare(region)
     # clip only what is not already inside the region (prepared, vectorised test)
     clipped = geoms.copy()
-    outside = ~shapely.contains(region, geoms)
+    outside = ~shapely.contains(prepared_copy(region), geoms)
     if outside.any():
         clipped[outside] = shapely.intersection(geoms[outside], region)
     clip_areas = shapely.area(clipped)
@@ -405,7 +404,7 @@ def pixels_under(elements: Sequence[Any], width: int, height: int) -> tuple[np.n
     i0 = np.clip(np.ceil(b[:, 1] - 0.5), 0, height).astype(np.int64)
     j1 = np.clip(np.floor(b[:, 2] - 0.5), -1, width - 1).astype(np.int64)
     i1 = np.clip(np.floor(b[:, 3] - 0.5), -1, height - 1).astype(np.int64)
-    shapely.prepare(geoms)
+    # the tiles are the caller's, so not prepared (cvt.threads)
     # even-odd spans are shapely's inside for one ring (crossing parity), and for holes
     # and parts when they neither overlap nor leave the shell (a valid geometry)
     kind = shapely.get_type_id(geoms)
@@ -415,7 +414,11 @@ def pixels_under(elements: Sequence[Any], width: int, height: int) -> tuple[np.n
     segments = [_span_segments(geoms, np.flatnonzero(spans), i0, i1, j0, j1, width)]
     other = np.flatnonzero(~spans)
     if len(other):
-        segments.append(_box_segments(geoms, other, i0, i1, j0, j1, width))
+        # prepared copies: prepared, GEOS reads the parts of an invalid tile by parity
+        # too (a point where two overlap is outside, as shapely has always said here)
+        own = geoms.copy()
+        own[other] = prepared_copy(geoms[other])
+        segments.append(_box_segments(own, other, i0, i1, j0, j1, width))
     tile, first, length = (np.concatenate(parts) for parts in zip(*segments, strict=True))
     # by tile, then pixel (a tile's segments never overlap); they come in a few sorted
     # runs, which a stable sort merges

@@ -3,6 +3,14 @@
 Shapely 2's vectorised functions release the GIL while GEOS works, so one array of
 geometries split into a slice per core and handed to threads runs that many times
 faster, with the same result: each element's operation is independent of the others.
+
+One thing two threads must not share: a prepared geometry (:func:`shapely.prepare`).
+GEOS keeps working state in it that its predicates change, so two threads testing the
+same prepared geometry at once can crash the process.  The project never prepares a
+geometry it was given (it prepares :func:`prepared_copy` instead), nor hands one
+geometry to shapely's ``contains_xy`` or ``intersects_xy`` with many points (which
+prepares it for good), and :func:`elementwise` keeps an operation whose first operand
+holds a prepared geometry in one thread.
 """
 
 from __future__ import annotations
@@ -14,6 +22,7 @@ from concurrent.futures import ThreadPoolExecutor
 from contextlib import contextmanager
 
 import numpy as np
+import shapely
 
 # below this many elements a split costs more than it saves
 PARALLEL_MIN = 64
@@ -75,6 +84,35 @@ def usable_cores() -> int:
     return os.cpu_count() or 1
 
 
+def _holds_prepared(operand: np.ndarray) -> bool:
+    """Whether an operand of geometries holds a prepared one."""
+    return operand.dtype == object and bool(shapely.is_prepared(operand).any())
+
+
+def prepared_copy(geometry: shapely.Geometry | np.ndarray) -> shapely.Geometry | np.ndarray:
+    """A prepared copy of ``geometry`` (or of each of an array of them), for the caller's
+    own thread.
+
+    Preparing speeds up testing many geometries against one, but a prepared geometry is
+    not safe to use from two threads at once; a copy leaves the given geometry as it
+    was, free to be used anywhere.
+
+    Parameters
+    ----------
+    geometry : shapely.Geometry or numpy.ndarray
+        Any geometry, or an array of them.
+
+    Returns
+    -------
+    shapely.Geometry or numpy.ndarray
+        The same geometry (the same coordinates, exactly), a new object, prepared; or
+        an array of such copies.
+    """
+    own = shapely.from_wkb(shapely.to_wkb(geometry))
+    shapely.prepare(own)
+    return own
+
+
 def elementwise(operation, *arrays: np.ndarray, **kwargs) -> np.ndarray:
     """``operation(*arrays, **kwargs)`` for an element-by-element ``operation`` (such as
     ``shapely.difference``), its arrays cut into one slice per core run in threads.
@@ -84,7 +122,9 @@ def elementwise(operation, *arrays: np.ndarray, **kwargs) -> np.ndarray:
     operation : callable
         Takes equal-length 1-d arrays and returns one result per element; it must
         release the GIL to gain anything (shapely's functions do).  Called from inside
-        a slice or a :func:`side_by_side` call, ``elementwise`` runs in that thread.
+        a slice or a :func:`side_by_side` call, ``elementwise`` runs in that thread; so
+        it does when the first operand holds a prepared geometry (shapely's predicates
+        use it, and two threads must not).
     *arrays : 1-d ndarrays of one length
         The operands.
     **kwargs
@@ -97,7 +137,7 @@ def elementwise(operation, *arrays: np.ndarray, **kwargs) -> np.ndarray:
     """
     n = len(arrays[0])
     workers = min(usable_cores(), n // PARALLEL_MIN)
-    if workers < 2 or _nested():
+    if workers < 2 or _nested() or _holds_prepared(arrays[0]):
         return operation(*arrays, **kwargs)
     bounds = np.linspace(0, n, workers + 1).astype(np.int64)
     slices = [slice(a, b) for a, b in zip(bounds[:-1], bounds[1:], strict=True)]
@@ -157,4 +197,11 @@ def on_its_own_thread(call: Callable, *args) -> Iterator[Callable]:
         yield pool.submit(call, *args).result
 
 
-__all__ = ["PARALLEL_MIN", "usable_cores", "elementwise", "side_by_side", "on_its_own_thread"]
+__all__ = [
+    "PARALLEL_MIN",
+    "usable_cores",
+    "elementwise",
+    "side_by_side",
+    "on_its_own_thread",
+    "prepared_copy",
+]

@@ -687,3 +687,68 @@ def test_segment_distances_are_geos_distances_bit_for_bit():
     assert (truth[~answered] < 1e-6).all()  # left open: they meet
     assert answered[truth > 1e-6].all() and 0 < (~answered).sum() < 400
     assert (shapely.get_type_id(pieces[answered]) == 0).any()
+
+
+def test_a_prepared_first_operand_stays_in_one_thread(monkeypatch):
+    """Two threads must not test one prepared geometry at once (GEOS keeps working state
+    in it): with a prepared geometry in the first operand the operation runs in the
+    calling thread; prepared only in the second (which shapely's predicates do not
+    prepare-read) or nowhere, it is split.  The caller's geometries stay as they were."""
+    import threading
+
+    import shapely
+
+    from compact_distributions.cvt import threads
+
+    monkeypatch.setattr(threads, "usable_cores", lambda: 2)
+    n = 4 * threads.PARALLEL_MIN
+    discs = shapely.buffer(shapely.points(np.arange(2.0 * n).reshape(n, 2)), 1.0, quad_segs=1)
+    boxes = shapely.box(*np.arange(2.0 * n).reshape(n, 2).T, *(np.arange(2.0 * n).reshape(n, 2) + 2).T)
+    seen = []
+
+    def who(a, b):
+        seen.append(threading.current_thread().name)
+        return shapely.intersects(a, b)
+
+    shapely.prepare(discs[[5]])
+    assert threads.elementwise(who, discs, boxes).all()
+    assert seen == [threading.current_thread().name]
+    seen.clear()
+    assert threads.elementwise(who, boxes, discs).all()
+    assert len(seen) == 2 and all(name.startswith("elementwise") for name in seen)
+    assert shapely.is_prepared(discs).tolist() == [k == 5 for k in range(n)]
+
+
+_PREPARED_IN_THREADS = """
+import numpy as np, shapely
+from compact_distributions.cvt.threads import elementwise
+rng = np.random.default_rng(1)
+xy = rng.uniform(-60, 55, (20000, 2))
+boxes = shapely.box(xy[:, 0], xy[:, 1], xy[:, 0] + 3, xy[:, 1] + 3)
+which = rng.integers(0, 4, len(boxes))
+truth = shapely.intersects(shapely.buffer(shapely.points(np.zeros((4, 2))), 50 + np.arange(4), 64)[which], boxes)
+for _ in range(20):
+    discs = shapely.buffer(shapely.points(np.zeros((4, 2))), 50 + np.arange(4), 64)
+    shapely.prepare(discs)
+    assert (elementwise(shapely.intersects, discs[which], boxes) == truth).all()
+print(int(truth.sum()))
+"""
+
+
+def test_prepared_geometries_tested_on_threads_do_not_crash_the_process():
+    """Four prepared discs, each tested against thousands of boxes across their outline,
+    split across threads, crashed the process within the first round before
+    ``elementwise`` kept a prepared first operand in one thread; the answers are
+    shapely's on the unprepared discs."""
+    import subprocess
+    import sys
+
+    from compact_distributions.cvt import threads
+
+    if threads.usable_cores() < 2:
+        pytest.skip("one core: elementwise never splits")
+    done = subprocess.run(
+        [sys.executable, "-c", _PREPARED_IN_THREADS], capture_output=True, text=True, timeout=300
+    )
+    assert done.returncode == 0, done.stderr[-2000:]
+    assert int(done.stdout) > 1000  # many boxes meet a disc: the test tests something

@@ -371,3 +371,22 @@ def test_evaluate_against_brute_force(seed):
     assert pairs > 0 and ev.overlapping_pairs == pairs
     assert ev.coverage == pytest.approx(union / (w * h), abs=1e-12)
     assert ev.overlap == pytest.approx((sum(t.area for t in inside) - union) / (w * h), abs=1e-12)
+
+
+def test_measures_leave_the_callers_geometries_unprepared():
+    """A prepared geometry is not safe to share between threads, so the measures and the
+    baselines' clipping prepare copies, never what they were given."""
+    from compact_distributions.baselines.common import make_elements
+    from compact_distributions.cvt.shapes import element_ball
+
+    grid = Grid(40, 30)
+    region = shapely.box(2, 2, 38, 28)
+    tiles = [shapely.box(x, 5, x + 6, 11) for x in range(0, 40, 5)]
+    ev = evaluate(tiles, grid, region=region)
+    assert ev.elements == len(tiles) and ev.coverage > 0
+    pixels_under(tiles, 40, 30)
+    placed, _ = make_elements(
+        element_ball("square"), [[20.0, 15.0], [1.0, 1.0]], [0.0, 0.0], [4.0, 4.0], grid, region=region
+    )
+    assert sum(p is not None for p in placed) == 2
+    assert not shapely.is_prepared([*tiles, region]).any()

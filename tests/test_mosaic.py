@@ -131,6 +131,10 @@ def test_without_field_every_element_is_upright():
         stripes(deg=30.0), NUMPY, n_elements=120, iterations=2, use_field=False, use_density=False
     )
     assert np.all(m.angles == 0)
+    # the fills and the measures read every tile, and leave none prepared: a prepared
+    # tile tested on two threads at once crashes the process
+    placed = [p for p in m.polygons if p is not None]
+    assert len(placed) > 100 and not shapely.is_prepared(placed).any()
     # every stage after the method is timed, and the picture's analysis before it
     from compact_distributions.bench.results import stages_of
 
