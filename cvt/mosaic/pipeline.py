@@ -992,10 +992,12 @@ def _after_the_method(dist, picture_of, edge_map, cut, gap, spacing, picture_sec
     bounds = tile_runs(polygons)
     colours, _, error = mosaic_fills(picture, polygons, dist.sites, bounds)
     t2 = time.perf_counter()
-    # one after the other: run side by side, the two measures' GEOS calls on the same
-    # tiles once crashed the process (a segfault in the coverage's pair test)
-    ev = evaluate(polygons, Grid(*edge_map.shape[::-1]))  # the whole picture: walls are grout
-    straddles = straddling_tiles(polygons, edge_map)
+    # beside the coverage, whose shapely calls let go of the GIL (neither prepares the
+    # tiles they share: cvt.threads)
+    ev, straddles = side_by_side(
+        lambda: evaluate(polygons, Grid(*edge_map.shape[::-1])),  # the whole picture: walls are grout
+        lambda: straddling_tiles(polygons, edge_map),
+    )
     t3 = time.perf_counter()
     _return_free_memory()  # the runs' pairs, freed on the threads, before the files are written
     stages = {
