@@ -333,8 +333,8 @@ def mosaic(
     """Turn a picture into a mosaic of tiles.
 
     The tiles follow the picture's edges and detail (a direction field and a density
-    from the picture), its strong edges are walls, and each tile takes the picture's
-    mean colour under it.
+    from the picture), its strong edges are walls, and each tile takes the geometric
+    median, in CIELAB, of the picture's colours under it.
 
     Parameters
     ----------

@@ -286,8 +286,9 @@ def evaluate(
 
 # ----------------------------------------------------------------- mosaic measures
 #
-#   fill of tile k     = the mean, in CIELAB, of the picture's pixels whose centres lie
-#                        inside or on the outline of tile k (cvt.mosaic.tile_colours)
+#   fill of tile k     = the geometric median, in CIELAB, of the picture's pixels whose
+#                        centres lie inside or on the outline of tile k (the colour with
+#                        the least mean ΔE*ab to them; cvt.mosaic.tile_colours)
 #   colour_error       = mean over every (tile, pixel centre inside or on the tile) pair of
 #                        ΔE*ab (CIE76) between the pixel and the tile's fill as written
 #                        (8-bit sRGB): the mean perceived difference over the tiled area

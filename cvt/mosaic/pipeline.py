@@ -707,7 +707,8 @@ class MosaicResult:
     polygons : list of shapely.Polygon or None
         The tiles, one per site, None where a site has none.
     colours : numpy.ndarray
-        (N, 3) sRGB fills in 0..1 (8-bit values): each tile's mean colour.
+        (N, 3) sRGB fills in 0..1 (8-bit values): each tile's colour, the geometric
+        median in CIELAB of the picture under it.
     coverage : float
         Area of the union of the tiles / area of the raster.
     overlap : float
