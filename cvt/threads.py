@@ -15,10 +15,12 @@ holds a prepared geometry in one thread.
 
 from __future__ import annotations
 
+import itertools
 import os
 import threading
-from collections.abc import Callable, Iterator
-from concurrent.futures import ThreadPoolExecutor
+from collections import deque
+from collections.abc import Callable, Iterable, Iterator
+from concurrent.futures import ThreadPoolExecutor, wait
 from contextlib import contextmanager
 
 import numpy as np
@@ -175,6 +177,47 @@ def side_by_side(*calls):
     return [first, *done]
 
 
+def in_order(calls: Iterable[Callable], ahead: int | None = None) -> Iterator:
+    """The results of independent zero-argument ``calls``, one at a time and in order,
+    while the next ones run on the process's pool: the caller works on each result as
+    the pool works on those after it.
+
+    Parameters
+    ----------
+    calls : iterable of callables
+        Each takes no argument; none may depend on another's effects.  Taken from the
+        iterable only as the pool makes room, so no more than ``ahead`` results wait.
+    ahead : int, optional
+        How many calls run (or wait, done) at once; default the usable cores.
+
+    Yields
+    ------
+    object
+        ``call()`` for each call, in the calls' order; an exception in a call is raised
+        here, after the calls still running have finished.
+    """
+    cores = usable_cores()
+    if cores < 2 or _nested():
+        for call in calls:
+            yield call()
+        return
+    pool = _shared_pool(cores)
+    pending = iter(calls)
+    running: deque = deque()
+    try:
+        for call in itertools.islice(pending, cores if ahead is None else max(1, ahead)):
+            running.append(pool.submit(_on_the_pool(call)))
+        while running:
+            result = running.popleft().result()
+            for call in itertools.islice(pending, 1):  # its place goes to the next call
+                running.append(pool.submit(_on_the_pool(call)))
+            yield result
+    finally:
+        for future in running:  # none left working on what the caller goes on to change
+            future.cancel()
+        wait(running)
+
+
 @contextmanager
 def on_its_own_thread(call: Callable, *args) -> Iterator[Callable]:
     """``call(*args)`` run on a thread of its own while the ``with`` block runs (not on
@@ -204,4 +247,5 @@ __all__ = [
     "side_by_side",
     "on_its_own_thread",
     "prepared_copy",
+    "in_order",
 ]

@@ -447,6 +447,39 @@ def test_side_by_side_runs_the_calls_at_once_and_returns_them_in_order(monkeypat
     assert threads.side_by_side(lambda: 3, lambda: 4) == [3, 4]
 
 
+def test_in_order_runs_calls_ahead_and_yields_them_in_order(monkeypatch):
+    """The first call waits for a signal only the second gives: both run at once.  The
+    calls are drawn only as room is made (two running, then one more for each result
+    taken), results come in the order given, and an error is raised at its place."""
+    import threading
+
+    from compact_distributions.cvt import threads
+
+    monkeypatch.setattr(threads, "usable_cores", lambda: 2)
+    signal = threading.Event()
+    drawn = []
+
+    def calls():
+        yield lambda: signal.wait(timeout=30) and "first"
+        for k in range(5):
+            drawn.append(k)
+            yield (lambda: signal.set() or "second") if k == 0 else (lambda k=k: k)
+
+    results = threads.in_order(calls(), ahead=2)
+    assert next(results) == "first" and drawn == [0, 1]
+    assert list(results) == ["second", 1, 2, 3, 4]
+
+    def broken():
+        raise ValueError("broken call")
+
+    results = threads.in_order([lambda: 1, broken, lambda: 3])
+    assert next(results) == 1
+    with pytest.raises(ValueError, match="broken call"):
+        next(results)
+    monkeypatch.setattr(threads, "usable_cores", lambda: 1)  # one core: one after the other
+    assert list(threads.in_order([lambda: 3, lambda: 4])) == [3, 4]
+
+
 def test_calls_nested_on_the_pool_run_in_their_own_thread(monkeypatch):
     """An elementwise operation that calls elementwise, and a side_by_side call on the
     pool that does, with a pool of two: waiting on the pool from inside it would wait

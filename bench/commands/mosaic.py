@@ -186,8 +186,11 @@ def _metric_name(text: str) -> str:
     return resolve_shapes(text, None, names=("--metric", "--element"))[0]
 
 
-def mosaic_result_json(args, m, ran_on, stage_seconds: dict | None = None) -> dict:
-    """result.json of a mosaic (the schema of bench/results.py)."""
+def mosaic_result_json(
+    args, m, ran_on, stage_seconds: dict | None = None, measured: dict | None = None
+) -> dict:
+    """result.json of a mosaic (the schema of bench/results.py); ``measured``: its
+    fidelity measures where they were taken already (else taken here)."""
     import dataclasses
 
     from compact_distributions.cvt.evaluate import empty_cells, evaluate
@@ -230,6 +233,7 @@ def mosaic_result_json(args, m, ran_on, stage_seconds: dict | None = None) -> di
         edge_threshold=m.edge_threshold,
         walls=m.walls,
         edge_pixels=int(m.edges.sum()),
+        measured=measured,
     )
 
 
@@ -238,6 +242,7 @@ PNG_SCALE_RANGE = (0.01, 100.0)
 
 def run(args) -> int:
     from compact_distributions.backends import backend_class
+    from compact_distributions.cvt.evaluate import timed_fidelity
     from compact_distributions.cvt.mosaic.images import open_picture, upright_size
     from compact_distributions.cvt.mosaic.pipeline import (
         make_mosaic,
@@ -246,6 +251,7 @@ def run(args) -> int:
         resolve_shapes,
     )
     from compact_distributions.cvt.resources import mosaic_estimate
+    from compact_distributions.cvt.threads import on_its_own_thread
 
     from ..outputs import (
         COMMAND_OUTPUTS,
@@ -310,11 +316,16 @@ def run(args) -> int:
         )
         # the other files first, so that result.json (written last) holds their writing time
         t_write = time.perf_counter()
-        # drawn and deflated beside the rest, in bands (never whole)
-        beside.run(write_png, tmp / "mosaic.png", m.render(scale=png_scale, as_rows=True))
-        write_lines(tmp / "mosaic.svg", m.svg_lines())
-        write_sites_csv(tmp / "sites.csv", m.sites, m.angles, m.scales)
-        result = mosaic_result_json(args, m, ran_on, {"writing": time.perf_counter() - t_write})
+        # the fidelity measures on a thread of their own meanwhile (Delaunay and GEOS let
+        # go of the GIL)
+        with on_its_own_thread(timed_fidelity, m.polygons, m.problem, m.element) as measures:
+            # drawn and deflated beside the rest, in bands (never whole)
+            beside.run(write_png, tmp / "mosaic.png", m.render(scale=png_scale, as_rows=True))
+            write_lines(tmp / "mosaic.svg", m.svg_lines())
+            write_sites_csv(tmp / "sites.csv", m.sites, m.angles, m.scales)
+            measured, measures_seconds = measures()
+        stages = {"writing": time.perf_counter() - t_write, "measures": measures_seconds}
+        result = mosaic_result_json(args, m, ran_on, stages, measured)
         # what the picture still needed once the rest was done counts as writing
         result["stage_seconds"]["writing"] += beside.wait()
         write_json(tmp / "result.json", result)

@@ -18,12 +18,15 @@ in 0..1); fills may be '#rrggbb' strings, float arrays in 0..1 or uint8 arrays.
 
 from __future__ import annotations
 
+import functools
+
 import numpy as np
 import shapely
 
 from ..errors import InputError
 from ..evaluate import exterior_rings
 from ..pixels import index_ranges, pixel_index
+from ..threads import in_order
 from .numbers import ring_texts
 
 DARK = "#202020"  # outside the region, and joints between elements
@@ -424,25 +427,27 @@ def draw_elements(
     step = int(np.lcm(int(k), ss)) if masked else ss
     rows = max(step, BAND_BYTES // (3 * big[0]) // step * step)
 
-    def bands():
+    def draw_band(top):
         # PIL fills a polygon that crosses an image's edge differently from one that
         # does not: each band is drawn tall enough to hold whole every polygon it shows
-        for top in range(0, big[1], rows):
-            n_rows = min(rows, big[1] - top)
-            near = (bottom_y >= top - 2) & (top_y <= top + n_rows + 2)
-            lo = int(np.floor(min(top, top_y[near].min(initial=top)))) - 2
-            hi = int(np.ceil(max(top + n_rows, bottom_y[near].max(initial=top)))) + 2
-            lo, hi = max(0, lo // step * step), min(big[1], -(-hi // step) * step)
-            if masked:  # the mask's rows, each pixel repeated k times (what NEAREST gives)
-                part = m[lo // int(k) : hi // int(k)].astype(np.uint8)
-                band = Image.fromarray(
-                    np.repeat(np.repeat(colours[part], int(k), axis=0), int(k), axis=1), "RGB"
-                )
-            else:
-                band = Image.new("RGB", (big[0], hi - lo), inside if inside is not None else rgb8(background))
-            paint(band, lo, shown[near])
-            box = (0, top - lo, big[0], top - lo + n_rows)  # the band's own rows, no cropped copy
-            yield top // ss, _reduce(band, ss, (small[0], n_rows // ss), box)
+        n_rows = min(rows, big[1] - top)
+        near = (bottom_y >= top - 2) & (top_y <= top + n_rows + 2)
+        lo = int(np.floor(min(top, top_y[near].min(initial=top)))) - 2
+        hi = int(np.ceil(max(top + n_rows, bottom_y[near].max(initial=top)))) + 2
+        lo, hi = max(0, lo // step * step), min(big[1], -(-hi // step) * step)
+        if masked:  # the mask's rows, each pixel repeated k times (what NEAREST gives)
+            part = m[lo // int(k) : hi // int(k)].astype(np.uint8)
+            img = Image.fromarray(np.repeat(np.repeat(colours[part], int(k), axis=0), int(k), axis=1), "RGB")
+        else:
+            img = Image.new("RGB", (big[0], hi - lo), inside if inside is not None else rgb8(background))
+        paint(img, lo, shown[near])
+        box = (0, top - lo, big[0], top - lo + n_rows)  # the band's own rows, no cropped copy
+        return top // ss, _reduce(img, ss, (small[0], n_rows // ss), box)
+
+    def bands():
+        # the bands drawn on the pool, a core's worth at once, taken in order (Pillow's
+        # reduction lets go of the GIL while the next band's polygons are drawn)
+        return in_order(functools.partial(draw_band, top) for top in range(0, big[1], rows))
 
     if as_rows:
         return RowStream(small, ((first, np.asarray(band)) for first, band in bands()))
