@@ -48,7 +48,7 @@ from ..problem import Grid, Problem, parse_size
 from ..registry import resolve_method
 from ..resources import mosaic_estimate
 from ..shapes import ELEMENT_SHAPES, element_ball, resolve_shapes, shape_record, unit_outline
-from ..threads import on_its_own_thread, side_by_side, usable_cores
+from ..threads import in_order, on_its_own_thread, side_by_side
 from ..validate import live_backend, real_number, whole_number
 from .colour import lab_to_srgb, quantised, srgb_to_lab
 from .cutting import CUT_STYLES, cut_to_walls
@@ -499,20 +499,29 @@ def mosaic_fills(picture: np.ndarray, polygons, sites, bounds=None) -> tuple[np.
         total[1] += len(pts)
 
     single = n > SINGLE_MEDIAN_TILES
-    for lo, hi in zip(bounds[:-1], bounds[1:], strict=True):
-        tiles, pixels = pixels_under(polygons[lo:hi], w, h)
-        held[lo:hi] = np.bincount(tiles, minlength=hi - lo) > 0
-        fill[lo:hi] = geometric_median(
-            flat,
-            tiles,
-            None,
-            index=pixels,
-            groups=hi - lo,
-            convert=srgb_to_lab,
-            on_block=measure,
-            single=single,
-        )
-        del tiles, pixels
+    runs = list(zip(bounds[:-1], bounds[1:], strict=True))
+
+    def pixels_of(k: int):
+        return pixels_under(polygons[runs[k][0] : runs[k][1]], w, h) if k < len(runs) else None
+
+    # each run's pixels are found while the run before is filled (on the pool)
+    found = pixels_of(0)
+    for k, (lo, hi) in enumerate(runs):
+        tiles, pixels = found
+        with on_its_own_thread(pixels_of, k + 1) as later:
+            held[lo:hi] = np.bincount(tiles, minlength=hi - lo) > 0
+            fill[lo:hi] = geometric_median(
+                flat,
+                tiles,
+                None,
+                index=pixels,
+                groups=hi - lo,
+                convert=srgb_to_lab,
+                on_block=measure,
+                single=single,
+            )
+            del tiles, pixels
+            found = later()
     _fill_thin(fill, held, picture, srgb_to_lab, polygons, sites)
     rgb = quantised(lab_to_srgb(fill))
     return rgb, srgb_to_lab(rgb), total[0] / total[1] if total[1] else float("nan")
@@ -615,16 +624,14 @@ def geometric_median(
             begin = m[block]
         return block, pts, _weiszfeld(pts, counts[block], begin, steps, np.float32 if single else np.float64)
 
-    # the blocks a core's worth at a time, side by side (each block's groups are its
-    # own); their results taken in order, so on_block sees them as one at a time would
-    pairs = list(zip(bounds[:-1], bounds[1:], strict=True))
-    cores = usable_cores()
-    for k in range(0, len(pairs), cores):
-        done = side_by_side(*(lambda a=a, b=b: solve(a, b) for a, b in pairs[k : k + cores]))
-        for block, pts, median in done:
-            m[block] = median
-            if on_block is not None:
-                on_block(block, counts[block], pts, median)
+    # the blocks on the pool, a core's worth at a time (each block's groups are its
+    # own), while this thread takes their results in order: on_block sees them as one
+    # at a time would, and runs while the pool works on the next blocks
+    pairs = zip(bounds[:-1], bounds[1:], strict=True)
+    for block, pts, median in in_order(lambda a=a, b=b: solve(a, b) for a, b in pairs):
+        m[block] = median
+        if on_block is not None:
+            on_block(block, counts[block], pts, median)
     return m
 
 
