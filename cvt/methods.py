@@ -452,7 +452,9 @@ def check_distribution(dist: object, problem: Problem, who: str = "the method") 
     one shapely polygon (or None) per site, or whose vertices are not finite (elements
     None: no element at any site, and so set); a label
     raster of another size than the problem's, or labels outside -1 .. N-1; timings that
-    are not finite.  Whole-array checks (the elements' vertices in one pass)."""
+    are not finite.  Whole-array checks (the elements' vertices in one pass).  A
+    prepared element (``shapely.prepare``) is replaced by an unprepared copy of it, the
+    method's own left as it was."""
     import shapely
 
     from .distribution import Distribution
@@ -504,6 +506,12 @@ def check_distribution(dist: object, problem: Problem, who: str = "the method") 
         broken = ~np.isfinite(coords).all(axis=1)
         if broken.any():
             raise bad(f"element {int(part[index[np.argmax(broken)]])} with NaN or infinite vertices")
+    # the suite measures and cuts elements on several threads, and GEOS's prepared
+    # geometries must not be shared between threads: a prepared element is taken as a copy
+    prepared = shapely.is_prepared(geoms)
+    if prepared.any():
+        geoms[prepared] = shapely.from_wkb(shapely.to_wkb(geoms[prepared]))
+        dist.elements = list(geoms)
     labels = dist.labels
     if labels is not None:
         grid = problem.grid

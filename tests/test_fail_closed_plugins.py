@@ -225,6 +225,23 @@ def test_check_distribution_accepts_a_good_one_and_refuses_each_defect(small):
         assert what in str(err.value), (what, str(err.value))
 
 
+def test_a_methods_prepared_elements_are_taken_as_copies(small):
+    """GEOS's prepared geometries must not be shared between threads: the run measures
+    unprepared copies with exactly the method's vertices, and leaves the method's own
+    elements prepared."""
+    own = shapely.box([4.0, 16.0], [4.0, 16.0], [12.0, 28.0], [12.0, 28.0])
+    shapely.prepare(own)
+
+    def prepared(problem, backend, **options):
+        sites = np.array([[8.0, 8.0], [22.0, 22.0]])
+        return Distribution("prepared", sites, np.zeros(2), np.ones(2), elements=list(own))
+
+    result = cd.run(small, prepared)
+    assert not shapely.is_prepared(result.elements).any() and shapely.is_prepared(own).all()
+    assert all(shapely.equals_exact(a, b, 0) for a, b in zip(result.elements, own, strict=True))
+    assert result.coverage == pytest.approx((64 + 144) / 1024)
+
+
 def test_a_method_that_places_no_elements_is_measured_as_such(small):
     def lattice(problem, backend, **options):  # sites only, as the Method example's
         sites = np.array([[8.0, 8.0], [24.0, 24.0]])
