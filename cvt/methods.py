@@ -458,6 +458,7 @@ def check_distribution(dist: object, problem: Problem, who: str = "the method") 
     import shapely
 
     from .distribution import Distribution
+    from .threads import own_copy
 
     def bad(what: str) -> PluginError:
         return PluginError(f"{who} returned {what}")
@@ -510,7 +511,7 @@ def check_distribution(dist: object, problem: Problem, who: str = "the method") 
     # geometries must not be shared between threads: a prepared element is taken as a copy
     prepared = shapely.is_prepared(geoms)
     if prepared.any():
-        geoms[prepared] = shapely.from_wkb(shapely.to_wkb(geoms[prepared]))
+        geoms[prepared] = own_copy(geoms[prepared])
         dist.elements = list(geoms)
     labels = dist.labels
     if labels is not None:

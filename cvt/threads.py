@@ -91,6 +91,23 @@ def _holds_prepared(operand: np.ndarray) -> bool:
     return operand.dtype == object and bool(shapely.is_prepared(operand).any())
 
 
+def own_copy(geometry: shapely.Geometry | np.ndarray) -> shapely.Geometry | np.ndarray:
+    """A new geometry with exactly the same coordinates (or one for each of an array of
+    them), sharing no GEOS state with the given one: never prepared.
+
+    Parameters
+    ----------
+    geometry : shapely.Geometry or numpy.ndarray
+        Any geometry, or an array of them.
+
+    Returns
+    -------
+    shapely.Geometry or numpy.ndarray
+        The copy, or an array of copies.
+    """
+    return shapely.from_wkb(shapely.to_wkb(geometry))
+
+
 def prepared_copy(geometry: shapely.Geometry | np.ndarray) -> shapely.Geometry | np.ndarray:
     """A prepared copy of ``geometry`` (or of each of an array of them), for the caller's
     own thread.
@@ -110,7 +127,7 @@ def prepared_copy(geometry: shapely.Geometry | np.ndarray) -> shapely.Geometry |
         The same geometry (the same coordinates, exactly), a new object, prepared; or
         an array of such copies.
     """
-    own = shapely.from_wkb(shapely.to_wkb(geometry))
+    own = own_copy(geometry)
     shapely.prepare(own)
     return own
 
@@ -246,6 +263,7 @@ __all__ = [
     "elementwise",
     "side_by_side",
     "on_its_own_thread",
+    "own_copy",
     "prepared_copy",
     "in_order",
 ]

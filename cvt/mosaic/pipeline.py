@@ -504,7 +504,7 @@ def mosaic_fills(picture: np.ndarray, polygons, sites, bounds=None) -> tuple[np.
     def pixels_of(k: int):
         return pixels_under(polygons[runs[k][0] : runs[k][1]], w, h) if k < len(runs) else None
 
-    # each run's pixels are found while the run before is filled (on the pool)
+    # each run's pixels are found on a thread of their own while the pool fills the run before
     found = pixels_of(0)
     for k, (lo, hi) in enumerate(runs):
         tiles, pixels = found
