@@ -16,6 +16,7 @@ import tempfile
 import time
 import zlib
 from contextlib import contextmanager
+from dataclasses import dataclass
 from importlib import metadata
 from pathlib import Path
 
@@ -542,30 +543,45 @@ def json_chunks(data: dict):
     """The text of :func:`dumps` piece by piece: one top-level key per line, each value
     compact; long lists (sites, element outlines) are converted a block of items at a
     time, so writing a result never holds a second copy of it."""
-    from compact_distributions.cvt.mosaic.render import element_coordinates_json
-
     yield "{\n"
     for i, (key, value) in enumerate(data.items()):
         yield (",\n" if i else "") + f" {json.dumps(str(key))}: "
-        if isinstance(value, (list, tuple, np.ndarray)) and len(value) > 64:
-            yield "["
-            geoms = _geometries_or_none(value)
-            if geoms is not None:
-                blocks = _outline_blocks(geoms)
-            else:
-                blocks = [slice(j, j + JSON_BLOCK) for j in range(0, len(value), JSON_BLOCK)]
-            for block in blocks:  # a block of items at a time
-                if geoms is not None:
-                    items = element_coordinates_json(geoms[block])
-                else:
-                    items = _item_texts(value[block])
-                if items is None:
-                    items = [json.dumps(to_jsonable(item)) for item in value[block]]
-                yield (", " if block.start else "") + ", ".join(items)
-            yield "]"
+        if isinstance(value, _JsonText):
+            yield value.text
         else:
-            yield json.dumps(to_jsonable(value))
+            yield from _value_chunks(value)
     yield "\n}\n"
+
+
+def _value_chunks(value):
+    """The compact JSON text of one top-level value, piece by piece (:func:`json_chunks`)."""
+    from compact_distributions.cvt.mosaic.render import element_coordinates_json
+
+    if not (isinstance(value, (list, tuple, np.ndarray)) and len(value) > 64):
+        yield json.dumps(to_jsonable(value))
+        return
+    yield "["
+    geoms = _geometries_or_none(value)
+    if geoms is not None:
+        blocks = _outline_blocks(geoms)
+    else:
+        blocks = [slice(j, j + JSON_BLOCK) for j in range(0, len(value), JSON_BLOCK)]
+    for block in blocks:  # a block of items at a time
+        if geoms is not None:
+            items = element_coordinates_json(geoms[block])
+        else:
+            items = _item_texts(value[block])
+        if items is None:
+            items = [json.dumps(to_jsonable(item)) for item in value[block]]
+        yield (", " if block.start else "") + ", ".join(items)
+    yield "]"
+
+
+@dataclass(frozen=True)
+class _JsonText:
+    """A top-level value already turned into its JSON text."""
+
+    text: str
 
 
 def dumps(data: dict) -> str:
@@ -575,6 +591,27 @@ def dumps(data: dict) -> str:
 
 def write_json(path, data) -> None:
     write_lines(path, json_chunks(data))
+
+
+def write_result_json(path, result: dict, beside: Beside) -> None:
+    """``result`` written to ``path`` as :func:`write_json` writes it, once the work
+    ``beside`` has finished, the time waited for it added to its
+    ``stage_seconds["writing"]``.  Every other value is turned into its text while that
+    work runs: the text is held whole meanwhile (about the file's size).
+
+    Parameters
+    ----------
+    path : path-like
+        The file written.
+    result : dict
+        A result record (:func:`bench.results.build_result`) with a ``stage_seconds``
+        dict holding ``"writing"``; its writing time is updated in place.
+    beside : Beside
+        The work that counts as writing and must end first.
+    """
+    texts = {k: _JsonText("".join(_value_chunks(v))) for k, v in result.items() if k != "stage_seconds"}
+    result["stage_seconds"]["writing"] += beside.wait()
+    write_lines(path, json_chunks({key: texts.get(key, value) for key, value in result.items()}))
 
 
 def write_lines(path, chunks) -> None:
@@ -739,6 +776,7 @@ __all__ = [
     "json_chunks",
     "dumps",
     "write_json",
+    "write_result_json",
     "write_lines",
     "write_sites_csv",
     "PNG_LEVEL",

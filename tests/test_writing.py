@@ -131,6 +131,42 @@ def test_result_json_lists_are_the_plain_json():
         assert line.rstrip(",") == f' "{key}": [' + ", ".join(json.dumps(v) for v in items) + "]"
 
 
+def test_result_json_written_after_the_work_beside(tmp_path):
+    """write_result_json turns the values into text while the pictures are still being
+    written, then writes what dumps writes, the wait counted as writing."""
+    import threading
+    import time
+
+    els, rng = mixed_elements()
+    result = {
+        "sites": rng.uniform(0, 100, (len(els), 2)),
+        "stage_seconds": {"lloyd": 1.5, "writing": 0.25},
+        "elements": els,
+        "gap": 1.0,
+    }
+    started, formatted = threading.Event(), []
+    real = outputs._value_chunks
+
+    def chunks(value):  # which values were formatted before the work beside ended
+        formatted.append(started.is_set())
+        return real(value)
+
+    outputs._value_chunks = chunks
+    try:
+        with outputs.Beside() as beside:
+            beside.run(lambda: (time.sleep(0.3), started.set()))
+            outputs.write_result_json(tmp_path / "result.json", result, beside)
+    finally:
+        outputs._value_chunks = real
+    text = (tmp_path / "result.json").read_text()
+    assert result["stage_seconds"]["writing"] >= 0.25 + 0.29  # the wait, added
+    assert text == dumps(result) and json.loads(text)["stage_seconds"]["writing"] >= 0.54
+    from compact_distributions.cvt.threads import usable_cores
+
+    if usable_cores() > 1:  # the three other values before the work ended, stage_seconds after
+        assert formatted[:3] == [False] * 3 and formatted[3:] == [True]
+
+
 def test_sites_csv_is_the_plain_formatting(tmp_path):
     rng = np.random.default_rng(1)
     sites, angles, scales = rng.uniform(0, 500, (300, 2)), rng.uniform(-4, 4, 300), rng.uniform(0.1, 3, 300)

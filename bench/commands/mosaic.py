@@ -257,9 +257,9 @@ def run(args) -> int:
         COMMAND_OUTPUTS,
         Beside,
         OutputFolder,
-        write_json,
         write_lines,
         write_png,
+        write_result_json,
         write_sites_csv,
     )
     from ..results import RanOn
@@ -326,9 +326,8 @@ def run(args) -> int:
             measured, measures_seconds = measures()
         stages = {"writing": time.perf_counter() - t_write, "measures": measures_seconds}
         result = mosaic_result_json(args, m, ran_on, stages, measured)
-        # what the picture still needed once the rest was done counts as writing
-        result["stage_seconds"]["writing"] += beside.wait()
-        write_json(tmp / "result.json", result)
+        # written once the picture is, the time waited for it counted as writing
+        write_result_json(tmp / "result.json", result, beside)
         if comparison is not None:
             comparison.save(tmp / f"compare_{args.compare}.png")
     _say(

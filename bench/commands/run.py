@@ -276,7 +276,7 @@ def run(args) -> int:
         Beside,
         OutputFolder,
         command_line,
-        write_json,
+        write_result_json,
     )
     from ..results import RanOn, build_result
 
@@ -343,9 +343,8 @@ def run(args) -> int:
             stage_seconds=stages,
             measured=measured,
         )
-        # what the pictures still needed once the rest was done counts as writing
-        result["stage_seconds"]["writing"] += beside.wait()
-        write_json(tmp / "result.json", result)
+        # written once the pictures are, the time waited for them counted as writing
+        write_result_json(tmp / "result.json", result, beside)
     if not args.quiet:
         mean = np.median(dist.seconds) * 1000 if dist.seconds else float("nan")
         print(
