@@ -145,6 +145,30 @@ def test_straight_cut_tiles_are_convex_and_hold_their_tiles():
         assert after.buffer(1e-9).covers(before)
 
 
+@pytest.mark.parametrize("parts", [2, 3])
+def test_straight_cut_in_parts_is_the_cut_in_one(monkeypatch, parts):
+    """The tiles of a turn cut in parts side by side: every outline is the one the whole
+    turn cut at once gives, vertex for vertex."""
+    from compact_distributions.cvt.mosaic import cutting
+
+    walls, truth = wall_network()
+    tiles = lattice_beside(truth, 3.0, 0.5, 0.4)
+    monkeypatch.setattr(cutting, "_ROWS_PER_PART", 10**9)
+    whole, grew_whole = cut_to_walls(tiles, walls, 0.5, spacing=3.5, style="straight")
+    monkeypatch.setattr(cutting, "_ROWS_PER_PART", 1)
+    monkeypatch.setattr(cutting, "usable_cores", lambda: parts)
+    calls = []
+    real = cutting._cut_convex
+    monkeypatch.setattr(cutting, "_cut_convex", lambda *a: calls.append(len(a[2])) or real(*a))
+    split, grew_split = cut_to_walls(tiles, walls, 0.5, spacing=3.5, style="straight")
+    assert grew_whole > 0 and grew_split == grew_whole
+    assert max(calls) < sum(calls) and len(calls) > parts  # the turns were cut in parts
+    assert (
+        shapely.to_wkb(np.array(split, dtype=object)).tolist()
+        == shapely.to_wkb(np.array(whole, dtype=object)).tolist()
+    )
+
+
 @pytest.mark.parametrize(
     "block,shuffle,single", [(None, False, False), (7, True, False), (40, False, False), (None, False, True)]
 )

@@ -63,12 +63,13 @@ import shapely
 from ..errors import InputError
 from ..evaluate import straddling_tiles
 from ..placement.compaction import _wall_links, wall_segments
-from ..threads import elementwise, side_by_side
+from ..threads import elementwise, side_by_side, usable_cores
 
 CUT_ENLARGE = 1.8  # a cut tile lies within its tile grown by this factor about its centre
 CUT_STYLES = ("auto", "exact", "straight")  # cut_to_walls's styles (the docstring)
 CUT_REACH = 1.0  # tiles this many element spacings or closer to a wall are cut to fit
 _MARGIN = 1e-3  # px kept beyond the gap
+_ROWS_PER_PART = 2000  # tiles cut at least, per part cut side by side
 _RUN = 64  # most vertices of a wall line in one piece of its margin, exact cut (fewer, smaller differences)
 
 
@@ -363,7 +364,7 @@ def _cut_straight(
             wide = np.flatnonzero(tile_count > narrow)
             by_row = np.concatenate([geoms[involved], pieces])
             vertices = (pool_row, pool_xy, by_row, wide, tile_xy[wide])
-            cut, ok, poly, count = _cut_convex(
+            cut, ok, poly, count = _cut_convex_in_parts(
                 whole, grown_xy, rows, (pair_tile, pool, obstacle, keep, d), (w, h), gap, (near, vertices)
             )
             good = rows[ok]
@@ -663,6 +664,39 @@ def _nearer(apart, inner, low, high, outer):
     length2 = apart[:, 0] * apart[:, 0] + apart[:, 1] * apart[:, 1]
     reach = low + inner
     return (reach >= 0) & (length2 <= reach * reach), length2 > (high + outer) ** 2
+
+
+def _cut_convex_in_parts(whole, grown, rows, pairs, size, gap, padded):
+    """:func:`_cut_convex` of ``rows`` (the same arguments and answer), the rows cut in
+    consecutive parts side by side (whole-array NumPy and GEOS let go of the GIL): a
+    tile's cut reads only its own pairs, which keep their order within its part."""
+    parts = min(usable_cores(), len(rows) // _ROWS_PER_PART)
+    if parts < 2:
+        return _cut_convex(whole, grown, rows, pairs, size, gap, padded)
+    pair_tile, pool, obstacle, keep, d = pairs
+    slot = np.full(len(whole), -1)
+    slot[rows] = np.arange(len(rows))
+    at = slot[pair_tile]
+    # runs of rows holding about equal numbers of pairs
+    ordered = np.sort(at)
+    edges = np.unique(np.r_[0, ordered[len(at) * np.arange(1, parts) // parts], len(rows)])
+    part_of = np.searchsorted(edges, at, side="right") - 1
+
+    def part(k):
+        mine = part_of == k
+        own = (pair_tile[mine], pool, obstacle[mine], keep[mine], d[mine])
+        return _cut_convex(whole, grown, rows[edges[k] : edges[k + 1]], own, size, gap, padded)
+
+    done = side_by_side(*(functools.partial(part, k) for k in range(len(edges) - 1)))
+    width = max(poly.shape[1] for _, _, poly, _ in done)  # padded rows: zeros past the count
+    return (
+        np.concatenate([cut for cut, _, _, _ in done]),
+        np.concatenate([ok for _, ok, _, _ in done]),
+        np.concatenate(
+            [np.pad(poly, ((0, 0), (0, width - poly.shape[1]), (0, 0))) for _, _, poly, _ in done]
+        ),
+        np.concatenate([count for _, _, _, count in done]),
+    )
 
 
 def _cut_convex(whole, grown, rows, pairs, size, gap, padded):
