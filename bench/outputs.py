@@ -16,7 +16,6 @@ import tempfile
 import time
 import zlib
 from contextlib import contextmanager
-from dataclasses import dataclass
 from importlib import metadata
 from pathlib import Path
 
@@ -545,12 +544,14 @@ def json_chunks(data: dict):
     time, so writing a result never holds a second copy of it."""
     yield "{\n"
     for i, (key, value) in enumerate(data.items()):
-        yield (",\n" if i else "") + f" {json.dumps(str(key))}: "
-        if isinstance(value, _JsonText):
-            yield value.text
-        else:
-            yield from _value_chunks(value)
+        yield from _member_chunks(i, key, value)
     yield "\n}\n"
+
+
+def _member_chunks(i: int, key, value):
+    """The text of the ``i``-th top-level member of :func:`json_chunks`, piece by piece."""
+    yield (",\n" if i else "") + f" {json.dumps(str(key))}: "
+    yield from _value_chunks(value)
 
 
 def _value_chunks(value):
@@ -577,13 +578,6 @@ def _value_chunks(value):
     yield "]"
 
 
-@dataclass(frozen=True)
-class _JsonText:
-    """A top-level value already turned into its JSON text."""
-
-    text: str
-
-
 def dumps(data: dict) -> str:
     """JSON with one top-level key per line and each value compact (site lists stay short)."""
     return "".join(json_chunks(data))
@@ -596,8 +590,9 @@ def write_json(path, data) -> None:
 def write_result_json(path, result: dict, beside: Beside) -> None:
     """``result`` written to ``path`` as :func:`write_json` writes it, once the work
     ``beside`` has finished, the time waited for it added to its
-    ``stage_seconds["writing"]``.  Every other value is turned into its text while that
-    work runs: the text is held whole meanwhile (about the file's size).
+    ``stage_seconds["writing"]``.  Every other member is turned into text while that
+    work runs: those before ``stage_seconds`` into the file, those after it into a
+    temporary file beside it, copied in at the end (never held whole).
 
     Parameters
     ----------
@@ -609,9 +604,18 @@ def write_result_json(path, result: dict, beside: Beside) -> None:
     beside : Beside
         The work that counts as writing and must end first.
     """
-    texts = {k: _JsonText("".join(_value_chunks(v))) for k, v in result.items() if k != "stage_seconds"}
-    result["stage_seconds"]["writing"] += beside.wait()
-    write_lines(path, json_chunks({key: texts.get(key, value) for key, value in result.items()}))
+    keys = list(result)
+    at = keys.index("stage_seconds")
+    with open(path, "w") as fh, tempfile.TemporaryFile("w+", dir=Path(path).parent) as rest:
+        fh.write("{\n")
+        for i, key in enumerate(keys):
+            if i != at:
+                (fh if i < at else rest).writelines(_member_chunks(i, key, result[key]))
+        result["stage_seconds"]["writing"] += beside.wait()
+        fh.writelines(_member_chunks(at, "stage_seconds", result["stage_seconds"]))
+        rest.seek(0)
+        shutil.copyfileobj(rest, fh)
+        fh.write("\n}\n")
 
 
 def write_lines(path, chunks) -> None:
