@@ -193,6 +193,36 @@ def test_colours_match_a_flat_colour_picture():
     assert 0.3 < m.coverage <= 1.0
 
 
+def test_the_measures_run_beside_the_fills(monkeypatch):
+    """The coverage and straddling are measured on a thread of their own while the tiles
+    are filled, and the mosaic records what they measured."""
+    import threading
+
+    from compact_distributions.cvt.mosaic import pipeline
+
+    filling, seen = threading.Event(), []
+    real_fills, real_evaluate = pipeline.mosaic_fills, pipeline.evaluate
+
+    def fills(*args, **kwargs):
+        filling.set()
+        try:
+            return real_fills(*args, **kwargs)
+        finally:
+            filling.clear()
+
+    def evaluate(*args, **kwargs):
+        filling.wait(5.0)  # the fills are under way when the measures begin
+        seen.append((threading.current_thread() is threading.main_thread(), filling.is_set()))
+        return real_evaluate(*args, **kwargs)
+
+    monkeypatch.setattr(pipeline, "mosaic_fills", fills)
+    monkeypatch.setattr(pipeline, "evaluate", evaluate)
+    m = make_mosaic(stripes(n=96), NUMPY, n_elements=60, iterations=3, element="square")
+    assert seen == [(False, True)]
+    tiles = [p for p in m.polygons if p is not None]
+    assert m.coverage == pytest.approx(shapely.union_all(tiles).area / (96 * 96), abs=1e-9)
+
+
 def test_same_seed_same_mosaic_and_numpy_input_equals_file(tmp_path):
     pic = (stripes(n=128, deg=10.0) * 200 + 20).astype(np.uint8)
     Image.fromarray(pic).save(tmp_path / "s.png")
