@@ -270,12 +270,25 @@ def test_threads_split_the_work_not_the_result(shape, monkeypatch):
     from compact_distributions.cvt.placement import compaction
 
     grid, sites, angles, sizes = random_layout(shape, 4, 150, "L")
+    import threading
+
+    from compact_distributions.cvt.threads import usable_cores
+
     one = compact(sites, angles, sizes, shape, 0.5, grid, rounds=3, threads=1)
     monkeypatch.setattr(compaction, "_PIECE_ROWS", 50)
     monkeypatch.setattr(compaction, "_PDHG_BLOCK_ENTRIES", 300)
+    # where the near pairs and the near pieces are found: side by side with threads
+    where: dict = {"pairs": set(), "pieces": set()}
+    for name, key in (("_near_pairs", "pairs"), ("_near_segments", "pieces")):
+        real = getattr(compaction, name)
+        monkeypatch.setattr(
+            compaction, name, lambda *a, real=real, key=key: where[key].add(threading.get_ident()) or real(*a)
+        )
     for t in (2, 3):
         split = compact(sites, angles, sizes, shape, 0.5, grid, rounds=3, threads=t)
         assert np.array_equal(one.centres, split.centres) and np.array_equal(one.sizes, split.sizes)
+    if usable_cores() > 1:
+        assert where["pieces"] - where["pairs"]  # the pieces on a thread of the pool
     assert_separated(shape, one.centres, angles, one.sizes, grid, 0.0)
 
 

@@ -1948,10 +1948,13 @@ def _round_rows(unit, c, r, cos, sin, budget, gap, pieces, prev, threads=1):
     act = np.flatnonzero(r > 0)
     # one kd-tree of the centres (per class of reach) for the pairs and the pieces
     trees = _point_trees(c[act], unit.circumradius * r[act] + budget[act]) if len(act) else []
-    i, j, px, py, _ = _near_pairs(unit, c, r, cos, sin, budget, gap, prev_p, act, trees, threads)
-    e, s, sx, sy, _ = _near_segments(
-        unit, c, r, cos, sin, budget, 0.5 * gap, pieces, prev_s, act, trees, threads
+    calls = (
+        lambda: _near_pairs(unit, c, r, cos, sin, budget, gap, prev_p, act, trees, threads),
+        lambda: _near_segments(unit, c, r, cos, sin, budget, 0.5 * gap, pieces, prev_s, act, trees, threads),
     )
+    # the pairs beside the pieces where there are threads: each one's serial parts
+    # overlap the other's work
+    (i, j, px, py, _), (e, s, sx, sy, _) = side_by_side(*calls) if threads > 1 else [f() for f in calls]
     segs = pieces.segs
     seg_m = np.minimum(sx * segs[s, 0] + sy * segs[s, 1], sx * segs[s, 2] + sy * segs[s, 3])
     if pieces.widen is not None:  # (2) against the piece widened: its line moved towards the element
