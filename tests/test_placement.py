@@ -690,6 +690,45 @@ def test_pick_columns_and_rows_last_reach_match_plain_indexing():
         assert np.array_equal(last.T, np.take_along_axis(full, cols, axis=1))
 
 
+def _contour_samples_by_hand(labels):
+    """The contour samples by their definition, edge by edge: each vertical edge's left
+    then right cell (raster order), then each horizontal edge's upper then lower cell."""
+    h, w = labels.shape
+
+    def at(i, j):
+        return labels[i, j] if 0 <= i < h and 0 <= j < w else -1
+
+    runs = [[], [], [], []]
+    for r in range(h):
+        for c in range(w + 1):
+            a, b = at(r, c - 1), at(r, c)
+            if a != b:
+                runs[0] += [(a, c, r + 0.5)] if a >= 0 else []
+                runs[1] += [(b, c, r + 0.5)] if b >= 0 else []
+    for r in range(h + 1):
+        for c in range(w):
+            a, b = at(r - 1, c), at(r, c)
+            if a != b:
+                runs[2] += [(a, c + 0.5, r)] if a >= 0 else []
+                runs[3] += [(b, c + 0.5, r)] if b >= 0 else []
+    rows = np.array([s for run in runs for s in run], dtype=np.float64).reshape(-1, 3)
+    return rows[:, 0].astype(np.int32), rows[:, 1], rows[:, 2]
+
+
+def test_contour_samples_are_the_edges_midpoints_in_order():
+    """contour_samples against the samples written out edge by edge, on random label
+    rasters with outside pixels (-1), one row or one column among them."""
+    rng = np.random.default_rng(4)
+    for h, w in ((1, 1), (1, 9), (7, 1), (23, 37), (30, 17)):
+        labels = rng.integers(-1, 6, (h, w)).astype(np.int32)
+        labels[rng.random((h, w)) < 0.5] = 2  # runs of one cell, as in a real raster
+        owner, x, y = contour_samples(labels)
+        truth = _contour_samples_by_hand(labels)
+        assert owner.dtype == np.int32 and len(owner) > 0
+        for got, want in zip((owner, x, y), truth, strict=True):
+            assert np.array_equal(got, want)
+
+
 def test_contour_samples_in_float32_are_exact():
     lab = np.random.default_rng(2).integers(-1, 5, (40, 50)).astype(np.int32)
     o64, x64, y64 = contour_samples(lab)
