@@ -21,6 +21,7 @@ from compact_distributions.cvt.mosaic.render import (
     svg_lines,
 )
 from compact_distributions.cvt.shapes import element_polygons
+from compact_distributions.cvt.threads import usable_cores
 
 W, H = 120, 90
 
@@ -131,7 +132,7 @@ def test_result_json_lists_are_the_plain_json():
         assert line.rstrip(",") == f' "{key}": [' + ", ".join(json.dumps(v) for v in items) + "]"
 
 
-def test_result_json_written_after_the_work_beside(tmp_path):
+def test_result_json_written_after_the_work_beside(tmp_path, monkeypatch):
     """write_result_json turns the values into text while the pictures are still being
     written, then writes what dumps writes, the wait counted as writing."""
     import threading
@@ -151,18 +152,14 @@ def test_result_json_written_after_the_work_beside(tmp_path):
         formatted.append(started.is_set())
         return real(value)
 
-    outputs._value_chunks = chunks
-    try:
-        with outputs.Beside() as beside:
-            beside.run(lambda: (time.sleep(0.3), started.set()))
-            outputs.write_result_json(tmp_path / "result.json", result, beside)
-    finally:
-        outputs._value_chunks = real
+    monkeypatch.setattr(outputs, "_value_chunks", chunks)
+    with outputs.Beside() as beside:
+        beside.run(lambda: (time.sleep(0.3), started.set()))
+        outputs.write_result_json(tmp_path / "result.json", result, beside)
+    monkeypatch.undo()  # dumps below formats as it always does
     text = (tmp_path / "result.json").read_text()
     assert result["stage_seconds"]["writing"] >= 0.25 + 0.29  # the wait, added
     assert text == dumps(result) and json.loads(text)["stage_seconds"]["writing"] >= 0.54
-    from compact_distributions.cvt.threads import usable_cores
-
     if usable_cores() > 1:  # the three other values before the work ended, stage_seconds after
         assert formatted[:3] == [False] * 3 and formatted[3:] == [True]
 
