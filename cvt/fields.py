@@ -76,6 +76,16 @@ class DensityMap:
         """Per-pixel acceptance probability for rejection sampling (density / max)."""
         return self.values / self.values.max()
 
+    def acceptance_at(self, pixels: np.ndarray) -> np.ndarray:
+        """``acceptance().ravel()[pixels]`` (``pixels``: flat indices), the same numbers,
+        without the picture-sized array."""
+        return self.values.ravel()[pixels] / self.values.max()
+
+    def everywhere_accepted(self) -> bool:
+        """Whether every pixel's acceptance is above 0 (the least value's is: the
+        division keeps the order)."""
+        return bool(self.values.min() / self.values.max() > 0)
+
 
 class DirectionField:
     """Angle (radians) as a function of position; ``shape`` is None for analytic fields."""

@@ -9,7 +9,7 @@ from compact_distributions.cvt.errors import InputError
 from compact_distributions.cvt.fields import DensityMap, DirectionField
 from compact_distributions.cvt.metrics import make_metric
 from compact_distributions.cvt.problem import Grid, Problem
-from compact_distributions.cvt.seeding import initial_sites
+from compact_distributions.cvt.seeding import initial_sites, region_pixels
 
 
 def test_uniform_seeding_stays_in_region_and_is_deterministic():
@@ -80,3 +80,64 @@ def test_problem_validation():
         Grid(4, 4, np.zeros((4, 4), bool))
     with pytest.raises(InputError, match="outside"):
         Problem(Grid(10, 10), 1, init_sites=np.array([[11.0, 2.0]]))
+
+
+def _seeded_over_listed_pixels(problem: Problem) -> np.ndarray:
+    """The seeding written over the list of every region pixel and every pixel's
+    acceptance (density / max): the draws ``initial_sites`` documents, made the plain way."""
+    grid, n = problem.grid, problem.n_elements
+    rng = np.random.default_rng(problem.seed)
+    inside = np.flatnonzero(np.ones(grid.width * grid.height, bool) if grid.mask is None else grid.mask)
+    if problem.density is None:
+        picks = rng.choice(inside, size=n, replace=False)
+    else:
+        values = problem.density.values
+        accept = (values / values.max()).ravel()[inside]
+        chosen = np.empty(0, dtype=np.int64)
+        while len(chosen) < n:
+            batch = rng.choice(len(inside), size=max(4 * n, 1024))
+            chosen = np.concatenate([chosen, batch[rng.random(len(batch)) < accept[batch]]])
+            _, first = np.unique(chosen, return_index=True)
+            chosen = chosen[np.sort(first)]
+            if len(chosen) < n and (accept > 0).sum() < n:  # then every other pixel, shuffled
+                chosen = np.concatenate(
+                    [chosen, rng.permutation(np.setdiff1d(np.arange(len(inside)), chosen))]
+                )
+        picks = inside[chosen[:n]]
+    i, j = np.divmod(picks, grid.width)
+    jitter = rng.random((n, 2))
+    return np.stack([j + jitter[:, 0], i + jitter[:, 1]], axis=1)
+
+
+@pytest.mark.parametrize("region", ["none", "most", "little"])
+@pytest.mark.parametrize("density", ["none", "positive", "zeros", "few"])
+def test_seeding_draws_as_over_the_listed_region_pixels(region, density):
+    rng = np.random.default_rng(5)
+    h, w = 90, 130
+    mask = {"none": None, "most": rng.random((h, w)) > 0.1, "little": rng.random((h, w)) < 0.2}[region]
+    values = {
+        "none": None,
+        "positive": 0.05 + rng.random((h, w)),
+        "zeros": np.where(rng.random((h, w)) < 0.5, 0.0, rng.random((h, w))),  # zero on about half
+        "few": np.where(rng.random((h, w)) < 0.02, 1.0, 0.0),  # fewer positive pixels than sites
+    }[density]
+    p = Problem(
+        Grid(w, h, mask),
+        700,
+        make_metric("linf"),
+        density=None if values is None else DensityMap(values),
+        seed=3,
+    )
+    np.testing.assert_array_equal(initial_sites(p), _seeded_over_listed_pixels(p))
+
+
+def test_region_pixels_are_the_listed_pixels_of_their_ranks():
+    rng = np.random.default_rng(0)
+    for _ in range(200):
+        h, w = rng.integers(1, 40, 2)
+        mask = rng.random((h, w)) < rng.random()
+        listed = np.flatnonzero(mask)
+        if len(listed) == 0:
+            continue
+        ranks = rng.integers(0, len(listed), size=rng.integers(1, 300))
+        np.testing.assert_array_equal(region_pixels(mask)(ranks), listed[ranks])
