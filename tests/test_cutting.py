@@ -809,3 +809,20 @@ def test_prepared_geometries_tested_on_threads_do_not_crash_the_process():
     )
     assert done.returncode == 0, done.stderr[-2000:]
     assert int(done.stdout) > 1000  # many boxes meet a disc: the test tests something
+
+
+@pytest.mark.parametrize("with_hole", [False, True])
+def test_vertex_arrays_are_each_exterior_written_out(with_hole):
+    """The padded vertex arrays are each polygon's exterior vertices as written (less the
+    closing one), zeros past its count; a polygon with a hole among them reads its
+    exterior alone."""
+    from compact_distributions.cvt.mosaic import cutting
+
+    square = [(0.0, 0.0), (4.0, 0.0), (4.0, 4.0), (0.0, 4.0)]
+    triangle = [(10.0, 1.0), (13.0, 1.0), (11.5, 5.0)]
+    hole = [(1.0, 1.0), (2.0, 1.0), (2.0, 2.0)] if with_hole else None
+    geoms = np.array([shapely.Polygon(triangle), shapely.Polygon(square, None if hole is None else [hole])])
+    poly, count = cutting._vertex_arrays(geoms)
+    np.testing.assert_array_equal(count, [3, 4])
+    np.testing.assert_array_equal(poly[0], triangle + [(0.0, 0.0)])
+    np.testing.assert_array_equal(poly[1], square)

@@ -61,7 +61,7 @@ import numpy as np
 import shapely
 
 from ..errors import InputError
-from ..evaluate import straddling_tiles
+from ..evaluate import exterior_rings, straddling_tiles
 from ..placement.compaction import _wall_links, wall_segments
 from ..threads import elementwise, side_by_side, usable_cores
 
@@ -891,7 +891,7 @@ def _best_plane(poly, count, r, first, tiles, obstacles, pairs):
 def _vertex_arrays(polygons):
     """(n, V, 2) vertices of each polygon's exterior (less the closing one), padded, and
     their counts."""
-    coords, index = shapely.get_coordinates(shapely.get_exterior_ring(polygons), return_index=True)
+    coords, index = shapely.get_coordinates(exterior_rings(polygons), return_index=True)
     begin = np.searchsorted(index, np.arange(len(polygons)))
     count = np.diff(np.append(begin, len(index))) - 1
     poly = np.zeros((len(polygons), int(count.max()) if len(polygons) else 0, 2))
