@@ -1112,8 +1112,12 @@ class OpenCLBackend(Backend):
         )
         self._wall_kernel(metric, "pieces_homeless", 1, *listed, parent, homeless, counts, *sizes, *cut)
         most = np.empty(2, dtype=np.uint32)
-        self._cl.enqueue_copy(self._queue, most, counts, is_blocking=False)  # before the sums: in order
-        return self._read_moments(acc_buf, n), int(most[0])
+        # before the sums (in order); its event is held until they are read, since
+        # pyopencl waits for a host copy whose event is let go, holding the GIL
+        copied = self._cl.enqueue_copy(self._queue, most, counts, is_blocking=False)
+        moments = self._read_moments(acc_buf, n)
+        del copied
+        return moments, int(most[0])
 
     def _walled_moments(self, sites, angles, scales, metric: Metric, grid: Grid) -> Moments:
         """The moments of the labels with each cell cut to the piece it keeps, found on
@@ -1127,12 +1131,13 @@ class OpenCLBackend(Backend):
         cl = self._cl
         n = len(sites)
         w, h = grid.width, grid.height
-        # each site's pixel, for pieces_site: sent now, without a wait (the array lives
-        # until the sums are read)
+        # each site's pixel, for pieces_site: sent now, without a wait (the array and
+        # the copy's event live until the sums are read: pyopencl waits, holding the
+        # GIL, for a copy whose event is let go)
         i, j = pixel_index(sites, w, h)
         site_pixel = (i * w + j).astype(np.int32)
         site_at = self._buffer("site_at", site_pixel.nbytes)
-        cl.enqueue_copy(self._queue, site_at, site_pixel, is_blocking=False)
+        sent = cl.enqueue_copy(self._queue, site_at, site_pixel, is_blocking=False)
         # the label kernel leaves the bits of which pixels have the label below them,
         # where it has them at hand (inside its blocks), for row_runs
         period = self._bits_period()
@@ -1144,6 +1149,7 @@ class OpenCLBackend(Backend):
                 cap = self._row_slots(w, n, area)
                 mom, most = self._enqueue_pieces(metric, n, w, h, acc_buf, labels_buf, site_at, cap, bits)
                 if most <= cap:
+                    del sent  # done: the sums are read
                     return mom
                 self._row_room = most + most // 4  # a row needs at most w: the next fits
                 acc_buf, labels_buf = self._enqueue_moments(sites, angles, scales, metric, grid, bits[0])

@@ -269,6 +269,60 @@ def test_released_buffers_are_made_again_with_the_same_labels_and_moments():
     assert 0.5 * grid.mask.sum() < moments.count.sum() <= grid.mask.sum()
 
 
+class _TrackedCopies:
+    """pyopencl with each host copy that does not block logged when it is let go (its
+    event dropped), beside the backend's reads of the sums."""
+
+    def __init__(self, cl, log):
+        self._cl, self._log = cl, log
+
+    def __getattr__(self, name):
+        return getattr(self._cl, name)
+
+    def enqueue_copy(self, *args, is_blocking=True, **kwargs):
+        event = self._cl.enqueue_copy(*args, is_blocking=is_blocking, **kwargs)
+        if is_blocking:
+            return event
+        self._log.append("copy")
+        return _LetGo(event, self._log)
+
+
+class _LetGo:
+    def __init__(self, event, log):
+        self.event, self.log = event, log
+
+    def __del__(self):
+        self.log.append("let go")
+
+
+def test_walled_moments_hold_each_copy_until_the_sums_are_read():
+    """pyopencl waits for a host copy that does not block when its event is let go, and
+    holds the GIL meanwhile: the walled moments let go of theirs only once the sums are
+    read (a wait without the GIL), so that threads beside run during the kernels."""
+    sites, angles, scales, metric, grid = random_case("linf", True, seed=6)
+    backend = OpenCLBackend()
+    log: list = []
+    try:
+        backend._cl = _TrackedCopies(backend._cl, log)
+        read = backend._read_moments
+
+        def logged_read(*args):
+            log.append("read")
+            return read(*args)
+
+        backend._read_moments = logged_read
+        backend.walled_moments(sites, angles=angles, scales=scales, metric=metric, grid=grid)
+    finally:
+        backend.close()
+    assert "copy" in log and "read" in log
+    # each copy let go only after a read of the sums that comes after it
+    for k, entry in enumerate(log):
+        if entry == "let go":
+            last_copy = max(i for i in range(k) if log[i] == "copy")
+            assert "read" in log[last_copy:k], f"a copy let go before the sums were read: {log}"
+    assert log.count("copy") == log.count("let go"), log
+
+
 def test_programs_are_built_once_per_metric_kind():
     ocl = OpenCLBackend()
     try:
