@@ -294,3 +294,30 @@ def test_help_lists_every_command_without_loading_the_methods():
         name, text = command_help(module)
         assert name == module.rsplit(".", 1)[1]
         assert " ".join(f"{name} {text}".split()) in " ".join(done.stdout.split())
+
+
+def test_a_command_runs_with_a_larger_first_generation_and_leaves_it_as_it_was(monkeypatch, capsys):
+    """While a command runs the collector's first generation is at least
+    GC_FIRST_GENERATION objects (the full collections it spares walk every object the
+    imports left); after it, and after a command that fails, it is what it was."""
+    import gc
+
+    from compact_distributions.bench.commands import cli, info
+
+    seen = []
+
+    def recorded(args):
+        seen.append(gc.get_threshold())
+        if len(seen) == 2:
+            raise cli.InputError("a bad argument")
+        return 0
+
+    monkeypatch.setattr(info, "run", recorded)
+    before = gc.get_threshold()
+    assert before[0] < cli.GC_FIRST_GENERATION  # the interpreter's own (700)
+    assert main(["info"]) == 0
+    assert gc.get_threshold() == before
+    assert main(["info"]) == 2
+    assert gc.get_threshold() == before
+    assert [t[0] for t in seen] == [cli.GC_FIRST_GENERATION] * 2
+    assert all(t[1:] == before[1:] for t in seen)
