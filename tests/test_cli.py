@@ -321,3 +321,31 @@ def test_a_command_runs_with_a_larger_first_generation_and_leaves_it_as_it_was(m
     assert gc.get_threshold() == before
     assert [t[0] for t in seen] == [cli.GC_FIRST_GENERATION] * 2
     assert all(t[1:] == before[1:] for t in seen)
+
+
+@pytest.mark.parametrize("region", [False, True])
+def test_run_streams_elements_png_with_the_pixels_of_the_picture_drawn_whole(
+    region, tmp_path, images, capsys, monkeypatch
+):
+    """`cvtbench run` draws elements.png as its rows are read (beside the measures):
+    the file holds, pixel for pixel, the picture drawn whole from the same elements."""
+    from compact_distributions.cvt.mosaic import render
+
+    calls = []
+    drawn = render.draw_elements
+
+    def spy(*args, **kwargs):
+        calls.append((args, dict(kwargs)))
+        return drawn(*args, **kwargs)
+
+    monkeypatch.setattr(render, "draw_elements", spy)
+    out = tmp_path / "out"
+    argv = ["run", "--elements", "150", "--size", "80", "--method", "ours-compact", "--out", str(out)]
+    code, _, err = run_cli(argv + (["--region", str(images["disc"])] if region else []), capsys)
+    assert code == 0, err
+    ((args, kwargs),) = calls
+    assert kwargs.get("as_rows") is True
+    whole = np.asarray(drawn(*args, **{**kwargs, "as_rows": False}))
+    written = np.asarray(Image.open(out / "elements.png").convert("RGB"))
+    assert whole.shape == (80, 80, 3) and len(np.unique(whole.reshape(-1, 3), axis=0)) > 20  # elements drawn
+    np.testing.assert_array_equal(written, whole)

@@ -374,8 +374,11 @@ def _write_files(tmp, beside, dist, problem, region, shape):
             tmp / "elements.svg",
             svg_lines(dist.elements, g.width, g.height, region=None if g.mask is None else region),
         )
-        picture = draw_elements(dist.elements, g.width, g.height, region_colour=PAPER, region_mask=g.mask)
-        beside.run(write_png, tmp / "elements.png", picture)  # deflated beside the measures
+        # drawn as its rows are read, and deflated, beside the measures
+        picture = draw_elements(
+            dist.elements, g.width, g.height, region_colour=PAPER, region_mask=g.mask, as_rows=True
+        )
+        beside.run(write_png, tmp / "elements.png", picture)
         del picture
         return measures()
 
